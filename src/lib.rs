@@ -1,0 +1,6 @@
+//! pav: physical adversarial camouflage for vehicles (PAV-Camou) and the rig that scores it.
+//!
+//! Data flows one way: video → frames → detections → metrics → report (see `eval`), and
+//! mesh → render → composite → detect → loss for texture optimization.
+
+pub mod detect;
