@@ -3,4 +3,7 @@
 //! Data flows one way: video → frames → detections → metrics → report (see `eval`), and
 //! mesh → render → composite → detect → loss for texture optimization.
 
+pub mod dataset;
 pub mod detect;
+pub mod eval;
+pub mod sidecar;

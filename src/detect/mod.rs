@@ -55,6 +55,10 @@ pub trait Detector {
     fn name(&self) -> &str;
     /// Runs the model and returns every proposal in frame coordinates.
     fn propose(&mut self, frame: &Frame) -> Result<Proposals, DetectError>;
+    /// Class indices that count as the vehicle.
+    fn target_classes(&self) -> &[usize];
+    /// Those classes' names joined by `+`, for reports.
+    fn target_label(&self) -> String;
 }
 
 /// Errors from building or running a detector.

@@ -1,6 +1,6 @@
 //! Frame → model input tensor (resize/letterbox, channel order, normalization) and the inverse box map.
 
-use super::config::{Align, ChannelOrder, InputConfig, Resize};
+use super::config::{Align, ChannelOrder, InputConfig, Interpolation, Resize};
 use super::{BBox, Frame};
 
 /// Maps boxes from model-input pixels back to frame pixels: `frame = (input - pad) / scale`.
@@ -29,17 +29,143 @@ impl InputMap {
     }
 }
 
-/// Per-axis bilinear sampling table with OpenCV INTER_LINEAR's half-pixel convention.
-fn axis_table(src: usize, dst: usize) -> Vec<(usize, usize, f32)> {
-    let s = src as f32 / dst as f32;
-    (0..dst)
-        .map(|d| {
-            let f = ((d as f32 + 0.5) * s - 0.5).max(0.0);
-            let i0 = (f.floor() as usize).min(src - 1);
-            let i1 = (i0 + 1).min(src - 1);
-            (i0, i1, f - i0 as f32)
-        })
-        .collect()
+/// Source taps of one output sample: first source index and normalized weights.
+struct Taps {
+    start: usize,
+    weights: Vec<f64>,
+}
+
+/// Per-axis resampling table from `src` to `dst` samples.
+fn axis_taps(src: usize, dst: usize, filter: Interpolation) -> Vec<Taps> {
+    let scale = src as f64 / dst as f64;
+    match filter {
+        Interpolation::Bilinear => (0..dst)
+            .map(|d| {
+                // OpenCV: half-pixel centres, coordinates clamped to the edge.
+                let f = ((d as f64 + 0.5) * scale - 0.5).max(0.0);
+                let i0 = (f.floor() as usize).min(src - 1);
+                let a = f - i0 as f64;
+                if i0 + 1 < src {
+                    Taps {
+                        start: i0,
+                        weights: vec![1.0 - a, a],
+                    }
+                } else {
+                    Taps {
+                        start: i0,
+                        weights: vec![1.0],
+                    }
+                }
+            })
+            .collect(),
+        Interpolation::Antialias => {
+            // PIL: triangle filter of support `max(scale, 1)`, window truncated at the edges and renormalized.
+            let fscale = scale.max(1.0);
+            let support = fscale;
+            (0..dst)
+                .map(|d| {
+                    let centre = (d as f64 + 0.5) * scale;
+                    let lo = ((centre - support + 0.5) as i64).max(0) as usize;
+                    let hi = ((centre + support + 0.5) as i64).min(src as i64) as usize;
+                    let w: Vec<f64> = (lo..hi)
+                        .map(|x| (1.0 - ((x as f64 - centre + 0.5) / fscale).abs()).max(0.0))
+                        .collect();
+                    let total: f64 = w.iter().sum();
+                    Taps {
+                        start: lo,
+                        weights: w.iter().map(|v| v / total).collect(),
+                    }
+                })
+                .collect()
+        }
+    }
+}
+
+/// Resizes an interleaved 3-channel u8 image to `nw × nh`, returning values on the 0–255 scale.
+fn resize(frame: &Frame, nw: usize, nh: usize, filter: Interpolation) -> Vec<f32> {
+    match filter {
+        Interpolation::Bilinear => resize_float(frame, nw, nh),
+        Interpolation::Antialias => resize_pil(frame, nw, nh),
+    }
+}
+
+/// Separable bilinear in f32 with one final rounding (OpenCV's result to within 1 LSB).
+fn resize_float(frame: &Frame, nw: usize, nh: usize) -> Vec<f32> {
+    let (w, h) = (frame.width, frame.height);
+    let xs = axis_taps(w, nw, Interpolation::Bilinear);
+    let ys = axis_taps(h, nh, Interpolation::Bilinear);
+    let mut mid = vec![0f32; h * nw * 3];
+    for y in 0..h {
+        let row = &frame.bgr[y * w * 3..(y + 1) * w * 3];
+        for (dx, t) in xs.iter().enumerate() {
+            for (k, &wt) in t.weights.iter().enumerate() {
+                let p = &row[(t.start + k) * 3..(t.start + k) * 3 + 3];
+                for c in 0..3 {
+                    mid[(y * nw + dx) * 3 + c] += p[c] as f32 * wt as f32;
+                }
+            }
+        }
+    }
+    let mut out = vec![0f32; nh * nw * 3];
+    for (dy, t) in ys.iter().enumerate() {
+        for (k, &wt) in t.weights.iter().enumerate() {
+            let src = &mid[(t.start + k) * nw * 3..(t.start + k + 1) * nw * 3];
+            for (o, s) in out[dy * nw * 3..(dy + 1) * nw * 3].iter_mut().zip(src) {
+                *o += s * wt as f32;
+            }
+        }
+    }
+    out.iter_mut()
+        .for_each(|v| *v = v.round().clamp(0.0, 255.0));
+    out
+}
+
+/// PIL's 8-bit resampler: 22-bit fixed-point weights, horizontal pass rounded to 8 bits, then vertical.
+fn resize_pil(frame: &Frame, nw: usize, nh: usize) -> Vec<f32> {
+    const BITS: u32 = 22;
+    let fixed = |taps: Vec<Taps>| -> Vec<(usize, Vec<i64>)> {
+        taps.into_iter()
+            .map(|t| {
+                (
+                    t.start,
+                    t.weights
+                        .iter()
+                        .map(|&w| (w as f64 * (1u64 << BITS) as f64 + 0.5).floor() as i64)
+                        .collect(),
+                )
+            })
+            .collect()
+    };
+    let (w, h) = (frame.width, frame.height);
+    let xs = fixed(axis_taps(w, nw, Interpolation::Antialias));
+    let ys = fixed(axis_taps(h, nh, Interpolation::Antialias));
+    let round = |acc: i64| ((acc + (1 << (BITS - 1))) >> BITS).clamp(0, 255) as u8;
+    let mut mid = vec![0u8; h * nw * 3];
+    for y in 0..h {
+        let row = &frame.bgr[y * w * 3..(y + 1) * w * 3];
+        for (dx, (start, ks)) in xs.iter().enumerate() {
+            for c in 0..3 {
+                let acc: i64 = ks
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &wt)| row[(start + k) * 3 + c] as i64 * wt)
+                    .sum();
+                mid[(y * nw + dx) * 3 + c] = round(acc);
+            }
+        }
+    }
+    let mut out = vec![0f32; nh * nw * 3];
+    for (dy, (start, ks)) in ys.iter().enumerate() {
+        for i in 0..nw * 3 {
+            let acc: i64 = ks
+                .iter()
+                .enumerate()
+                .map(|(k, &wt)| mid[(start + k) * nw * 3 + i] as i64 * wt)
+                .sum();
+            out[dy * nw * 3 + i] = round(acc) as f32;
+        }
+    }
+    out
 }
 
 /// Builds the NCHW float input (batch 1) for `frame` and the map back to frame pixels.
@@ -58,7 +184,7 @@ pub fn prepare(frame: &Frame, cfg: &InputConfig) -> (Vec<f32>, InputMap) {
             }
         }
     };
-    // Model channel c reads BGR byte src_ch[c].
+    // Model channel c reads BGR channel src_ch[c].
     let src_ch = match cfg.channels {
         ChannelOrder::Bgr => [0, 1, 2],
         ChannelOrder::Rgb => [2, 1, 0],
@@ -69,18 +195,17 @@ pub fn prepare(frame: &Frame, cfg: &InputConfig) -> (Vec<f32>, InputMap) {
     for c in 0..3 {
         out[c * plane..(c + 1) * plane].fill(norm(c, cfg.pad_value as f32));
     }
-    let xs = axis_table(w, nw);
-    let ys = axis_table(h, nh);
-    let px_at = |x: usize, y: usize, ch: usize| frame.bgr[(y * w + x) * 3 + ch] as f32;
-    for (dy, &(y0, y1, fy)) in ys.iter().enumerate() {
-        let row = (dy + py) * iw + px;
-        for (dx, &(x0, x1, fx)) in xs.iter().enumerate() {
+    let resized = if (nw, nh) == (w, h) {
+        frame.bgr.iter().map(|&v| v as f32).collect()
+    } else {
+        resize(frame, nw, nh, cfg.interpolation)
+    };
+    for y in 0..nh {
+        for x in 0..nw {
+            let p = &resized[(y * nw + x) * 3..(y * nw + x) * 3 + 3];
+            let at = (y + py) * iw + x + px;
             for (c, &sc) in src_ch.iter().enumerate() {
-                let top = px_at(x0, y0, sc) * (1.0 - fx) + px_at(x1, y0, sc) * fx;
-                let bot = px_at(x0, y1, sc) * (1.0 - fx) + px_at(x1, y1, sc) * fx;
-                // Round to 8 bits as an 8-bit resize would, so results match uint8 pipelines.
-                let v = (top * (1.0 - fy) + bot * fy).round();
-                out[c * plane + row + dx] = norm(c, v);
+                out[c * plane + at] = norm(c, p[sc]);
             }
         }
     }
@@ -109,19 +234,27 @@ mod tests {
             mean: [0.0; 3],
             std: [1.0; 3],
             resize,
+            interpolation: Interpolation::Bilinear,
             pad_value: 114,
             align,
         }
     }
 
     fn solid(w: usize, h: usize, bgr: [u8; 3]) -> Frame {
-        Frame { width: w, height: h, bgr: (0..w * h).flat_map(|_| bgr).collect() }
+        Frame {
+            width: w,
+            height: h,
+            bgr: (0..w * h).flat_map(|_| bgr).collect(),
+        }
     }
 
     #[test]
     fn letterbox_centre_pads_and_maps_boxes_back() {
         let f = solid(16, 8, [10, 20, 30]);
-        let (t, m) = prepare(&f, &cfg(Resize::Letterbox, Align::Center, ChannelOrder::Rgb));
+        let (t, m) = prepare(
+            &f,
+            &cfg(Resize::Letterbox, Align::Center, ChannelOrder::Rgb),
+        );
         // 16x8 -> 8x4 centred vertically: rows 0,1 and 6,7 are padding.
         assert_eq!(t[0], 114.0);
         assert_eq!(t[2 * 8], 30.0); // R plane, row 2 = image
@@ -133,7 +266,10 @@ mod tests {
     #[test]
     fn top_left_letterbox_and_stretch() {
         let f = solid(8, 16, [1, 2, 3]);
-        let (t, m) = prepare(&f, &cfg(Resize::Letterbox, Align::TopLeft, ChannelOrder::Bgr));
+        let (t, m) = prepare(
+            &f,
+            &cfg(Resize::Letterbox, Align::TopLeft, ChannelOrder::Bgr),
+        );
         assert_eq!(t[0], 1.0);
         assert_eq!(t[7], 114.0); // column 4..8 padded
         assert_eq!((m.pad_x, m.scale_x), (0.0, 0.5));
@@ -142,13 +278,50 @@ mod tests {
     }
 
     #[test]
-    fn bilinear_matches_half_pixel_convention() {
+    fn bilinear_matches_opencv_half_pixel_convention() {
         // A 2-pixel ramp upsampled to 4: OpenCV gives 0, 64, 191, 255 for [0, 255].
-        let f = Frame { width: 2, height: 1, bgr: vec![0, 0, 0, 255, 255, 255] };
+        let f = Frame {
+            width: 2,
+            height: 1,
+            bgr: vec![0, 0, 0, 255, 255, 255],
+        };
         let mut c = cfg(Resize::Stretch, Align::Center, ChannelOrder::Bgr);
         c.width = 4;
         c.height = 1;
         let (t, _) = prepare(&f, &c);
         assert_eq!(&t[..4], &[0.0, 64.0, 191.0, 255.0]);
+    }
+
+    #[test]
+    fn antialias_reproduces_pil_bilinear_downscale() {
+        // 23x9 image (rows 4.. inverted) resized to 5x3; expected values from PIL 11 Image.resize(BILINEAR).
+        let row: Vec<u8> = (0..23u32).map(|x| ((x * x * 7 + 13) % 256) as u8).collect();
+        let bgr: Vec<u8> = (0..9)
+            .flat_map(|y| {
+                row.iter()
+                    .flat_map(move |&v| [if y >= 4 { 255 - v } else { v }; 3])
+            })
+            .collect();
+        let f = Frame {
+            width: 23,
+            height: 9,
+            bgr,
+        };
+        let mut c = cfg(Resize::Stretch, Align::Center, ChannelOrder::Bgr);
+        (c.width, c.height, c.interpolation) = (5, 3, Interpolation::Antialias);
+        let (t, _) = prepare(&f, &c);
+        let pil = [
+            60.0, 113.0, 153.0, 133.0, 168.0, 150.0, 132.0, 119.0, 126.0, 114.0, 195.0, 142.0,
+            102.0, 122.0, 87.0,
+        ];
+        let worst = t[..15]
+            .iter()
+            .zip(pil)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f32::max);
+        assert_eq!(worst, 0.0, "got {:?}", &t[..15]);
+        // Weights sum to one, so a flat image stays flat.
+        let (flat, _) = prepare(&solid(37, 11, [200, 200, 200]), &c);
+        assert!(flat[..15].iter().all(|&v| v == 200.0));
     }
 }

@@ -1,0 +1,388 @@
+//! The `evaluate` pipeline: videos → frames → detections → per-frame records → reports.
+//!
+//! Every frame record is flushed as soon as it exists and the summary is written from whatever
+//! was scored, so a corrupt video, a failing detector or Ctrl-C never loses finished work.
+
+use super::physical::{Accuracy, FrameRecord};
+use super::plot::{accuracy_bars, polar_scores, ScoreSeries};
+use super::report::{
+    summary_markdown, write_angles_csv, write_summary_csv, write_text, FrameCsv, ReportError,
+    ReportSettings, SummaryRow,
+};
+use super::video::VideoReader;
+use crate::detect::Detector;
+use crate::sidecar::{self, AngleSample};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+/// One video to score.
+#[derive(Clone, Debug)]
+pub struct VideoJob {
+    /// Video file.
+    pub path: PathBuf,
+    /// Label in reports (row of the Table-4 matrix).
+    pub label: String,
+    /// Angle sidecar; when `None`, `<video>.angles.csv` is used if it exists.
+    pub sidecar: Option<PathBuf>,
+}
+
+/// Evaluation settings.
+#[derive(Clone, Debug)]
+pub struct EvalOptions {
+    /// A frame counts as "car detected" when a target-class score is ≥ this.
+    pub threshold: f32,
+    /// Score every N-th frame.
+    pub stride: usize,
+    /// Seconds per turntable revolution, used when a video has no sidecar.
+    pub rotation_period_s: f64,
+    /// Angle at frame 0 when no sidecar.
+    pub start_angle_deg: f64,
+    /// Angle sectors in the per-angle breakdown.
+    pub angle_bins: usize,
+    /// Output directory (created).
+    pub out_dir: PathBuf,
+    /// Show progress bars.
+    pub progress: bool,
+    /// Draw PNG plots.
+    pub plots: bool,
+}
+
+/// Wall-clock split of a run, for benchmarks.
+#[derive(Clone, Debug, Default)]
+pub struct Timing {
+    /// Frames decoded (including skipped ones).
+    pub frames_decoded: usize,
+    /// Frames scored.
+    pub frames_scored: usize,
+    /// Seconds spent decoding.
+    pub decode_s: f64,
+    /// Seconds per detector (preprocess + inference + decode of outputs), same order as given.
+    pub detector_s: Vec<f64>,
+    /// Seconds for the whole run including reports.
+    pub total_s: f64,
+}
+
+/// Everything a run produced.
+#[derive(Debug, Default)]
+pub struct EvalOutcome {
+    /// One row per (video, detector) that scored at least one frame or failed.
+    pub rows: Vec<SummaryRow>,
+    /// Every frame record.
+    pub records: Vec<FrameRecord>,
+    /// Human-readable failures (video or detector errors); the run went on past each.
+    pub failures: Vec<String>,
+    /// Whether Ctrl-C stopped the run early.
+    pub interrupted: bool,
+    /// Time split.
+    pub timing: Timing,
+    /// Files written.
+    pub files: Vec<PathBuf>,
+}
+
+enum Angles {
+    Sidecar(HashMap<usize, AngleSample>),
+    Period { period_s: f64, start_deg: f64 },
+}
+
+impl Angles {
+    fn at(&self, frame: usize, fps: f64) -> (f64, Option<f64>) {
+        let t = frame as f64 / fps;
+        match self {
+            Angles::Sidecar(m) => m
+                .get(&frame)
+                .map(|s| (s.timestamp_s, Some(s.angle_deg)))
+                .unwrap_or((t, None)),
+            Angles::Period {
+                period_s,
+                start_deg,
+            } => (
+                t,
+                Some((start_deg + 360.0 * t / period_s).rem_euclid(360.0)),
+            ),
+        }
+    }
+}
+
+/// Runs every detector over every frame of every video and writes the reports into `opts.out_dir`.
+pub fn evaluate(
+    jobs: &[VideoJob],
+    detectors: &mut [Box<dyn Detector>],
+    opts: &EvalOptions,
+    stop: &AtomicBool,
+) -> Result<EvalOutcome, ReportError> {
+    let t_run = Instant::now();
+    std::fs::create_dir_all(&opts.out_dir).map_err(|e| ReportError {
+        path: opts.out_dir.clone(),
+        msg: e.to_string(),
+    })?;
+    let frames_path = opts.out_dir.join("frames.csv");
+    let mut csv = FrameCsv::create(&frames_path)?;
+    let mut out = EvalOutcome {
+        timing: Timing {
+            detector_s: vec![0.0; detectors.len()],
+            ..Timing::default()
+        },
+        ..EvalOutcome::default()
+    };
+    out.files.push(frames_path);
+    let mut angle_sources = Vec::new();
+    let stride = opts.stride.max(1);
+
+    'videos: for job in jobs {
+        let angles = match job
+            .sidecar
+            .clone()
+            .or_else(|| Some(sidecar::sidecar_path(&job.path)).filter(|p| p.exists()))
+        {
+            Some(p) => match sidecar::read(&p) {
+                Ok(rows) => {
+                    angle_sources.push((job.label.clone(), format!("sidecar {}", p.display())));
+                    Angles::Sidecar(rows.into_iter().map(|r| (r.frame, r)).collect())
+                }
+                Err(e) => {
+                    out.failures.push(e.to_string());
+                    continue;
+                }
+            },
+            None => {
+                angle_sources.push((
+                    job.label.clone(),
+                    format!(
+                        "no sidecar; {}° + 360° × t / {} s",
+                        opts.start_angle_deg, opts.rotation_period_s
+                    ),
+                ));
+                Angles::Period {
+                    period_s: opts.rotation_period_s,
+                    start_deg: opts.start_angle_deg,
+                }
+            }
+        };
+        let mut reader = match VideoReader::open(&job.path) {
+            Ok(r) => r,
+            Err(e) => {
+                out.failures.push(e.to_string());
+                for d in detectors.iter() {
+                    out.rows.push(SummaryRow {
+                        video: job.label.clone(),
+                        detector: d.name().to_string(),
+                        classes: d.target_label(),
+                        accuracy: Accuracy::default(),
+                        decoded_frames: 0,
+                        declared_frames: 0,
+                        status: format!("failed: {e}"),
+                    });
+                }
+                continue;
+            }
+        };
+        let info = reader.info().clone();
+        let bar = if opts.progress {
+            let b = ProgressBar::new(info.declared_frames as u64);
+            b.set_style(
+                ProgressStyle::with_template(
+                    "{msg:>16} [{bar:40}] {pos}/{len} frames {per_sec} eta {eta}",
+                )
+                .expect("static template")
+                .progress_chars("=> "),
+            );
+            b.set_message(job.label.clone());
+            b
+        } else {
+            ProgressBar::hidden()
+        };
+        let mut status = "complete".to_string();
+        let mut failed_det: Vec<Option<String>> = vec![None; detectors.len()];
+        let mut decoded = 0usize;
+        let first_record = out.records.len();
+        loop {
+            if stop.load(Ordering::Relaxed) {
+                status = format!("interrupted after {decoded} frames");
+                out.interrupted = true;
+                break;
+            }
+            let t0 = Instant::now();
+            let step = if decoded % stride == 0 {
+                reader.read().map(|f| f.map(Some))
+            } else {
+                reader.skip().map(|ok| ok.then_some(None))
+            };
+            out.timing.decode_s += t0.elapsed().as_secs_f64();
+            let frame = match step {
+                Ok(None) => break,
+                Ok(Some(f)) => f,
+                Err(e) => {
+                    status = format!("stopped: {e}");
+                    out.failures.push(e.to_string());
+                    break;
+                }
+            };
+            decoded += 1;
+            bar.inc(1);
+            let Some((idx, frame)) = frame else { continue };
+            out.timing.frames_scored += 1;
+            let (time_s, angle_deg) = angles.at(idx, info.fps);
+            for (k, det) in detectors.iter_mut().enumerate() {
+                if failed_det[k].is_some() {
+                    continue;
+                }
+                let t1 = Instant::now();
+                let result = det.propose(&frame);
+                out.timing.detector_s[k] += t1.elapsed().as_secs_f64();
+                let props = match result {
+                    Ok(p) => p,
+                    Err(e) => {
+                        out.failures
+                            .push(format!("{}: frame {idx}: {e}", job.label));
+                        failed_det[k] = Some(format!("stopped at frame {idx}: {e}"));
+                        continue;
+                    }
+                };
+                let best = props.best(det.target_classes());
+                let rec = FrameRecord {
+                    video: job.label.clone(),
+                    frame: idx,
+                    time_s,
+                    angle_deg,
+                    detector: det.name().to_string(),
+                    detected: best.is_some_and(|b| b.score >= opts.threshold),
+                    max_score: best.map(|b| b.score).unwrap_or(0.0),
+                    x1: best.map(|b| b.bbox[0]),
+                    y1: best.map(|b| b.bbox[1]),
+                    x2: best.map(|b| b.bbox[2]),
+                    y2: best.map(|b| b.bbox[3]),
+                };
+                csv.push(&rec)?;
+                out.records.push(rec);
+            }
+            if failed_det.iter().all(Option::is_some) {
+                break;
+            }
+        }
+        bar.finish_and_clear();
+        out.timing.frames_decoded += decoded;
+        if decoded == 0 && status == "complete" {
+            status = "no frames decoded".into();
+            out.failures.push(format!(
+                "{}: no frames could be decoded from {}",
+                job.label,
+                job.path.display()
+            ));
+        } else if status == "complete" && info.declared_frames > decoded + 1 {
+            // Containers estimate counts from duration; more than one frame short means a cut file.
+            status = format!(
+                "truncated: decoded {decoded} of {} declared frames",
+                info.declared_frames
+            );
+            out.failures.push(format!("{}: {status}", job.label));
+        }
+        let recs = &out.records[first_record..];
+        for (k, det) in detectors.iter().enumerate() {
+            let name = det.name();
+            out.rows.push(SummaryRow {
+                video: job.label.clone(),
+                detector: name.to_string(),
+                classes: det.target_label(),
+                accuracy: Accuracy::of(recs.iter().filter(|r| r.detector == name)),
+                decoded_frames: decoded,
+                declared_frames: info.declared_frames,
+                status: failed_det[k].clone().unwrap_or_else(|| status.clone()),
+            });
+        }
+        if out.interrupted {
+            break 'videos;
+        }
+    }
+    let settings = ReportSettings {
+        threshold: opts.threshold,
+        stride,
+        angle_bins: opts.angle_bins,
+        angle_sources,
+    };
+    write_reports(&mut out, &settings, opts, detectors)?;
+    out.timing.total_s = t_run.elapsed().as_secs_f64();
+    Ok(out)
+}
+
+fn write_reports(
+    out: &mut EvalOutcome,
+    s: &ReportSettings,
+    opts: &EvalOptions,
+    detectors: &[Box<dyn Detector>],
+) -> Result<(), ReportError> {
+    let dir = &opts.out_dir;
+    let p = dir.join("summary.csv");
+    write_summary_csv(&p, &out.rows, s)?;
+    out.files.push(p);
+    let p = dir.join("angles.csv");
+    write_angles_csv(&p, &out.records, &out.rows, s.angle_bins)?;
+    out.files.push(p);
+    let p = dir.join("summary.md");
+    write_text(&p, &summary_markdown(&out.rows, &out.records, s))?;
+    out.files.push(p);
+    if !opts.plots {
+        return Ok(());
+    }
+    let mut videos: Vec<&str> = Vec::new();
+    for r in &out.records {
+        if !videos.contains(&r.video.as_str()) {
+            videos.push(&r.video);
+        }
+    }
+    let plot_err = |e: super::plot::PlotError| ReportError {
+        path: PathBuf::from(&e.path),
+        msg: e.msg,
+    };
+    for v in videos {
+        let series: Vec<ScoreSeries> = detectors
+            .iter()
+            .map(|d| ScoreSeries {
+                label: d.name().to_string(),
+                points: out
+                    .records
+                    .iter()
+                    .filter(|r| r.video == v && r.detector == d.name())
+                    .filter_map(|r| r.angle_deg.map(|a| (a, r.max_score as f64)))
+                    .collect(),
+            })
+            .collect();
+        let p = dir.join(format!("polar_{}.png", file_safe(v)));
+        polar_scores(
+            &p,
+            &format!("{v}: car score vs turntable angle"),
+            &series,
+            opts.threshold as f64,
+        )
+        .map_err(plot_err)?;
+        out.files.push(p);
+    }
+    if !out.rows.is_empty() {
+        let p = dir.join("accuracy.png");
+        accuracy_bars(&p, &out.rows, opts.threshold).map_err(plot_err)?;
+        out.files.push(p);
+    }
+    Ok(())
+}
+
+/// Makes a label usable as part of a file name.
+pub fn file_safe(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// The default label of a video: its file stem.
+pub fn default_label(p: &Path) -> String {
+    p.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| p.display().to_string())
+}

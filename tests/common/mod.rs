@@ -1,0 +1,64 @@
+//! Helpers shared by the integration tests: where the real data and installed models are.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+
+/// The repository root.
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// `../shared/data`, or `None` (the caller skips, printing why) when the shared data is absent.
+pub fn shared_data() -> Option<PathBuf> {
+    let p = repo().join("../shared/data");
+    if p.join("MANIFEST.tsv").is_file() {
+        Some(p)
+    } else {
+        eprintln!("SKIP: ../shared/data is absent next to the repository; this test needs the real data there");
+        None
+    }
+}
+
+/// Panics with the fix when scripts/setup.sh has not installed ONNX Runtime and the models.
+pub fn require_setup() {
+    let deps = repo().join(".deps");
+    for f in [
+        "onnxruntime/libonnxruntime.so",
+        "models/yolov3-tiny/yolov3-tiny.onnx",
+    ] {
+        assert!(
+            deps.join(f).exists()
+                || std::env::var_os("ORT_DYLIB_PATH").is_some() && f.starts_with("onnx"),
+            ".deps/{f} is missing: run scripts/setup.sh before the tests"
+        );
+    }
+}
+
+/// A detector config from configs/detectors.
+pub fn detector_config(name: &str) -> PathBuf {
+    repo()
+        .join("configs/detectors")
+        .join(format!("{name}.toml"))
+}
+
+/// Reads `derived_test_labels.tsv` as (npz path, column → value).
+pub fn reference_labels(
+    shared: &Path,
+) -> Vec<(PathBuf, std::collections::HashMap<String, String>)> {
+    let text = std::fs::read_to_string(shared.join("fca/carla_dataset/derived_test_labels.tsv"))
+        .expect("labels tsv");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("header").split('\t').collect();
+    lines
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| {
+            let cols: Vec<&str> = l.split('\t').collect();
+            let map = header
+                .iter()
+                .zip(&cols)
+                .map(|(h, c)| (h.to_string(), c.to_string()))
+                .collect();
+            (shared.join("..").join(cols[0]), map)
+        })
+        .collect()
+}
