@@ -327,9 +327,11 @@ mod tests {
         let t = p.best(&[1]).unwrap();
         assert!((t.score - 0.4).abs() < 1e-5);
         let expect = [43.0, 9.0, 53.0, 23.0];
-        for k in 0..4 {
-            assert!((t.bbox[k] - expect[k]).abs() < 1e-4, "{:?}", t.bbox);
-        }
+        assert!(
+            t.bbox.iter().zip(expect).all(|(a, b)| (a - b).abs() < 1e-4),
+            "{:?}",
+            t.bbox
+        );
     }
 
     #[test]

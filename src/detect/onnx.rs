@@ -10,12 +10,13 @@ use ort::value::{Tensor, TensorElementType, ValueType};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-/// Where ONNX Runtime's shared library was looked for, in order.
+/// Where ONNX Runtime's shared library is looked for, in order: `ORT_DYLIB_PATH` alone when set,
+/// else `.deps/onnxruntime/libonnxruntime.so` above the executable or the working directory.
 pub fn library_candidates() -> Vec<PathBuf> {
-    let mut c = Vec::new();
     if let Some(p) = std::env::var_os("ORT_DYLIB_PATH") {
-        c.push(PathBuf::from(p));
+        return vec![PathBuf::from(p)];
     }
+    let mut c = Vec::new();
     // scripts/setup.sh puts it in <repo>/.deps; look upward from the binary and the working dir.
     let mut roots: Vec<PathBuf> = Vec::new();
     if let Ok(exe) = std::env::current_exe() {

@@ -130,7 +130,7 @@ fn resize_pil(frame: &Frame, nw: usize, nh: usize) -> Vec<f32> {
                     t.start,
                     t.weights
                         .iter()
-                        .map(|&w| (w as f64 * (1u64 << BITS) as f64 + 0.5).floor() as i64)
+                        .map(|&w| (w * (1u64 << BITS) as f64 + 0.5).floor() as i64)
                         .collect(),
                 )
             })

@@ -1,0 +1,262 @@
+//! `evaluate` on the recorded CARLA fixture reproduces the per-frame truth exactly for two real
+//! detectors, with sidecar angles, stride, several videos, and partial results on bad input.
+
+mod common;
+
+use pav::detect::onnx::OnnxDetector;
+use pav::detect::{Detector, DetectorConfig};
+use pav::eval::physical::Accuracy;
+use pav::eval::run::{evaluate, EvalOptions, EvalOutcome, VideoJob};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+
+struct Truth {
+    visible: bool,
+    angle: f64,
+    refs: HashMap<&'static str, f32>,
+}
+
+fn fixture() -> PathBuf {
+    common::repo().join("fixtures/carla_orbit.mp4")
+}
+
+fn truth() -> Vec<Truth> {
+    let mut rd =
+        csv::Reader::from_path(common::repo().join("fixtures/carla_orbit.truth.csv")).unwrap();
+    rd.records()
+        .map(|r| {
+            let r = r.unwrap();
+            let refs = HashMap::from([
+                ("yolox_nano", r[4].parse().unwrap()),
+                ("yolov8n_int8", r[5].parse().unwrap()),
+            ]);
+            Truth {
+                visible: &r[2] == "true",
+                angle: r[3].parse().unwrap(),
+                refs,
+            }
+        })
+        .collect()
+}
+
+/// Ground truth "detected": the car is in the frame and the independent reference score is ≥ 0.5.
+fn expected(t: &Truth, det: &str) -> bool {
+    t.visible && t.refs[det] >= 0.5
+}
+
+fn detectors(names: &[&str]) -> Vec<Box<dyn Detector>> {
+    names
+        .iter()
+        .map(|n| {
+            Box::new(
+                OnnxDetector::new(
+                    DetectorConfig::load(&common::detector_config(n)).unwrap(),
+                    1,
+                )
+                .unwrap(),
+            ) as Box<dyn Detector>
+        })
+        .collect()
+}
+
+fn opts(out: &Path, stride: usize) -> EvalOptions {
+    EvalOptions {
+        threshold: 0.5,
+        stride,
+        rotation_period_s: 28.0,
+        start_angle_deg: 0.0,
+        angle_bins: 8,
+        out_dir: out.to_path_buf(),
+        progress: false,
+        plots: true,
+    }
+}
+
+fn run(jobs: &[VideoJob], dets: &[&str], out: &Path, stride: usize) -> EvalOutcome {
+    let mut d = detectors(dets);
+    evaluate(jobs, &mut d, &opts(out, stride), &AtomicBool::new(false)).unwrap()
+}
+
+fn job(path: PathBuf, label: &str) -> VideoJob {
+    VideoJob {
+        path,
+        label: label.into(),
+        sidecar: None,
+    }
+}
+
+const DETS: [&str; 2] = ["yolox_nano", "yolov8n_int8"];
+
+#[test]
+fn a_physical_matches_truth_frame_by_frame() {
+    if common::shared_data().is_none() {
+        return;
+    }
+    common::require_setup();
+    let tmp = tempfile::tempdir().unwrap();
+    let out = run(&[job(fixture(), "orbit")], &DETS, tmp.path(), 1);
+    let truth = truth();
+    assert!(out.failures.is_empty(), "{:?}", out.failures);
+    assert_eq!(out.records.len(), truth.len() * DETS.len());
+    for r in &out.records {
+        let t = &truth[r.frame];
+        assert_eq!(
+            r.detected,
+            expected(t, &r.detector),
+            "{} frame {}: score {}",
+            r.detector,
+            r.frame,
+            r.max_score
+        );
+        // Angles come from the sidecar beside the video.
+        assert!(
+            (r.angle_deg.unwrap() - t.angle).abs() < 0.06,
+            "frame {} angle {:?}",
+            r.frame,
+            r.angle_deg
+        );
+    }
+    for det in DETS {
+        let want = truth.iter().filter(|t| expected(t, det)).count();
+        let row = out.rows.iter().find(|r| r.detector == det).unwrap();
+        assert_eq!(
+            row.accuracy,
+            Accuracy {
+                detected: want,
+                total: truth.len()
+            },
+            "{det}"
+        );
+        assert_eq!((want, row.status.as_str()), (30, "complete"));
+    }
+    // Reports exist and the per-angle CSV adds up to the totals.
+    for f in [
+        "frames.csv",
+        "summary.csv",
+        "summary.md",
+        "angles.csv",
+        "polar_orbit.png",
+        "accuracy.png",
+    ] {
+        assert!(
+            tmp.path().join(f).metadata().unwrap().len() > 0,
+            "{f} missing or empty"
+        );
+    }
+    let mut rd = csv::Reader::from_path(tmp.path().join("angles.csv")).unwrap();
+    let mut per_det: HashMap<String, (usize, usize)> = HashMap::new();
+    for r in rd.records() {
+        let r = r.unwrap();
+        let e = per_det.entry(r[1].to_string()).or_default();
+        e.0 += r[4].parse::<usize>().unwrap();
+        e.1 += r[5].parse::<usize>().unwrap();
+    }
+    assert_eq!(per_det["yolox_nano"], (45, 30));
+}
+
+#[test]
+fn stride_scores_every_nth_frame() {
+    if common::shared_data().is_none() {
+        return;
+    }
+    common::require_setup();
+    let tmp = tempfile::tempdir().unwrap();
+    let out = run(&[job(fixture(), "orbit")], &["yolox_nano"], tmp.path(), 4);
+    let truth = truth();
+    let frames: Vec<usize> = out.records.iter().map(|r| r.frame).collect();
+    assert_eq!(frames, (0..45).step_by(4).collect::<Vec<_>>());
+    let want = (0..45)
+        .step_by(4)
+        .filter(|&f| expected(&truth[f], "yolox_nano"))
+        .count();
+    assert_eq!(
+        out.rows[0].accuracy,
+        Accuracy {
+            detected: want,
+            total: 12
+        }
+    );
+    assert_eq!(out.rows[0].decoded_frames, 45);
+}
+
+#[test]
+fn several_videos_make_a_table_and_bad_ones_keep_the_rest() {
+    if common::shared_data().is_none() {
+        return;
+    }
+    common::require_setup();
+    let tmp = tempfile::tempdir().unwrap();
+    let corrupt = tmp.path().join("corrupt.mp4");
+    std::fs::write(
+        &corrupt,
+        b"this is not a video at all, just text that claims to be one",
+    )
+    .unwrap();
+    // Cut without an index (moov at the end): cannot even be opened.
+    let cut = tmp.path().join("cut.mp4");
+    let bytes = std::fs::read(fixture()).unwrap();
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    // Cut with the index first (faststart): opens, then the stream ends early.
+    let faststart = tmp.path().join("faststart.mp4");
+    let ok = std::process::Command::new("ffmpeg")
+        .args(["-v", "error", "-y", "-i"])
+        .arg(fixture())
+        .args(["-c", "copy", "-movflags", "+faststart"])
+        .arg(&faststart)
+        .status()
+        .expect("ffmpeg (installed by scripts/setup.sh)");
+    assert!(ok.success());
+    let fs_bytes = std::fs::read(&faststart).unwrap();
+    let truncated = tmp.path().join("truncated.mp4");
+    std::fs::write(&truncated, &fs_bytes[..fs_bytes.len() * 6 / 10]).unwrap();
+    let jobs = [
+        job(fixture(), "original"),
+        job(tmp.path().join("missing.mp4"), "missing"),
+        job(corrupt, "corrupt"),
+        job(cut, "cut"),
+        job(truncated, "truncated"),
+        job(fixture(), "again"),
+    ];
+    let out_dir = tmp.path().join("out");
+    let out = run(&jobs, &DETS, &out_dir, 1);
+    let fail = out.failures.join("\n");
+    assert!(fail.contains("missing.mp4 does not exist"), "{fail}");
+    assert!(fail.contains("corrupt.mp4 cannot be opened"), "{fail}");
+    assert!(fail.contains("cut.mp4 cannot be opened"), "{fail}");
+    // The truncated video keeps what it decoded and says how far it got.
+    let t = out
+        .rows
+        .iter()
+        .find(|r| r.video == "truncated" && r.detector == "yolox_nano")
+        .unwrap();
+    assert!(t.accuracy.total > 0 && t.accuracy.total < 45, "{t:?}");
+    assert!(
+        t.status.starts_with("truncated: decoded") && t.status.contains("of 45"),
+        "{}",
+        t.status
+    );
+    // The good videos before and after the bad ones are fully scored.
+    for label in ["original", "again"] {
+        let r = out
+            .rows
+            .iter()
+            .find(|r| r.video == label && r.detector == "yolox_nano")
+            .unwrap();
+        assert_eq!((r.accuracy.detected, r.accuracy.total), (30, 45), "{label}");
+    }
+    let md = std::fs::read_to_string(out_dir.join("summary.md")).unwrap();
+    assert!(md.contains("| Video | yolox_nano | yolov8n_int8 |"), "{md}");
+    assert!(md.contains("| original | 66.7 | 66.7 |"), "{md}");
+    assert!(
+        md.contains("Score threshold **0.5**; target classes **car**"),
+        "{md}"
+    );
+    let summary = std::fs::read_to_string(out_dir.join("summary.csv")).unwrap();
+    assert!(
+        summary
+            .lines()
+            .any(|l| l.starts_with("missing,yolox_nano") && l.contains("failed")),
+        "{summary}"
+    );
+}
