@@ -6,7 +6,7 @@ use pav::detect::darknet::{to_onnx, Network, Weights};
 use pav::detect::onnx::OnnxDetector;
 use pav::detect::{Detector, DetectorConfig};
 use pav::eval::run::{default_label, evaluate, EvalOptions, VideoJob};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
@@ -222,7 +222,7 @@ fn cmd_evaluate(a: &EvaluateArgs) -> Result<()> {
     Ok(())
 }
 
-fn cmd_darknet2onnx(cfg: &PathBuf, weights: &PathBuf, out: &PathBuf) -> Result<()> {
+fn cmd_darknet2onnx(cfg: &Path, weights: &Path, out: &Path) -> Result<()> {
     let net = Network::from_file(cfg)?;
     let w = Weights::from_file(weights, &net)?;
     let model = to_onnx::export(&net, &w)?;
