@@ -224,7 +224,7 @@ fn ctrl_c_keeps_every_scored_frame_and_a_summary() {
     let o = child.wait_with_output().unwrap();
     assert_clean_failure(&o, "interrupted");
     let scored = std::fs::read_to_string(&frames).unwrap().lines().count() - 1;
-    assert!(scored >= 4 && scored < 3 * 45 * 2, "{scored} rows");
+    assert!((4..3 * 45 * 2).contains(&scored), "{scored} rows");
     let summary = std::fs::read_to_string(tmp.path().join("summary.csv")).unwrap();
     assert!(summary.contains("interrupted after"), "{summary}");
     // The summary counts exactly the frames that were written.
