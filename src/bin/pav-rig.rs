@@ -28,6 +28,36 @@ enum Cmd {
     /// Model utilities.
     #[command(subcommand)]
     Model(ModelCmd),
+    /// Benchmark: decode / inference / evaluate throughput and the accuracy-vs-time trade-off (CSV + PNG).
+    Bench(BenchArgs),
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    /// Video to score.
+    #[arg(long, default_value = "fixtures/carla_orbit.mp4")]
+    video: PathBuf,
+    /// Detector configs or directories of them (default: configs/detectors).
+    #[arg(long = "detector", short = 'd')]
+    detectors: Vec<PathBuf>,
+    /// Strides for the trade-off.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,4,8")]
+    strides: Vec<usize>,
+    /// Second input size, for models that accept any input size.
+    #[arg(long, default_value_t = 320)]
+    alt_size: usize,
+    /// ONNX Runtime intra-op threads (0 = runtime default).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Timed repetitions; the fastest is kept.
+    #[arg(long, default_value_t = 3)]
+    repeats: usize,
+    /// Score threshold.
+    #[arg(long, default_value_t = 0.5)]
+    threshold: f32,
+    /// Output directory.
+    #[arg(long, short = 'o', default_value = "bench")]
+    out: PathBuf,
 }
 
 #[derive(Subcommand)]
@@ -52,7 +82,7 @@ struct EvaluateArgs {
     /// Video files (mp4, avi, mkv, ...). Each may have a `<name>.angles.csv` sidecar beside it.
     #[arg(required = true)]
     videos: Vec<PathBuf>,
-    /// Detector config TOML; repeat for several detectors.
+    /// Detector config TOML, or a directory of them; repeat for several detectors.
     #[arg(long = "detector", short = 'd', required = true)]
     detectors: Vec<PathBuf>,
     /// Label per video, in order (default: file stem), e.g. `--label original --label camouflaged`.
@@ -103,11 +133,34 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
     }
 }
 
+/// Expands directories into the TOML files they hold (sorted); files pass through.
+fn expand_configs(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for p in paths {
+        if p.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
+                .with_context(|| format!("listing {}", p.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|f| f.extension().is_some_and(|x| x == "toml"))
+                .collect();
+            if found.is_empty() {
+                bail!("{} holds no detector configs (*.toml)", p.display());
+            }
+            found.sort();
+            out.extend(found);
+        } else {
+            out.push(p.clone());
+        }
+    }
+    Ok(out)
+}
+
 fn load_detectors(
     paths: &[PathBuf],
     classes: &[String],
     threads: usize,
 ) -> Result<Vec<Box<dyn Detector>>> {
+    let paths = &expand_configs(paths)?;
     // Validate every config before loading any model, so all config mistakes show at once.
     let mut cfgs = Vec::new();
     let mut errors = Vec::new();
@@ -244,6 +297,33 @@ fn cmd_darknet2onnx(cfg: &Path, weights: &Path, out: &Path) -> Result<()> {
     Ok(())
 }
 
+fn cmd_bench(b: &BenchArgs) -> Result<()> {
+    let given = if b.detectors.is_empty() {
+        vec![PathBuf::from("configs/detectors")]
+    } else {
+        b.detectors.clone()
+    };
+    let detectors = expand_configs(&given)?;
+    if b.strides.is_empty() || b.strides.contains(&0) {
+        bail!("--strides must be positive, got {:?}", b.strides);
+    }
+    let opts = pav::eval::bench::BenchOptions {
+        video: b.video.clone(),
+        detectors,
+        strides: b.strides.clone(),
+        alt_size: Some(b.alt_size),
+        threads: b.threads,
+        repeats: b.repeats,
+        threshold: b.threshold,
+        out_dir: b.out.clone(),
+    };
+    pav::eval::bench::run(&opts)?;
+    for f in ["throughput.csv", "tradeoff.csv", "tradeoff.png"] {
+        eprintln!("wrote {}", b.out.join(f).display());
+    }
+    Ok(())
+}
+
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match &cli.cmd {
@@ -251,5 +331,6 @@ fn main() -> Result<()> {
         Cmd::Model(ModelCmd::Darknet2onnx { cfg, weights, out }) => {
             cmd_darknet2onnx(cfg, weights, out)
         }
+        Cmd::Bench(b) => cmd_bench(b),
     }
 }

@@ -141,6 +141,18 @@ impl OnnxDetector {
         })
     }
 
+    /// Whether the model accepts any input height and width (symbolic spatial dimensions).
+    pub fn accepts_any_size(&self) -> bool {
+        self.session
+            .inputs()
+            .iter()
+            .find(|i| i.name() == self.input_name)
+            .is_some_and(|i| match i.dtype() {
+                ValueType::Tensor { shape, .. } => shape.len() == 4 && shape[2] < 0 && shape[3] < 0,
+                _ => false,
+            })
+    }
+
     /// The config this detector was built from.
     pub fn config(&self) -> &DetectorConfig {
         &self.cfg

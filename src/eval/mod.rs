@@ -1,5 +1,7 @@
 //! Scoring recorded videos: decode, detect, A_physical, reports and plots.
 
+#[cfg(feature = "eval")]
+pub mod bench;
 pub mod physical;
 #[cfg(feature = "eval")]
 pub mod plot;

@@ -213,3 +213,67 @@ pub fn accuracy_bars(path: &Path, rows: &[SummaryRow], threshold: f32) -> Result
         })(),
     )
 }
+
+/// Accuracy-vs-time scatter: one series per (detector, input size), one point per stride.
+pub fn tradeoff(path: &Path, rows: &[super::bench::Tradeoff]) -> Result<(), PlotError> {
+    fonts();
+    let mut keys: Vec<(String, String)> = Vec::new();
+    for r in rows {
+        let k = (r.detector.clone(), r.input.clone());
+        if !keys.contains(&k) {
+            keys.push(k);
+        }
+    }
+    let tmax = rows.iter().map(|r| r.seconds).fold(0.0, f64::max) * 1.1 + 1e-3;
+    wrap(
+        path,
+        (|| -> R<()> {
+            let root = BitMapBackend::new(path, (900, 560)).into_drawing_area();
+            root.fill(&WHITE)?;
+            let mut ch = ChartBuilder::on(&root)
+                .caption(
+                    "What accuracy costs in time (labels: stride)",
+                    ("sans-serif", 22),
+                )
+                .margin(15)
+                .x_label_area_size(45)
+                .y_label_area_size(60)
+                .build_cartesian_2d(0f64..tmax, 0f64..105f64)?;
+            ch.configure_mesh()
+                .x_desc("seconds per video")
+                .y_desc("A_physical [%]")
+                .draw()?;
+            for (i, (d, inp)) in keys.iter().enumerate() {
+                let c = colour(i);
+                let pts: Vec<&super::bench::Tradeoff> = rows
+                    .iter()
+                    .filter(|r| &r.detector == d && &r.input == inp)
+                    .collect();
+                ch.draw_series(LineSeries::new(
+                    pts.iter().map(|r| (r.seconds, 100.0 * r.a_physical)),
+                    c.stroke_width(2),
+                ))?
+                .label(format!("{d} {inp}"))
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
+                });
+                for r in pts {
+                    let p = (r.seconds, 100.0 * r.a_physical);
+                    ch.draw_series(std::iter::once(Circle::new(p, 4, c.filled())))?;
+                    ch.draw_series(std::iter::once(Text::new(
+                        format!("{}", r.stride),
+                        p,
+                        ("sans-serif", 14),
+                    )))?;
+                }
+            }
+            ch.configure_series_labels()
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .position(SeriesLabelPosition::LowerRight)
+                .draw()?;
+            root.present()?;
+            Ok(())
+        })(),
+    )
+}

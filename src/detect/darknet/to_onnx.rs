@@ -195,8 +195,8 @@ pub fn export(net: &Network, weights: &Weights) -> Result<Model, DarknetError> {
                         dims: vec![
                             Err("N".into()),
                             Ok(expect as i64),
-                            Ok(h as i64),
-                            Ok(w as i64),
+                            Err(format!("H/{}", net.height / h)),
+                            Err(format!("W/{}", net.width / w)),
                         ],
                     });
                     prev
@@ -221,11 +221,13 @@ pub fn export(net: &Network, weights: &Weights) -> Result<Model, DarknetError> {
         inputs: vec![ValueInfo {
             name: INPUT_NAME.into(),
             elem_type: FLOAT,
+            // Spatial size is symbolic: the network is fully convolutional with anchors in pixels,
+            // so any multiple of its total stride works (320, 416, 608, ...).
             dims: vec![
                 Err("N".into()),
                 Ok(net.channels as i64),
-                Ok(net.height as i64),
-                Ok(net.width as i64),
+                Err("H".into()),
+                Err("W".into()),
             ],
         }],
         outputs,
