@@ -1,0 +1,40 @@
+//! Turntable protocol core: line codec, commands, replies and integer-microstep motion.
+//!
+//! `no_std` and heap-free so the same logic runs in the RP2040 firmware, the QEMU firmware
+//! used in tests and the host-side simulator. Conventions borrow from grbl, Marlin and Klipper:
+//!
+//! - One ASCII command per line, optionally framed as `N<seq> <command>*<xor>`; the xor is over
+//!   every byte before `*` and is written in decimal.
+//! - Every line gets exactly one reply: `ok [N<seq>]` or `error:<code> [N<seq>] <message>`.
+//!   Moves are acknowledged when accepted and report `done N<seq> pos=<usteps>` when finished.
+//! - Real-time bytes bypass the line buffer: `!` (emergency stop), `?` (status), 0x18 (reset).
+//! - On reset the device prints a banner with its firmware version and microsteps per turn.
+//! - Alarms (stall, homing failure, emergency stop) lock motion until `UNLOCK`.
+//! - Position is an integer count of microsteps, so no float drift builds up over turns.
+//! - While moving, the device reports `@<t_ms> <usteps>` angle samples and sends
+//!   `busy N<seq>` keep-alives during long moves.
+
+#![no_std]
+#![forbid(unsafe_code)]
+
+pub mod codec;
+pub mod command;
+pub mod device;
+pub mod motion;
+pub mod reply;
+pub mod text;
+
+pub use codec::{Event, LineCodec, Realtime};
+pub use command::{Command, Frame, ParseError};
+pub use device::{Config, Device, Sink};
+pub use motion::{Motion, Profile};
+pub use reply::{Alarm, ErrorCode, Reply, State};
+
+/// Protocol version printed in the banner.
+pub const PROTOCOL_VERSION: u32 = 1;
+
+/// Longest command line accepted, excluding the terminator.
+pub const MAX_LINE: usize = 96;
+
+#[cfg(test)]
+extern crate std;
