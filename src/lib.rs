@@ -6,4 +6,6 @@
 pub mod dataset;
 pub mod detect;
 pub mod eval;
+#[cfg(feature = "rig")]
+pub mod rig;
 pub mod sidecar;

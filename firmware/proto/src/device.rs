@@ -124,6 +124,12 @@ impl Device {
         self.physical_position(now_us) - self.origin
     }
 
+    /// The running motion and the home offset: with them the position at any time is known
+    /// (simulators use this as ground truth).
+    pub fn motion(&self) -> (Motion, i64) {
+        (self.motion, self.origin)
+    }
+
     /// Machine state.
     pub fn state(&self) -> State {
         self.state

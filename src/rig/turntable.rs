@@ -1,0 +1,438 @@
+//! Host-side turntable client over a serial port: framed commands with sequence numbers and
+//! checksums, per-command timeouts, resynchronisation after timeouts, and reconnection.
+
+use serialport::{ClearBuffer, SerialPort};
+use std::collections::VecDeque;
+use std::io::{ErrorKind, Read, Write};
+use std::time::{Duration, Instant};
+use turntable_proto::{Alarm, Command, ErrorCode, Frame, Reply, State};
+
+/// Errors talking to the turntable.
+#[derive(Debug, thiserror::Error)]
+pub enum TurntableError {
+    /// The port could not be opened.
+    #[error("cannot open turntable port {path}: {msg}")]
+    Open {
+        /// Port path.
+        path: String,
+        /// Reason.
+        msg: String,
+    },
+    /// Something answered, but not as a pav turntable.
+    #[error("{path}: no pav turntable answered within {after:?} (wrong port or baud rate, or firmware not running)")]
+    NoDevice {
+        /// Port path.
+        path: String,
+        /// How long we waited.
+        after: Duration,
+    },
+    /// A command got no answer in time.
+    #[error("turntable did not answer `{cmd}` within {after:?}")]
+    Timeout {
+        /// The command line.
+        cmd: String,
+        /// How long we waited.
+        after: Duration,
+    },
+    /// The device answered `error:`.
+    #[error("turntable refused `{cmd}`: {code:?}: {msg}")]
+    Refused {
+        /// The command line.
+        cmd: String,
+        /// Error code.
+        code: ErrorCode,
+        /// Device message.
+        msg: String,
+    },
+    /// The device raised an alarm; motion is locked until `unlock`.
+    #[error("turntable alarm: {} (fix the cause, then `pav-rig turntable unlock`)", .0.text())]
+    Alarm(Alarm),
+    /// A motion sent neither progress nor `done` for too long.
+    #[error("turntable motion sent no progress for {0:?}")]
+    NoProgress(Duration),
+    /// The port went away (cable pulled, device reset).
+    #[error("turntable disconnected: {0}")]
+    Disconnected(String),
+}
+
+type Result<T> = std::result::Result<T, TurntableError>;
+
+/// Something the device reported on its own.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Event {
+    /// Position sample while moving, with the host time it arrived.
+    Angle {
+        /// Device clock, ms.
+        t_ms: u64,
+        /// Microsteps from home.
+        pos: i64,
+        /// Host receive time.
+        rx: Instant,
+    },
+    /// A motion finished.
+    Done {
+        /// Its command's sequence number.
+        seq: Option<u32>,
+        /// Final microsteps from home.
+        pos: i64,
+    },
+    /// An alarm was raised.
+    Alarm(Alarm),
+}
+
+/// A status report.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Status {
+    /// State.
+    pub state: State,
+    /// Active alarm.
+    pub alarm: Option<Alarm>,
+    /// Microsteps from home.
+    pub pos: i64,
+    /// Device clock, ms.
+    pub t_ms: u64,
+}
+
+/// A connected turntable.
+pub struct Turntable {
+    /// `None` only while reconnecting (the old port must close before the device can be reopened).
+    port: Option<Box<dyn SerialPort>>,
+    path: String,
+    baud: u32,
+    partial: Vec<u8>,
+    seq: u32,
+    usteps_per_rev: u32,
+    firmware: String,
+    events: VecDeque<Event>,
+    timeout: Duration,
+    /// Lines that did not parse (line noise), for diagnostics.
+    pub garbage_lines: usize,
+}
+
+fn open_port(path: &str, baud: u32) -> Result<Box<dyn SerialPort>> {
+    serialport::new(path, baud)
+        .timeout(Duration::from_millis(20))
+        .open()
+        .map_err(|e| TurntableError::Open {
+            path: path.into(),
+            msg: e.to_string(),
+        })
+}
+
+impl Turntable {
+    /// Opens `path` and checks that a pav turntable answers; `timeout` bounds each command.
+    pub fn open(path: &str, baud: u32, timeout: Duration) -> Result<Self> {
+        let port = open_port(path, baud)?;
+        let mut t = Turntable {
+            port: Some(port),
+            path: path.into(),
+            baud,
+            partial: Vec::new(),
+            seq: 0,
+            usteps_per_rev: 0,
+            firmware: String::new(),
+            events: VecDeque::new(),
+            timeout,
+            garbage_lines: 0,
+        };
+        t.handshake()?;
+        Ok(t)
+    }
+
+    /// Microsteps per turntable revolution, from the banner.
+    pub fn usteps_per_rev(&self) -> u32 {
+        self.usteps_per_rev
+    }
+
+    /// Firmware version, from the banner.
+    pub fn firmware(&self) -> &str {
+        &self.firmware
+    }
+
+    /// Converts microsteps from home to degrees (not wrapped).
+    pub fn degrees(&self, pos: i64) -> f64 {
+        pos as f64 * 360.0 / self.usteps_per_rev.max(1) as f64
+    }
+
+    fn port(&mut self) -> Result<&mut Box<dyn SerialPort>> {
+        let path = &self.path;
+        self.port
+            .as_mut()
+            .ok_or_else(|| TurntableError::Disconnected(format!("{path} is not open")))
+    }
+
+    fn write(&mut self, bytes: &[u8]) -> Result<()> {
+        let path = self.path.clone();
+        let p = self.port()?;
+        p.write_all(bytes)
+            .and_then(|_| p.flush())
+            .map_err(|e| TurntableError::Disconnected(format!("{path}: {e}")))
+    }
+
+    fn handshake(&mut self) -> Result<()> {
+        let _ = self.port()?.clear(ClearBuffer::Input);
+        self.partial.clear();
+        // A few tries: the first bytes after opening may meet a device still booting.
+        for _ in 0..3 {
+            match self.request(Command::Info, self.timeout) {
+                Ok(_) if self.usteps_per_rev > 0 => return Ok(()),
+                Ok(_) | Err(TurntableError::Timeout { .. }) => continue,
+                Err(e) => return Err(e),
+            }
+        }
+        Err(TurntableError::NoDevice {
+            path: self.path.clone(),
+            after: self.timeout * 3,
+        })
+    }
+
+    /// Reads one line, or `None` when `deadline` passes first.
+    fn read_line(&mut self, deadline: Instant) -> Result<Option<(String, Instant)>> {
+        let mut byte = [0u8; 64];
+        loop {
+            if let Some(i) = self.partial.iter().position(|&b| b == b'\n') {
+                let line: Vec<u8> = self.partial.drain(..=i).collect();
+                return Ok(Some((
+                    String::from_utf8_lossy(&line).trim().to_string(),
+                    Instant::now(),
+                )));
+            }
+            if Instant::now() >= deadline {
+                return Ok(None);
+            }
+            match self.port()?.read(&mut byte) {
+                Ok(0) => {
+                    return Err(TurntableError::Disconnected(format!(
+                        "{} closed",
+                        self.path
+                    )))
+                }
+                Ok(n) => self.partial.extend_from_slice(&byte[..n]),
+                Err(e)
+                    if e.kind() == ErrorKind::TimedOut
+                        || e.kind() == ErrorKind::WouldBlock
+                        || e.kind() == ErrorKind::Interrupted => {}
+                Err(e) => return Err(TurntableError::Disconnected(format!("{}: {e}", self.path))),
+            }
+            if self.partial.len() > 4096 {
+                // A line this long is noise; drop it rather than grow without bound.
+                self.partial.clear();
+                self.garbage_lines += 1;
+            }
+        }
+    }
+
+    /// Files an unsolicited line as an event; returns the parsed reply for the caller to inspect.
+    fn file<'l>(&mut self, line: &'l str, rx: Instant) -> Option<Reply<'l>> {
+        let Some(r) = Reply::parse(line) else {
+            if !line.is_empty() {
+                self.garbage_lines += 1;
+            }
+            return None;
+        };
+        match r {
+            Reply::Angle { t_ms, pos } => self.events.push_back(Event::Angle { t_ms, pos, rx }),
+            Reply::Done { seq, pos } => self.events.push_back(Event::Done { seq, pos }),
+            Reply::Alarm(a) => self.events.push_back(Event::Alarm(a)),
+            Reply::Banner {
+                fw, usteps_per_rev, ..
+            } => {
+                self.usteps_per_rev = usteps_per_rev;
+                self.firmware = fw.to_string();
+            }
+            _ => {}
+        }
+        Some(r)
+    }
+
+    /// Sends `cmd` and waits for its `ok`; returns the sequence number and the status line, if any.
+    fn request(&mut self, cmd: Command, timeout: Duration) -> Result<(u32, Option<Status>)> {
+        self.seq = self.seq.wrapping_add(1) % 1_000_000_000;
+        let seq = self.seq;
+        let frame = Frame {
+            seq: Some(seq),
+            cmd,
+        };
+        let text = frame.encode(true);
+        let mut line = text.as_str().as_bytes().to_vec();
+        line.push(b'\n');
+        self.write(&line)?;
+        let deadline = Instant::now() + timeout;
+        let mut status = None;
+        while let Some((l, rx)) = self.read_line(deadline)? {
+            match self.file(&l, rx) {
+                Some(Reply::Ok { seq: Some(s) }) if s == seq => return Ok((seq, status)),
+                Some(Reply::Error {
+                    code,
+                    seq: Some(s),
+                    msg,
+                }) if s == seq => {
+                    return Err(TurntableError::Refused {
+                        cmd: cmd.to_string(),
+                        code,
+                        msg: msg.to_string(),
+                    });
+                }
+                // A checksum failure cannot be tied to a sequence number if the N field was hit.
+                Some(Reply::Error {
+                    code: ErrorCode::Checksum | ErrorCode::Garbage | ErrorCode::LineTooLong,
+                    seq: None,
+                    ..
+                }) => {
+                    self.resync()?;
+                    return Err(TurntableError::Timeout {
+                        cmd: cmd.to_string(),
+                        after: timeout,
+                    });
+                }
+                Some(Reply::Status {
+                    state,
+                    alarm,
+                    pos,
+                    t_ms,
+                }) => {
+                    status = Some(Status {
+                        state,
+                        alarm,
+                        pos,
+                        t_ms,
+                    })
+                }
+                _ => {}
+            }
+        }
+        self.resync()?;
+        Err(TurntableError::Timeout {
+            cmd: cmd.to_string(),
+            after: timeout,
+        })
+    }
+
+    /// Drops everything buffered and confirms a fresh round trip, so late replies to a timed-out
+    /// command cannot be taken for answers to the next one.
+    pub fn resync(&mut self) -> Result<()> {
+        let _ = self.port()?.clear(ClearBuffer::Input);
+        self.partial.clear();
+        self.seq = self.seq.wrapping_add(1) % 1_000_000_000;
+        let seq = self.seq;
+        let line = format!(
+            "{}\n",
+            Frame {
+                seq: Some(seq),
+                cmd: Command::Ping
+            }
+            .encode(true)
+            .as_str()
+        );
+        self.write(line.as_bytes())?;
+        let deadline = Instant::now() + self.timeout;
+        while let Some((l, rx)) = self.read_line(deadline)? {
+            if let Some(Reply::Ok { seq: Some(s) }) = self.file(&l, rx) {
+                if s == seq {
+                    return Ok(());
+                }
+            }
+        }
+        // No answer either: leave it to the caller's timeout error.
+        Ok(())
+    }
+
+    /// Sends a command and waits for its acknowledgement; motions then run until [`Turntable::wait_done`].
+    pub fn command(&mut self, cmd: Command) -> Result<u32> {
+        self.request(cmd, self.timeout).map(|r| r.0)
+    }
+
+    /// Sends a command that is safe to repeat (not a motion), retrying after timeouts.
+    pub fn command_retry(&mut self, cmd: Command, attempts: usize) -> Result<u32> {
+        assert!(
+            !matches!(
+                cmd,
+                Command::Home | Command::MoveTo(_) | Command::MoveBy(_) | Command::Spin { .. }
+            ),
+            "motions are not retried: a lost `ok` would start them twice"
+        );
+        let mut last = None;
+        for _ in 0..attempts.max(1) {
+            match self.command(cmd) {
+                Err(e @ TurntableError::Timeout { .. }) => last = Some(e),
+                other => return other,
+            }
+        }
+        Err(last.expect("at least one attempt"))
+    }
+
+    /// Current status (retried up to 3 times on line noise).
+    pub fn status(&mut self) -> Result<Status> {
+        let mut last = None;
+        for _ in 0..3 {
+            match self.request(Command::Status, self.timeout) {
+                Ok((_, Some(st))) => return Ok(st),
+                Ok((_, None)) => {
+                    last = Some(TurntableError::Timeout {
+                        cmd: "STATUS (report line)".into(),
+                        after: self.timeout,
+                    })
+                }
+                Err(e @ TurntableError::Timeout { .. }) => last = Some(e),
+                Err(e) => return Err(e),
+            }
+        }
+        Err(last.expect("three attempts"))
+    }
+
+    /// Waits until the motion started by `seq` reports `done`; fails on an alarm or when nothing
+    /// (no `busy`, no angle report) arrives for `no_progress`.
+    pub fn wait_done(&mut self, seq: u32, no_progress: Duration) -> Result<i64> {
+        loop {
+            match self.next_event(no_progress)? {
+                Some(Event::Done { seq: Some(s), pos }) if s == seq => return Ok(pos),
+                Some(Event::Alarm(a)) => return Err(TurntableError::Alarm(a)),
+                Some(_) => {}
+                None => return Err(TurntableError::NoProgress(no_progress)),
+            }
+        }
+    }
+
+    /// Next event, waiting up to `timeout` for one; keep-alives reset nothing here but count as traffic.
+    pub fn next_event(&mut self, timeout: Duration) -> Result<Option<Event>> {
+        let mut deadline = Instant::now() + timeout;
+        loop {
+            if let Some(e) = self.events.pop_front() {
+                return Ok(Some(e));
+            }
+            let Some((l, rx)) = self.read_line(deadline)? else {
+                return Ok(None);
+            };
+            if let Some(Reply::Busy { .. }) = self.file(&l, rx) {
+                deadline = Instant::now() + timeout;
+            }
+        }
+    }
+
+    /// Sends the real-time emergency stop byte.
+    pub fn estop(&mut self) -> Result<()> {
+        self.write(b"!")
+    }
+
+    /// Reopens the port (after a USB re-enumeration or cable glitch) and handshakes again.
+    pub fn reconnect(&mut self, attempts: usize, wait: Duration) -> Result<()> {
+        let mut last = TurntableError::Disconnected(self.path.clone());
+        self.port = None;
+        for _ in 0..attempts.max(1) {
+            match open_port(&self.path, self.baud) {
+                Ok(p) => {
+                    self.port = Some(p);
+                    self.partial.clear();
+                    self.events.clear();
+                    match self.handshake() {
+                        Ok(()) => return Ok(()),
+                        Err(e) => last = e,
+                    }
+                }
+                Err(e) => last = e,
+            }
+            std::thread::sleep(wait);
+        }
+        Err(last)
+    }
+}

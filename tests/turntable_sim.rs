@@ -1,0 +1,196 @@
+//! The host client against the simulated turntable (the firmware's protocol logic on a pty):
+//! real motions, and every injected fault ending in a clear error or a recovery, never a hang.
+
+use pav::rig::sim::{Faults, SimOptions, SimTurntable};
+use pav::rig::turntable::{Event, Turntable, TurntableError};
+use std::time::{Duration, Instant};
+use turntable_proto::text::Milli;
+use turntable_proto::{Alarm, Command, ErrorCode, State};
+
+fn sim(time_scale: f64, faults: Faults) -> SimTurntable {
+    SimTurntable::spawn(SimOptions {
+        time_scale,
+        faults,
+        ..SimOptions::default()
+    })
+    .unwrap()
+}
+
+fn connect(s: &SimTurntable, timeout_ms: u64) -> Turntable {
+    Turntable::open(
+        &s.path().to_string_lossy(),
+        115_200,
+        Duration::from_millis(timeout_ms),
+    )
+    .unwrap()
+}
+
+#[test]
+fn moves_and_spins_end_exactly_where_commanded() {
+    let s = sim(20.0, Faults::default());
+    let mut t = connect(&s, 500);
+    assert_eq!((t.usteps_per_rev(), t.firmware()), (3200, "0.1.0"));
+    let st = t.status().unwrap();
+    assert_eq!((st.state, st.pos), (State::Idle, 0));
+    let seq = t.command(Command::MoveTo(Milli(90_000))).unwrap();
+    assert_eq!(t.wait_done(seq, Duration::from_secs(2)).unwrap(), 800);
+    assert!((s.truth().angle_at(Instant::now()) - 90.0).abs() < 1e-9);
+    // One revolution at 28 s (1.4 s of wall time at 20x), with angle reports on the way.
+    let seq = t
+        .command(Command::Spin {
+            period_s: Milli(28_000),
+            turns: 1,
+        })
+        .unwrap();
+    let t0 = Instant::now();
+    let mut reports = 0;
+    let end = loop {
+        match t.next_event(Duration::from_secs(2)).unwrap() {
+            Some(Event::Angle { pos, .. }) => {
+                assert!((800..=4000).contains(&pos));
+                reports += 1;
+            }
+            Some(Event::Done { seq: Some(q), pos }) if q == seq => break pos,
+            other => panic!("unexpected {other:?}"),
+        }
+    };
+    assert_eq!(end, 4000);
+    let wall = t0.elapsed().as_secs_f64();
+    assert!(
+        (1.3..2.5).contains(&wall),
+        "one turn took {wall} s of wall time"
+    );
+    assert!(reports > 20, "{reports} angle reports");
+    let seq = t.command(Command::Home).unwrap();
+    assert_eq!(t.wait_done(seq, Duration::from_secs(2)).unwrap(), 0);
+}
+
+#[test]
+fn stall_alarm_locks_until_unlock() {
+    let s = sim(
+        20.0,
+        Faults {
+            stall_after: Some(Duration::from_millis(500)),
+            ..Faults::default()
+        },
+    );
+    let mut t = connect(&s, 500);
+    let seq = t
+        .command(Command::Spin {
+            period_s: Milli(28_000),
+            turns: 2,
+        })
+        .unwrap();
+    match t.wait_done(seq, Duration::from_secs(2)) {
+        Err(TurntableError::Alarm(Alarm::Stall)) => {}
+        other => panic!("expected a stall alarm, got {other:?}"),
+    }
+    match t.command(Command::MoveBy(Milli(10_000))) {
+        Err(TurntableError::Refused {
+            code: ErrorCode::Locked,
+            msg,
+            ..
+        }) => assert_eq!(msg, "motor stall"),
+        other => panic!("expected locked, got {other:?}"),
+    }
+    assert_eq!(t.status().unwrap().alarm, Some(Alarm::Stall));
+    t.command(Command::Unlock).unwrap();
+    let seq = t.command(Command::MoveBy(Milli(-10_000))).unwrap();
+    t.wait_done(seq, Duration::from_secs(2)).unwrap();
+}
+
+#[test]
+fn noisy_lines_are_survived_by_resync_and_retries() {
+    let s = sim(
+        1.0,
+        Faults {
+            drop_byte: 0.01,
+            garbage_line: 0.2,
+            ..Faults::default()
+        },
+    );
+    let mut t = connect(&s, 150);
+    let t0 = Instant::now();
+    let mut ok = 0;
+    for _ in 0..40 {
+        if t.command_retry(Command::Ping, 5).is_ok() {
+            ok += 1;
+        }
+    }
+    assert!(ok >= 38, "only {ok}/40 pings got through");
+    assert!(t.garbage_lines > 0, "garbage was injected but never seen");
+    assert!(t0.elapsed() < Duration::from_secs(30));
+}
+
+#[test]
+fn slow_or_hung_device_times_out_and_disconnect_is_reported() {
+    let s = sim(
+        1.0,
+        Faults {
+            delay: Duration::from_millis(400),
+            ..Faults::default()
+        },
+    );
+    let r = Turntable::open(
+        &s.path().to_string_lossy(),
+        115_200,
+        Duration::from_millis(100),
+    );
+    assert!(
+        matches!(r, Err(TurntableError::NoDevice { .. })),
+        "{:?}",
+        r.err()
+    );
+
+    let s = sim(
+        1.0,
+        Faults {
+            hang_after: Some(Duration::from_millis(300)),
+            ..Faults::default()
+        },
+    );
+    let mut t = connect(&s, 200);
+    std::thread::sleep(Duration::from_millis(400));
+    let t0 = Instant::now();
+    let e = t.command(Command::Ping).unwrap_err();
+    assert!(matches!(e, TurntableError::Timeout { .. }), "{e}");
+    assert!(e.to_string().contains("did not answer `PING`"), "{e}");
+    assert!(t0.elapsed() < Duration::from_secs(2));
+
+    let s = sim(
+        1.0,
+        Faults {
+            disconnect_after: Some(Duration::from_millis(300)),
+            ..Faults::default()
+        },
+    );
+    let mut t = connect(&s, 200);
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(!s.is_running());
+    let t0 = Instant::now();
+    let e = t.command(Command::Ping).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            TurntableError::Disconnected(_) | TurntableError::Timeout { .. }
+        ),
+        "{e}"
+    );
+    assert!(t0.elapsed() < Duration::from_secs(2));
+}
+
+#[test]
+fn reconnect_handshakes_again() {
+    let s = sim(1.0, Faults::default());
+    let mut t = connect(&s, 300);
+    t.reconnect(3, Duration::from_millis(50)).unwrap();
+    assert_eq!(t.status().unwrap().state, State::Idle);
+    let e = Turntable::open("/dev/does-not-exist", 115_200, Duration::from_millis(100))
+        .err()
+        .unwrap();
+    assert!(
+        e.to_string()
+            .contains("cannot open turntable port /dev/does-not-exist"),
+        "{e}"
+    );
+}
