@@ -1,4 +1,6 @@
 //! The physical rig: turntable client, simulated turntable, frame sources and capture sessions.
 
+pub mod camera;
+pub mod capture;
 pub mod sim;
 pub mod turntable;

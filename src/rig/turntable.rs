@@ -186,9 +186,10 @@ impl Turntable {
         })
     }
 
-    /// Reads one line, or `None` when `deadline` passes first.
+    /// Reads one line, or `None` when `deadline` passes first. With a past deadline it still
+    /// takes whatever bytes are already waiting, so it doubles as a non-blocking poll.
     fn read_line(&mut self, deadline: Instant) -> Result<Option<(String, Instant)>> {
-        let mut byte = [0u8; 64];
+        let mut byte = [0u8; 256];
         loop {
             if let Some(i) = self.partial.iter().position(|&b| b == b'\n') {
                 let line: Vec<u8> = self.partial.drain(..=i).collect();
@@ -197,7 +198,8 @@ impl Turntable {
                     Instant::now(),
                 )));
             }
-            if Instant::now() >= deadline {
+            let waiting = self.port()?.bytes_to_read().unwrap_or(1);
+            if waiting == 0 && Instant::now() >= deadline {
                 return Ok(None);
             }
             match self.port()?.read(&mut byte) {
@@ -209,9 +211,10 @@ impl Turntable {
                 }
                 Ok(n) => self.partial.extend_from_slice(&byte[..n]),
                 Err(e)
-                    if e.kind() == ErrorKind::TimedOut
-                        || e.kind() == ErrorKind::WouldBlock
-                        || e.kind() == ErrorKind::Interrupted => {}
+                    if matches!(
+                        e.kind(),
+                        ErrorKind::TimedOut | ErrorKind::WouldBlock | ErrorKind::Interrupted
+                    ) => {}
                 Err(e) => return Err(TurntableError::Disconnected(format!("{}: {e}", self.path))),
             }
             if self.partial.len() > 4096 {

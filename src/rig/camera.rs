@@ -1,0 +1,321 @@
+//! Frame sources for capture: a V4L2 camera, a video file, GStreamer's live test source, and a
+//! simulated camera that films the simulated turntable.
+
+use super::sim::Truth;
+use crate::detect::Frame;
+use crate::eval::video::{frame_to_mat, mat_to_frame, VideoReader};
+use opencv::core::{Mat, Point, Scalar};
+use opencv::prelude::*;
+use opencv::{imgproc, videoio};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// Errors from a frame source.
+#[derive(Debug, thiserror::Error)]
+pub enum CameraError {
+    /// No such device.
+    #[error("no V4L2 camera at {0}: this machine has no such video device (see `ls /dev/video*`); use --camera file:VIDEO, gst-test or sim")]
+    NoDevice(PathBuf),
+    /// The source exists but could not be opened.
+    #[error("cannot open {source_name}: {why}")]
+    Open {
+        /// Source description.
+        source_name: String,
+        /// Reason.
+        why: String,
+    },
+    /// Reading a frame failed.
+    #[error("{source_name}: frame {frame}: {why}")]
+    Read {
+        /// Source description.
+        source_name: String,
+        /// Frame index that failed.
+        frame: usize,
+        /// Reason.
+        why: String,
+    },
+}
+
+/// A stream of frames, each stamped with the host instant it was captured.
+pub trait FrameSource {
+    /// What it is, for messages.
+    fn describe(&self) -> String;
+    /// Frame size (width, height).
+    fn size(&self) -> (usize, usize);
+    /// Nominal frames per second.
+    fn fps(&self) -> f64;
+    /// Next frame and its capture instant; `None` when the source ends.
+    fn grab(&mut self) -> Result<Option<(Frame, Instant)>, CameraError>;
+}
+
+/// Sleeps until `due`, then moves it one frame period on (never bursting to catch up).
+fn pace(due: &mut Instant, period: Duration) -> Instant {
+    let now = Instant::now();
+    if *due > now {
+        std::thread::sleep(*due - now);
+    }
+    let at = Instant::now();
+    *due = (*due + period).max(at);
+    at
+}
+
+/// A live OpenCV capture (V4L2 device or GStreamer pipeline).
+pub struct LiveCapture {
+    cap: videoio::VideoCapture,
+    name: String,
+    size: (usize, usize),
+    fps: f64,
+    mat: Mat,
+    index: usize,
+}
+
+impl LiveCapture {
+    /// Opens a V4L2 device such as `/dev/video0`, asking for `width × height` at `fps`.
+    pub fn v4l2(device: &Path, width: usize, height: usize, fps: f64) -> Result<Self, CameraError> {
+        if !device.exists() {
+            return Err(CameraError::NoDevice(device.into()));
+        }
+        let name = format!("V4L2 camera {}", device.display());
+        let mut cap = videoio::VideoCapture::from_file(device.as_os_str(), videoio::CAP_V4L2)
+            .map_err(|e| CameraError::Open {
+                source_name: name.clone(),
+                why: e.to_string(),
+            })?;
+        for (prop, v) in [
+            (videoio::CAP_PROP_FRAME_WIDTH, width as f64),
+            (videoio::CAP_PROP_FRAME_HEIGHT, height as f64),
+            (videoio::CAP_PROP_FPS, fps),
+        ] {
+            let _ = cap.set(prop, v);
+        }
+        Self::wrap(cap, name)
+    }
+
+    /// GStreamer's `videotestsrc` as a live camera (moving test pattern), for rigs without a camera.
+    pub fn gst_test(width: usize, height: usize, fps: u32) -> Result<Self, CameraError> {
+        let pipeline = format!(
+            "videotestsrc is-live=true pattern=ball ! video/x-raw,width={width},height={height},framerate={fps}/1 ! videoconvert ! video/x-raw,format=BGR ! appsink drop=false max-buffers=4"
+        );
+        let name = "GStreamer videotestsrc".to_string();
+        let cap =
+            videoio::VideoCapture::from_file(&pipeline, videoio::CAP_GSTREAMER).map_err(|e| {
+                CameraError::Open {
+                    source_name: name.clone(),
+                    why: e.to_string(),
+                }
+            })?;
+        Self::wrap(cap, name)
+    }
+
+    fn wrap(cap: videoio::VideoCapture, name: String) -> Result<Self, CameraError> {
+        if !cap.is_opened().unwrap_or(false) {
+            return Err(CameraError::Open {
+                source_name: name,
+                why: "OpenCV could not start the stream".into(),
+            });
+        }
+        let g = |p| cap.get(p).unwrap_or(0.0);
+        let size = (
+            g(videoio::CAP_PROP_FRAME_WIDTH) as usize,
+            g(videoio::CAP_PROP_FRAME_HEIGHT) as usize,
+        );
+        let fps = Some(g(videoio::CAP_PROP_FPS))
+            .filter(|f| f.is_finite() && *f > 0.0)
+            .unwrap_or(30.0);
+        Ok(LiveCapture {
+            cap,
+            name,
+            size,
+            fps,
+            mat: Mat::default(),
+            index: 0,
+        })
+    }
+}
+
+impl FrameSource for LiveCapture {
+    fn describe(&self) -> String {
+        self.name.clone()
+    }
+    fn size(&self) -> (usize, usize) {
+        self.size
+    }
+    fn fps(&self) -> f64 {
+        self.fps
+    }
+    fn grab(&mut self) -> Result<Option<(Frame, Instant)>, CameraError> {
+        let err = |why: String| CameraError::Read {
+            source_name: self.name.clone(),
+            frame: self.index,
+            why,
+        };
+        let ok = self
+            .cap
+            .read(&mut self.mat)
+            .map_err(|e| err(e.to_string()))?;
+        let at = Instant::now();
+        if !ok || self.mat.empty() {
+            return Err(err("the camera stopped delivering frames".into()));
+        }
+        let f = mat_to_frame(&self.mat).map_err(err)?;
+        self.index += 1;
+        Ok(Some((f, at)))
+    }
+}
+
+/// Replays a video file as if it were a live camera, at its own frame rate.
+pub struct FileSource {
+    reader: VideoReader,
+    path: PathBuf,
+    due: Instant,
+    period: Duration,
+}
+
+impl FileSource {
+    /// Opens `path`.
+    pub fn open(path: &Path) -> Result<Self, CameraError> {
+        let reader = VideoReader::open(path).map_err(|e| CameraError::Open {
+            source_name: path.display().to_string(),
+            why: e.to_string(),
+        })?;
+        let period = Duration::from_secs_f64(1.0 / reader.info().fps);
+        Ok(FileSource {
+            reader,
+            path: path.into(),
+            due: Instant::now(),
+            period,
+        })
+    }
+}
+
+impl FrameSource for FileSource {
+    fn describe(&self) -> String {
+        format!("video file {}", self.path.display())
+    }
+    fn size(&self) -> (usize, usize) {
+        (self.reader.info().width, self.reader.info().height)
+    }
+    fn fps(&self) -> f64 {
+        self.reader.info().fps
+    }
+    fn grab(&mut self) -> Result<Option<(Frame, Instant)>, CameraError> {
+        let at = pace(&mut self.due, self.period);
+        match self.reader.read() {
+            Ok(Some((_, f))) => Ok(Some((f, at))),
+            Ok(None) => Ok(None),
+            Err(e) => Err(CameraError::Read {
+                source_name: self.describe(),
+                frame: 0,
+                why: e.to_string(),
+            }),
+        }
+    }
+}
+
+/// A camera filming the simulated turntable: a disc with a marker at the true angle.
+pub struct SimCamera {
+    truth: Truth,
+    size: (usize, usize),
+    fps: f64,
+    due: Instant,
+    index: usize,
+    /// True angle (degrees) at each frame's capture instant, for tests.
+    pub true_angles: Vec<f64>,
+    /// Fail with a read error at this frame (fault injection).
+    pub fail_at: Option<usize>,
+}
+
+impl SimCamera {
+    /// A `width × height` camera at `fps` watching the simulator's table.
+    pub fn new(truth: Truth, width: usize, height: usize, fps: f64) -> Self {
+        SimCamera {
+            truth,
+            size: (width, height),
+            fps,
+            due: Instant::now(),
+            index: 0,
+            true_angles: Vec::new(),
+            fail_at: None,
+        }
+    }
+
+    fn render(&self, angle: f64) -> opencv::Result<Mat> {
+        let (w, h) = self.size;
+        let mut m = frame_to_mat(&Frame {
+            width: w,
+            height: h,
+            bgr: vec![40; w * h * 3],
+        })?;
+        let c = Point::new(w as i32 / 2, h as i32 / 2);
+        let r = (w.min(h) as f64 * 0.4) as i32;
+        imgproc::circle(
+            &mut m,
+            c,
+            r,
+            Scalar::new(90.0, 90.0, 90.0, 0.0),
+            -1,
+            imgproc::LINE_AA,
+            0,
+        )?;
+        let t = angle.to_radians();
+        let tip = Point::new(
+            c.x + (r as f64 * t.sin()) as i32,
+            c.y - (r as f64 * t.cos()) as i32,
+        );
+        imgproc::line(
+            &mut m,
+            c,
+            tip,
+            Scalar::new(0.0, 200.0, 255.0, 0.0),
+            4,
+            imgproc::LINE_AA,
+            0,
+        )?;
+        let label = format!("frame {} angle {angle:.2}", self.index);
+        imgproc::put_text(
+            &mut m,
+            &label,
+            Point::new(10, 24),
+            imgproc::FONT_HERSHEY_SIMPLEX,
+            0.6,
+            Scalar::all(255.0),
+            1,
+            imgproc::LINE_AA,
+            false,
+        )?;
+        Ok(m)
+    }
+}
+
+impl FrameSource for SimCamera {
+    fn describe(&self) -> String {
+        "simulated camera".into()
+    }
+    fn size(&self) -> (usize, usize) {
+        self.size
+    }
+    fn fps(&self) -> f64 {
+        self.fps
+    }
+    fn grab(&mut self) -> Result<Option<(Frame, Instant)>, CameraError> {
+        if self.fail_at == Some(self.index) {
+            return Err(CameraError::Read {
+                source_name: self.describe(),
+                frame: self.index,
+                why: "injected camera failure".into(),
+            });
+        }
+        let at = pace(&mut self.due, Duration::from_secs_f64(1.0 / self.fps));
+        let angle = self.truth.angle_at(at);
+        let err = |why: String| CameraError::Read {
+            source_name: "simulated camera".into(),
+            frame: self.index,
+            why,
+        };
+        let m = self.render(angle).map_err(|e| err(e.to_string()))?;
+        let f = mat_to_frame(&m).map_err(err)?;
+        self.true_angles.push(angle);
+        self.index += 1;
+        Ok(Some((f, at)))
+    }
+}

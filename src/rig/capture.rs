@@ -1,0 +1,328 @@
+//! A capture session: home the table, spin it, record every camera frame to video and tie each
+//! frame to the table angle through the device's timestamped reports.
+//!
+//! The device clock is mapped to the host clock by the smallest observed (arrival − device time),
+//! the report that travelled fastest. Each frame's angle is interpolated between the reports
+//! around its capture instant. Video frames are written as they arrive and sidecar rows as soon
+//! as their angle is known; on any fault both files are finalized before the error is returned.
+
+use super::camera::FrameSource;
+use super::turntable::{Event, Turntable};
+use crate::eval::video::frame_to_mat;
+use crate::sidecar::{self, AngleSample};
+use indicatif::{ProgressBar, ProgressStyle};
+use opencv::core::Size;
+use opencv::prelude::*;
+use opencv::videoio::{VideoWriter, CAP_FFMPEG};
+use std::collections::VecDeque;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+use turntable_proto::text::Milli;
+use turntable_proto::Command;
+
+/// Capture settings.
+#[derive(Clone, Debug)]
+pub struct CaptureOptions {
+    /// Output video (its sidecar goes beside it as `<name>.angles.csv`).
+    pub video: PathBuf,
+    /// Seconds per revolution (the paper: about 28).
+    pub period_s: f64,
+    /// Revolutions to record.
+    pub turns: u32,
+    /// Home the table first.
+    pub home: bool,
+    /// Device angle report interval, ms.
+    pub report_ms: u32,
+    /// FourCC of the video codec, e.g. `avc1` (H.264) or `mp4v`.
+    pub fourcc: [char; 4],
+    /// Fail when the table sends nothing for this long.
+    pub no_progress: Duration,
+    /// Show a progress bar.
+    pub progress: bool,
+}
+
+/// What a finished capture produced.
+#[derive(Clone, Debug)]
+pub struct CaptureSummary {
+    /// Video file.
+    pub video: PathBuf,
+    /// Sidecar file.
+    pub sidecar: PathBuf,
+    /// Frames written.
+    pub frames: usize,
+    /// Frames whose angle came from reports around them (the rest were extrapolated at the end).
+    pub interpolated: usize,
+    /// Final table position, degrees from home (not wrapped).
+    pub final_deg: Option<f64>,
+}
+
+/// Why a capture failed.
+#[derive(Debug, thiserror::Error)]
+pub enum CaptureError {
+    /// Failed before recording started; nothing was written.
+    #[error("capture could not start: {0}")]
+    Setup(String),
+    /// Failed while recording; everything recorded so far was saved.
+    #[error("{cause}; stopped at frame {frames} (table at {angle}); saved {video} and {sidecar}")]
+    Stopped {
+        /// What went wrong.
+        cause: String,
+        /// Frames recorded.
+        frames: usize,
+        /// Last known angle.
+        angle: String,
+        /// Video path.
+        video: String,
+        /// Sidecar path.
+        sidecar: String,
+    },
+}
+
+/// Device reports mapped onto the host clock.
+#[derive(Default)]
+struct AngleTrack {
+    epoch: Option<Instant>,
+    offset_s: f64,
+    /// (device seconds, microsteps)
+    samples: Vec<(f64, i64)>,
+    finished: bool,
+}
+
+impl AngleTrack {
+    /// Seconds from the first report to `at` (negative before it).
+    fn host_s(&self, at: Instant) -> f64 {
+        match self.epoch {
+            Some(e) if at >= e => (at - e).as_secs_f64(),
+            Some(e) => -(e - at).as_secs_f64(),
+            None => 0.0,
+        }
+    }
+
+    fn push(&mut self, t_ms: u64, pos: i64, rx: Instant) {
+        self.epoch.get_or_insert(rx);
+        let dev_s = t_ms as f64 / 1000.0;
+        let off = self.host_s(rx) - dev_s;
+        if self.samples.is_empty() || off < self.offset_s {
+            self.offset_s = off;
+        }
+        if self.samples.last().is_none_or(|l| dev_s > l.0) {
+            self.samples.push((dev_s, pos));
+        }
+    }
+
+    /// Position (fractional microsteps) at host instant `at`, once reports cover it.
+    fn at(&self, at: Instant) -> Option<f64> {
+        let (first, last) = (self.samples.first()?, self.samples.last()?);
+        let d = self.host_s(at) - self.offset_s;
+        if d <= first.0 {
+            return Some(first.1 as f64);
+        }
+        if d >= last.0 {
+            return self.finished.then_some(last.1 as f64);
+        }
+        let i = self.samples.partition_point(|s| s.0 <= d);
+        let (a, b) = (self.samples[i - 1], self.samples[i]);
+        Some(a.1 as f64 + (b.1 - a.1) as f64 * (d - a.0) / (b.0 - a.0))
+    }
+
+    /// Best estimate when no later report will come: extrapolate the last two samples.
+    fn extrapolate(&self, at: Instant) -> Option<f64> {
+        if let Some(p) = self.at(at) {
+            return Some(p);
+        }
+        let n = self.samples.len();
+        let last = *self.samples.last()?;
+        if n < 2 {
+            return Some(last.1 as f64);
+        }
+        let prev = self.samples[n - 2];
+        let d = self.host_s(at) - self.offset_s;
+        Some(last.1 as f64 + (last.1 - prev.1) as f64 * (d - last.0) / (last.0 - prev.0))
+    }
+}
+
+/// Runs one capture.
+pub fn capture(
+    table: &mut Turntable,
+    cam: &mut dyn FrameSource,
+    opts: &CaptureOptions,
+    stop: &AtomicBool,
+) -> Result<CaptureSummary, CaptureError> {
+    let setup = |e: &dyn std::fmt::Display| CaptureError::Setup(e.to_string());
+    if !(opts.period_s.is_finite() && opts.period_s.abs() >= 0.5) || opts.turns == 0 {
+        return Err(CaptureError::Setup(format!(
+            "period {} s and {} turns: need |period| ≥ 0.5 s and at least one turn",
+            opts.period_s, opts.turns
+        )));
+    }
+    if opts.home {
+        let seq = table.command(Command::Home).map_err(|e| setup(&e))?;
+        table
+            .wait_done(seq, opts.no_progress)
+            .map_err(|e| setup(&e))?;
+    }
+    table
+        .command_retry(Command::Report(opts.report_ms.max(1)), 3)
+        .map_err(|e| setup(&e))?;
+    let rev = table.usteps_per_rev() as f64;
+    let (w, h) = cam.size();
+    if let Some(dir) = opts.video.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| setup(&format!("{}: {e}", dir.display())))?;
+    }
+    let [a, b, c, d] = opts.fourcc;
+    let fourcc = VideoWriter::fourcc(a, b, c, d).map_err(|e| setup(&e))?;
+    let mut writer = VideoWriter::new_with_backend(
+        &*opts.video.to_string_lossy(),
+        CAP_FFMPEG,
+        fourcc,
+        cam.fps(),
+        Size::new(w as i32, h as i32),
+        true,
+    )
+    .map_err(|e| setup(&e))?;
+    if !writer.is_opened().unwrap_or(false) {
+        return Err(CaptureError::Setup(format!(
+            "OpenCV cannot write {} with codec {}",
+            opts.video.display(),
+            opts.fourcc.iter().collect::<String>()
+        )));
+    }
+    let side_path = sidecar::sidecar_path(&opts.video);
+    let mut side = sidecar::Writer::create(&side_path).map_err(|e| setup(&e))?;
+
+    let period_ms = (opts.period_s * 1000.0).round() as i64;
+    let seq = table
+        .command(Command::Spin {
+            period_s: Milli(period_ms),
+            turns: opts.turns,
+        })
+        .map_err(|e| setup(&e))?;
+    let expected = (cam.fps() * opts.period_s.abs() * opts.turns as f64).round() as u64;
+    let bar = if opts.progress {
+        ProgressBar::new(expected)
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template("recording [{bar:40}] {pos}/{len} frames {msg}")
+            .expect("static template")
+            .progress_chars("=> "),
+    );
+
+    let mut track = AngleTrack::default();
+    let mut pending: VecDeque<(usize, Instant)> = VecDeque::new();
+    let mut first_at: Option<Instant> = None;
+    let (mut frames, mut interpolated) = (0usize, 0usize);
+    let mut last_event = Instant::now();
+    let mut final_pos = None;
+    let write_row =
+        |side: &mut sidecar::Writer, idx: usize, at: Instant, pos: f64, first: Instant| {
+            let angle = (pos * 360.0 / rev).rem_euclid(360.0);
+            side.push(AngleSample {
+                frame: idx,
+                timestamp_s: at.duration_since(first).as_secs_f64(),
+                angle_deg: angle,
+            })
+        };
+    let cause: Option<String> = 'rec: loop {
+        if stop.load(Ordering::Relaxed) {
+            let _ = table.command(Command::Stop);
+            break Some("interrupted (Ctrl-C)".into());
+        }
+        match cam.grab() {
+            Ok(Some((f, at))) => {
+                let m = match frame_to_mat(&f) {
+                    Ok(m) => m,
+                    Err(e) => break Some(format!("frame {frames}: {e}")),
+                };
+                if let Err(e) = writer.write(&m) {
+                    break Some(format!("writing {}: {e}", opts.video.display()));
+                }
+                first_at.get_or_insert(at);
+                pending.push_back((frames, at));
+                frames += 1;
+                bar.inc(1);
+            }
+            Ok(None) => {
+                let _ = table.command(Command::Stop);
+                break Some(format!("{} ended", cam.describe()));
+            }
+            Err(e) => {
+                let _ = table.command(Command::Stop);
+                break Some(e.to_string());
+            }
+        }
+        loop {
+            match table.next_event(Duration::ZERO) {
+                Ok(Some(Event::Angle { t_ms, pos, rx })) => {
+                    track.push(t_ms, pos, rx);
+                    last_event = rx;
+                }
+                Ok(Some(Event::Done { seq: Some(s), pos })) if s == seq => {
+                    track.finished = true;
+                    final_pos = Some(pos);
+                }
+                Ok(Some(Event::Alarm(a))) => {
+                    break 'rec Some(format!("turntable alarm: {}", a.text()))
+                }
+                Ok(Some(_)) => {}
+                Ok(None) => break,
+                Err(e) => break 'rec Some(e.to_string()),
+            }
+        }
+        let first = first_at.expect("a frame was recorded");
+        while let Some(&(idx, at)) = pending.front() {
+            let Some(pos) = track.at(at) else { break };
+            if let Err(e) = write_row(&mut side, idx, at, pos, first) {
+                break 'rec Some(e.to_string());
+            }
+            interpolated += 1;
+            pending.pop_front();
+            bar.set_message(format!("{:.1}°", (pos * 360.0 / rev).rem_euclid(360.0)));
+        }
+        if track.finished && pending.is_empty() {
+            break None;
+        }
+        if last_event.elapsed() > opts.no_progress {
+            break Some(format!(
+                "turntable sent no angle report for {:?}",
+                opts.no_progress
+            ));
+        }
+    };
+    bar.finish_and_clear();
+    // Finalize whatever happened: remaining frames get the best estimate, files are closed.
+    let mut last_angle = None;
+    if let Some(first) = first_at {
+        while let Some((idx, at)) = pending.pop_front() {
+            if let Some(pos) = track.extrapolate(at) {
+                let _ = write_row(&mut side, idx, at, pos, first);
+                last_angle = Some(pos);
+            }
+        }
+    }
+    let released = writer.release();
+    let summary = CaptureSummary {
+        video: opts.video.clone(),
+        sidecar: side_path.clone(),
+        frames,
+        interpolated,
+        final_deg: final_pos.map(|p| p as f64 * 360.0 / rev),
+    };
+    let cause = cause.or_else(|| released.err().map(|e| format!("closing the video: {e}")));
+    match cause {
+        None => Ok(summary),
+        Some(cause) => Err(CaptureError::Stopped {
+            cause,
+            frames,
+            angle: last_angle
+                .or_else(|| track.samples.last().map(|s| s.1 as f64))
+                .map_or("an unknown angle".into(), |p| {
+                    format!("{:.1}°", (p * 360.0 / rev).rem_euclid(360.0))
+                }),
+            video: opts.video.display().to_string(),
+            sidecar: side_path.display().to_string(),
+        }),
+    }
+}
