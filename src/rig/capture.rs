@@ -1,9 +1,9 @@
 //! A capture session: home the table, spin it, record every camera frame to video and tie each
 //! frame to the table angle through the device's timestamped reports.
 //!
-//! The device clock is mapped to the host clock by the smallest observed (arrival − device time),
-//! the report that travelled fastest. Each frame's angle is interpolated between the reports
-//! around its capture instant. Video frames are written as they arrive and sidecar rows as soon
+//! The device clock is mapped to the host clock from the reports' arrival times (rate by least
+//! squares, offset from the report that travelled fastest), and each frame's angle is
+//! interpolated between the reports around its capture instant. Video frames are written as they arrive and sidecar rows as soon
 //! as their angle is known; on any fault both files are finalized before the error is returned.
 
 use super::camera::FrameSource;
@@ -80,12 +80,17 @@ pub enum CaptureError {
 }
 
 /// Device reports mapped onto the host clock.
+///
+/// The device clock is modelled as `dev = rate·host + c`. `rate` is the least-squares slope over
+/// all reports, which absorbs crystal drift (and the simulator's time scale). Latency only ever
+/// delays arrivals, so `c` is the largest `dev − rate·host`, which comes from the report that
+/// travelled fastest.
 #[derive(Default)]
 struct AngleTrack {
     epoch: Option<Instant>,
-    offset_s: f64,
-    /// (device seconds, microsteps)
-    samples: Vec<(f64, i64)>,
+    /// (host seconds at arrival, device seconds, microsteps)
+    samples: Vec<(f64, f64, i64)>,
+    sums: [f64; 5],
     finished: bool,
 }
 
@@ -101,29 +106,47 @@ impl AngleTrack {
 
     fn push(&mut self, t_ms: u64, pos: i64, rx: Instant) {
         self.epoch.get_or_insert(rx);
-        let dev_s = t_ms as f64 / 1000.0;
-        let off = self.host_s(rx) - dev_s;
-        if self.samples.is_empty() || off < self.offset_s {
-            self.offset_s = off;
+        let (h, d) = (self.host_s(rx), t_ms as f64 / 1000.0);
+        if self.samples.last().is_none_or(|l| d > l.1) {
+            self.samples.push((h, d, pos));
+            for (k, v) in [1.0, h, d, h * h, h * d].into_iter().enumerate() {
+                self.sums[k] += v;
+            }
         }
-        if self.samples.last().is_none_or(|l| dev_s > l.0) {
-            self.samples.push((dev_s, pos));
-        }
+    }
+
+    /// Clock model (rate, c).
+    fn clock(&self) -> (f64, f64) {
+        let [n, sh, sd, shh, shd] = self.sums;
+        let var = n * shh - sh * sh;
+        // Until the reports span some time, assume the device clock runs at host speed.
+        let rate = if n >= 2.0 && var > 1e-6 * n * n {
+            (n * shd - sh * sd) / var
+        } else {
+            1.0
+        };
+        let c = self
+            .samples
+            .iter()
+            .map(|s| s.1 - rate * s.0)
+            .fold(f64::NEG_INFINITY, f64::max);
+        (rate, c)
     }
 
     /// Position (fractional microsteps) at host instant `at`, once reports cover it.
     fn at(&self, at: Instant) -> Option<f64> {
         let (first, last) = (self.samples.first()?, self.samples.last()?);
-        let d = self.host_s(at) - self.offset_s;
-        if d <= first.0 {
-            return Some(first.1 as f64);
+        let (rate, c) = self.clock();
+        let d = rate * self.host_s(at) + c;
+        if d <= first.1 {
+            return Some(first.2 as f64);
         }
-        if d >= last.0 {
-            return self.finished.then_some(last.1 as f64);
+        if d >= last.1 {
+            return self.finished.then_some(last.2 as f64);
         }
-        let i = self.samples.partition_point(|s| s.0 <= d);
+        let i = self.samples.partition_point(|s| s.1 <= d);
         let (a, b) = (self.samples[i - 1], self.samples[i]);
-        Some(a.1 as f64 + (b.1 - a.1) as f64 * (d - a.0) / (b.0 - a.0))
+        Some(a.2 as f64 + (b.2 - a.2) as f64 * (d - a.1) / (b.1 - a.1))
     }
 
     /// Best estimate when no later report will come: extrapolate the last two samples.
@@ -134,11 +157,12 @@ impl AngleTrack {
         let n = self.samples.len();
         let last = *self.samples.last()?;
         if n < 2 {
-            return Some(last.1 as f64);
+            return Some(last.2 as f64);
         }
         let prev = self.samples[n - 2];
-        let d = self.host_s(at) - self.offset_s;
-        Some(last.1 as f64 + (last.1 - prev.1) as f64 * (d - last.0) / (last.0 - prev.0))
+        let (rate, c) = self.clock();
+        let d = rate * self.host_s(at) + c;
+        Some(last.2 as f64 + (last.2 - prev.2) as f64 * (d - last.1) / (last.1 - prev.1))
     }
 }
 
@@ -317,12 +341,45 @@ pub fn capture(
             cause,
             frames,
             angle: last_angle
-                .or_else(|| track.samples.last().map(|s| s.1 as f64))
+                .or_else(|| track.samples.last().map(|s| s.2 as f64))
                 .map_or("an unknown angle".into(), |p| {
                     format!("{:.1}°", (p * 360.0 / rev).rem_euclid(360.0))
                 }),
             video: opts.video.display().to_string(),
             sidecar: side_path.display().to_string(),
         }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clock_model_recovers_drift_and_ignores_latency() {
+        // Device clock 3x host speed, offset 5 s; arrivals delayed 0.2–2.2 ms (one at the minimum).
+        let t0 = Instant::now();
+        let mut tr = AngleTrack::default();
+        for k in 0..200u64 {
+            let host = k as f64 * 0.01;
+            let lat = 0.0002 + ((k * 7919) % 11) as f64 * 0.0002;
+            let dev_ms = ((host * 3.0 + 5.0) * 1000.0).round() as u64;
+            tr.push(
+                dev_ms,
+                k as i64 * 10,
+                t0 + Duration::from_secs_f64(host + lat),
+            );
+        }
+        let (rate, c) = tr.clock();
+        assert!((rate - 3.0).abs() < 0.01, "rate {rate}");
+        // The epoch is the first arrival (0.2 ms late), so c ≈ 5 − 3·0.0002.
+        assert!((c - (5.0 - 3.0 * 0.0002)).abs() < 0.003, "c {c}");
+        // A frame at host 1.0 s: device 8.0 s → sample k = 100 → 1000 microsteps.
+        let p = tr.at(t0 + Duration::from_secs_f64(1.0)).unwrap();
+        assert!((p - 1000.0).abs() < 5.0, "{p}");
+        // Beyond the last report: unknown until the motion is done.
+        assert_eq!(tr.at(t0 + Duration::from_secs(5)), None);
+        tr.finished = true;
+        assert_eq!(tr.at(t0 + Duration::from_secs(5)), Some(1990.0));
     }
 }

@@ -4,6 +4,9 @@
 use serialport::{ClearBuffer, SerialPort};
 use std::collections::VecDeque;
 use std::io::{ErrorKind, Read, Write};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, TryRecvError};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 use turntable_proto::{Alarm, Command, ErrorCode, Frame, Reply, State};
 
@@ -97,9 +100,10 @@ pub struct Status {
 pub struct Turntable {
     /// `None` only while reconnecting (the old port must close before the device can be reopened).
     port: Option<Box<dyn SerialPort>>,
+    /// Lines stamped with their arrival time by the reader thread.
+    lines: Option<Reader>,
     path: String,
     baud: u32,
-    partial: Vec<u8>,
     seq: u32,
     usteps_per_rev: u32,
     firmware: String,
@@ -107,6 +111,82 @@ pub struct Turntable {
     timeout: Duration,
     /// Lines that did not parse (line noise), for diagnostics.
     pub garbage_lines: usize,
+}
+
+/// A thread that reads the port and stamps every line with the instant it arrived, so the
+/// host-to-device clock mapping does not depend on how often the caller polls.
+struct Reader {
+    rx: Receiver<std::result::Result<(String, Instant), String>>,
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Reader {
+    fn spawn(mut port: Box<dyn SerialPort>, path: String) -> Self {
+        let (tx, rx) = mpsc::channel();
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = stop.clone();
+        let thread = std::thread::Builder::new()
+            .name("turntable-rx".into())
+            .spawn(move || {
+                let mut partial: Vec<u8> = Vec::new();
+                let mut buf = [0u8; 256];
+                while !flag.load(Ordering::Relaxed) {
+                    match port.read(&mut buf) {
+                        Ok(0) => {
+                            let _ = tx.send(Err(format!("{path} closed")));
+                            return;
+                        }
+                        Ok(n) => {
+                            let at = Instant::now();
+                            partial.extend_from_slice(&buf[..n]);
+                            while let Some(i) = partial.iter().position(|&b| b == b'\n') {
+                                let line: Vec<u8> = partial.drain(..=i).collect();
+                                if tx
+                                    .send(Ok((
+                                        String::from_utf8_lossy(&line).trim().to_string(),
+                                        at,
+                                    )))
+                                    .is_err()
+                                {
+                                    return;
+                                }
+                            }
+                            // A line this long is noise; drop it rather than grow without bound.
+                            if partial.len() > 4096 {
+                                partial.clear();
+                            }
+                        }
+                        Err(e)
+                            if matches!(
+                                e.kind(),
+                                ErrorKind::TimedOut
+                                    | ErrorKind::WouldBlock
+                                    | ErrorKind::Interrupted
+                            ) => {}
+                        Err(e) => {
+                            let _ = tx.send(Err(format!("{path}: {e}")));
+                            return;
+                        }
+                    }
+                }
+            })
+            .expect("spawning the serial reader thread");
+        Reader {
+            rx,
+            stop,
+            thread: Some(thread),
+        }
+    }
+}
+
+impl Drop for Reader {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
 }
 
 fn open_port(path: &str, baud: u32) -> Result<Box<dyn SerialPort>> {
@@ -123,11 +203,15 @@ impl Turntable {
     /// Opens `path` and checks that a pav turntable answers; `timeout` bounds each command.
     pub fn open(path: &str, baud: u32, timeout: Duration) -> Result<Self> {
         let port = open_port(path, baud)?;
+        let reader = port.try_clone().map_err(|e| TurntableError::Open {
+            path: path.into(),
+            msg: e.to_string(),
+        })?;
         let mut t = Turntable {
+            lines: Some(Reader::spawn(reader, path.into())),
             port: Some(port),
             path: path.into(),
             baud,
-            partial: Vec::new(),
             seq: 0,
             usteps_per_rev: 0,
             firmware: String::new(),
@@ -169,9 +253,17 @@ impl Turntable {
             .map_err(|e| TurntableError::Disconnected(format!("{path}: {e}")))
     }
 
-    fn handshake(&mut self) -> Result<()> {
+    /// Drops every byte and line received but not yet read.
+    fn discard_input(&mut self) -> Result<()> {
         let _ = self.port()?.clear(ClearBuffer::Input);
-        self.partial.clear();
+        if let Some(r) = &self.lines {
+            while let Ok(Ok(_)) = r.rx.try_recv() {}
+        }
+        Ok(())
+    }
+
+    fn handshake(&mut self) -> Result<()> {
+        self.discard_input()?;
         // A few tries: the first bytes after opening may meet a device still booting.
         for _ in 0..3 {
             match self.request(Command::Info, self.timeout) {
@@ -186,42 +278,38 @@ impl Turntable {
         })
     }
 
-    /// Reads one line, or `None` when `deadline` passes first. With a past deadline it still
-    /// takes whatever bytes are already waiting, so it doubles as a non-blocking poll.
+    /// Next line with its arrival time, or `None` when `deadline` passes first (a past deadline
+    /// still returns a line that is already waiting, so this doubles as a non-blocking poll).
     fn read_line(&mut self, deadline: Instant) -> Result<Option<(String, Instant)>> {
-        let mut byte = [0u8; 256];
-        loop {
-            if let Some(i) = self.partial.iter().position(|&b| b == b'\n') {
-                let line: Vec<u8> = self.partial.drain(..=i).collect();
-                return Ok(Some((
-                    String::from_utf8_lossy(&line).trim().to_string(),
-                    Instant::now(),
-                )));
+        let path = self.path.clone();
+        let r = self
+            .lines
+            .as_ref()
+            .ok_or_else(|| TurntableError::Disconnected(format!("{path} is not open")))?;
+        let got = match r.rx.try_recv() {
+            Ok(x) => Some(x),
+            Err(TryRecvError::Disconnected) => {
+                return Err(TurntableError::Disconnected(format!(
+                    "{path}: reader stopped"
+                )))
             }
-            let waiting = self.port()?.bytes_to_read().unwrap_or(1);
-            if waiting == 0 && Instant::now() >= deadline {
-                return Ok(None);
-            }
-            match self.port()?.read(&mut byte) {
-                Ok(0) => {
+            Err(TryRecvError::Empty) => match r
+                .rx
+                .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+            {
+                Ok(x) => Some(x),
+                Err(RecvTimeoutError::Timeout) => None,
+                Err(RecvTimeoutError::Disconnected) => {
                     return Err(TurntableError::Disconnected(format!(
-                        "{} closed",
-                        self.path
+                        "{path}: reader stopped"
                     )))
                 }
-                Ok(n) => self.partial.extend_from_slice(&byte[..n]),
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        ErrorKind::TimedOut | ErrorKind::WouldBlock | ErrorKind::Interrupted
-                    ) => {}
-                Err(e) => return Err(TurntableError::Disconnected(format!("{}: {e}", self.path))),
-            }
-            if self.partial.len() > 4096 {
-                // A line this long is noise; drop it rather than grow without bound.
-                self.partial.clear();
-                self.garbage_lines += 1;
-            }
+            },
+        };
+        match got {
+            None => Ok(None),
+            Some(Ok(line)) => Ok(Some(line)),
+            Some(Err(msg)) => Err(TurntableError::Disconnected(msg)),
         }
     }
 
@@ -314,8 +402,7 @@ impl Turntable {
     /// Drops everything buffered and confirms a fresh round trip, so late replies to a timed-out
     /// command cannot be taken for answers to the next one.
     pub fn resync(&mut self) -> Result<()> {
-        let _ = self.port()?.clear(ClearBuffer::Input);
-        self.partial.clear();
+        self.discard_input()?;
         self.seq = self.seq.wrapping_add(1) % 1_000_000_000;
         let seq = self.seq;
         let line = format!(
@@ -420,12 +507,19 @@ impl Turntable {
     /// Reopens the port (after a USB re-enumeration or cable glitch) and handshakes again.
     pub fn reconnect(&mut self, attempts: usize, wait: Duration) -> Result<()> {
         let mut last = TurntableError::Disconnected(self.path.clone());
+        self.lines = None;
         self.port = None;
         for _ in 0..attempts.max(1) {
-            match open_port(&self.path, self.baud) {
-                Ok(p) => {
+            match open_port(&self.path, self.baud).and_then(|p| {
+                let r = p.try_clone().map_err(|e| TurntableError::Open {
+                    path: self.path.clone(),
+                    msg: e.to_string(),
+                })?;
+                Ok((p, r))
+            }) {
+                Ok((p, r)) => {
+                    self.lines = Some(Reader::spawn(r, self.path.clone()));
                     self.port = Some(p);
-                    self.partial.clear();
                     self.events.clear();
                     match self.handshake() {
                         Ok(()) => return Ok(()),
