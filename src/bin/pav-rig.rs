@@ -6,9 +6,16 @@ use pav::detect::darknet::{to_onnx, Network, Weights};
 use pav::detect::onnx::OnnxDetector;
 use pav::detect::{Detector, DetectorConfig};
 use pav::eval::run::{default_label, evaluate, EvalOptions, VideoJob};
+use pav::rig::camera::{FileSource, FrameSource, LiveCapture, SimCamera};
+use pav::rig::capture::{capture, CaptureOptions};
+use pav::rig::sim::{Faults, SimOptions, SimTurntable};
+use pav::rig::turntable::{self, Turntable, TurntableError};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
+use std::time::Duration;
+use turntable_proto::text::Milli;
+use turntable_proto::Command;
 
 #[derive(Parser)]
 #[command(
@@ -30,6 +37,123 @@ enum Cmd {
     Model(ModelCmd),
     /// Benchmark: decode / inference / evaluate throughput and the accuracy-vs-time trade-off (CSV + PNG).
     Bench(BenchArgs),
+    /// Drive the turntable directly.
+    Turntable(TurntableArgs),
+    /// Serve a simulated turntable on a pseudo-terminal (prints its path) until Ctrl-C.
+    Simulate(SimulateArgs),
+    /// Record one or more turntable revolutions: video plus a per-frame angle sidecar.
+    Capture(CaptureArgs),
+}
+
+#[derive(Args)]
+struct PortArgs {
+    /// Serial port of the turntable (e.g. /dev/ttyACM0), or `sim` for an in-process simulator.
+    #[arg(long, default_value = "/dev/ttyACM0")]
+    port: String,
+    /// Baud rate (ignored by USB-CDC).
+    #[arg(long, default_value_t = 115_200)]
+    baud: u32,
+    /// Per-command timeout in milliseconds.
+    #[arg(long, default_value_t = 1000)]
+    timeout_ms: u64,
+    /// Simulated time speed-up when --port sim.
+    #[arg(long, default_value_t = 1.0)]
+    time_scale: f64,
+}
+
+#[derive(Args)]
+struct TurntableArgs {
+    #[command(flatten)]
+    port: PortArgs,
+    #[command(subcommand)]
+    action: TableAction,
+}
+
+#[derive(Subcommand)]
+enum TableAction {
+    /// Print state, position and angle.
+    Status,
+    /// Return to angle 0 and restart the turn count.
+    Home,
+    /// Turn to an angle (degrees), or by an angle with --relative.
+    Rotate {
+        /// Degrees.
+        #[arg(allow_hyphen_values = true)]
+        degrees: f64,
+        /// Turn by DEGREES instead of to it.
+        #[arg(long)]
+        relative: bool,
+    },
+    /// Spin continuously; Ctrl-C stops the table.
+    Spin {
+        /// Seconds per revolution (negative: backwards).
+        #[arg(long, default_value = "28s", value_parser = parse_signed_seconds, allow_hyphen_values = true)]
+        period: f64,
+        /// Revolutions (0 = until Ctrl-C).
+        #[arg(long, default_value_t = 1)]
+        turns: u32,
+    },
+    /// Ramp down to a halt.
+    Stop,
+    /// Emergency stop (locks until unlock).
+    Estop,
+    /// Clear an alarm.
+    Unlock,
+}
+
+#[derive(Args)]
+struct SimulateArgs {
+    /// Simulated time runs this many times faster than wall time.
+    #[arg(long, default_value_t = 1.0)]
+    time_scale: f64,
+    /// Probability of dropping each byte the device sends.
+    #[arg(long, default_value_t = 0.0)]
+    drop_rate: f64,
+    /// Probability of a garbage line before each reply.
+    #[arg(long, default_value_t = 0.0)]
+    garbage_rate: f64,
+    /// Extra reply latency in milliseconds.
+    #[arg(long, default_value_t = 0)]
+    delay_ms: u64,
+    /// Raise a stall alarm this many (simulated) seconds into the first motion.
+    #[arg(long)]
+    stall_after: Option<f64>,
+    /// Hang up the line after this many seconds.
+    #[arg(long)]
+    disconnect_after: Option<f64>,
+}
+
+#[derive(Args)]
+struct CaptureArgs {
+    #[command(flatten)]
+    port: PortArgs,
+    /// Frame source: `v4l2:/dev/video0`, `file:VIDEO`, `gst-test` or `sim` (needs --port sim).
+    #[arg(long, default_value = "v4l2:/dev/video0")]
+    camera: String,
+    /// Output video; the sidecar goes beside it as NAME.angles.csv.
+    #[arg(long, short = 'o')]
+    out: PathBuf,
+    /// Seconds per revolution.
+    #[arg(long, default_value = "28s", value_parser = parse_signed_seconds, allow_hyphen_values = true)]
+    period: f64,
+    /// Revolutions to record.
+    #[arg(long, default_value_t = 1)]
+    turns: u32,
+    /// Do not home before recording.
+    #[arg(long)]
+    no_home: bool,
+    /// Requested camera width.
+    #[arg(long, default_value_t = 1280)]
+    width: usize,
+    /// Requested camera height.
+    #[arg(long, default_value_t = 720)]
+    height: usize,
+    /// Requested camera frame rate.
+    #[arg(long, default_value_t = 30.0)]
+    fps: f64,
+    /// Video codec FourCC (avc1 = H.264, mp4v = MPEG-4 part 2).
+    #[arg(long, default_value = "avc1")]
+    codec: String,
 }
 
 #[derive(Args)]
@@ -118,6 +242,19 @@ struct EvaluateArgs {
     /// Skip the PNG plots.
     #[arg(long)]
     no_plots: bool,
+}
+
+fn parse_signed_seconds(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .trim_end_matches('s')
+        .parse()
+        .map_err(|_| format!("`{s}` is not a duration like 28s"))?;
+    if v.is_finite() && v != 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("period must be non-zero, got {s}"))
+    }
 }
 
 fn parse_seconds(s: &str) -> Result<f64, String> {
@@ -324,6 +461,193 @@ fn cmd_bench(b: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
+/// Opens the turntable, spawning a simulator first for `--port sim` (kept alive by the caller).
+fn connect(p: &PortArgs) -> Result<(Option<SimTurntable>, Turntable)> {
+    let sim = if p.port == "sim" {
+        Some(
+            SimTurntable::spawn(SimOptions {
+                time_scale: p.time_scale,
+                ..SimOptions::default()
+            })
+            .context("starting the simulated turntable")?,
+        )
+    } else {
+        None
+    };
+    let path = sim
+        .as_ref()
+        .map_or(p.port.clone(), |s| s.path().display().to_string());
+    let table = Turntable::open(&path, p.baud, Duration::from_millis(p.timeout_ms))?;
+    eprintln!(
+        "turntable on {path}: firmware {}, {} microsteps/rev",
+        table.firmware(),
+        table.usteps_per_rev()
+    );
+    Ok((sim, table))
+}
+
+fn ctrl_c_flag() -> Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    Ok(stop)
+}
+
+fn milli(deg: f64) -> Result<Milli> {
+    Milli::parse(&format!("{deg:.3}")).with_context(|| format!("{deg} is out of range"))
+}
+
+fn cmd_turntable(a: &TurntableArgs) -> Result<()> {
+    let (_sim, mut t) = connect(&a.port)?;
+    let no_progress = Duration::from_secs(5);
+    let print_status = |t: &mut Turntable| -> Result<()> {
+        let st = t.status()?;
+        let deg = t.degrees(st.pos);
+        println!(
+            "state {:?}{}  position {} microsteps = {:.3}° ({:.3}° in the current turn)",
+            st.state,
+            st.alarm
+                .map(|x| format!(" (alarm: {})", x.text()))
+                .unwrap_or_default(),
+            st.pos,
+            deg,
+            deg.rem_euclid(360.0)
+        );
+        Ok(())
+    };
+    let motion = match a.action {
+        TableAction::Status => return print_status(&mut t),
+        TableAction::Stop => return Ok(t.command(Command::Stop).map(|_| ())?),
+        TableAction::Unlock => return Ok(t.command(Command::Unlock).map(|_| ())?),
+        TableAction::Estop => return Ok(t.estop()?),
+        TableAction::Home => Command::Home,
+        TableAction::Rotate {
+            degrees,
+            relative: false,
+        } => Command::MoveTo(milli(degrees)?),
+        TableAction::Rotate {
+            degrees,
+            relative: true,
+        } => Command::MoveBy(milli(degrees)?),
+        TableAction::Spin { period, turns } => Command::Spin {
+            period_s: milli(period)?,
+            turns,
+        },
+    };
+    let stop = ctrl_c_flag()?;
+    let seq = t.command(motion)?;
+    let mut heard = std::time::Instant::now();
+    loop {
+        if stop.swap(false, Ordering::Relaxed) {
+            eprintln!("stopping the table");
+            t.command(Command::Stop)?;
+        }
+        match t.next_event(Duration::from_millis(100))? {
+            Some(turntable::Event::Done { seq: Some(s), pos }) if s == seq => {
+                println!("done at {pos} microsteps = {:.3}°", t.degrees(pos));
+                return Ok(());
+            }
+            Some(turntable::Event::Alarm(x)) => return Err(TurntableError::Alarm(x).into()),
+            Some(_) => heard = std::time::Instant::now(),
+            // Angle reports arrive every 50 ms while moving; silence means a dead link.
+            None if heard.elapsed() > no_progress => {
+                bail!("turntable sent nothing for {no_progress:?} during the motion")
+            }
+            None => {}
+        }
+    }
+}
+
+fn cmd_simulate(a: &SimulateArgs) -> Result<()> {
+    let secs = |s: Option<f64>| s.filter(|v| *v >= 0.0).map(Duration::from_secs_f64);
+    let faults = Faults {
+        drop_byte: a.drop_rate,
+        garbage_line: a.garbage_rate,
+        delay: Duration::from_millis(a.delay_ms),
+        stall_after: secs(a.stall_after),
+        disconnect_after: secs(a.disconnect_after),
+        hang_after: None,
+    };
+    let sim = SimTurntable::spawn(SimOptions {
+        time_scale: a.time_scale,
+        faults,
+        ..SimOptions::default()
+    })?;
+    println!("{}", sim.path().display());
+    eprintln!(
+        "simulated turntable on {} (time x{}); Ctrl-C to stop",
+        sim.path().display(),
+        a.time_scale
+    );
+    let stop = ctrl_c_flag()?;
+    while !stop.load(Ordering::Relaxed) && sim.is_running() {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    Ok(())
+}
+
+fn cmd_capture(a: &CaptureArgs) -> Result<()> {
+    let codec: Vec<char> = a.codec.chars().collect();
+    let [c0, c1, c2, c3] = codec[..] else {
+        bail!(
+            "--codec must be a 4-character FourCC like avc1, got `{}`",
+            a.codec
+        )
+    };
+    if a.camera == "sim" && a.port.port != "sim" {
+        bail!("--camera sim films the simulated turntable: use it with --port sim");
+    }
+    let (sim, mut table) = connect(&a.port)?;
+    let mut cam: Box<dyn FrameSource> = match a.camera.as_str() {
+        "sim" => Box::new(SimCamera::new(
+            sim.as_ref().expect("checked above").truth(),
+            a.width,
+            a.height,
+            a.fps,
+        )),
+        "gst-test" => Box::new(LiveCapture::gst_test(
+            a.width,
+            a.height,
+            a.fps.round() as u32,
+        )?),
+        c if c.starts_with("v4l2:") => Box::new(LiveCapture::v4l2(
+            std::path::Path::new(&c[5..]),
+            a.width,
+            a.height,
+            a.fps,
+        )?),
+        c if c.starts_with("file:") => Box::new(FileSource::open(std::path::Path::new(&c[5..]))?),
+        c => bail!("unknown --camera `{c}`: use v4l2:/dev/videoN, file:VIDEO, gst-test or sim"),
+    };
+    let (w, h) = cam.size();
+    eprintln!("camera: {} {w}x{h} at {:.1} fps", cam.describe(), cam.fps());
+    let opts = CaptureOptions {
+        video: a.out.clone(),
+        period_s: a.period,
+        turns: a.turns,
+        home: !a.no_home,
+        report_ms: 10,
+        fourcc: [c0, c1, c2, c3],
+        no_progress: Duration::from_secs(3),
+        progress: true,
+    };
+    let stop = ctrl_c_flag()?;
+    let sum = capture(&mut table, cam.as_mut(), &opts, &stop)?;
+    println!(
+        "recorded {} frames ({} with angles between reports), table ended at {:.3}°",
+        sum.frames,
+        sum.interpolated,
+        sum.final_deg.unwrap_or(f64::NAN)
+    );
+    println!(
+        "video   {}\nsidecar {}",
+        sum.video.display(),
+        sum.sidecar.display()
+    );
+    Ok(())
+}
+
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match &cli.cmd {
@@ -332,5 +656,8 @@ fn main() -> Result<()> {
             cmd_darknet2onnx(cfg, weights, out)
         }
         Cmd::Bench(b) => cmd_bench(b),
+        Cmd::Turntable(t) => cmd_turntable(t),
+        Cmd::Simulate(a) => cmd_simulate(a),
+        Cmd::Capture(c) => cmd_capture(c),
     }
 }

@@ -1,0 +1,159 @@
+//! `pav-rig capture` and `pav-rig turntable` as a user runs them, against the simulator; the
+//! captured video and sidecar feed straight into `pav-rig evaluate`.
+
+mod common;
+
+use std::process::{Command, Output};
+
+fn pav_rig() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+#[test]
+fn capture_on_the_simulator_then_evaluate_uses_the_sidecar() {
+    let tmp = tempfile::tempdir().unwrap();
+    let video = tmp.path().join("spin.mp4");
+    let o = pav_rig()
+        .args([
+            "capture",
+            "--port",
+            "sim",
+            "--time-scale",
+            "10",
+            "--camera",
+            "sim",
+            "--width",
+            "320",
+            "--height",
+            "240",
+            "--codec",
+            "mp4v",
+            "-o",
+        ])
+        .arg(&video)
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .unwrap();
+    let out = text(&o);
+    assert!(o.status.success(), "{out}");
+    assert!(out.contains("table ended at 360.000°"), "{out}");
+    let rows = pav::sidecar::read(&pav::sidecar::sidecar_path(&video)).unwrap();
+    assert!(
+        (80..=90).contains(&rows.len()),
+        "{} frames for 2.8 s at 30 fps",
+        rows.len()
+    );
+    if common::shared_data().is_none() {
+        return;
+    }
+    common::require_setup();
+    let o = pav_rig()
+        .args(["evaluate"])
+        .arg(&video)
+        .args([
+            "-d",
+            &common::detector_config("yolox_nano").display().to_string(),
+            "--no-plots",
+            "-o",
+        ])
+        .arg(tmp.path().join("eval"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let md = std::fs::read_to_string(tmp.path().join("eval/summary.md")).unwrap();
+    assert!(md.contains("Angles for **spin**: sidecar"), "{md}");
+    // The synthetic disc is no car: nothing is detected.
+    assert!(md.contains("| spin | 0.0 |"), "{md}");
+}
+
+#[test]
+fn missing_hardware_is_a_clear_error() {
+    let o = pav_rig()
+        .args(["turntable", "--port", "/dev/no-such-tty", "status"])
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let out = text(&o);
+    assert!(
+        out.contains("cannot open turntable port /dev/no-such-tty"),
+        "{out}"
+    );
+    let o = pav_rig()
+        .args([
+            "capture",
+            "--port",
+            "sim",
+            "--camera",
+            "v4l2:/dev/video-none",
+            "-o",
+            "/tmp/never.mp4",
+        ])
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(
+        text(&o).contains("no V4L2 camera at /dev/video-none"),
+        "{}",
+        text(&o)
+    );
+    assert!(!std::path::Path::new("/tmp/never.mp4").exists());
+    let o = pav_rig()
+        .args([
+            "capture",
+            "--port",
+            "/dev/ttyS99",
+            "--camera",
+            "sim",
+            "-o",
+            "/tmp/never.mp4",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        text(&o).contains("--camera sim films the simulated turntable"),
+        "{}",
+        text(&o)
+    );
+}
+
+#[test]
+fn turntable_commands_on_the_simulator() {
+    let o = pav_rig()
+        .args([
+            "turntable",
+            "--port",
+            "sim",
+            "--time-scale",
+            "20",
+            "rotate",
+            "--",
+            "-90",
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(
+        text(&o).contains("done at -800 microsteps = -90.000°"),
+        "{}",
+        text(&o)
+    );
+    let o = pav_rig()
+        .args(["turntable", "--port", "sim", "status"])
+        .output()
+        .unwrap();
+    assert!(
+        text(&o).contains("state Idle  position 0 microsteps"),
+        "{}",
+        text(&o)
+    );
+}
