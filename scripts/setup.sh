@@ -80,6 +80,8 @@ if ! command -v qemu-system-arm >/dev/null; then
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --allow-downgrades qemu-system-arm "qemu-utils=$QV"
 fi
 (cd firmware/qemu && cargo build --release)
+log "building the RP2040 firmware"
+(cd firmware/rp2040 && cargo build --release)
 
 log "building pav-rig (release)"
 cargo build --release --bin pav-rig
