@@ -37,12 +37,30 @@ enum Cmd {
     Model(ModelCmd),
     /// Benchmark: decode / inference / evaluate throughput and the accuracy-vs-time trade-off (CSV + PNG).
     Bench(BenchArgs),
+    /// Benchmark the rig: command round-trip latency and capture angle-sync error (CSV).
+    BenchRig(BenchRigArgs),
     /// Drive the turntable directly.
     Turntable(TurntableArgs),
     /// Serve a simulated turntable on a pseudo-terminal (prints its path) until Ctrl-C.
     Simulate(SimulateArgs),
     /// Record one or more turntable revolutions: video plus a per-frame angle sidecar.
     Capture(CaptureArgs),
+}
+
+#[derive(Args)]
+struct BenchRigArgs {
+    /// Serial ports to time besides the simulator (e.g. a QEMU pty or /dev/ttyACM0).
+    #[arg(long = "port")]
+    ports: Vec<String>,
+    /// Round trips per link.
+    #[arg(long, default_value_t = 500)]
+    n: usize,
+    /// Simulated time scales for the angle-sync capture (28 s turn / scale of wall time each).
+    #[arg(long, value_delimiter = ',', default_value = "1,4,10")]
+    time_scales: Vec<f64>,
+    /// Output directory.
+    #[arg(long, short = 'o', default_value = "bench")]
+    out: PathBuf,
 }
 
 #[derive(Args)]
@@ -559,6 +577,58 @@ fn cmd_turntable(a: &TurntableArgs) -> Result<()> {
     }
 }
 
+fn cmd_bench_rig(b: &BenchRigArgs) -> Result<()> {
+    use pav::rig::bench;
+    std::fs::create_dir_all(&b.out).with_context(|| format!("creating {}", b.out.display()))?;
+    let mut lat = Vec::new();
+    let sim = SimTurntable::spawn(SimOptions::default())?;
+    let mut t = Turntable::open(
+        &sim.path().to_string_lossy(),
+        115_200,
+        Duration::from_secs(1),
+    )?;
+    lat.push(bench::latency(&mut t, "sim (pty)", b.n)?);
+    for p in &b.ports {
+        let mut t = Turntable::open(p, 115_200, Duration::from_secs(1))?;
+        lat.push(bench::latency(&mut t, p, b.n)?);
+    }
+    for l in &lat {
+        eprintln!(
+            "{}: median {:.0} µs, p99 {:.0} µs, max {:.0} µs over {}",
+            l.link, l.median_us, l.p99_us, l.max_us, l.n
+        );
+    }
+    let tmp = tempfile_dir()?;
+    let mut sync = Vec::new();
+    for &s in &b.time_scales {
+        eprintln!(
+            "capturing a simulated 28 s turn at x{s} ({:.1} s)",
+            28.0 / s
+        );
+        let r = bench::angle_sync(s, 30.0, &tmp)?;
+        eprintln!(
+            "  {} frames: median {:.3}°, p95 {:.3}°, max {:.3}°",
+            r.frames, r.median_deg, r.p95_deg, r.max_deg
+        );
+        sync.push(r);
+    }
+    let _ = std::fs::remove_dir_all(&tmp);
+    bench::write_csv(&b.out.join("rig_latency.csv"), &lat)?;
+    bench::write_csv(&b.out.join("rig_angle_sync.csv"), &sync)?;
+    eprintln!(
+        "wrote {} and {}",
+        b.out.join("rig_latency.csv").display(),
+        b.out.join("rig_angle_sync.csv").display()
+    );
+    Ok(())
+}
+
+fn tempfile_dir() -> Result<PathBuf> {
+    let d = std::env::temp_dir().join(format!("pav-bench-rig-{}", std::process::id()));
+    std::fs::create_dir_all(&d).with_context(|| format!("creating {}", d.display()))?;
+    Ok(d)
+}
+
 fn cmd_simulate(a: &SimulateArgs) -> Result<()> {
     let secs = |s: Option<f64>| s.filter(|v| *v >= 0.0).map(Duration::from_secs_f64);
     let faults = Faults {
@@ -656,6 +726,7 @@ fn main() -> Result<()> {
             cmd_darknet2onnx(cfg, weights, out)
         }
         Cmd::Bench(b) => cmd_bench(b),
+        Cmd::BenchRig(b) => cmd_bench_rig(b),
         Cmd::Turntable(t) => cmd_turntable(t),
         Cmd::Simulate(a) => cmd_simulate(a),
         Cmd::Capture(c) => cmd_capture(c),

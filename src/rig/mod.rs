@@ -1,5 +1,6 @@
 //! The physical rig: turntable client, simulated turntable, frame sources and capture sessions.
 
+pub mod bench;
 pub mod camera;
 pub mod capture;
 pub mod sim;
