@@ -13,14 +13,10 @@ use std::time::Duration;
 
 fn opts(video: &Path) -> CaptureOptions {
     CaptureOptions {
-        video: video.to_path_buf(),
         period_s: 28.0,
-        turns: 1,
-        home: true,
-        report_ms: 10,
         fourcc: ['m', 'p', '4', 'v'],
         no_progress: Duration::from_secs(2),
-        progress: false,
+        ..CaptureOptions::new(video)
     }
 }
 

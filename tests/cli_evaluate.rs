@@ -37,10 +37,9 @@ fn assert_clean_failure(o: &Output, needle: &str) {
 
 #[test]
 fn evaluate_prints_table_and_writes_reports() {
-    if common::shared_data().is_none() {
+    if common::real_data().is_none() {
         return;
     }
-    common::require_setup();
     let tmp = tempfile::tempdir().unwrap();
     let o = pav_rig()
         .args([
@@ -148,10 +147,9 @@ fn bad_configs_name_the_problem() {
 
 #[test]
 fn a_missing_video_fails_the_run_but_keeps_the_others() {
-    if common::shared_data().is_none() {
+    if common::real_data().is_none() {
         return;
     }
-    common::require_setup();
     let tmp = tempfile::tempdir().unwrap();
     let o = pav_rig()
         .args([
@@ -180,10 +178,9 @@ fn a_missing_video_fails_the_run_but_keeps_the_others() {
 
 #[test]
 fn ctrl_c_keeps_every_scored_frame_and_a_summary() {
-    if common::shared_data().is_none() {
+    if common::real_data().is_none() {
         return;
     }
-    common::require_setup();
     let tmp = tempfile::tempdir().unwrap();
     let fx = fixture();
     let child = pav_rig()

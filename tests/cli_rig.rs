@@ -51,10 +51,9 @@ fn capture_on_the_simulator_then_evaluate_uses_the_sidecar() {
         "{} frames for 2.8 s at 30 fps",
         rows.len()
     );
-    if common::shared_data().is_none() {
+    if common::real_data().is_none() {
         return;
     }
-    common::require_setup();
     let o = pav_rig()
         .args(["evaluate"])
         .arg(&video)

@@ -11,8 +11,7 @@ use pav::detect::{Detector, DetectorConfig};
 
 /// Max score of the target class on every sample, with the config's preprocessing optionally overridden.
 fn scores(detector: &str, interpolation: Option<Interpolation>) -> Option<Vec<(String, f32, f32)>> {
-    let shared = common::shared_data()?;
-    common::require_setup();
+    let shared = common::real_data()?;
     let mut cfg = DetectorConfig::load(&common::detector_config(detector)).unwrap();
     if let Some(i) = interpolation {
         cfg.input.interpolation = i;

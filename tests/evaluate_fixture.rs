@@ -90,10 +90,9 @@ const DETS: [&str; 2] = ["yolox_nano", "yolov8n_int8"];
 
 #[test]
 fn a_physical_matches_truth_frame_by_frame() {
-    if common::shared_data().is_none() {
+    if common::real_data().is_none() {
         return;
     }
-    common::require_setup();
     let tmp = tempfile::tempdir().unwrap();
     let out = run(&[job(fixture(), "orbit")], &DETS, tmp.path(), 1);
     let truth = truth();
@@ -157,10 +156,9 @@ fn a_physical_matches_truth_frame_by_frame() {
 
 #[test]
 fn stride_scores_every_nth_frame() {
-    if common::shared_data().is_none() {
+    if common::real_data().is_none() {
         return;
     }
-    common::require_setup();
     let tmp = tempfile::tempdir().unwrap();
     let out = run(&[job(fixture(), "orbit")], &["yolox_nano"], tmp.path(), 4);
     let truth = truth();
@@ -182,10 +180,9 @@ fn stride_scores_every_nth_frame() {
 
 #[test]
 fn several_videos_make_a_table_and_bad_ones_keep_the_rest() {
-    if common::shared_data().is_none() {
+    if common::real_data().is_none() {
         return;
     }
-    common::require_setup();
     let tmp = tempfile::tempdir().unwrap();
     let corrupt = tmp.path().join("corrupt.mp4");
     std::fs::write(

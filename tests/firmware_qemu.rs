@@ -147,14 +147,10 @@ fn capture_against_the_firmware_follows_the_commanded_rotation() {
     let tmp = tempfile::tempdir().unwrap();
     let video = tmp.path().join("qemu.mp4");
     let opts = CaptureOptions {
-        video: video.clone(),
         period_s: 3.0,
-        turns: 1,
-        home: true,
-        report_ms: 10,
         fourcc: ['m', 'p', '4', 'v'],
         no_progress: Duration::from_secs(2),
-        progress: false,
+        ..CaptureOptions::new(video.clone())
     };
     let sum = capture(&mut t, &mut cam, &opts, &AtomicBool::new(false)).unwrap();
     assert!(

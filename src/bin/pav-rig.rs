@@ -613,8 +613,8 @@ fn cmd_bench_rig(b: &BenchRigArgs) -> Result<()> {
         sync.push(r);
     }
     let _ = std::fs::remove_dir_all(&tmp);
-    bench::write_csv(&b.out.join("rig_latency.csv"), &lat)?;
-    bench::write_csv(&b.out.join("rig_angle_sync.csv"), &sync)?;
+    pav::eval::bench::write_csv(&b.out.join("rig_latency.csv"), &lat)?;
+    pav::eval::bench::write_csv(&b.out.join("rig_angle_sync.csv"), &sync)?;
     eprintln!(
         "wrote {} and {}",
         b.out.join("rig_latency.csv").display(),
@@ -693,14 +693,12 @@ fn cmd_capture(a: &CaptureArgs) -> Result<()> {
     let (w, h) = cam.size();
     eprintln!("camera: {} {w}x{h} at {:.1} fps", cam.describe(), cam.fps());
     let opts = CaptureOptions {
-        video: a.out.clone(),
         period_s: a.period,
         turns: a.turns,
         home: !a.no_home,
-        report_ms: 10,
         fourcc: [c0, c1, c2, c3],
-        no_progress: Duration::from_secs(3),
         progress: true,
+        ..CaptureOptions::new(&a.out)
     };
     let stop = ctrl_c_flag()?;
     let sum = capture(&mut table, cam.as_mut(), &opts, &stop)?;

@@ -255,7 +255,8 @@ pub fn run(opts: &BenchOptions) -> Result<(Vec<Throughput>, Vec<Tradeoff>)> {
     Ok((thr, trade))
 }
 
-fn write_csv<T: serde::Serialize>(path: &Path, rows: &[T]) -> Result<()> {
+/// Writes serializable rows as a CSV file with a header.
+pub fn write_csv<T: serde::Serialize>(path: &Path, rows: &[T]) -> Result<()> {
     let mut w =
         csv::Writer::from_path(path).with_context(|| format!("writing {}", path.display()))?;
     for r in rows {

@@ -76,14 +76,8 @@ pub fn angle_sync(time_scale: f64, fps: f64, dir: &Path) -> Result<AngleSync> {
     let mut cam = SimCamera::new(sim.truth(), 160, 120, fps);
     let video = dir.join(format!("sync_x{time_scale}.mp4"));
     let opts = CaptureOptions {
-        video: video.clone(),
-        period_s: 28.0,
-        turns: 1,
-        home: true,
-        report_ms: 10,
         fourcc: ['m', 'p', '4', 'v'],
-        no_progress: Duration::from_secs(3),
-        progress: false,
+        ..CaptureOptions::new(video.clone())
     };
     capture(&mut table, &mut cam, &opts, &AtomicBool::new(false))?;
     let rows = crate::sidecar::read(&crate::sidecar::sidecar_path(&video))?;
@@ -100,15 +94,4 @@ pub fn angle_sync(time_scale: f64, fps: f64, dir: &Path) -> Result<AngleSync> {
         p95_deg: percentile(&err, 0.95),
         max_deg: *err.last().context("no frames")?,
     })
-}
-
-/// Writes rows as CSV.
-pub fn write_csv<T: serde::Serialize>(path: &Path, rows: &[T]) -> Result<()> {
-    let mut w =
-        csv::Writer::from_path(path).with_context(|| format!("writing {}", path.display()))?;
-    for r in rows {
-        w.serialize(r)?;
-    }
-    w.flush()?;
-    Ok(())
 }

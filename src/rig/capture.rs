@@ -42,6 +42,22 @@ pub struct CaptureOptions {
     pub progress: bool,
 }
 
+impl CaptureOptions {
+    /// One 28 s revolution into `video`: homed first, 10 ms reports, H.264, no progress bar.
+    pub fn new(video: impl Into<PathBuf>) -> Self {
+        CaptureOptions {
+            video: video.into(),
+            period_s: 28.0,
+            turns: 1,
+            home: true,
+            report_ms: 10,
+            fourcc: ['a', 'v', 'c', '1'],
+            no_progress: Duration::from_secs(3),
+            progress: false,
+        }
+    }
+}
+
 /// What a finished capture produced.
 #[derive(Clone, Debug)]
 pub struct CaptureSummary {

@@ -34,6 +34,14 @@ pub fn require_setup() {
     }
 }
 
+/// The shared data with the installed models, or `None` (skip) when ../shared is absent;
+/// panics with the fix when scripts/setup.sh has not run.
+pub fn real_data() -> Option<PathBuf> {
+    let s = shared_data()?;
+    require_setup();
+    Some(s)
+}
+
 /// A detector config from configs/detectors.
 pub fn detector_config(name: &str) -> PathBuf {
     repo()

@@ -104,14 +104,7 @@ impl Device {
         } else {
             State::Idle
         };
-        send(
-            out,
-            Reply::Banner {
-                fw: self.cfg.fw_version,
-                usteps_per_rev: self.cfg.usteps_per_rev,
-                proto: PROTOCOL_VERSION,
-            },
-        );
+        send(out, self.banner());
     }
 
     /// Position the motor must be at, in physical microsteps (not shifted by `HOME`).
@@ -138,6 +131,14 @@ impl Device {
     /// Active alarm.
     pub fn alarm(&self) -> Option<Alarm> {
         self.alarm
+    }
+
+    fn banner(&self) -> Reply<'static> {
+        Reply::Banner {
+            fw: self.cfg.fw_version,
+            usteps_per_rev: self.cfg.usteps_per_rev,
+            proto: PROTOCOL_VERSION,
+        }
     }
 
     fn t_ms(&self, now_us: u64) -> u64 {
@@ -230,14 +231,7 @@ impl Device {
         match f.cmd {
             Command::Ping => send(out, ok),
             Command::Info => {
-                send(
-                    out,
-                    Reply::Banner {
-                        fw: self.cfg.fw_version,
-                        usteps_per_rev: self.cfg.usteps_per_rev,
-                        proto: PROTOCOL_VERSION,
-                    },
-                );
+                send(out, self.banner());
                 send(out, ok);
             }
             Command::Status => {
