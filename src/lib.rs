@@ -6,6 +6,8 @@
 pub mod dataset;
 pub mod detect;
 pub mod eval;
+pub mod geometry;
+pub mod render;
 #[cfg(feature = "rig")]
 pub mod rig;
 pub mod sidecar;

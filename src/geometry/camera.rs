@@ -1,0 +1,138 @@
+//! Cameras in PyTorch3D's conventions (as the PAV-Camou code uses them): spherical placement,
+//! `look_at` with +Y up, and a square field-of-view perspective.
+//!
+//! View space: +X left, +Y up, +Z forward (into the image). Image pixel (0, 0) is the top-left
+//! corner, so NDC x = +1 is the left edge and y = +1 the top edge.
+
+/// Position from spherical angles: `dist`, elevation and azimuth in degrees (PyTorch3D's
+/// `camera_position_from_spherical_angles`): `(d·cos e·sin a, d·sin e, d·cos e·cos a)`.
+pub fn spherical(dist: f32, elev_deg: f32, azim_deg: f32) -> [f32; 3] {
+    let (e, a) = (elev_deg.to_radians(), azim_deg.to_radians());
+    [
+        dist * e.cos() * a.sin(),
+        dist * e.sin(),
+        dist * e.cos() * a.cos(),
+    ]
+}
+
+fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+/// Cross product.
+pub fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+/// Dot product.
+pub fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+/// Unit vector (zero stays zero).
+pub fn normalize(a: [f32; 3]) -> [f32; 3] {
+    let n = dot(a, a).sqrt();
+    if n > 0.0 {
+        [a[0] / n, a[1] / n, a[2] / n]
+    } else {
+        a
+    }
+}
+
+/// A pinhole camera: world → view rotation rows and eye, vertical field of view.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    /// View axes in world coordinates: rows are view X, Y, Z.
+    pub axes: [[f32; 3]; 3],
+    /// Eye position.
+    pub eye: [f32; 3],
+    /// Field of view in degrees (the image is square).
+    pub fov_deg: f32,
+    /// Near clipping distance.
+    pub znear: f32,
+}
+
+impl Camera {
+    /// Looks from `eye` at `at` with `up`; when `up` is parallel to the view direction (the
+    /// camera straight above), a world axis not parallel to it is used instead of producing NaNs.
+    pub fn look_at(eye: [f32; 3], at: [f32; 3], up: [f32; 3], fov_deg: f32) -> Camera {
+        let z = normalize(sub(at, eye));
+        let mut x = cross(up, z);
+        if dot(x, x) < 1e-12 {
+            let alt = if z[2].abs() < 0.9 {
+                [0.0, 0.0, 1.0]
+            } else {
+                [1.0, 0.0, 0.0]
+            };
+            x = cross(alt, z);
+        }
+        let x = normalize(x);
+        let y = normalize(cross(z, x));
+        Camera {
+            axes: [x, y, z],
+            eye,
+            fov_deg,
+            znear: 1e-3,
+        }
+    }
+
+    /// World point → view coordinates.
+    pub fn to_view(&self, p: [f32; 3]) -> [f32; 3] {
+        let d = sub(p, self.eye);
+        [
+            dot(self.axes[0], d),
+            dot(self.axes[1], d),
+            dot(self.axes[2], d),
+        ]
+    }
+
+    /// View point (z > 0) → pixel coordinates (x right, y down) in an `size × size` image.
+    pub fn to_pixel(&self, v: [f32; 3], size: usize) -> [f32; 2] {
+        let t = (self.fov_deg.to_radians() / 2.0).tan();
+        let (nx, ny) = (v[0] / (v[2] * t), v[1] / (v[2] * t));
+        let s = size as f32 / 2.0;
+        [(1.0 - nx) * s, (1.0 - ny) * s]
+    }
+}
+
+/// The PAV-Camou camera for a CARLA npz pose: distance `‖cam_trans[0]‖·0.345`, elevation
+/// −pitch (−0.001 to keep clear of the pole), azimuth −(camera yaw − vehicle yaw), look-at
+/// (0, −0.235, 0.07) in normalized mesh units, +Y up, FoV 60°. The authors' code uses −yaw
+/// alone, which equals this for their data set; FCA samples have the vehicle at yaw ≈ 90°.
+pub fn pav_camou(cam_trans: [[f64; 3]; 2], veh_yaw_deg: f64) -> Camera {
+    let [p, r] = cam_trans;
+    let dist = ((p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() * 0.345) as f32;
+    let eye = spherical(dist, (-r[0] - 0.001) as f32, -(r[1] - veh_yaw_deg) as f32);
+    Camera::look_at(eye, [0.0, -0.235, 0.07], [0.0, 1.0, 0.0], 60.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn look_at_centres_the_target_and_keeps_up_up() {
+        let c = Camera::look_at(spherical(5.0, 20.0, 30.0), [0.0; 3], [0.0, 1.0, 0.0], 60.0);
+        let v = c.to_view([0.0; 3]);
+        assert!((v[2] - 5.0).abs() < 1e-5 && v[0].abs() < 1e-5 && v[1].abs() < 1e-5);
+        assert_eq!(c.to_pixel(v, 100), [50.0, 50.0]);
+        // A point above the target lands above the centre.
+        let up = c.to_pixel(c.to_view([0.0, 0.5, 0.0]), 100);
+        assert!(up[1] < 50.0);
+    }
+
+    #[test]
+    fn pole_cameras_stay_finite() {
+        for elev in [90.0, -90.0] {
+            let c = Camera::look_at(spherical(3.0, elev, 0.0), [0.0; 3], [0.0, 1.0, 0.0], 60.0);
+            assert!(
+                c.axes.iter().flatten().all(|v| v.is_finite()),
+                "{elev}: {:?}",
+                c.axes
+            );
+            let v = c.to_view([0.1, 0.0, 0.1]);
+            assert!(v.iter().all(|x| x.is_finite()));
+        }
+    }
+}

@@ -1,0 +1,4 @@
+//! Geometry: meshes (OBJ) and cameras (PyTorch3D / CARLA pose conventions).
+
+pub mod camera;
+pub mod mesh;
