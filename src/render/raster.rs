@@ -113,7 +113,8 @@ impl GBuffer {
                 }
                 // Perspective-correct: interpolate attributes/z and 1/z linearly in screen space.
                 let iz = w0 * t[0].inv_z + w1 * t[1].inv_z + w2 * t[2].inv_z;
-                if !(iz > 0.0) {
+                // Also rejects NaN (a sliver whose edge functions overflowed).
+                if iz.is_nan() || iz <= 0.0 {
                     continue;
                 }
                 let z = 1.0 / iz;
@@ -121,13 +122,12 @@ impl GBuffer {
                 if z >= self.depth[i] {
                     continue;
                 }
-                let mut bc = [0.0f32; 3];
-                for k in 0..3 {
-                    bc[k] = (w0 * t[0].inv_z * t[0].b[k]
+                let bc: [f32; 3] = std::array::from_fn(|k| {
+                    (w0 * t[0].inv_z * t[0].b[k]
                         + w1 * t[1].inv_z * t[1].b[k]
                         + w2 * t[2].inv_z * t[2].b[k])
-                        * z;
-                }
+                        * z
+                });
                 self.depth[i] = z;
                 self.face[i] = face;
                 self.bary[i] = bc;
@@ -279,7 +279,7 @@ mod tests {
                 .filter(|f| **f != EMPTY)
                 .collect::<std::collections::BTreeSet<_>>()
         );
-        assert!(g.face.iter().any(|f| *f == 3));
+        assert!(g.face.contains(&3));
         assert!(g.depth.iter().filter(|d| d.is_finite()).all(|d| *d >= 1e-3));
     }
 
