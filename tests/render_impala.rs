@@ -105,3 +105,76 @@ fn impala_renders_with_its_textured_region() {
         "{inside}/{total} textured pixels on white-centroid faces"
     );
 }
+
+/// The paper's mask on the real mesh: rendering the two-valued T_m in dark light keeps the two
+/// grey ranges apart so c_mid separates them, while the authors' lit scene makes them overlap.
+#[test]
+fn dark_light_mask_separates_and_strong_light_does_not() {
+    use pav::render::mask::{binarize, c_mid, measure, MaskError};
+    use pav::render::shade::{vertex_normals, Lights, Shading};
+    let Some(shared) = common::shared_data() else {
+        return;
+    };
+    let mut mesh = Mesh::load_obj(&shared.join("pav-camou/xfl_yxz.obj")).unwrap();
+    mesh.normalize();
+    let normals = vertex_normals(&mesh);
+    let half = Texture::load(&shared.join("pav-camou/half.png")).unwrap();
+    let white: Vec<bool> = half
+        .rgb
+        .chunks(3)
+        .map(|c| c.iter().all(|v| *v == 1.0))
+        .collect();
+    // T_m: C_t = 0.6 on the textured region, C_n = 0.45 elsewhere.
+    let t_m: Vec<f32> = white.iter().map(|w| if *w { 0.6 } else { 0.45 }).collect();
+    let cam = pav::geometry::camera::Camera::look_at(
+        pav::geometry::camera::spherical(2.2, 25.0, 60.0),
+        [0.0; 3],
+        [0.0, 1.0, 0.0],
+        60.0,
+    );
+    let size = 400;
+    let g = GBuffer::render(&mesh, &cam, size);
+    let gather = Gather::new(g.uv_samples(&mesh), half.width, half.height);
+    // Ground truth per pixel from the texture itself; pixels straddling the border are left out,
+    // as the paper measured the ranges on clean regions of an example render.
+    let mut label = vec![None; size * size];
+    for (p, taps) in gather.pixels.iter().zip(&gather.taps) {
+        let w: Vec<bool> = taps
+            .iter()
+            .filter(|t| t.1 > 0.0)
+            .map(|t| white[t.0 as usize])
+            .collect();
+        if w.iter().all(|x| *x) || w.iter().all(|x| !*x) {
+            label[*p as usize] = Some(w[0]);
+        }
+    }
+    let covered: Vec<bool> = g.face.iter().map(|f| *f != EMPTY).collect();
+    let render = |lights: &Lights| {
+        let mut grey = vec![0.0; size * size];
+        gather.apply(&t_m, 1, &mut grey);
+        Shading::new(&g, &mesh, &normals, &cam, lights).apply(&mut grey, 1);
+        grey
+    };
+    let dark = render(&Lights::DARK);
+    let (t, n) = measure(&dark, &label).unwrap();
+    let mid = c_mid(t, n).unwrap();
+    assert!((mid - 0.525).abs() < 1e-4, "c_mid {mid} from {t:?} / {n:?}");
+    let p = binarize(&dark, &covered, mid, true);
+    let (agree, total) = label
+        .iter()
+        .zip(&p)
+        .filter_map(|(l, p)| l.map(|l| (l == (*p == 1.0)) as usize))
+        .fold((0, 0), |a, x| (a.0 + x, a.1 + 1));
+    assert_eq!(
+        agree,
+        total,
+        "P disagrees with the texture on {} labelled pixels",
+        total - agree
+    );
+    let lit = render(&Lights::PAV_CAMOU);
+    let (t, n) = measure(&lit, &label).unwrap();
+    assert!(
+        matches!(c_mid(t, n), Err(MaskError::Intersect { .. })),
+        "lit ranges {t:?} / {n:?} should overlap"
+    );
+}

@@ -3,4 +3,5 @@
 
 pub mod mask;
 pub mod raster;
+pub mod shade;
 pub mod texture;
