@@ -22,6 +22,22 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Cmd {
+    /// Time the render stages on a mesh (G-buffer per view, texture gather and its adjoint,
+    /// shading) at several image sizes; writes CSV.
+    BenchRender {
+        /// OBJ mesh with UVs.
+        #[arg(long, default_value = "../shared/data/pav-camou/xfl_yxz.obj")]
+        mesh: PathBuf,
+        /// Image sizes.
+        #[arg(long, value_delimiter = ',', default_value = "416,800")]
+        sizes: Vec<usize>,
+        /// Views (orbit azimuths) per size.
+        #[arg(long, default_value_t = 8)]
+        views: usize,
+        /// Output CSV.
+        #[arg(long, short = 'o', default_value = "bench/render.csv")]
+        out: PathBuf,
+    },
     /// Render the mesh with its UV texture (flat, unlit) and the textured-region mask as PNGs.
     Render {
         /// OBJ mesh with UVs.
@@ -56,15 +72,116 @@ fn save_rgb(path: &std::path::Path, size: usize, rgb: &[f32]) -> Result<()> {
         .with_context(|| format!("writing {}", path.display()))
 }
 
+#[derive(serde::Serialize)]
+struct RenderTiming {
+    size: usize,
+    views: usize,
+    gbuffer_ms: f64,
+    coverage: f64,
+    gather_ms: f64,
+    adjoint_ms: f64,
+    shade_ms: f64,
+}
+
+fn ms_per(views: usize, t: std::time::Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3 / views as f64
+}
+
+fn bench_render(
+    mesh: &std::path::Path,
+    sizes: &[usize],
+    views: usize,
+    out: &std::path::Path,
+) -> Result<()> {
+    use pav::render::shade::{vertex_normals, Lights, Shading};
+    use std::time::Instant;
+    let mut m = Mesh::load_obj(mesh)?;
+    m.normalize();
+    let normals = vertex_normals(&m);
+    let (tw, th) = (2048, 2048);
+    let tex: Vec<f32> = (0..tw * th * 3).map(|i| (i % 251) as f32 / 250.0).collect();
+    let views = views.max(1);
+    let cams: Vec<Camera> = (0..views)
+        .map(|k| {
+            Camera::look_at(
+                spherical(2.2, 20.0, k as f32 * 360.0 / views as f32),
+                [0.0; 3],
+                [0.0, 1.0, 0.0],
+                60.0,
+            )
+        })
+        .collect();
+    let mut rows = Vec::new();
+    for &size in sizes {
+        let t = Instant::now();
+        let gb: Vec<GBuffer> = cams.iter().map(|c| GBuffer::render(&m, c, size)).collect();
+        let gbuffer_ms = ms_per(views, t);
+        let gathers: Vec<Gather> = gb
+            .iter()
+            .map(|g| Gather::new(g.uv_samples(&m), tw, th))
+            .collect();
+        let mut img = vec![0.0; size * size * 3];
+        let t = Instant::now();
+        for g in &gathers {
+            g.apply(&tex, 3, &mut img);
+        }
+        let gather_ms = ms_per(views, t);
+        let mut grad = vec![0.0; tw * th * 3];
+        let t = Instant::now();
+        for g in &gathers {
+            g.adjoint(&img, 3, &mut grad);
+        }
+        let adjoint_ms = ms_per(views, t);
+        let t = Instant::now();
+        for (g, c) in gb.iter().zip(&cams) {
+            Shading::new(g, &m, &normals, c, &Lights::PAV_CAMOU).apply(&mut img, 3);
+        }
+        let shade_ms = ms_per(views, t);
+        let coverage = gb.iter().map(|g| g.coverage() as f64).sum::<f64>() / views as f64;
+        eprintln!(
+            "{size}²: G-buffer {gbuffer_ms:.1} ms/view, gather {gather_ms:.2} ms, adjoint {adjoint_ms:.2} ms, shading {shade_ms:.2} ms (car covers {:.0} %)",
+            100.0 * coverage
+        );
+        rows.push(RenderTiming {
+            size,
+            views,
+            gbuffer_ms,
+            coverage,
+            gather_ms,
+            adjoint_ms,
+            shade_ms,
+        });
+    }
+    if let Some(d) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(d)?;
+    }
+    let mut w =
+        csv::Writer::from_path(out).with_context(|| format!("writing {}", out.display()))?;
+    for r in &rows {
+        w.serialize(r)?;
+    }
+    w.flush()?;
+    eprintln!("wrote {}", out.display());
+    Ok(())
+}
+
 fn main() -> Result<()> {
-    let Cmd::Render {
-        mesh,
-        texture,
-        pose,
-        orbit,
-        size,
-        out,
-    } = Cli::parse().cmd;
+    let (mesh, texture, pose, orbit, size, out) = match Cli::parse().cmd {
+        Cmd::BenchRender {
+            mesh,
+            sizes,
+            views,
+            out,
+        } => return bench_render(&mesh, &sizes, views, &out),
+        Cmd::Render {
+            mesh,
+            texture,
+            pose,
+            orbit,
+            size,
+            out,
+        } => (mesh, texture, pose, orbit, size, out),
+    };
     let mut m = Mesh::load_obj(&mesh)?;
     m.normalize();
     let tex_path = match texture {
