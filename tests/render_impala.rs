@@ -49,17 +49,7 @@ fn impala_renders_with_its_textured_region() {
 
     // half.png: pure white = optimizable (24.8 % of the atlas per the manifest).
     let tex = Texture::load(&body.map_kd.clone().unwrap()).unwrap();
-    let white: Vec<f32> = tex
-        .rgb
-        .chunks(3)
-        .map(|c| {
-            if c.iter().all(|v| *v == 1.0) {
-                1.0
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let white = tex.white_mask();
     let share = white.iter().sum::<f32>() / white.len() as f32;
     assert!((share - 0.248).abs() < 0.001, "{share}");
 

@@ -217,17 +217,7 @@ fn main() -> Result<()> {
     let gather = Gather::new(g.uv_samples(&m), tex.width, tex.height);
     let mut rgb = vec![1.0f32; size * size * 3];
     gather.apply(&tex.rgb, 3, &mut rgb);
-    let white: Vec<f32> = tex
-        .rgb
-        .chunks(3)
-        .map(|c| {
-            if c.iter().all(|v| *v == 1.0) {
-                1.0
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let white = tex.white_mask();
     let mut mask = vec![0.0f32; size * size];
     gather.apply(&white, 1, &mut mask);
     if let Some(d) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
