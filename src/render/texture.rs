@@ -32,6 +32,21 @@ impl Texture {
                 .collect(),
         })
     }
+
+    /// The optimizable region as PAV-Camou marks it: 1 where a texel is pure white (every
+    /// channel exactly 1.0, i.e. 255), else 0.
+    pub fn white_mask(&self) -> Vec<f32> {
+        self.rgb
+            .chunks(3)
+            .map(|c| {
+                if c.iter().all(|v| *v == 1.0) {
+                    1.0
+                } else {
+                    0.0
+                }
+            })
+            .collect()
+    }
 }
 
 /// Texel convention: `align_corners = True` as in PyTorch3D's `TexturesUV`. u = 0 and u = 1 are
