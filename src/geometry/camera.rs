@@ -51,6 +51,8 @@ pub struct Camera {
     pub fov_deg: f32,
     /// Near clipping distance.
     pub znear: f32,
+    /// Mirror the image horizontally (neural_renderer's x axis points the other way).
+    pub mirror_x: bool,
 }
 
 impl Camera {
@@ -74,6 +76,7 @@ impl Camera {
             eye,
             fov_deg,
             znear: 1e-3,
+            mirror_x: false,
         }
     }
 
@@ -92,6 +95,7 @@ impl Camera {
         let t = (self.fov_deg.to_radians() / 2.0).tan();
         let (nx, ny) = (v[0] / (v[2] * t), v[1] / (v[2] * t));
         let s = size as f32 / 2.0;
+        let nx = if self.mirror_x { -nx } else { nx };
         [(1.0 - nx) * s, (1.0 - ny) * s]
     }
 }
@@ -105,6 +109,32 @@ pub fn pav_camou(cam_trans: [[f64; 3]; 2], veh_yaw_deg: f64) -> Camera {
     let dist = ((p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() * 0.345) as f32;
     let eye = spherical(dist, (-r[0] - 0.001) as f32, -(r[1] - veh_yaw_deg) as f32);
     Camera::look_at(eye, [0.0, -0.235, 0.07], [0.0, 1.0, 0.0], 60.0)
+}
+
+/// The FCA/DAS camera for a CARLA npz pose, with the mesh normalized as neural_renderer does
+/// ([`crate::geometry::mesh::Mesh::normalize_bbox`]): eye = camera offset × 0.40, view direction
+/// and up from the camera pitch and yaw, Z up, all rotated about Z by −vehicle yaw; a 90° field of
+/// view (neural_renderer `viewing_angle` 45) and a mirrored x axis. Measured against the FCA
+/// masks in `tests/render_fca.rs`.
+pub fn fca(cam_trans: [[f64; 3]; 2], veh_trans: [[f64; 3]; 2]) -> Camera {
+    let (c, vy) = (cam_trans, veh_trans[1][1].to_radians());
+    let eye0 = [c[0][0] * 0.40, c[0][1] * 0.40, c[0][2] * 0.40];
+    let (p, y) = (c[1][0].to_radians(), c[1][1].to_radians());
+    let dir = [p.cos() * y.cos(), p.cos() * y.sin(), p.sin()];
+    let q = p + std::f64::consts::FRAC_PI_2;
+    let up = [q.cos() * y.cos(), q.cos() * y.sin(), q.sin()];
+    let rot = |v: [f64; 3]| {
+        [
+            (v[0] * vy.cos() + v[1] * vy.sin()) as f32,
+            (-v[0] * vy.sin() + v[1] * vy.cos()) as f32,
+            v[2] as f32,
+        ]
+    };
+    let eye = rot(eye0);
+    let at = rot([eye0[0] + dir[0], eye0[1] + dir[1], eye0[2] + dir[2]]);
+    let mut cam = Camera::look_at(eye, at, rot(up), 90.0);
+    cam.mirror_x = true;
+    cam
 }
 
 #[cfg(test)]

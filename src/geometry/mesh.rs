@@ -257,6 +257,26 @@ impl Mesh {
         Ok(m)
     }
 
+    /// neural_renderer's `load_obj` normalization (used by FCA and DAS): the bounding box is
+    /// centred and its longest side scaled to 2.
+    pub fn normalize_bbox(&mut self) {
+        let mut lo = [f32::INFINITY; 3];
+        let mut hi = [f32::NEG_INFINITY; 3];
+        for p in &self.positions {
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        let side = (0..3).map(|k| hi[k] - lo[k]).fold(0f32, f32::max);
+        let s = if side > 0.0 { 2.0 / side } else { 1.0 };
+        for p in &mut self.positions {
+            for k in 0..3 {
+                p[k] = (p[k] - (lo[k] + hi[k]) / 2.0) * s;
+            }
+        }
+    }
+
     /// Centres on the vertex mean and divides by the largest absolute coordinate (PAV-Camou's
     /// normalization); returns (centre, scale) so it can be undone.
     pub fn normalize(&mut self) -> ([f32; 3], f32) {
