@@ -29,12 +29,8 @@ const ERASED: [&str; 4] = ["data12501", "data12502", "data12505", "data12508"];
 fn erase_car(img: &Frame, b: [usize; 4]) -> Frame {
     let (w, h) = (img.width, img.height);
     let (gx, gy) = ((b[2] - b[0]) / 10, (b[3] - b[1]) / 10);
-    let (x1, y1, x2, y2) = (
-        b[0].saturating_sub(gx),
-        b[1].saturating_sub(gy),
-        (b[2] + gx).min(w - 1),
-        (b[3] + gy).min(h - 1),
-    );
+    let (x1, y1, x2, y2) =
+        (b[0].saturating_sub(gx), b[1].saturating_sub(gy), (b[2] + gx).min(w - 1), (b[3] + gy).min(h - 1));
     let ring = 12;
     let mut sum = [0f64; 3];
     let mut n = 0f64;
@@ -65,17 +61,8 @@ fn main() -> Result<()> {
         .context("reading derived_test_labels.tsv (is ../shared present?)")?;
     let mut lines = tsv.lines();
     let header: Vec<&str> = lines.next().context("empty tsv")?.split('\t').collect();
-    let col = |name: &str| {
-        header
-            .iter()
-            .position(|h| *h == name)
-            .with_context(|| format!("tsv lacks {name}"))
-    };
-    let (c_box, c_x, c_v8) = (
-        col("gt_x1")?,
-        col("car_score_yolox_nano")?,
-        col("car_score_yolov8n_int8")?,
-    );
+    let col = |name: &str| header.iter().position(|h| *h == name).with_context(|| format!("tsv lacks {name}"));
+    let (c_box, c_x, c_v8) = (col("gt_x1")?, col("car_score_yolox_nano")?, col("car_score_yolov8n_int8")?);
     struct View {
         name: String,
         sample: CarlaSample,
@@ -88,26 +75,11 @@ fn main() -> Result<()> {
         let c: Vec<&str> = l.split('\t').collect();
         let path = shared.join("..").join(c[0]);
         let sample = CarlaSample::load(&path)?;
-        let bbox = [
-            c[c_box].parse()?,
-            c[c_box + 1].parse()?,
-            c[c_box + 2].parse()?,
-            c[c_box + 3].parse()?,
-        ];
+        let bbox = [c[c_box].parse()?, c[c_box + 1].parse()?, c[c_box + 2].parse()?, c[c_box + 3].parse()?];
         let name = path.file_stem().unwrap().to_string_lossy().into_owned();
-        views.push(View {
-            name,
-            sample,
-            bbox,
-            yolox: c[c_x].into(),
-            yolov8n: c[c_v8].into(),
-        });
+        views.push(View { name, sample, bbox, yolox: c[c_x].into(), yolov8n: c[c_v8].into() });
     }
-    views.sort_by(|a, b| {
-        a.sample
-            .relative_azimuth_deg()
-            .total_cmp(&b.sample.relative_azimuth_deg())
-    });
+    views.sort_by(|a, b| a.sample.relative_azimuth_deg().total_cmp(&b.sample.relative_azimuth_deg()));
     let (w, h) = (views[0].sample.image.width, views[0].sample.image.height);
 
     let out_dir = repo.join("fixtures");
@@ -123,10 +95,7 @@ fn main() -> Result<()> {
         true,
     )?;
     if !writer.is_opened()? {
-        bail!(
-            "OpenCV could not open an H.264 writer for {}",
-            video.display()
-        );
+        bail!("OpenCV could not open an H.264 writer for {}", video.display());
     }
     let mut side = sidecar::Writer::create(&sidecar::sidecar_path(&video))?;
     let mut truth = csv::Writer::from_path(out_dir.join("carla_orbit.truth.csv"))?;
@@ -144,24 +113,9 @@ fn main() -> Result<()> {
         let az = v.sample.relative_azimuth_deg();
         for _ in 0..HOLD {
             writer.write(&mat)?;
-            side.push(AngleSample {
-                frame,
-                timestamp_s: frame as f64 / FPS,
-                angle_deg: az,
-            })?;
-            let (sx, s8) = if visible {
-                (v.yolox.clone(), v.yolov8n.clone())
-            } else {
-                ("0".into(), "0".into())
-            };
-            truth.write_record([
-                frame.to_string(),
-                v.name.clone(),
-                visible.to_string(),
-                format!("{az:.1}"),
-                sx,
-                s8,
-            ])?;
+            side.push(AngleSample { frame, timestamp_s: frame as f64 / FPS, angle_deg: az })?;
+            let (sx, s8) = if visible { (v.yolox.clone(), v.yolov8n.clone()) } else { ("0".into(), "0".into()) };
+            truth.write_record([frame.to_string(), v.name.clone(), visible.to_string(), format!("{az:.1}"), sx, s8])?;
             frame += 1;
         }
         Ok(())

@@ -47,28 +47,18 @@ pub fn sidecar_path(video: &Path) -> PathBuf {
 
 /// Reads a sidecar; frames must be strictly increasing and values finite.
 pub fn read(path: &Path) -> Result<Vec<AngleSample>, SidecarError> {
-    let csv_err = |source| SidecarError::Csv {
-        path: path.into(),
-        source,
-    };
+    let csv_err = |source| SidecarError::Csv { path: path.into(), source };
     let mut rd = csv::Reader::from_path(path).map_err(csv_err)?;
     let mut out: Vec<AngleSample> = Vec::new();
     for (i, rec) in rd.deserialize().enumerate() {
         let s: AngleSample = rec.map_err(csv_err)?;
-        let row_err = |msg: String| SidecarError::Row {
-            path: path.into(),
-            row: i + 1,
-            msg,
-        };
+        let row_err = |msg: String| SidecarError::Row { path: path.into(), row: i + 1, msg };
         if !s.angle_deg.is_finite() || !s.timestamp_s.is_finite() {
             return Err(row_err("non-finite timestamp or angle".into()));
         }
         if let Some(prev) = out.last() {
             if s.frame <= prev.frame {
-                return Err(row_err(format!(
-                    "frame {} does not follow frame {}",
-                    s.frame, prev.frame
-                )));
+                return Err(row_err(format!("frame {} does not follow frame {}", s.frame, prev.frame)));
             }
         }
         out.push(s);
@@ -85,29 +75,15 @@ pub struct Writer {
 impl Writer {
     /// Creates (truncates) `path` and writes the header.
     pub fn create(path: &Path) -> Result<Self, SidecarError> {
-        let inner = csv::Writer::from_path(path).map_err(|source| SidecarError::Csv {
-            path: path.into(),
-            source,
-        })?;
-        Ok(Writer {
-            inner,
-            path: path.into(),
-        })
+        let inner = csv::Writer::from_path(path).map_err(|source| SidecarError::Csv { path: path.into(), source })?;
+        Ok(Writer { inner, path: path.into() })
     }
 
     /// Appends one row and flushes it.
     pub fn push(&mut self, s: AngleSample) -> Result<(), SidecarError> {
         let path = self.path.clone();
-        self.inner
-            .serialize(s)
-            .map_err(|source| SidecarError::Csv {
-                path: path.clone(),
-                source,
-            })?;
-        self.inner.flush().map_err(|e| SidecarError::Csv {
-            path,
-            source: e.into(),
-        })
+        self.inner.serialize(s).map_err(|source| SidecarError::Csv { path: path.clone(), source })?;
+        self.inner.flush().map_err(|e| SidecarError::Csv { path, source: e.into() })
     }
 }
 
@@ -120,32 +96,12 @@ mod tests {
         let d = tempfile::tempdir().unwrap();
         let p = d.path().join("v.angles.csv");
         let mut w = Writer::create(&p).unwrap();
-        w.push(AngleSample {
-            frame: 0,
-            timestamp_s: 0.0,
-            angle_deg: 0.0,
-        })
-        .unwrap();
-        w.push(AngleSample {
-            frame: 2,
-            timestamp_s: 0.066,
-            angle_deg: 1.7,
-        })
-        .unwrap();
+        w.push(AngleSample { frame: 0, timestamp_s: 0.0, angle_deg: 0.0 }).unwrap();
+        w.push(AngleSample { frame: 2, timestamp_s: 0.066, angle_deg: 1.7 }).unwrap();
         drop(w);
-        assert_eq!(
-            read(&p).unwrap()[1],
-            AngleSample {
-                frame: 2,
-                timestamp_s: 0.066,
-                angle_deg: 1.7
-            }
-        );
+        assert_eq!(read(&p).unwrap()[1], AngleSample { frame: 2, timestamp_s: 0.066, angle_deg: 1.7 });
         std::fs::write(&p, "frame,timestamp_s,angle_deg\n3,0,0\n1,0,0\n").unwrap();
         assert!(read(&p).unwrap_err().to_string().contains("row 2"));
-        assert_eq!(
-            sidecar_path(Path::new("a/b.mp4")),
-            Path::new("a/b.angles.csv")
-        );
+        assert_eq!(sidecar_path(Path::new("a/b.mp4")), Path::new("a/b.angles.csv"));
     }
 }

@@ -21,18 +21,8 @@ fn opts(video: &Path) -> CaptureOptions {
 }
 
 fn rig(scale: f64, faults: Faults) -> (SimTurntable, Turntable) {
-    let s = SimTurntable::spawn(SimOptions {
-        time_scale: scale,
-        faults,
-        ..SimOptions::default()
-    })
-    .unwrap();
-    let t = Turntable::open(
-        &s.path().to_string_lossy(),
-        115_200,
-        Duration::from_millis(500),
-    )
-    .unwrap();
+    let s = SimTurntable::spawn(SimOptions { time_scale: scale, faults, ..SimOptions::default() }).unwrap();
+    let t = Turntable::open(&s.path().to_string_lossy(), 115_200, Duration::from_millis(500)).unwrap();
     (s, t)
 }
 
@@ -53,15 +43,8 @@ fn one_revolution_has_every_frame_within_half_a_degree() {
     let (s, mut table) = rig(5.0, Faults::default());
     let mut cam = SimCamera::new(s.truth(), 320, 240, 30.0);
     let sum = capture(&mut table, &mut cam, &opts(&video), &AtomicBool::new(false)).unwrap();
-    assert!(
-        (165..=176).contains(&sum.frames),
-        "{} frames for a 5.6 s turn at 30 fps",
-        sum.frames
-    );
-    assert_eq!(
-        sum.interpolated, sum.frames,
-        "every angle came from reports around its frame"
-    );
+    assert!((165..=176).contains(&sum.frames), "{} frames for a 5.6 s turn at 30 fps", sum.frames);
+    assert_eq!(sum.interpolated, sum.frames, "every angle came from reports around its frame");
     assert!((sum.final_deg.unwrap() - 360.0).abs() < 1e-9);
     let rows = sidecar::read(&sidecar::sidecar_path(&video)).unwrap();
     assert_eq!(rows.len(), sum.frames);
@@ -77,24 +60,15 @@ fn one_revolution_has_every_frame_within_half_a_degree() {
     assert!(rows.iter().any(|r| (170.0..190.0).contains(&r.angle_deg)));
 }
 
-fn expect_stopped(
-    r: Result<pav::rig::capture::CaptureSummary, CaptureError>,
-    needle: &str,
-    video: &Path,
-) -> usize {
+fn expect_stopped(r: Result<pav::rig::capture::CaptureSummary, CaptureError>, needle: &str, video: &Path) -> usize {
     let e = r.expect_err("capture should stop");
     let msg = e.to_string();
     assert!(msg.contains(needle), "{msg}");
-    let CaptureError::Stopped { frames, .. } = e else {
-        panic!("{msg}")
-    };
+    let CaptureError::Stopped { frames, .. } = e else { panic!("{msg}") };
     assert!(msg.contains("saved"), "{msg}");
     // Nothing recorded is lost: the video decodes and the sidecar has a row per frame.
     assert_eq!(decoded_frames(video), frames, "{msg}");
-    assert_eq!(
-        sidecar::read(&sidecar::sidecar_path(video)).unwrap().len(),
-        frames
-    );
+    assert_eq!(sidecar::read(&sidecar::sidecar_path(video)).unwrap().len(), frames);
     frames
 }
 
@@ -120,37 +94,18 @@ fn camera_failure_saves_what_was_recorded() {
 fn serial_disconnect_and_stall_save_what_was_recorded() {
     let tmp = tempfile::tempdir().unwrap();
     let video = tmp.path().join("disc.mp4");
-    let (s, mut table) = rig(
-        14.0,
-        Faults {
-            disconnect_after: Some(Duration::from_millis(1200)),
-            ..Faults::default()
-        },
-    );
+    let (s, mut table) = rig(14.0, Faults { disconnect_after: Some(Duration::from_millis(1200)), ..Faults::default() });
     let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
-    let n = expect_stopped(
-        capture(&mut table, &mut cam, &opts(&video), &AtomicBool::new(false)),
-        "disconnected",
-        &video,
-    );
+    let n =
+        expect_stopped(capture(&mut table, &mut cam, &opts(&video), &AtomicBool::new(false)), "disconnected", &video);
     assert!(n > 5, "{n}");
 
     let video = tmp.path().join("stall.mp4");
-    let (s, mut table) = rig(
-        14.0,
-        Faults {
-            stall_after: Some(Duration::from_secs(8)),
-            ..Faults::default()
-        },
-    );
+    let (s, mut table) = rig(14.0, Faults { stall_after: Some(Duration::from_secs(8)), ..Faults::default() });
     let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
     let mut o = opts(&video);
     o.home = false;
-    expect_stopped(
-        capture(&mut table, &mut cam, &o, &AtomicBool::new(false)),
-        "turntable alarm: motor stall",
-        &video,
-    );
+    expect_stopped(capture(&mut table, &mut cam, &o, &AtomicBool::new(false)), "turntable alarm: motor stall", &video);
 }
 
 #[test]
@@ -165,25 +120,15 @@ fn ctrl_c_stops_the_table_and_saves() {
         std::thread::sleep(Duration::from_millis(800));
         flag.store(true, std::sync::atomic::Ordering::Relaxed);
     });
-    let n = expect_stopped(
-        capture(&mut table, &mut cam, &opts(&video), &stop),
-        "interrupted (Ctrl-C)",
-        &video,
-    );
+    let n = expect_stopped(capture(&mut table, &mut cam, &opts(&video), &stop), "interrupted (Ctrl-C)", &video);
     assert!((15..40).contains(&n), "{n}");
 }
 
 #[test]
 fn camera_sources_fail_clearly_or_stream() {
-    let e = LiveCapture::v4l2(Path::new("/dev/video-not-here"), 640, 480, 30.0)
-        .err()
-        .unwrap();
+    let e = LiveCapture::v4l2(Path::new("/dev/video-not-here"), 640, 480, 30.0).err().unwrap();
     assert!(matches!(e, CameraError::NoDevice(_)));
-    assert!(
-        e.to_string()
-            .contains("no V4L2 camera at /dev/video-not-here"),
-        "{e}"
-    );
+    assert!(e.to_string().contains("no V4L2 camera at /dev/video-not-here"), "{e}");
     // GStreamer's live test source stands in for a camera (scripts/setup.sh installs it).
     let mut g = LiveCapture::gst_test(320, 240, 30).unwrap();
     let (f, _) = g.grab().unwrap().unwrap();

@@ -11,10 +11,7 @@ fn pav_rig() -> Command {
 }
 
 fn fixture() -> String {
-    common::repo()
-        .join("fixtures/carla_orbit.mp4")
-        .display()
-        .to_string()
+    common::repo().join("fixtures/carla_orbit.mp4").display().to_string()
 }
 
 fn cfg(name: &str) -> String {
@@ -22,10 +19,7 @@ fn cfg(name: &str) -> String {
 }
 
 fn text(o: &Output) -> (String, String) {
-    (
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
+    (String::from_utf8_lossy(&o.stdout).into_owned(), String::from_utf8_lossy(&o.stderr).into_owned())
 }
 
 fn assert_clean_failure(o: &Output, needle: &str) {
@@ -42,26 +36,14 @@ fn evaluate_prints_table_and_writes_reports() {
     }
     let tmp = tempfile::tempdir().unwrap();
     let o = pav_rig()
-        .args([
-            "evaluate",
-            &fixture(),
-            "-d",
-            &cfg("yolox_nano"),
-            "--stride",
-            "3",
-            "-o",
-        ])
+        .args(["evaluate", &fixture(), "-d", &cfg("yolox_nano"), "--stride", "3", "-o"])
         .arg(tmp.path())
         .output()
         .unwrap();
     let (out, err) = text(&o);
     assert!(o.status.success(), "{out}\n{err}");
     assert!(out.contains("A_physical at score threshold 0.5"), "{out}");
-    assert!(
-        out.lines()
-            .any(|l| l.starts_with("carla_orbit") && l.contains(" 10 ") && l.contains(" 15 ")),
-        "{out}"
-    );
+    assert!(out.lines().any(|l| l.starts_with("carla_orbit") && l.contains(" 10 ") && l.contains(" 15 ")), "{out}");
     assert!(err.contains("stride 3"), "{err}");
     assert!(tmp.path().join("accuracy.png").exists());
 }
@@ -75,10 +57,7 @@ fn missing_or_broken_onnx_runtime_is_a_clear_error() {
         .arg(tmp.path().join("o1"))
         .output()
         .unwrap();
-    if common::repo()
-        .join(".deps/models/yolov3-tiny/yolov3-tiny.onnx")
-        .exists()
-    {
+    if common::repo().join(".deps/models/yolov3-tiny/yolov3-tiny.onnx").exists() {
         assert_clean_failure(&o, "ONNX Runtime library not found");
         let fake = tmp.path().join("libonnxruntime.so");
         std::fs::write(&fake, "not a shared library").unwrap();
@@ -108,40 +87,15 @@ fn write_cfg(dir: &Path, model: &str, layout: &str) -> String {
 fn bad_configs_name_the_problem() {
     let tmp = tempfile::tempdir().unwrap();
     let missing_model = write_cfg(tmp.path(), "no/such/model.onnx", "ultralytics");
-    let o = pav_rig()
-        .args(["evaluate", &fixture(), "-d", &missing_model])
-        .output()
-        .unwrap();
+    let o = pav_rig().args(["evaluate", &fixture(), "-d", &missing_model]).output().unwrap();
     assert_clean_failure(&o, "no/such/model.onnx does not exist");
     let bad_layout = write_cfg(tmp.path(), "m.onnx", "retinanet");
-    let o = pav_rig()
-        .args(["evaluate", &fixture(), "-d", &bad_layout])
-        .output()
-        .unwrap();
+    let o = pav_rig().args(["evaluate", &fixture(), "-d", &bad_layout]).output().unwrap();
     assert_clean_failure(&o, "unknown variant `retinanet`");
-    let o = pav_rig()
-        .args([
-            "evaluate",
-            &fixture(),
-            "-d",
-            &cfg("yolox_nano"),
-            "--classes",
-            "hovercraft",
-        ])
-        .output()
-        .unwrap();
+    let o =
+        pav_rig().args(["evaluate", &fixture(), "-d", &cfg("yolox_nano"), "--classes", "hovercraft"]).output().unwrap();
     assert_clean_failure(&o, "`hovercraft`");
-    let o = pav_rig()
-        .args([
-            "evaluate",
-            &fixture(),
-            "-d",
-            &cfg("yolox_nano"),
-            "--threshold",
-            "1.5",
-        ])
-        .output()
-        .unwrap();
+    let o = pav_rig().args(["evaluate", &fixture(), "-d", &cfg("yolox_nano"), "--threshold", "1.5"]).output().unwrap();
     assert_clean_failure(&o, "--threshold 1.5");
 }
 
@@ -168,12 +122,7 @@ fn a_missing_video_fails_the_run_but_keeps_the_others() {
         .unwrap();
     assert_clean_failure(&o, "no_such_video.mp4 does not exist");
     let summary = std::fs::read_to_string(tmp.path().join("summary.csv")).unwrap();
-    assert!(
-        summary
-            .lines()
-            .any(|l| l.starts_with("carla_orbit,yolox_nano") && l.ends_with("complete")),
-        "{summary}"
-    );
+    assert!(summary.lines().any(|l| l.starts_with("carla_orbit,yolox_nano") && l.ends_with("complete")), "{summary}");
 }
 
 #[test]
@@ -184,17 +133,8 @@ fn ctrl_c_keeps_every_scored_frame_and_a_summary() {
     let tmp = tempfile::tempdir().unwrap();
     let fx = fixture();
     let child = pav_rig()
-        .args([
-            "evaluate", &fx, &fx, &fx, "--label", "a", "--label", "b", "--label", "c",
-        ])
-        .args([
-            "-d",
-            &cfg("yolov8n_int8"),
-            "-d",
-            &cfg("deimv2_atto_int8"),
-            "--no-plots",
-            "-o",
-        ])
+        .args(["evaluate", &fx, &fx, &fx, "--label", "a", "--label", "b", "--label", "c"])
+        .args(["-d", &cfg("yolov8n_int8"), "-d", &cfg("deimv2_atto_int8"), "--no-plots", "-o"])
         .arg(tmp.path())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -202,21 +142,11 @@ fn ctrl_c_keeps_every_scored_frame_and_a_summary() {
         .unwrap();
     let frames = tmp.path().join("frames.csv");
     let t0 = std::time::Instant::now();
-    while std::fs::read_to_string(&frames)
-        .map(|s| s.lines().count())
-        .unwrap_or(0)
-        < 5
-    {
-        assert!(
-            t0.elapsed().as_secs() < 120,
-            "no frames scored within 2 minutes"
-        );
+    while std::fs::read_to_string(&frames).map(|s| s.lines().count()).unwrap_or(0) < 5 {
+        assert!(t0.elapsed().as_secs() < 120, "no frames scored within 2 minutes");
         std::thread::sleep(std::time::Duration::from_millis(50));
     }
-    let ok = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
+    let ok = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
     assert!(ok.success());
     let o = child.wait_with_output().unwrap();
     assert_clean_failure(&o, "interrupted");
@@ -225,10 +155,6 @@ fn ctrl_c_keeps_every_scored_frame_and_a_summary() {
     let summary = std::fs::read_to_string(tmp.path().join("summary.csv")).unwrap();
     assert!(summary.contains("interrupted after"), "{summary}");
     // The summary counts exactly the frames that were written.
-    let counted: usize = summary
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').nth(5).unwrap().parse::<usize>().unwrap())
-        .sum();
+    let counted: usize = summary.lines().skip(1).map(|l| l.split(',').nth(5).unwrap().parse::<usize>().unwrap()).sum();
     assert_eq!(counted, scored);
 }

@@ -10,11 +10,7 @@ fn pav_rig() -> Command {
 }
 
 fn text(o: &Output) -> String {
-    format!(
-        "{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
+    format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
 }
 
 #[test]
@@ -46,23 +42,14 @@ fn capture_on_the_simulator_then_evaluate_uses_the_sidecar() {
     assert!(o.status.success(), "{out}");
     assert!(out.contains("table ended at 360.000°"), "{out}");
     let rows = pav::sidecar::read(&pav::sidecar::sidecar_path(&video)).unwrap();
-    assert!(
-        (80..=90).contains(&rows.len()),
-        "{} frames for 2.8 s at 30 fps",
-        rows.len()
-    );
+    assert!((80..=90).contains(&rows.len()), "{} frames for 2.8 s at 30 fps", rows.len());
     if common::real_data().is_none() {
         return;
     }
     let o = pav_rig()
         .args(["evaluate"])
         .arg(&video)
-        .args([
-            "-d",
-            &common::detector_config("yolox_nano").display().to_string(),
-            "--no-plots",
-            "-o",
-        ])
+        .args(["-d", &common::detector_config("yolox_nano").display().to_string(), "--no-plots", "-o"])
         .arg(tmp.path().join("eval"))
         .output()
         .unwrap();
@@ -82,77 +69,28 @@ fn missing_hardware_is_a_clear_error() {
         .unwrap();
     assert!(!o.status.success());
     let out = text(&o);
-    assert!(
-        out.contains("cannot open turntable port /dev/no-such-tty"),
-        "{out}"
-    );
+    assert!(out.contains("cannot open turntable port /dev/no-such-tty"), "{out}");
     let o = pav_rig()
-        .args([
-            "capture",
-            "--port",
-            "sim",
-            "--camera",
-            "v4l2:/dev/video-none",
-            "-o",
-            "/tmp/never.mp4",
-        ])
+        .args(["capture", "--port", "sim", "--camera", "v4l2:/dev/video-none", "-o", "/tmp/never.mp4"])
         .env("RUST_BACKTRACE", "0")
         .output()
         .unwrap();
     assert!(!o.status.success());
-    assert!(
-        text(&o).contains("no V4L2 camera at /dev/video-none"),
-        "{}",
-        text(&o)
-    );
+    assert!(text(&o).contains("no V4L2 camera at /dev/video-none"), "{}", text(&o));
     assert!(!std::path::Path::new("/tmp/never.mp4").exists());
     let o = pav_rig()
-        .args([
-            "capture",
-            "--port",
-            "/dev/ttyS99",
-            "--camera",
-            "sim",
-            "-o",
-            "/tmp/never.mp4",
-        ])
+        .args(["capture", "--port", "/dev/ttyS99", "--camera", "sim", "-o", "/tmp/never.mp4"])
         .output()
         .unwrap();
-    assert!(
-        text(&o).contains("--camera sim films the simulated turntable"),
-        "{}",
-        text(&o)
-    );
+    assert!(text(&o).contains("--camera sim films the simulated turntable"), "{}", text(&o));
 }
 
 #[test]
 fn turntable_commands_on_the_simulator() {
-    let o = pav_rig()
-        .args([
-            "turntable",
-            "--port",
-            "sim",
-            "--time-scale",
-            "20",
-            "rotate",
-            "--",
-            "-90",
-        ])
-        .output()
-        .unwrap();
+    let o =
+        pav_rig().args(["turntable", "--port", "sim", "--time-scale", "20", "rotate", "--", "-90"]).output().unwrap();
     assert!(o.status.success(), "{}", text(&o));
-    assert!(
-        text(&o).contains("done at -800 microsteps = -90.000°"),
-        "{}",
-        text(&o)
-    );
-    let o = pav_rig()
-        .args(["turntable", "--port", "sim", "status"])
-        .output()
-        .unwrap();
-    assert!(
-        text(&o).contains("state Idle  position 0 microsteps"),
-        "{}",
-        text(&o)
-    );
+    assert!(text(&o).contains("done at -800 microsteps = -90.000°"), "{}", text(&o));
+    let o = pav_rig().args(["turntable", "--port", "sim", "status"]).output().unwrap();
+    assert!(text(&o).contains("state Idle  position 0 microsteps"), "{}", text(&o));
 }

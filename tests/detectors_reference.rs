@@ -22,17 +22,8 @@ fn scores(detector: &str, interpolation: Option<Interpolation>) -> Option<Vec<(S
     for (npz, cols) in common::reference_labels(&shared) {
         let s = CarlaSample::load(&npz).unwrap();
         let want: f32 = cols[&column].parse().unwrap();
-        let got = det
-            .propose(&s.image)
-            .unwrap()
-            .best(det.target_classes())
-            .map(|b| b.score)
-            .unwrap_or(0.0);
-        out.push((
-            npz.file_name().unwrap().to_string_lossy().into_owned(),
-            got,
-            want,
-        ));
+        let got = det.propose(&s.image).unwrap().best(det.target_classes()).map(|b| b.score).unwrap_or(0.0);
+        out.push((npz.file_name().unwrap().to_string_lossy().into_owned(), got, want));
     }
     Some(out)
 }
@@ -45,16 +36,9 @@ fn check(detector: &str, tol: f32) {
     };
     let shipped = scores(detector, None).unwrap();
     for ((f, got, want), (_, got_cfg, _)) in rows.iter().zip(&shipped) {
-        assert!(
-            (got - want).abs() <= tol,
-            "{detector} {f}: score {got:.4}, reference {want:.3}"
-        );
+        assert!((got - want).abs() <= tol, "{detector} {f}: score {got:.4}, reference {want:.3}");
         if (want - 0.5).abs() > 0.1 {
-            assert_eq!(
-                *got >= 0.5,
-                *want >= 0.5,
-                "{detector} {f}: {got:.3} vs reference {want:.3}"
-            );
+            assert_eq!(*got >= 0.5, *want >= 0.5, "{detector} {f}: {got:.3} vs reference {want:.3}");
             assert_eq!(
                 *got_cfg >= 0.5,
                 *want >= 0.5,

@@ -22,20 +22,12 @@ fn fixture() -> PathBuf {
 }
 
 fn truth() -> Vec<Truth> {
-    let mut rd =
-        csv::Reader::from_path(common::repo().join("fixtures/carla_orbit.truth.csv")).unwrap();
+    let mut rd = csv::Reader::from_path(common::repo().join("fixtures/carla_orbit.truth.csv")).unwrap();
     rd.records()
         .map(|r| {
             let r = r.unwrap();
-            let refs = HashMap::from([
-                ("yolox_nano", r[4].parse().unwrap()),
-                ("yolov8n_int8", r[5].parse().unwrap()),
-            ]);
-            Truth {
-                visible: &r[2] == "true",
-                angle: r[3].parse().unwrap(),
-                refs,
-            }
+            let refs = HashMap::from([("yolox_nano", r[4].parse().unwrap()), ("yolov8n_int8", r[5].parse().unwrap())]);
+            Truth { visible: &r[2] == "true", angle: r[3].parse().unwrap(), refs }
         })
         .collect()
 }
@@ -49,13 +41,8 @@ fn detectors(names: &[&str]) -> Vec<Box<dyn Detector>> {
     names
         .iter()
         .map(|n| {
-            Box::new(
-                OnnxDetector::new(
-                    DetectorConfig::load(&common::detector_config(n)).unwrap(),
-                    1,
-                )
-                .unwrap(),
-            ) as Box<dyn Detector>
+            Box::new(OnnxDetector::new(DetectorConfig::load(&common::detector_config(n)).unwrap(), 1).unwrap())
+                as Box<dyn Detector>
         })
         .collect()
 }
@@ -79,11 +66,7 @@ fn run(jobs: &[VideoJob], dets: &[&str], out: &Path, stride: usize) -> EvalOutco
 }
 
 fn job(path: PathBuf, label: &str) -> VideoJob {
-    VideoJob {
-        path,
-        label: label.into(),
-        sidecar: None,
-    }
+    VideoJob { path, label: label.into(), sidecar: None }
 }
 
 const DETS: [&str; 2] = ["yolox_nano", "yolov8n_int8"];
@@ -100,48 +83,19 @@ fn a_physical_matches_truth_frame_by_frame() {
     assert_eq!(out.records.len(), truth.len() * DETS.len());
     for r in &out.records {
         let t = &truth[r.frame];
-        assert_eq!(
-            r.detected,
-            expected(t, &r.detector),
-            "{} frame {}: score {}",
-            r.detector,
-            r.frame,
-            r.max_score
-        );
+        assert_eq!(r.detected, expected(t, &r.detector), "{} frame {}: score {}", r.detector, r.frame, r.max_score);
         // Angles come from the sidecar beside the video.
-        assert!(
-            (r.angle_deg.unwrap() - t.angle).abs() < 0.06,
-            "frame {} angle {:?}",
-            r.frame,
-            r.angle_deg
-        );
+        assert!((r.angle_deg.unwrap() - t.angle).abs() < 0.06, "frame {} angle {:?}", r.frame, r.angle_deg);
     }
     for det in DETS {
         let want = truth.iter().filter(|t| expected(t, det)).count();
         let row = out.rows.iter().find(|r| r.detector == det).unwrap();
-        assert_eq!(
-            row.accuracy,
-            Accuracy {
-                detected: want,
-                total: truth.len()
-            },
-            "{det}"
-        );
+        assert_eq!(row.accuracy, Accuracy { detected: want, total: truth.len() }, "{det}");
         assert_eq!((want, row.status.as_str()), (30, "complete"));
     }
     // Reports exist and the per-angle CSV adds up to the totals.
-    for f in [
-        "frames.csv",
-        "summary.csv",
-        "summary.md",
-        "angles.csv",
-        "polar_orbit.png",
-        "accuracy.png",
-    ] {
-        assert!(
-            tmp.path().join(f).metadata().unwrap().len() > 0,
-            "{f} missing or empty"
-        );
+    for f in ["frames.csv", "summary.csv", "summary.md", "angles.csv", "polar_orbit.png", "accuracy.png"] {
+        assert!(tmp.path().join(f).metadata().unwrap().len() > 0, "{f} missing or empty");
     }
     let mut rd = csv::Reader::from_path(tmp.path().join("angles.csv")).unwrap();
     let mut per_det: HashMap<String, (usize, usize)> = HashMap::new();
@@ -164,17 +118,8 @@ fn stride_scores_every_nth_frame() {
     let truth = truth();
     let frames: Vec<usize> = out.records.iter().map(|r| r.frame).collect();
     assert_eq!(frames, (0..45).step_by(4).collect::<Vec<_>>());
-    let want = (0..45)
-        .step_by(4)
-        .filter(|&f| expected(&truth[f], "yolox_nano"))
-        .count();
-    assert_eq!(
-        out.rows[0].accuracy,
-        Accuracy {
-            detected: want,
-            total: 12
-        }
-    );
+    let want = (0..45).step_by(4).filter(|&f| expected(&truth[f], "yolox_nano")).count();
+    assert_eq!(out.rows[0].accuracy, Accuracy { detected: want, total: 12 });
     assert_eq!(out.rows[0].decoded_frames, 45);
 }
 
@@ -185,11 +130,7 @@ fn several_videos_make_a_table_and_bad_ones_keep_the_rest() {
     }
     let tmp = tempfile::tempdir().unwrap();
     let corrupt = tmp.path().join("corrupt.mp4");
-    std::fs::write(
-        &corrupt,
-        b"this is not a video at all, just text that claims to be one",
-    )
-    .unwrap();
+    std::fs::write(&corrupt, b"this is not a video at all, just text that claims to be one").unwrap();
     // Cut without an index (moov at the end): cannot even be opened.
     let cut = tmp.path().join("cut.mp4");
     let bytes = std::fs::read(fixture()).unwrap();
@@ -222,38 +163,18 @@ fn several_videos_make_a_table_and_bad_ones_keep_the_rest() {
     assert!(fail.contains("corrupt.mp4 cannot be opened"), "{fail}");
     assert!(fail.contains("cut.mp4 cannot be opened"), "{fail}");
     // The truncated video keeps what it decoded and says how far it got.
-    let t = out
-        .rows
-        .iter()
-        .find(|r| r.video == "truncated" && r.detector == "yolox_nano")
-        .unwrap();
+    let t = out.rows.iter().find(|r| r.video == "truncated" && r.detector == "yolox_nano").unwrap();
     assert!(t.accuracy.total > 0 && t.accuracy.total < 45, "{t:?}");
-    assert!(
-        t.status.starts_with("truncated: decoded") && t.status.contains("of 45"),
-        "{}",
-        t.status
-    );
+    assert!(t.status.starts_with("truncated: decoded") && t.status.contains("of 45"), "{}", t.status);
     // The good videos before and after the bad ones are fully scored.
     for label in ["original", "again"] {
-        let r = out
-            .rows
-            .iter()
-            .find(|r| r.video == label && r.detector == "yolox_nano")
-            .unwrap();
+        let r = out.rows.iter().find(|r| r.video == label && r.detector == "yolox_nano").unwrap();
         assert_eq!((r.accuracy.detected, r.accuracy.total), (30, 45), "{label}");
     }
     let md = std::fs::read_to_string(out_dir.join("summary.md")).unwrap();
     assert!(md.contains("| Video | yolox_nano | yolov8n_int8 |"), "{md}");
     assert!(md.contains("| original | 66.7 | 66.7 |"), "{md}");
-    assert!(
-        md.contains("Score threshold **0.5**; target classes **car**"),
-        "{md}"
-    );
+    assert!(md.contains("Score threshold **0.5**; target classes **car**"), "{md}");
     let summary = std::fs::read_to_string(out_dir.join("summary.csv")).unwrap();
-    assert!(
-        summary
-            .lines()
-            .any(|l| l.starts_with("missing,yolox_nano") && l.contains("failed")),
-        "{summary}"
-    );
+    assert!(summary.lines().any(|l| l.starts_with("missing,yolox_nano") && l.contains("failed")), "{summary}");
 }

@@ -18,12 +18,9 @@ fn audi_silhouettes_overlap_the_fca_masks() {
     mesh.normalize_bbox();
     let mut ious = Vec::new();
     for n in 12501..=12510 {
-        let s =
-            CarlaSample::load(&shared.join(format!("fca/carla_dataset/test/data{n}.npz"))).unwrap();
+        let s = CarlaSample::load(&shared.join(format!("fca/carla_dataset/test/data{n}.npz"))).unwrap();
         let g = GBuffer::render(&mesh, &fca(s.cam_trans, s.veh_trans), 608);
-        let mask = image::open(shared.join(format!("fca/carla_dataset/masks/data{n}.png")))
-            .unwrap()
-            .to_luma8();
+        let mask = image::open(shared.join(format!("fca/carla_dataset/masks/data{n}.png"))).unwrap().to_luma8();
         let (mut inter, mut union) = (0u32, 0u32);
         for (i, px) in mask.pixels().enumerate() {
             let (a, b) = (g.face[i] != EMPTY, px[0] > 127);

@@ -8,21 +8,11 @@ use turntable_proto::text::Milli;
 use turntable_proto::{Alarm, Command, ErrorCode, State};
 
 fn sim(time_scale: f64, faults: Faults) -> SimTurntable {
-    SimTurntable::spawn(SimOptions {
-        time_scale,
-        faults,
-        ..SimOptions::default()
-    })
-    .unwrap()
+    SimTurntable::spawn(SimOptions { time_scale, faults, ..SimOptions::default() }).unwrap()
 }
 
 fn connect(s: &SimTurntable, timeout_ms: u64) -> Turntable {
-    Turntable::open(
-        &s.path().to_string_lossy(),
-        115_200,
-        Duration::from_millis(timeout_ms),
-    )
-    .unwrap()
+    Turntable::open(&s.path().to_string_lossy(), 115_200, Duration::from_millis(timeout_ms)).unwrap()
 }
 
 #[test]
@@ -36,12 +26,7 @@ fn moves_and_spins_end_exactly_where_commanded() {
     assert_eq!(t.wait_done(seq, Duration::from_secs(2)).unwrap(), 800);
     assert!((s.truth().angle_at(Instant::now()) - 90.0).abs() < 1e-9);
     // One revolution at 28 s (1.4 s of wall time at 20x), with angle reports on the way.
-    let seq = t
-        .command(Command::Spin {
-            period_s: Milli(28_000),
-            turns: 1,
-        })
-        .unwrap();
+    let seq = t.command(Command::Spin { period_s: Milli(28_000), turns: 1 }).unwrap();
     let t0 = Instant::now();
     let mut reports = 0;
     let end = loop {
@@ -56,10 +41,7 @@ fn moves_and_spins_end_exactly_where_commanded() {
     };
     assert_eq!(end, 4000);
     let wall = t0.elapsed().as_secs_f64();
-    assert!(
-        (1.3..2.5).contains(&wall),
-        "one turn took {wall} s of wall time"
-    );
+    assert!((1.3..2.5).contains(&wall), "one turn took {wall} s of wall time");
     assert!(reports > 20, "{reports} angle reports");
     let seq = t.command(Command::Home).unwrap();
     assert_eq!(t.wait_done(seq, Duration::from_secs(2)).unwrap(), 0);
@@ -67,30 +49,15 @@ fn moves_and_spins_end_exactly_where_commanded() {
 
 #[test]
 fn stall_alarm_locks_until_unlock() {
-    let s = sim(
-        20.0,
-        Faults {
-            stall_after: Some(Duration::from_millis(500)),
-            ..Faults::default()
-        },
-    );
+    let s = sim(20.0, Faults { stall_after: Some(Duration::from_millis(500)), ..Faults::default() });
     let mut t = connect(&s, 500);
-    let seq = t
-        .command(Command::Spin {
-            period_s: Milli(28_000),
-            turns: 2,
-        })
-        .unwrap();
+    let seq = t.command(Command::Spin { period_s: Milli(28_000), turns: 2 }).unwrap();
     match t.wait_done(seq, Duration::from_secs(2)) {
         Err(TurntableError::Alarm(Alarm::Stall)) => {}
         other => panic!("expected a stall alarm, got {other:?}"),
     }
     match t.command(Command::MoveBy(Milli(10_000))) {
-        Err(TurntableError::Refused {
-            code: ErrorCode::Locked,
-            msg,
-            ..
-        }) => assert_eq!(msg, "motor stall"),
+        Err(TurntableError::Refused { code: ErrorCode::Locked, msg, .. }) => assert_eq!(msg, "motor stall"),
         other => panic!("expected locked, got {other:?}"),
     }
     assert_eq!(t.status().unwrap().alarm, Some(Alarm::Stall));
@@ -101,14 +68,7 @@ fn stall_alarm_locks_until_unlock() {
 
 #[test]
 fn noisy_lines_are_survived_by_resync_and_retries() {
-    let s = sim(
-        1.0,
-        Faults {
-            drop_byte: 0.01,
-            garbage_line: 0.2,
-            ..Faults::default()
-        },
-    );
+    let s = sim(1.0, Faults { drop_byte: 0.01, garbage_line: 0.2, ..Faults::default() });
     let mut t = connect(&s, 150);
     let t0 = Instant::now();
     let mut ok = 0;
@@ -124,31 +84,11 @@ fn noisy_lines_are_survived_by_resync_and_retries() {
 
 #[test]
 fn slow_or_hung_device_times_out_and_disconnect_is_reported() {
-    let s = sim(
-        1.0,
-        Faults {
-            delay: Duration::from_millis(400),
-            ..Faults::default()
-        },
-    );
-    let r = Turntable::open(
-        &s.path().to_string_lossy(),
-        115_200,
-        Duration::from_millis(100),
-    );
-    assert!(
-        matches!(r, Err(TurntableError::NoDevice { .. })),
-        "{:?}",
-        r.err()
-    );
+    let s = sim(1.0, Faults { delay: Duration::from_millis(400), ..Faults::default() });
+    let r = Turntable::open(&s.path().to_string_lossy(), 115_200, Duration::from_millis(100));
+    assert!(matches!(r, Err(TurntableError::NoDevice { .. })), "{:?}", r.err());
 
-    let s = sim(
-        1.0,
-        Faults {
-            hang_after: Some(Duration::from_millis(300)),
-            ..Faults::default()
-        },
-    );
+    let s = sim(1.0, Faults { hang_after: Some(Duration::from_millis(300)), ..Faults::default() });
     let mut t = connect(&s, 200);
     std::thread::sleep(Duration::from_millis(400));
     let t0 = Instant::now();
@@ -157,25 +97,13 @@ fn slow_or_hung_device_times_out_and_disconnect_is_reported() {
     assert!(e.to_string().contains("did not answer `PING`"), "{e}");
     assert!(t0.elapsed() < Duration::from_secs(2));
 
-    let s = sim(
-        1.0,
-        Faults {
-            disconnect_after: Some(Duration::from_millis(300)),
-            ..Faults::default()
-        },
-    );
+    let s = sim(1.0, Faults { disconnect_after: Some(Duration::from_millis(300)), ..Faults::default() });
     let mut t = connect(&s, 200);
     std::thread::sleep(Duration::from_millis(500));
     assert!(!s.is_running());
     let t0 = Instant::now();
     let e = t.command(Command::Ping).unwrap_err();
-    assert!(
-        matches!(
-            e,
-            TurntableError::Disconnected(_) | TurntableError::Timeout { .. }
-        ),
-        "{e}"
-    );
+    assert!(matches!(e, TurntableError::Disconnected(_) | TurntableError::Timeout { .. }), "{e}");
     assert!(t0.elapsed() < Duration::from_secs(2));
 }
 
@@ -185,12 +113,6 @@ fn reconnect_handshakes_again() {
     let mut t = connect(&s, 300);
     t.reconnect(3, Duration::from_millis(50)).unwrap();
     assert_eq!(t.status().unwrap().state, State::Idle);
-    let e = Turntable::open("/dev/does-not-exist", 115_200, Duration::from_millis(100))
-        .err()
-        .unwrap();
-    assert!(
-        e.to_string()
-            .contains("cannot open turntable port /dev/does-not-exist"),
-        "{e}"
-    );
+    let e = Turntable::open("/dev/does-not-exist", 115_200, Duration::from_millis(100)).err().unwrap();
+    assert!(e.to_string().contains("cannot open turntable port /dev/does-not-exist"), "{e}");
 }

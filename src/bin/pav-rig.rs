@@ -263,11 +263,7 @@ struct EvaluateArgs {
 }
 
 fn parse_signed_seconds(s: &str) -> Result<f64, String> {
-    let v: f64 = s
-        .trim()
-        .trim_end_matches('s')
-        .parse()
-        .map_err(|_| format!("`{s}` is not a duration like 28s"))?;
+    let v: f64 = s.trim().trim_end_matches('s').parse().map_err(|_| format!("`{s}` is not a duration like 28s"))?;
     if v.is_finite() && v != 0.0 {
         Ok(v)
     } else {
@@ -276,11 +272,7 @@ fn parse_signed_seconds(s: &str) -> Result<f64, String> {
 }
 
 fn parse_seconds(s: &str) -> Result<f64, String> {
-    let v: f64 = s
-        .trim()
-        .trim_end_matches('s')
-        .parse()
-        .map_err(|_| format!("`{s}` is not a duration like 28s"))?;
+    let v: f64 = s.trim().trim_end_matches('s').parse().map_err(|_| format!("`{s}` is not a duration like 28s"))?;
     if v.is_finite() && v > 0.0 {
         Ok(v)
     } else {
@@ -310,11 +302,7 @@ fn expand_configs(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
     Ok(out)
 }
 
-fn load_detectors(
-    paths: &[PathBuf],
-    classes: &[String],
-    threads: usize,
-) -> Result<Vec<Box<dyn Detector>>> {
+fn load_detectors(paths: &[PathBuf], classes: &[String], threads: usize) -> Result<Vec<Box<dyn Detector>>> {
     let paths = &expand_configs(paths)?;
     // Validate every config before loading any model, so all config mistakes show at once.
     let mut cfgs = Vec::new();
@@ -341,26 +329,16 @@ fn load_detectors(
         bail!("two detector configs are both named `{}`", w[0]);
     }
     cfgs.into_iter()
-        .map(|c| {
-            OnnxDetector::new(c, threads)
-                .map(|d| Box::new(d) as Box<dyn Detector>)
-                .map_err(anyhow::Error::from)
-        })
+        .map(|c| OnnxDetector::new(c, threads).map(|d| Box::new(d) as Box<dyn Detector>).map_err(anyhow::Error::from))
         .collect()
 }
 
 fn jobs(a: &EvaluateArgs) -> Result<Vec<VideoJob>> {
     if !a.labels.is_empty() && a.labels.len() != a.videos.len() {
-        bail!(
-            "{} labels given for {} videos: give one --label per video or none",
-            a.labels.len(),
-            a.videos.len()
-        );
+        bail!("{} labels given for {} videos: give one --label per video or none", a.labels.len(), a.videos.len());
     }
     if a.sidecar.is_some() && a.videos.len() != 1 {
-        bail!(
-            "--sidecar applies to a single video; with several, put <name>.angles.csv beside each"
-        );
+        bail!("--sidecar applies to a single video; with several, put <name>.angles.csv beside each");
     }
     let mut out: Vec<VideoJob> = Vec::new();
     for (i, v) in a.videos.iter().enumerate() {
@@ -368,11 +346,7 @@ fn jobs(a: &EvaluateArgs) -> Result<Vec<VideoJob>> {
         if out.iter().any(|j| j.label == label) {
             bail!("two videos share the label `{label}`: use --label to tell them apart");
         }
-        out.push(VideoJob {
-            path: v.clone(),
-            label,
-            sidecar: a.sidecar.clone(),
-        });
+        out.push(VideoJob { path: v.clone(), label, sidecar: a.sidecar.clone() });
     }
     Ok(out)
 }
@@ -385,8 +359,7 @@ fn cmd_evaluate(a: &EvaluateArgs) -> Result<()> {
     let mut detectors = load_detectors(&a.detectors, &a.classes, a.threads)?;
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
-    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
-        .context("installing the Ctrl-C handler")?;
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
     let opts = EvalOptions {
         threshold: a.threshold,
         stride: a.stride as usize,
@@ -402,18 +375,11 @@ fn cmd_evaluate(a: &EvaluateArgs) -> Result<()> {
         jobs.len(),
         detectors.len(),
         a.threshold,
-        detectors
-            .iter()
-            .map(|d| format!("{}={}", d.name(), d.target_label()))
-            .collect::<Vec<_>>()
-            .join(", "),
+        detectors.iter().map(|d| format!("{}={}", d.name(), d.target_label())).collect::<Vec<_>>().join(", "),
         a.stride
     );
     let out = evaluate(&jobs, &mut detectors, &opts, &stop)?;
-    println!(
-        "{}",
-        pav::eval::report::summary_table(&out.rows, a.threshold)
-    );
+    println!("{}", pav::eval::report::summary_table(&out.rows, a.threshold));
     for f in &out.files {
         eprintln!("wrote {}", f.display());
     }
@@ -453,11 +419,7 @@ fn cmd_darknet2onnx(cfg: &Path, weights: &Path, out: &Path) -> Result<()> {
 }
 
 fn cmd_bench(b: &BenchArgs) -> Result<()> {
-    let given = if b.detectors.is_empty() {
-        vec![PathBuf::from("configs/detectors")]
-    } else {
-        b.detectors.clone()
-    };
+    let given = if b.detectors.is_empty() { vec![PathBuf::from("configs/detectors")] } else { b.detectors.clone() };
     let detectors = expand_configs(&given)?;
     if b.strides.is_empty() || b.strides.contains(&0) {
         bail!("--strides must be positive, got {:?}", b.strides);
@@ -483,32 +445,22 @@ fn cmd_bench(b: &BenchArgs) -> Result<()> {
 fn connect(p: &PortArgs) -> Result<(Option<SimTurntable>, Turntable)> {
     let sim = if p.port == "sim" {
         Some(
-            SimTurntable::spawn(SimOptions {
-                time_scale: p.time_scale,
-                ..SimOptions::default()
-            })
-            .context("starting the simulated turntable")?,
+            SimTurntable::spawn(SimOptions { time_scale: p.time_scale, ..SimOptions::default() })
+                .context("starting the simulated turntable")?,
         )
     } else {
         None
     };
-    let path = sim
-        .as_ref()
-        .map_or(p.port.clone(), |s| s.path().display().to_string());
+    let path = sim.as_ref().map_or(p.port.clone(), |s| s.path().display().to_string());
     let table = Turntable::open(&path, p.baud, Duration::from_millis(p.timeout_ms))?;
-    eprintln!(
-        "turntable on {path}: firmware {}, {} microsteps/rev",
-        table.firmware(),
-        table.usteps_per_rev()
-    );
+    eprintln!("turntable on {path}: firmware {}, {} microsteps/rev", table.firmware(), table.usteps_per_rev());
     Ok((sim, table))
 }
 
 fn ctrl_c_flag() -> Result<Arc<AtomicBool>> {
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
-    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
-        .context("installing the Ctrl-C handler")?;
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
     Ok(stop)
 }
 
@@ -525,9 +477,7 @@ fn cmd_turntable(a: &TurntableArgs) -> Result<()> {
         println!(
             "state {:?}{}  position {} microsteps = {:.3}° ({:.3}° in the current turn)",
             st.state,
-            st.alarm
-                .map(|x| format!(" (alarm: {})", x.text()))
-                .unwrap_or_default(),
+            st.alarm.map(|x| format!(" (alarm: {})", x.text())).unwrap_or_default(),
             st.pos,
             deg,
             deg.rem_euclid(360.0)
@@ -540,18 +490,9 @@ fn cmd_turntable(a: &TurntableArgs) -> Result<()> {
         TableAction::Unlock => return Ok(t.command(Command::Unlock).map(|_| ())?),
         TableAction::Estop => return Ok(t.estop()?),
         TableAction::Home => Command::Home,
-        TableAction::Rotate {
-            degrees,
-            relative: false,
-        } => Command::MoveTo(milli(degrees)?),
-        TableAction::Rotate {
-            degrees,
-            relative: true,
-        } => Command::MoveBy(milli(degrees)?),
-        TableAction::Spin { period, turns } => Command::Spin {
-            period_s: milli(period)?,
-            turns,
-        },
+        TableAction::Rotate { degrees, relative: false } => Command::MoveTo(milli(degrees)?),
+        TableAction::Rotate { degrees, relative: true } => Command::MoveBy(milli(degrees)?),
+        TableAction::Spin { period, turns } => Command::Spin { period_s: milli(period)?, turns },
     };
     let stop = ctrl_c_flag()?;
     let seq = t.command(motion)?;
@@ -582,11 +523,7 @@ fn cmd_bench_rig(b: &BenchRigArgs) -> Result<()> {
     std::fs::create_dir_all(&b.out).with_context(|| format!("creating {}", b.out.display()))?;
     let mut lat = Vec::new();
     let sim = SimTurntable::spawn(SimOptions::default())?;
-    let mut t = Turntable::open(
-        &sim.path().to_string_lossy(),
-        115_200,
-        Duration::from_secs(1),
-    )?;
+    let mut t = Turntable::open(&sim.path().to_string_lossy(), 115_200, Duration::from_secs(1))?;
     lat.push(bench::latency(&mut t, "sim (pty)", b.n)?);
     for p in &b.ports {
         let mut t = Turntable::open(p, 115_200, Duration::from_secs(1))?;
@@ -601,25 +538,15 @@ fn cmd_bench_rig(b: &BenchRigArgs) -> Result<()> {
     let tmp = tempfile_dir()?;
     let mut sync = Vec::new();
     for &s in &b.time_scales {
-        eprintln!(
-            "capturing a simulated 28 s turn at x{s} ({:.1} s)",
-            28.0 / s
-        );
+        eprintln!("capturing a simulated 28 s turn at x{s} ({:.1} s)", 28.0 / s);
         let r = bench::angle_sync(s, 30.0, &tmp)?;
-        eprintln!(
-            "  {} frames: median {:.3}°, p95 {:.3}°, max {:.3}°",
-            r.frames, r.median_deg, r.p95_deg, r.max_deg
-        );
+        eprintln!("  {} frames: median {:.3}°, p95 {:.3}°, max {:.3}°", r.frames, r.median_deg, r.p95_deg, r.max_deg);
         sync.push(r);
     }
     let _ = std::fs::remove_dir_all(&tmp);
     pav::eval::bench::write_csv(&b.out.join("rig_latency.csv"), &lat)?;
     pav::eval::bench::write_csv(&b.out.join("rig_angle_sync.csv"), &sync)?;
-    eprintln!(
-        "wrote {} and {}",
-        b.out.join("rig_latency.csv").display(),
-        b.out.join("rig_angle_sync.csv").display()
-    );
+    eprintln!("wrote {} and {}", b.out.join("rig_latency.csv").display(), b.out.join("rig_angle_sync.csv").display());
     Ok(())
 }
 
@@ -639,17 +566,9 @@ fn cmd_simulate(a: &SimulateArgs) -> Result<()> {
         disconnect_after: secs(a.disconnect_after),
         hang_after: None,
     };
-    let sim = SimTurntable::spawn(SimOptions {
-        time_scale: a.time_scale,
-        faults,
-        ..SimOptions::default()
-    })?;
+    let sim = SimTurntable::spawn(SimOptions { time_scale: a.time_scale, faults, ..SimOptions::default() })?;
     println!("{}", sim.path().display());
-    eprintln!(
-        "simulated turntable on {} (time x{}); Ctrl-C to stop",
-        sim.path().display(),
-        a.time_scale
-    );
+    eprintln!("simulated turntable on {} (time x{}); Ctrl-C to stop", sim.path().display(), a.time_scale);
     let stop = ctrl_c_flag()?;
     while !stop.load(Ordering::Relaxed) && sim.is_running() {
         std::thread::sleep(Duration::from_millis(50));
@@ -660,33 +579,18 @@ fn cmd_simulate(a: &SimulateArgs) -> Result<()> {
 fn cmd_capture(a: &CaptureArgs) -> Result<()> {
     let codec: Vec<char> = a.codec.chars().collect();
     let [c0, c1, c2, c3] = codec[..] else {
-        bail!(
-            "--codec must be a 4-character FourCC like avc1, got `{}`",
-            a.codec
-        )
+        bail!("--codec must be a 4-character FourCC like avc1, got `{}`", a.codec)
     };
     if a.camera == "sim" && a.port.port != "sim" {
         bail!("--camera sim films the simulated turntable: use it with --port sim");
     }
     let (sim, mut table) = connect(&a.port)?;
     let mut cam: Box<dyn FrameSource> = match a.camera.as_str() {
-        "sim" => Box::new(SimCamera::new(
-            sim.as_ref().expect("checked above").truth(),
-            a.width,
-            a.height,
-            a.fps,
-        )),
-        "gst-test" => Box::new(LiveCapture::gst_test(
-            a.width,
-            a.height,
-            a.fps.round() as u32,
-        )?),
-        c if c.starts_with("v4l2:") => Box::new(LiveCapture::v4l2(
-            std::path::Path::new(&c[5..]),
-            a.width,
-            a.height,
-            a.fps,
-        )?),
+        "sim" => Box::new(SimCamera::new(sim.as_ref().expect("checked above").truth(), a.width, a.height, a.fps)),
+        "gst-test" => Box::new(LiveCapture::gst_test(a.width, a.height, a.fps.round() as u32)?),
+        c if c.starts_with("v4l2:") => {
+            Box::new(LiveCapture::v4l2(std::path::Path::new(&c[5..]), a.width, a.height, a.fps)?)
+        }
         c if c.starts_with("file:") => Box::new(FileSource::open(std::path::Path::new(&c[5..]))?),
         c => bail!("unknown --camera `{c}`: use v4l2:/dev/videoN, file:VIDEO, gst-test or sim"),
     };
@@ -708,11 +612,7 @@ fn cmd_capture(a: &CaptureArgs) -> Result<()> {
         sum.interpolated,
         sum.final_deg.unwrap_or(f64::NAN)
     );
-    println!(
-        "video   {}\nsidecar {}",
-        sum.video.display(),
-        sum.sidecar.display()
-    );
+    println!("video   {}\nsidecar {}", sum.video.display(), sum.sidecar.display());
     Ok(())
 }
 
@@ -720,9 +620,7 @@ fn main() -> Result<()> {
     let cli = Cli::parse();
     match &cli.cmd {
         Cmd::Evaluate(a) => cmd_evaluate(a),
-        Cmd::Model(ModelCmd::Darknet2onnx { cfg, weights, out }) => {
-            cmd_darknet2onnx(cfg, weights, out)
-        }
+        Cmd::Model(ModelCmd::Darknet2onnx { cfg, weights, out }) => cmd_darknet2onnx(cfg, weights, out),
         Cmd::Bench(b) => cmd_bench(b),
         Cmd::BenchRig(b) => cmd_bench_rig(b),
         Cmd::Turntable(t) => cmd_turntable(t),

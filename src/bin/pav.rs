@@ -10,11 +10,7 @@ use pav::render::texture::{Gather, Texture};
 use std::path::PathBuf;
 
 #[derive(Parser)]
-#[command(
-    name = "pav",
-    version,
-    about = "PAV-Camou texture tools: render the textured car"
-)]
+#[command(name = "pav", version, about = "PAV-Camou texture tools: render the textured car")]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
@@ -22,6 +18,9 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Cmd {
+    /// UV map tools.
+    #[command(subcommand)]
+    Uv(UvCmd),
     /// Time the render stages on a mesh (G-buffer per view, texture gather and its adjoint,
     /// shading) at several image sizes; writes CSV.
     BenchRender {
@@ -62,14 +61,84 @@ enum Cmd {
 }
 
 fn save_rgb(path: &std::path::Path, size: usize, rgb: &[f32]) -> Result<()> {
-    let bytes: Vec<u8> = rgb
-        .iter()
-        .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
-        .collect();
+    let bytes: Vec<u8> = rgb.iter().map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect();
     image::RgbImage::from_raw(size as u32, size as u32, bytes)
         .context("image buffer size")?
         .save(path)
         .with_context(|| format!("writing {}", path.display()))
+}
+
+#[derive(Subcommand)]
+enum UvCmd {
+    /// Per-face stretch/compression of the optimizable patch: CSV, summary and heat maps
+    /// (grey = none, purple = stretched, red = compressed, as MAYA shows them).
+    Check {
+        /// OBJ mesh with UVs.
+        #[arg(long, default_value = "../shared/data/pav-camou/xfl_yxz.obj")]
+        mesh: PathBuf,
+        /// UV map whose pure-white texels mark the optimizable patch.
+        #[arg(long, default_value = "../shared/data/pav-camou/half.png")]
+        mask: PathBuf,
+        /// Output directory.
+        #[arg(long, short = 'o', default_value = "out/uv")]
+        out: PathBuf,
+    },
+}
+
+fn uv_check(mesh: &std::path::Path, mask: &std::path::Path, out: &std::path::Path) -> Result<()> {
+    use pav::geometry::uv::{distortion, faces_in_mask, heat_colour, paint_uv, summary};
+    let mut m = Mesh::load_obj(mesh)?;
+    m.normalize();
+    let tex = Texture::load(mask).map_err(anyhow::Error::msg)?;
+    let patch = faces_in_mask(&m, &tex.white_mask(), tex.width, tex.height);
+    if patch.is_empty() {
+        bail!("{} marks no face of {} (no pure-white texel under any face centroid)", mask.display(), mesh.display());
+    }
+    let d = distortion(&m, &patch);
+    let (mean_abs, p95) = summary(&d);
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let mut w = csv::Writer::from_path(out.join("uv_distortion.csv"))?;
+    for r in &d {
+        w.serialize(r)?;
+    }
+    w.flush()?;
+    let colours: Vec<(usize, [u8; 3])> = d.iter().map(|r| (r.face, heat_colour(r.log2_stretch))).collect();
+    let size = 1024;
+    let uv_img = paint_uv(&m, &colours, size, [255, 255, 255]);
+    image::RgbImage::from_raw(size as u32, size as u32, uv_img)
+        .context("uv image")?
+        .save(out.join("uv_heat_uv.png"))?;
+    // On the mesh: patch faces in their heat colour, the rest light grey.
+    let mut face_col = vec![[225u8, 225, 225]; m.faces.len()];
+    for (f, c) in &colours {
+        face_col[*f] = *c;
+    }
+    let mut views = Vec::new();
+    for azim in [45.0f32, 135.0, 225.0, 315.0] {
+        let g = GBuffer::render(&m, &Camera::look_at(spherical(2.2, 25.0, azim), [0.0; 3], [0.0, 1.0, 0.0], 60.0), 400);
+        views.push(
+            g.face
+                .iter()
+                .flat_map(|f| if *f == pav::render::raster::EMPTY { [255, 255, 255] } else { face_col[*f as usize] })
+                .collect::<Vec<u8>>(),
+        );
+    }
+    // 2×2 grid of views.
+    let mut grid = vec![255u8; 800 * 800 * 3];
+    for (k, v) in views.iter().enumerate() {
+        let (ox, oy) = ((k % 2) * 400, (k / 2) * 400);
+        for y in 0..400 {
+            let dst = ((oy + y) * 800 + ox) * 3;
+            grid[dst..dst + 1200].copy_from_slice(&v[y * 1200..(y + 1) * 1200]);
+        }
+    }
+    image::RgbImage::from_raw(800, 800, grid).context("mesh image")?.save(out.join("uv_heat_mesh.png"))?;
+    println!(
+        "{} patch faces: area-weighted mean |log2 stretch| {mean_abs:.3} (1.0 = a factor of 2), 95th-percentile anisotropy {p95:.2}",
+        d.len()
+    );
+    eprintln!("wrote {}/uv_distortion.csv, uv_heat_uv.png, uv_heat_mesh.png", out.display());
+    Ok(())
 }
 
 #[derive(serde::Serialize)]
@@ -87,12 +156,7 @@ fn ms_per(views: usize, t: std::time::Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3 / views as f64
 }
 
-fn bench_render(
-    mesh: &std::path::Path,
-    sizes: &[usize],
-    views: usize,
-    out: &std::path::Path,
-) -> Result<()> {
+fn bench_render(mesh: &std::path::Path, sizes: &[usize], views: usize, out: &std::path::Path) -> Result<()> {
     use pav::render::shade::{vertex_normals, Lights, Shading};
     use std::time::Instant;
     let mut m = Mesh::load_obj(mesh)?;
@@ -103,12 +167,7 @@ fn bench_render(
     let views = views.max(1);
     let cams: Vec<Camera> = (0..views)
         .map(|k| {
-            Camera::look_at(
-                spherical(2.2, 20.0, k as f32 * 360.0 / views as f32),
-                [0.0; 3],
-                [0.0, 1.0, 0.0],
-                60.0,
-            )
+            Camera::look_at(spherical(2.2, 20.0, k as f32 * 360.0 / views as f32), [0.0; 3], [0.0, 1.0, 0.0], 60.0)
         })
         .collect();
     let mut rows = Vec::new();
@@ -116,10 +175,7 @@ fn bench_render(
         let t = Instant::now();
         let gb: Vec<GBuffer> = cams.iter().map(|c| GBuffer::render(&m, c, size)).collect();
         let gbuffer_ms = ms_per(views, t);
-        let gathers: Vec<Gather> = gb
-            .iter()
-            .map(|g| Gather::new(g.uv_samples(&m), tw, th))
-            .collect();
+        let gathers: Vec<Gather> = gb.iter().map(|g| Gather::new(g.uv_samples(&m), tw, th)).collect();
         let mut img = vec![0.0; size * size * 3];
         let t = Instant::now();
         for g in &gathers {
@@ -142,21 +198,12 @@ fn bench_render(
             "{size}²: G-buffer {gbuffer_ms:.1} ms/view, gather {gather_ms:.2} ms, adjoint {adjoint_ms:.2} ms, shading {shade_ms:.2} ms (car covers {:.0} %)",
             100.0 * coverage
         );
-        rows.push(RenderTiming {
-            size,
-            views,
-            gbuffer_ms,
-            coverage,
-            gather_ms,
-            adjoint_ms,
-            shade_ms,
-        });
+        rows.push(RenderTiming { size, views, gbuffer_ms, coverage, gather_ms, adjoint_ms, shade_ms });
     }
     if let Some(d) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(d)?;
     }
-    let mut w =
-        csv::Writer::from_path(out).with_context(|| format!("writing {}", out.display()))?;
+    let mut w = csv::Writer::from_path(out).with_context(|| format!("writing {}", out.display()))?;
     for r in &rows {
         w.serialize(r)?;
     }
@@ -167,20 +214,9 @@ fn bench_render(
 
 fn main() -> Result<()> {
     let (mesh, texture, pose, orbit, size, out) = match Cli::parse().cmd {
-        Cmd::BenchRender {
-            mesh,
-            sizes,
-            views,
-            out,
-        } => return bench_render(&mesh, &sizes, views, &out),
-        Cmd::Render {
-            mesh,
-            texture,
-            pose,
-            orbit,
-            size,
-            out,
-        } => (mesh, texture, pose, orbit, size, out),
+        Cmd::BenchRender { mesh, sizes, views, out } => return bench_render(&mesh, &sizes, views, &out),
+        Cmd::Uv(UvCmd::Check { mesh, mask, out }) => return uv_check(&mesh, &mask, &out),
+        Cmd::Render { mesh, texture, pose, orbit, size, out } => (mesh, texture, pose, orbit, size, out),
     };
     let mut m = Mesh::load_obj(&mesh)?;
     m.normalize();
@@ -204,14 +240,10 @@ fn main() -> Result<()> {
                 .map(|s| s.trim().parse())
                 .collect::<Result<_, _>>()
                 .with_context(|| format!("--orbit `{o}`: expected dist,elev,azim"))?;
-            let [d, e, a] = v[..] else {
-                bail!("--orbit `{o}`: expected three numbers dist,elev,azim")
-            };
+            let [d, e, a] = v[..] else { bail!("--orbit `{o}`: expected three numbers dist,elev,azim") };
             Camera::look_at(spherical(d, e, a), [0.0; 3], [0.0, 1.0, 0.0], 60.0)
         }
-        (None, None) => {
-            Camera::look_at(spherical(2.2, 20.0, 45.0), [0.0; 3], [0.0, 1.0, 0.0], 60.0)
-        }
+        (None, None) => Camera::look_at(spherical(2.2, 20.0, 45.0), [0.0; 3], [0.0, 1.0, 0.0], 60.0),
     };
     let g = GBuffer::render(&m, &cam, size);
     let gather = Gather::new(g.uv_samples(&m), tex.width, tex.height);
@@ -224,10 +256,7 @@ fn main() -> Result<()> {
         std::fs::create_dir_all(d)?;
     }
     save_rgb(&out, size, &rgb)?;
-    let mask_path = out.with_file_name(format!(
-        "{}_mask.png",
-        out.file_stem().unwrap_or_default().to_string_lossy()
-    ));
+    let mask_path = out.with_file_name(format!("{}_mask.png", out.file_stem().unwrap_or_default().to_string_lossy()));
     let mask_rgb: Vec<f32> = mask.iter().flat_map(|v| [*v; 3]).collect();
     save_rgb(&mask_path, size, &mask_rgb)?;
     eprintln!(

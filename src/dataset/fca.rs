@@ -21,11 +21,7 @@ impl CarlaSample {
     /// Reads an FCA-format npz.
     pub fn load(path: &Path) -> Result<Self, NpzError> {
         let mut z = Npz::open(path)?;
-        let bad = |name: &str, msg: String| NpzError::Array {
-            path: path.into(),
-            name: name.into(),
-            msg,
-        };
+        let bad = |name: &str, msg: String| NpzError::Array { path: path.into(), name: name.into(), msg };
         let img = z.array("img")?;
         let NpyData::U8(bgr) = img.data else {
             return Err(bad("img", "expected uint8".into()));
@@ -37,20 +33,13 @@ impl CarlaSample {
             let a = z.array(name)?;
             let v = a.to_f64();
             if v.len() != 6 || v.iter().any(|x| !x.is_finite()) {
-                return Err(bad(
-                    name,
-                    format!("expected 2×3 finite values, got shape {:?}", a.shape),
-                ));
+                return Err(bad(name, format!("expected 2×3 finite values, got shape {:?}", a.shape)));
             }
             Ok([[v[0], v[1], v[2]], [v[3], v[4], v[5]]])
         };
         Ok(CarlaSample {
             path: path.into(),
-            image: Frame {
-                width: w,
-                height: h,
-                bgr,
-            },
+            image: Frame { width: w, height: h, bgr },
             veh_trans: pose("veh_trans")?,
             cam_trans: pose("cam_trans")?,
         })

@@ -161,10 +161,7 @@ fn car() -> Vec<String> {
 
 impl Default for ClassConfig {
     fn default() -> Self {
-        ClassConfig {
-            names: coco80(),
-            target: car(),
-        }
+        ClassConfig { names: coco80(), target: car() }
     }
 }
 
@@ -213,12 +210,8 @@ pub struct DetectorConfig {
 impl DetectorConfig {
     /// Reads and validates a TOML config; relative paths in it are relative to its directory.
     pub fn load(path: &Path) -> Result<Self, DetectError> {
-        let cfg_err = |msg: String| DetectError::Config {
-            path: path.display().to_string(),
-            msg,
-        };
-        let text =
-            std::fs::read_to_string(path).map_err(|e| cfg_err(format!("cannot read: {e}")))?;
+        let cfg_err = |msg: String| DetectError::Config { path: path.display().to_string(), msg };
+        let text = std::fs::read_to_string(path).map_err(|e| cfg_err(format!("cannot read: {e}")))?;
         let raw: RawConfig = toml::from_str(&text).map_err(|e| cfg_err(e.to_string()))?;
         let dir = path.parent().unwrap_or(Path::new("."));
         let class_names: Vec<String> = if raw.classes.names == "coco80" {
@@ -257,10 +250,7 @@ impl DetectorConfig {
             .iter()
             .map(|n| {
                 self.class_names.iter().position(|c| c == n).ok_or_else(|| {
-                    format!(
-                        "target class `{n}` is not among the model's {} classes",
-                        self.class_names.len()
-                    )
+                    format!("target class `{n}` is not among the model's {} classes", self.class_names.len())
                 })
             })
             .collect::<Result<_, _>>()?;
@@ -269,48 +259,29 @@ impl DetectorConfig {
 
     /// Names of the target classes, joined for reports.
     pub fn target_names(&self) -> String {
-        self.target_classes
-            .iter()
-            .map(|&i| self.class_names[i].as_str())
-            .collect::<Vec<_>>()
-            .join("+")
+        self.target_classes.iter().map(|&i| self.class_names[i].as_str()).collect::<Vec<_>>().join("+")
     }
 
     fn validate(&self) -> Result<(), String> {
         let i = &self.input;
         if i.width == 0 || i.height == 0 {
-            return Err(format!(
-                "input size {}x{} must be positive",
-                i.width, i.height
-            ));
+            return Err(format!("input size {}x{} must be positive", i.width, i.height));
         }
         if !i.scale.is_finite() || i.scale == 0.0 {
-            return Err(format!(
-                "input.scale = {} must be finite and non-zero",
-                i.scale
-            ));
+            return Err(format!("input.scale = {} must be finite and non-zero", i.scale));
         }
-        if i.std.iter().any(|s| !s.is_finite() || *s == 0.0)
-            || i.mean.iter().any(|m| !m.is_finite())
-        {
-            return Err(format!(
-                "input.mean {:?} / input.std {:?} must be finite, std non-zero",
-                i.mean, i.std
-            ));
+        if i.std.iter().any(|s| !s.is_finite() || *s == 0.0) || i.mean.iter().any(|m| !m.is_finite()) {
+            return Err(format!("input.mean {:?} / input.std {:?} must be finite, std non-zero", i.mean, i.std));
         }
         if !(0.0..=1.0).contains(&self.nms_iou) {
             return Err(format!("nms_iou = {} must be in [0, 1]", self.nms_iou));
         }
         match &self.output {
-            OutputLayout::Darknet { heads }
-                if heads.is_empty() || heads.iter().any(|h| h.anchors.is_empty()) =>
-            {
+            OutputLayout::Darknet { heads } if heads.is_empty() || heads.iter().any(|h| h.anchors.is_empty()) => {
                 Err("darknet layout needs at least one head, each with anchors".into())
             }
             OutputLayout::Yolox { strides, .. } if strides.is_empty() || strides.contains(&0) => {
-                Err(format!(
-                    "yolox strides {strides:?} must be non-empty and positive"
-                ))
+                Err(format!("yolox strides {strides:?} must be non-empty and positive"))
             }
             _ => Ok(()),
         }
@@ -332,11 +303,7 @@ mod tests {
     #[test]
     fn resolves_model_path_and_default_car_target() {
         let d = tempfile::tempdir().unwrap();
-        let c = DetectorConfig::load(&write(
-            d.path(),
-            &format!("{BASE}[output]\nlayout='ultralytics'\n"),
-        ))
-        .unwrap();
+        let c = DetectorConfig::load(&write(d.path(), &format!("{BASE}[output]\nlayout='ultralytics'\n"))).unwrap();
         assert_eq!(c.model, d.path().join("m.onnx"));
         assert_eq!(c.target_classes, vec![2]);
         assert_eq!(c.target_names(), "car");
@@ -345,13 +312,9 @@ mod tests {
     #[test]
     fn unknown_layout_and_unknown_class_are_clear_errors() {
         let d = tempfile::tempdir().unwrap();
-        let e = DetectorConfig::load(&write(d.path(), &format!("{BASE}[output]\nlayout='ssd'\n")))
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.contains("unknown variant `ssd`") && e.contains("ultralytics"),
-            "{e}"
-        );
+        let e =
+            DetectorConfig::load(&write(d.path(), &format!("{BASE}[output]\nlayout='ssd'\n"))).unwrap_err().to_string();
+        assert!(e.contains("unknown variant `ssd`") && e.contains("ultralytics"), "{e}");
         let e = DetectorConfig::load(&write(
             d.path(),
             &format!("{BASE}[output]\nlayout='ultralytics'\n[classes]\ntarget=['tank']\n"),
@@ -359,12 +322,9 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("`tank`"), "{e}");
-        let e = DetectorConfig::load(&write(
-            d.path(),
-            &format!("{BASE}std=[1,0,1]\n[output]\nlayout='ultralytics'\n"),
-        ))
-        .unwrap_err()
-        .to_string();
+        let e = DetectorConfig::load(&write(d.path(), &format!("{BASE}std=[1,0,1]\n[output]\nlayout='ultralytics'\n")))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("std"), "{e}");
     }
 }

@@ -29,11 +29,7 @@ pub struct Proposals {
 
 impl Proposals {
     fn with_capacity(num_classes: usize, n: usize) -> Self {
-        Proposals {
-            num_classes,
-            boxes: Vec::with_capacity(n),
-            scores: Vec::with_capacity(n * num_classes),
-        }
+        Proposals { num_classes, boxes: Vec::with_capacity(n), scores: Vec::with_capacity(n * num_classes) }
     }
 
     /// Number of proposals.
@@ -59,11 +55,7 @@ impl Proposals {
             for &c in classes {
                 let s = row.get(c).copied().unwrap_or(0.0);
                 if best.is_none_or(|t| s > t.score) {
-                    best = Some(TargetScore {
-                        score: s,
-                        bbox: *b,
-                        class_id: c,
-                    });
+                    best = Some(TargetScore { score: s, bbox: *b, class_id: c });
                 }
             }
         }
@@ -75,17 +67,9 @@ impl Proposals {
         let mut out = Vec::new();
         for (i, b) in self.boxes.iter().enumerate() {
             let row = self.row(i);
-            let (c, &s) =
-                row.iter().enumerate().fold(
-                    (0, &f32::NEG_INFINITY),
-                    |a, x| if x.1 > a.1 { x } else { a },
-                );
+            let (c, &s) = row.iter().enumerate().fold((0, &f32::NEG_INFINITY), |a, x| if x.1 > a.1 { x } else { a });
             if s >= min_score {
-                out.push(Detection {
-                    class_id: c,
-                    score: s,
-                    bbox: *b,
-                });
+                out.push(Detection { class_id: c, score: s, bbox: *b });
             }
         }
         nms(out, iou)
@@ -101,15 +85,10 @@ fn find<'a>(outs: &'a [RawOutput], name: Option<&str>) -> Result<&'a RawOutput, 
         Some(n) => outs.iter().find(|o| o.name == n).ok_or_else(|| {
             format!(
                 "model has no output `{n}` (outputs: {})",
-                outs.iter()
-                    .map(|o| o.name.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                outs.iter().map(|o| o.name.as_str()).collect::<Vec<_>>().join(", ")
             )
         }),
-        None => outs
-            .first()
-            .ok_or_else(|| "model produced no outputs".to_string()),
+        None => outs.first().ok_or_else(|| "model produced no outputs".to_string()),
     }
 }
 
@@ -165,14 +144,8 @@ pub fn decode(
                             let w = at(2).exp() * anchor[0];
                             let h = at(3).exp() * anchor[1];
                             let obj = sigmoid(at(4));
-                            p.boxes.push(map.to_frame([
-                                cx - w / 2.0,
-                                cy - h / 2.0,
-                                cx + w / 2.0,
-                                cy + h / 2.0,
-                            ]));
-                            p.scores
-                                .extend((0..num_classes).map(|c| obj * sigmoid(at(5 + c))));
+                            p.boxes.push(map.to_frame([cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0]));
+                            p.scores.extend((0..num_classes).map(|c| obj * sigmoid(at(5 + c))));
                         }
                     }
                 }
@@ -182,10 +155,7 @@ pub fn decode(
             let o = find(outs, output.as_deref())?;
             let s = squeeze(o, 2, "yolox")?;
             let (rows, cols) = (s[0], s[1]);
-            let expect_rows: usize = strides
-                .iter()
-                .map(|st| (input_h / st) * (input_w / st))
-                .sum();
+            let expect_rows: usize = strides.iter().map(|st| (input_h / st) * (input_w / st)).sum();
             if cols != 5 + num_classes || rows != expect_rows {
                 return Err(format!(
                     "output `{}` is {rows}×{cols}; yolox with strides {strides:?} at {input_w}×{input_h} and {num_classes} classes needs {expect_rows}×{}",
@@ -202,12 +172,7 @@ pub fn decode(
                         let cx = (v[0] + gx as f32) * st as f32;
                         let cy = (v[1] + gy as f32) * st as f32;
                         let (w, h) = (v[2].exp() * st as f32, v[3].exp() * st as f32);
-                        p.boxes.push(map.to_frame([
-                            cx - w / 2.0,
-                            cy - h / 2.0,
-                            cx + w / 2.0,
-                            cy + h / 2.0,
-                        ]));
+                        p.boxes.push(map.to_frame([cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0]));
                         p.scores.extend(v[5..].iter().map(|c| c * v[4]));
                         r += 1;
                     }
@@ -229,26 +194,12 @@ pub fn decode(
             let at = |f: usize, i: usize| o.data[f * n + i];
             for i in 0..n {
                 let (cx, cy, w, h) = (at(0, i), at(1, i), at(2, i), at(3, i));
-                p.boxes.push(map.to_frame([
-                    cx - w / 2.0,
-                    cy - h / 2.0,
-                    cx + w / 2.0,
-                    cy + h / 2.0,
-                ]));
+                p.boxes.push(map.to_frame([cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0]));
                 p.scores.extend((0..num_classes).map(|c| at(4 + c, i)));
             }
         }
-        OutputLayout::Detr {
-            labels,
-            boxes,
-            scores,
-            ..
-        } => {
-            let (l, b, sc) = (
-                find(outs, Some(labels))?,
-                find(outs, Some(boxes))?,
-                find(outs, Some(scores))?,
-            );
+        OutputLayout::Detr { labels, boxes, scores, .. } => {
+            let (l, b, sc) = (find(outs, Some(labels))?, find(outs, Some(boxes))?, find(outs, Some(scores))?);
             let q = squeeze(l, 1, "detr")?[0];
             let bs = squeeze(b, 2, "detr")?;
             let ss = squeeze(sc, 1, "detr")?;
@@ -286,14 +237,7 @@ mod tests {
     use super::*;
     use crate::detect::config::HeadConfig;
 
-    const ID: InputMap = InputMap {
-        scale_x: 1.0,
-        scale_y: 1.0,
-        pad_x: 0.0,
-        pad_y: 0.0,
-        frame_w: 1e6,
-        frame_h: 1e6,
-    };
+    const ID: InputMap = InputMap { scale_x: 1.0, scale_y: 1.0, pad_x: 0.0, pad_y: 0.0, frame_w: 1e6, frame_h: 1e6 };
 
     fn logit(p: f32) -> f32 {
         (p / (1.0 - p)).ln()
@@ -311,27 +255,15 @@ mod tests {
         set(&mut data, 3, (2.0f32).ln()); // h = 2*anchor 7 = 14
         set(&mut data, 4, logit(0.8));
         set(&mut data, 6, logit(0.5));
-        let outs = [RawOutput {
-            name: "h".into(),
-            shape: vec![1, 7, 2, 2],
-            data,
-        }];
-        let layout = OutputLayout::Darknet {
-            heads: vec![HeadConfig {
-                output: "h".into(),
-                anchors: vec![[10.0, 7.0]],
-            }],
-        };
+        let outs = [RawOutput { name: "h".into(), shape: vec![1, 7, 2, 2], data }];
+        let layout =
+            OutputLayout::Darknet { heads: vec![HeadConfig { output: "h".into(), anchors: vec![[10.0, 7.0]] }] };
         let p = decode(&layout, &outs, 64, 64, nc, &ID).unwrap();
         assert_eq!(p.len(), 4);
         let t = p.best(&[1]).unwrap();
         assert!((t.score - 0.4).abs() < 1e-5);
         let expect = [43.0, 9.0, 53.0, 23.0];
-        assert!(
-            t.bbox.iter().zip(expect).all(|(a, b)| (a - b).abs() < 1e-4),
-            "{:?}",
-            t.bbox
-        );
+        assert!(t.bbox.iter().zip(expect).all(|(a, b)| (a - b).abs() < 1e-4), "{:?}", t.bbox);
     }
 
     #[test]
@@ -340,38 +272,12 @@ mod tests {
         let mut data = vec![0f32; 5 * 6];
         let r = 3; // stride 4, gx=1, gy=1
         data[r * 6..r * 6 + 6].copy_from_slice(&[0.5, 0.5, 0.0, 0.0, 0.9, 0.5]);
-        let outs = [RawOutput {
-            name: "o".into(),
-            shape: vec![1, 5, 6],
-            data,
-        }];
-        let p = decode(
-            &OutputLayout::Yolox {
-                output: None,
-                strides: vec![4, 8],
-            },
-            &outs,
-            8,
-            8,
-            1,
-            &ID,
-        )
-        .unwrap();
+        let outs = [RawOutput { name: "o".into(), shape: vec![1, 5, 6], data }];
+        let p = decode(&OutputLayout::Yolox { output: None, strides: vec![4, 8] }, &outs, 8, 8, 1, &ID).unwrap();
         let t = p.best(&[0]).unwrap();
         assert!((t.score - 0.45).abs() < 1e-6);
         assert_eq!(t.bbox, [4.0, 4.0, 8.0, 8.0]);
-        let wrong = decode(
-            &OutputLayout::Yolox {
-                output: None,
-                strides: vec![8],
-            },
-            &outs,
-            8,
-            8,
-            1,
-            &ID,
-        )
-        .unwrap_err();
+        let wrong = decode(&OutputLayout::Yolox { output: None, strides: vec![8] }, &outs, 8, 8, 1, &ID).unwrap_err();
         assert!(wrong.contains("needs 1×6"), "{wrong}");
     }
 
@@ -379,45 +285,16 @@ mod tests {
     fn ultralytics_is_feature_major_and_detr_keeps_label() {
         // 2 proposals, 2 classes: layout [4+2, 2]
         let data = vec![10., 20., 10., 20., 4., 4., 4., 4., 0.1, 0.7, 0.3, 0.2];
-        let outs = [RawOutput {
-            name: "o".into(),
-            shape: vec![1, 6, 2],
-            data,
-        }];
-        let p = decode(
-            &OutputLayout::Ultralytics { output: None },
-            &outs,
-            32,
-            32,
-            2,
-            &ID,
-        )
-        .unwrap();
+        let outs = [RawOutput { name: "o".into(), shape: vec![1, 6, 2], data }];
+        let p = decode(&OutputLayout::Ultralytics { output: None }, &outs, 32, 32, 2, &ID).unwrap();
         assert_eq!(p.best(&[0]).unwrap().score, 0.7);
         assert_eq!(p.best(&[0]).unwrap().bbox, [18.0, 18.0, 22.0, 22.0]);
         let outs = [
-            RawOutput {
-                name: "l".into(),
-                shape: vec![1, 2],
-                data: vec![1.0, 0.0],
-            },
-            RawOutput {
-                name: "b".into(),
-                shape: vec![1, 2, 4],
-                data: vec![0., 0., 1., 1., 2., 2., 3., 3.],
-            },
-            RawOutput {
-                name: "s".into(),
-                shape: vec![1, 2],
-                data: vec![0.9, 0.2],
-            },
+            RawOutput { name: "l".into(), shape: vec![1, 2], data: vec![1.0, 0.0] },
+            RawOutput { name: "b".into(), shape: vec![1, 2, 4], data: vec![0., 0., 1., 1., 2., 2., 3., 3.] },
+            RawOutput { name: "s".into(), shape: vec![1, 2], data: vec![0.9, 0.2] },
         ];
-        let l = OutputLayout::Detr {
-            labels: "l".into(),
-            boxes: "b".into(),
-            scores: "s".into(),
-            size_input: None,
-        };
+        let l = OutputLayout::Detr { labels: "l".into(), boxes: "b".into(), scores: "s".into(), size_input: None };
         let p = decode(&l, &outs, 32, 32, 2, &ID).unwrap();
         assert_eq!(p.best(&[1]).unwrap().score, 0.9);
         assert_eq!(p.best(&[0]).unwrap().bbox, [2.0, 2.0, 3.0, 3.0]);

@@ -21,10 +21,7 @@ pub fn nms(mut dets: Vec<Detection>, thr: f32) -> Vec<Detection> {
     dets.sort_by(|a, b| b.score.total_cmp(&a.score));
     let mut keep: Vec<Detection> = Vec::new();
     for d in dets {
-        if !keep
-            .iter()
-            .any(|k| k.class_id == d.class_id && iou(&k.bbox, &d.bbox) > thr)
-        {
+        if !keep.iter().any(|k| k.class_id == d.class_id && iou(&k.bbox, &d.bbox) > thr) {
             keep.push(d);
         }
     }
@@ -37,20 +34,8 @@ mod tests {
 
     #[test]
     fn suppresses_overlaps_within_class_only() {
-        let d = |c, s, x| Detection {
-            class_id: c,
-            score: s,
-            bbox: [x, 0.0, x + 10.0, 10.0],
-        };
-        let kept = nms(
-            vec![
-                d(2, 0.6, 1.0),
-                d(2, 0.9, 0.0),
-                d(7, 0.5, 0.0),
-                d(2, 0.4, 50.0),
-            ],
-            0.45,
-        );
+        let d = |c, s, x| Detection { class_id: c, score: s, bbox: [x, 0.0, x + 10.0, 10.0] };
+        let kept = nms(vec![d(2, 0.6, 1.0), d(2, 0.9, 0.0), d(7, 0.5, 0.0), d(2, 0.4, 50.0)], 0.45);
         assert_eq!(kept, vec![d(2, 0.9, 0.0), d(7, 0.5, 0.0), d(2, 0.4, 50.0)]);
         assert_eq!(iou(&[0.0, 0.0, 0.0, 0.0], &[0.0, 0.0, 0.0, 0.0]), 0.0);
     }

@@ -64,20 +64,13 @@ pub struct OnnxDetector {
 impl OnnxDetector {
     /// Loads the model named by `cfg` with `threads` intra-op threads (0 = runtime default).
     pub fn new(cfg: DetectorConfig, threads: usize) -> Result<Self, DetectError> {
-        let model_err = |msg: String| DetectError::Model {
-            detector: cfg.name.clone(),
-            path: cfg.model.display().to_string(),
-            msg,
-        };
+        let model_err =
+            |msg: String| DetectError::Model { detector: cfg.name.clone(), path: cfg.model.display().to_string(), msg };
         if !cfg.model.is_file() {
             return Err(model_err(format!(
                 "does not exist (from {}{})",
                 cfg.source.display(),
-                if cfg.model.to_string_lossy().contains(".deps") {
-                    "; run scripts/setup.sh"
-                } else {
-                    ""
-                }
+                if cfg.model.to_string_lossy().contains(".deps") { "; run scripts/setup.sh" } else { "" }
             )));
         }
         let env = runtime()?;
@@ -86,30 +79,19 @@ impl OnnxDetector {
             .with_optimization_level(GraphOptimizationLevel::All)
             .map_err(|e| DetectError::Runtime(e.to_string()))?;
         if threads > 0 {
-            builder = builder
-                .with_intra_threads(threads)
-                .map_err(|e| DetectError::Runtime(e.to_string()))?;
+            builder = builder.with_intra_threads(threads).map_err(|e| DetectError::Runtime(e.to_string()))?;
         }
         let session = builder
             .commit_from_file(&cfg.model)
             .map_err(|e| model_err(format!("is not a loadable ONNX model: {e}")))?;
-        let names: Vec<String> = session
-            .inputs()
-            .iter()
-            .map(|i| i.name().to_string())
-            .collect();
+        let names: Vec<String> = session.inputs().iter().map(|i| i.name().to_string()).collect();
         let size_input = match &cfg.output {
             OutputLayout::Detr { size_input, .. } => size_input.clone(),
             _ => None,
         };
         let input_name = match &cfg.input.name {
             Some(n) if names.contains(n) => n.clone(),
-            Some(n) => {
-                return Err(model_err(format!(
-                    "has no input `{n}` (inputs: {})",
-                    names.join(", ")
-                )))
-            }
+            Some(n) => return Err(model_err(format!("has no input `{n}` (inputs: {})", names.join(", ")))),
             None => names
                 .iter()
                 .find(|n| Some(*n) != size_input.as_ref())
@@ -124,33 +106,20 @@ impl OnnxDetector {
                 )));
             }
         }
-        let extra: Vec<&String> = names
-            .iter()
-            .filter(|n| **n != input_name && Some(*n) != size_input.as_ref())
-            .collect();
+        let extra: Vec<&String> =
+            names.iter().filter(|n| **n != input_name && Some(*n) != size_input.as_ref()).collect();
         if !extra.is_empty() {
-            return Err(model_err(format!(
-                "has inputs the config does not feed: {extra:?}"
-            )));
+            return Err(model_err(format!("has inputs the config does not feed: {extra:?}")));
         }
-        Ok(OnnxDetector {
-            cfg,
-            session,
-            input_name,
-            size_input,
-        })
+        Ok(OnnxDetector { cfg, session, input_name, size_input })
     }
 
     /// Whether the model accepts any input height and width (symbolic spatial dimensions).
     pub fn accepts_any_size(&self) -> bool {
-        self.session
-            .inputs()
-            .iter()
-            .find(|i| i.name() == self.input_name)
-            .is_some_and(|i| match i.dtype() {
-                ValueType::Tensor { shape, .. } => shape.len() == 4 && shape[2] < 0 && shape[3] < 0,
-                _ => false,
-            })
+        self.session.inputs().iter().find(|i| i.name() == self.input_name).is_some_and(|i| match i.dtype() {
+            ValueType::Tensor { shape, .. } => shape.len() == 4 && shape[2] < 0 && shape[3] < 0,
+            _ => false,
+        })
     }
 
     /// The config this detector was built from.
@@ -161,24 +130,20 @@ impl OnnxDetector {
     /// Runs the model on an already prepared NCHW input and returns its raw outputs.
     pub fn infer(&mut self, input: Vec<f32>) -> Result<Vec<RawOutput>, DetectError> {
         let (w, h) = (self.cfg.input.width, self.cfg.input.height);
-        let inf_err = |msg: String| DetectError::Inference {
-            detector: self.cfg.name.clone(),
-            msg,
-        };
-        let image =
-            Tensor::from_array(([1usize, 3, h, w], input)).map_err(|e| inf_err(e.to_string()))?;
+        let inf_err = |msg: String| DetectError::Inference { detector: self.cfg.name.clone(), msg };
+        let image = Tensor::from_array(([1usize, 3, h, w], input)).map_err(|e| inf_err(e.to_string()))?;
         let mut feed: Vec<(String, ort::session::SessionInputValue<'_>)> =
             vec![(self.input_name.clone(), image.into())];
         if let Some(s) = &self.size_input {
-            let size = Tensor::from_array(([1usize, 2], vec![w as i64, h as i64]))
-                .map_err(|e| inf_err(e.to_string()))?;
+            let size =
+                Tensor::from_array(([1usize, 2], vec![w as i64, h as i64])).map_err(|e| inf_err(e.to_string()))?;
             feed.push((s.clone(), size.into()));
         }
         let name = self.cfg.name.clone();
-        let outputs = self.session.run(feed).map_err(|e| DetectError::Inference {
-            detector: name.clone(),
-            msg: e.to_string(),
-        })?;
+        let outputs = self
+            .session
+            .run(feed)
+            .map_err(|e| DetectError::Inference { detector: name.clone(), msg: e.to_string() })?;
         let mut raw = Vec::with_capacity(outputs.len());
         for (oname, value) in outputs.iter() {
             let shape_of = |s: &[i64]| s.iter().map(|&d| d.max(0) as usize).collect::<Vec<_>>();
@@ -189,7 +154,11 @@ impl OnnxDetector {
                 }
                 ValueType::Tensor { ty: TensorElementType::Int64, .. } => {
                     let (s, d) = value.try_extract_tensor::<i64>().map_err(|e| inf_err(e.to_string()))?;
-                    RawOutput { name: oname.to_string(), shape: shape_of(s), data: d.iter().map(|&v| v as f32).collect() }
+                    RawOutput {
+                        name: oname.to_string(),
+                        shape: shape_of(s),
+                        data: d.iter().map(|&v| v as f32).collect(),
+                    }
                 }
                 other => {
                     return Err(DetectError::Output {
@@ -221,17 +190,7 @@ impl Detector for OnnxDetector {
         let (input, map) = prepare(frame, &self.cfg.input);
         let raw = self.infer(input)?;
         let c = &self.cfg;
-        decode(
-            &c.output,
-            &raw,
-            c.input.width,
-            c.input.height,
-            c.class_names.len(),
-            &map,
-        )
-        .map_err(|msg| DetectError::Output {
-            detector: c.name.clone(),
-            msg,
-        })
+        decode(&c.output, &raw, c.input.width, c.input.height, c.class_names.len(), &map)
+            .map_err(|msg| DetectError::Output { detector: c.name.clone(), msg })
     }
 }

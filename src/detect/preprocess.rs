@@ -46,15 +46,9 @@ fn axis_taps(src: usize, dst: usize, filter: Interpolation) -> Vec<Taps> {
                 let i0 = (f.floor() as usize).min(src - 1);
                 let a = f - i0 as f64;
                 if i0 + 1 < src {
-                    Taps {
-                        start: i0,
-                        weights: vec![1.0 - a, a],
-                    }
+                    Taps { start: i0, weights: vec![1.0 - a, a] }
                 } else {
-                    Taps {
-                        start: i0,
-                        weights: vec![1.0],
-                    }
+                    Taps { start: i0, weights: vec![1.0] }
                 }
             })
             .collect(),
@@ -67,14 +61,10 @@ fn axis_taps(src: usize, dst: usize, filter: Interpolation) -> Vec<Taps> {
                     let centre = (d as f64 + 0.5) * scale;
                     let lo = ((centre - support + 0.5) as i64).max(0) as usize;
                     let hi = ((centre + support + 0.5) as i64).min(src as i64) as usize;
-                    let w: Vec<f64> = (lo..hi)
-                        .map(|x| (1.0 - ((x as f64 - centre + 0.5) / fscale).abs()).max(0.0))
-                        .collect();
+                    let w: Vec<f64> =
+                        (lo..hi).map(|x| (1.0 - ((x as f64 - centre + 0.5) / fscale).abs()).max(0.0)).collect();
                     let total: f64 = w.iter().sum();
-                    Taps {
-                        start: lo,
-                        weights: w.iter().map(|v| v / total).collect(),
-                    }
+                    Taps { start: lo, weights: w.iter().map(|v| v / total).collect() }
                 })
                 .collect()
         }
@@ -115,8 +105,7 @@ fn resize_float(frame: &Frame, nw: usize, nh: usize) -> Vec<f32> {
             }
         }
     }
-    out.iter_mut()
-        .for_each(|v| *v = v.round().clamp(0.0, 255.0));
+    out.iter_mut().for_each(|v| *v = v.round().clamp(0.0, 255.0));
     out
 }
 
@@ -125,15 +114,7 @@ fn resize_pil(frame: &Frame, nw: usize, nh: usize) -> Vec<f32> {
     const BITS: u32 = 22;
     let fixed = |taps: Vec<Taps>| -> Vec<(usize, Vec<i64>)> {
         taps.into_iter()
-            .map(|t| {
-                (
-                    t.start,
-                    t.weights
-                        .iter()
-                        .map(|&w| (w * (1u64 << BITS) as f64 + 0.5).floor() as i64)
-                        .collect(),
-                )
-            })
+            .map(|t| (t.start, t.weights.iter().map(|&w| (w * (1u64 << BITS) as f64 + 0.5).floor() as i64).collect()))
             .collect()
     };
     let (w, h) = (frame.width, frame.height);
@@ -145,11 +126,7 @@ fn resize_pil(frame: &Frame, nw: usize, nh: usize) -> Vec<f32> {
         let row = &frame.bgr[y * w * 3..(y + 1) * w * 3];
         for (dx, (start, ks)) in xs.iter().enumerate() {
             for c in 0..3 {
-                let acc: i64 = ks
-                    .iter()
-                    .enumerate()
-                    .map(|(k, &wt)| row[(start + k) * 3 + c] as i64 * wt)
-                    .sum();
+                let acc: i64 = ks.iter().enumerate().map(|(k, &wt)| row[(start + k) * 3 + c] as i64 * wt).sum();
                 mid[(y * nw + dx) * 3 + c] = round(acc);
             }
         }
@@ -157,11 +134,7 @@ fn resize_pil(frame: &Frame, nw: usize, nh: usize) -> Vec<f32> {
     let mut out = vec![0f32; nh * nw * 3];
     for (dy, (start, ks)) in ys.iter().enumerate() {
         for i in 0..nw * 3 {
-            let acc: i64 = ks
-                .iter()
-                .enumerate()
-                .map(|(k, &wt)| mid[(start + k) * nw * 3 + i] as i64 * wt)
-                .sum();
+            let acc: i64 = ks.iter().enumerate().map(|(k, &wt)| mid[(start + k) * nw * 3 + i] as i64 * wt).sum();
             out[dy * nw * 3 + i] = round(acc) as f32;
         }
     }
@@ -241,20 +214,13 @@ mod tests {
     }
 
     fn solid(w: usize, h: usize, bgr: [u8; 3]) -> Frame {
-        Frame {
-            width: w,
-            height: h,
-            bgr: (0..w * h).flat_map(|_| bgr).collect(),
-        }
+        Frame { width: w, height: h, bgr: (0..w * h).flat_map(|_| bgr).collect() }
     }
 
     #[test]
     fn letterbox_centre_pads_and_maps_boxes_back() {
         let f = solid(16, 8, [10, 20, 30]);
-        let (t, m) = prepare(
-            &f,
-            &cfg(Resize::Letterbox, Align::Center, ChannelOrder::Rgb),
-        );
+        let (t, m) = prepare(&f, &cfg(Resize::Letterbox, Align::Center, ChannelOrder::Rgb));
         // 16x8 -> 8x4 centred vertically: rows 0,1 and 6,7 are padding.
         assert_eq!(t[0], 114.0);
         assert_eq!(t[2 * 8], 30.0); // R plane, row 2 = image
@@ -266,10 +232,7 @@ mod tests {
     #[test]
     fn top_left_letterbox_and_stretch() {
         let f = solid(8, 16, [1, 2, 3]);
-        let (t, m) = prepare(
-            &f,
-            &cfg(Resize::Letterbox, Align::TopLeft, ChannelOrder::Bgr),
-        );
+        let (t, m) = prepare(&f, &cfg(Resize::Letterbox, Align::TopLeft, ChannelOrder::Bgr));
         assert_eq!(t[0], 1.0);
         assert_eq!(t[7], 114.0); // column 4..8 padded
         assert_eq!((m.pad_x, m.scale_x), (0.0, 0.5));
@@ -280,11 +243,7 @@ mod tests {
     #[test]
     fn bilinear_matches_opencv_half_pixel_convention() {
         // A 2-pixel ramp upsampled to 4: OpenCV gives 0, 64, 191, 255 for [0, 255].
-        let f = Frame {
-            width: 2,
-            height: 1,
-            bgr: vec![0, 0, 0, 255, 255, 255],
-        };
+        let f = Frame { width: 2, height: 1, bgr: vec![0, 0, 0, 255, 255, 255] };
         let mut c = cfg(Resize::Stretch, Align::Center, ChannelOrder::Bgr);
         c.width = 4;
         c.height = 1;
@@ -296,29 +255,15 @@ mod tests {
     fn antialias_reproduces_pil_bilinear_downscale() {
         // 23x9 image (rows 4.. inverted) resized to 5x3; expected values from PIL 11 Image.resize(BILINEAR).
         let row: Vec<u8> = (0..23u32).map(|x| ((x * x * 7 + 13) % 256) as u8).collect();
-        let bgr: Vec<u8> = (0..9)
-            .flat_map(|y| {
-                row.iter()
-                    .flat_map(move |&v| [if y >= 4 { 255 - v } else { v }; 3])
-            })
-            .collect();
-        let f = Frame {
-            width: 23,
-            height: 9,
-            bgr,
-        };
+        let bgr: Vec<u8> =
+            (0..9).flat_map(|y| row.iter().flat_map(move |&v| [if y >= 4 { 255 - v } else { v }; 3])).collect();
+        let f = Frame { width: 23, height: 9, bgr };
         let mut c = cfg(Resize::Stretch, Align::Center, ChannelOrder::Bgr);
         (c.width, c.height, c.interpolation) = (5, 3, Interpolation::Antialias);
         let (t, _) = prepare(&f, &c);
-        let pil = [
-            60.0, 113.0, 153.0, 133.0, 168.0, 150.0, 132.0, 119.0, 126.0, 114.0, 195.0, 142.0,
-            102.0, 122.0, 87.0,
-        ];
-        let worst = t[..15]
-            .iter()
-            .zip(pil)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f32::max);
+        let pil =
+            [60.0, 113.0, 153.0, 133.0, 168.0, 150.0, 132.0, 119.0, 126.0, 114.0, 195.0, 142.0, 102.0, 122.0, 87.0];
+        let worst = t[..15].iter().zip(pil).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
         assert_eq!(worst, 0.0, "got {:?}", &t[..15]);
         // Weights sum to one, so a flat image stays flat.
         let (flat, _) = prepare(&solid(37, 11, [200, 200, 200]), &c);

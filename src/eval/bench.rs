@@ -103,19 +103,11 @@ fn decode_all(video: &Path) -> Result<Vec<Frame>> {
     while let Some((_, f)) = r.read()? {
         frames.push(f);
     }
-    anyhow::ensure!(
-        !frames.is_empty(),
-        "{} has no decodable frames",
-        video.display()
-    );
+    anyhow::ensure!(!frames.is_empty(), "{} has no decodable frames", video.display());
     Ok(frames)
 }
 
-fn run_evaluate(
-    opts: &BenchOptions,
-    cfg: &DetectorConfig,
-    stride: usize,
-) -> Result<(f64, Accuracy, usize)> {
+fn run_evaluate(opts: &BenchOptions, cfg: &DetectorConfig, stride: usize) -> Result<(f64, Accuracy, usize)> {
     let tmp = std::env::temp_dir().join(format!("pav-bench-{}", std::process::id()));
     let eval_opts = EvalOptions {
         threshold: opts.threshold,
@@ -127,40 +119,22 @@ fn run_evaluate(
         progress: false,
         plots: false,
     };
-    let job = VideoJob {
-        path: opts.video.clone(),
-        label: "bench".into(),
-        sidecar: None,
-    };
-    let mut dets: Vec<Box<dyn Detector>> =
-        vec![Box::new(OnnxDetector::new(cfg.clone(), opts.threads)?)];
+    let job = VideoJob { path: opts.video.clone(), label: "bench".into(), sidecar: None };
+    let mut dets: Vec<Box<dyn Detector>> = vec![Box::new(OnnxDetector::new(cfg.clone(), opts.threads)?)];
     let (secs, out) = best_of(opts.repeats, || {
-        Ok(evaluate(
-            std::slice::from_ref(&job),
-            &mut dets,
-            &eval_opts,
-            &AtomicBool::new(false),
-        )?)
+        Ok(evaluate(std::slice::from_ref(&job), &mut dets, &eval_opts, &AtomicBool::new(false))?)
     })?;
     let _ = std::fs::remove_dir_all(&tmp);
-    anyhow::ensure!(
-        out.failures.is_empty(),
-        "evaluate failed: {}",
-        out.failures.join("; ")
-    );
+    anyhow::ensure!(out.failures.is_empty(), "evaluate failed: {}", out.failures.join("; "));
     Ok((secs, out.rows[0].accuracy, out.timing.frames_decoded))
 }
 
 /// Runs the benchmark and writes its CSVs and plot into `opts.out_dir`.
 pub fn run(opts: &BenchOptions) -> Result<(Vec<Throughput>, Vec<Tradeoff>)> {
-    std::fs::create_dir_all(&opts.out_dir)
-        .with_context(|| format!("creating {}", opts.out_dir.display()))?;
+    std::fs::create_dir_all(&opts.out_dir).with_context(|| format!("creating {}", opts.out_dir.display()))?;
     let (decode_s, frames) = best_of(opts.repeats, || decode_all(&opts.video))?;
     let n = frames.len();
-    eprintln!(
-        "decode: {n} frames in {decode_s:.3} s ({:.0} fps)",
-        n as f64 / decode_s
-    );
+    eprintln!("decode: {n} frames in {decode_s:.3} s ({:.0} fps)", n as f64 / decode_s);
     let mut thr = Vec::new();
     let mut trade = Vec::new();
     for path in &opts.detectors {
@@ -170,12 +144,8 @@ pub fn run(opts: &BenchOptions) -> Result<(Vec<Throughput>, Vec<Tradeoff>)> {
         for f in frames.iter().take(2) {
             det.propose(f)?; // warm-up: first runs allocate and pick kernels
         }
-        let (pre_s, inputs) = best_of(opts.repeats, || {
-            Ok(frames
-                .iter()
-                .map(|f| prepare(f, &cfg.input).0)
-                .collect::<Vec<_>>())
-        })?;
+        let (pre_s, inputs) =
+            best_of(opts.repeats, || Ok(frames.iter().map(|f| prepare(f, &cfg.input).0).collect::<Vec<_>>()))?;
         let mut bare_s = f64::INFINITY;
         for _ in 0..opts.repeats.max(1) {
             let batch = inputs.clone();
@@ -215,10 +185,7 @@ pub fn run(opts: &BenchOptions) -> Result<(Vec<Throughput>, Vec<Tradeoff>)> {
         );
         thr.push(row);
         let mut sizes = vec![cfg.clone()];
-        if let Some(s) = opts
-            .alt_size
-            .filter(|&s| s != cfg.input.width || s != cfg.input.height)
-        {
+        if let Some(s) = opts.alt_size.filter(|&s| s != cfg.input.width || s != cfg.input.height) {
             if det.accepts_any_size() {
                 let mut c = cfg.clone();
                 (c.input.width, c.input.height) = (s, s);
@@ -240,25 +207,20 @@ pub fn run(opts: &BenchOptions) -> Result<(Vec<Throughput>, Vec<Tradeoff>)> {
                     seconds: secs,
                     video_fps: decoded as f64 / secs,
                 };
-                eprintln!(
-                    "  {} stride {stride}: A = {:.3} in {secs:.2} s",
-                    t.input, t.a_physical
-                );
+                eprintln!("  {} stride {stride}: A = {:.3} in {secs:.2} s", t.input, t.a_physical);
                 trade.push(t);
             }
         }
     }
     write_csv(&opts.out_dir.join("throughput.csv"), &thr)?;
     write_csv(&opts.out_dir.join("tradeoff.csv"), &trade)?;
-    super::plot::tradeoff(&opts.out_dir.join("tradeoff.png"), &trade)
-        .map_err(|e| anyhow::anyhow!(e.to_string()))?;
+    super::plot::tradeoff(&opts.out_dir.join("tradeoff.png"), &trade).map_err(|e| anyhow::anyhow!(e.to_string()))?;
     Ok((thr, trade))
 }
 
 /// Writes serializable rows as a CSV file with a header.
 pub fn write_csv<T: serde::Serialize>(path: &Path, rows: &[T]) -> Result<()> {
-    let mut w =
-        csv::Writer::from_path(path).with_context(|| format!("writing {}", path.display()))?;
+    let mut w = csv::Writer::from_path(path).with_context(|| format!("writing {}", path.display()))?;
     for r in rows {
         w.serialize(r)?;
     }

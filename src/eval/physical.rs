@@ -42,12 +42,10 @@ pub const Z95: f64 = 1.959_963_984_540_054;
 impl Accuracy {
     /// Counts detected frames in `records`.
     pub fn of<'a>(records: impl IntoIterator<Item = &'a FrameRecord>) -> Self {
-        records
-            .into_iter()
-            .fold(Accuracy::default(), |a, r| Accuracy {
-                detected: a.detected + r.detected as usize,
-                total: a.total + 1,
-            })
+        records.into_iter().fold(Accuracy::default(), |a, r| Accuracy {
+            detected: a.detected + r.detected as usize,
+            total: a.total + 1,
+        })
     }
 
     /// A_physical in [0, 1]; `None` when no frame was scored.
@@ -79,10 +77,7 @@ pub struct AngleBin {
 }
 
 /// Splits 360° into `n` equal sectors and counts the records whose angle falls in each.
-pub fn angle_bins<'a>(
-    records: impl IntoIterator<Item = &'a FrameRecord>,
-    n: usize,
-) -> Vec<AngleBin> {
+pub fn angle_bins<'a>(records: impl IntoIterator<Item = &'a FrameRecord>, n: usize) -> Vec<AngleBin> {
     let n = n.max(1);
     let width = 360.0 / n as f64;
     let mut bins: Vec<AngleBin> = (0..n)
@@ -125,66 +120,22 @@ mod tests {
     #[test]
     fn wilson_matches_reference_values() {
         // Reference: 8/10 -> (0.4902, 0.9433); 0/10 -> (0, 0.2775); 10/10 -> (0.7225, 1).
-        let (lo, hi) = Accuracy {
-            detected: 8,
-            total: 10,
-        }
-        .wilson(Z95)
-        .unwrap();
-        assert!(
-            (lo - 0.4902).abs() < 1e-4 && (hi - 0.9433).abs() < 1e-4,
-            "{lo} {hi}"
-        );
-        let (lo, hi) = Accuracy {
-            detected: 0,
-            total: 10,
-        }
-        .wilson(Z95)
-        .unwrap();
+        let (lo, hi) = Accuracy { detected: 8, total: 10 }.wilson(Z95).unwrap();
+        assert!((lo - 0.4902).abs() < 1e-4 && (hi - 0.9433).abs() < 1e-4, "{lo} {hi}");
+        let (lo, hi) = Accuracy { detected: 0, total: 10 }.wilson(Z95).unwrap();
         assert!(lo.abs() < 1e-12 && (hi - 0.2775).abs() < 1e-4);
-        let (lo, hi) = Accuracy {
-            detected: 10,
-            total: 10,
-        }
-        .wilson(Z95)
-        .unwrap();
+        let (lo, hi) = Accuracy { detected: 10, total: 10 }.wilson(Z95).unwrap();
         assert!((lo - 0.7225).abs() < 1e-4 && (hi - 1.0).abs() < 1e-12);
         assert_eq!(Accuracy::default().wilson(Z95), None);
     }
 
     #[test]
     fn bins_wrap_angles_and_skip_unknown() {
-        let mut rs = vec![
-            rec(10.0, true),
-            rec(370.0, false),
-            rec(-90.0, true),
-            rec(359.999, true),
-        ];
-        rs.push(FrameRecord {
-            angle_deg: None,
-            ..rec(0.0, true)
-        });
+        let mut rs = vec![rec(10.0, true), rec(370.0, false), rec(-90.0, true), rec(359.999, true)];
+        rs.push(FrameRecord { angle_deg: None, ..rec(0.0, true) });
         let b = angle_bins(&rs, 4);
-        assert_eq!(
-            b[0].accuracy,
-            Accuracy {
-                detected: 1,
-                total: 2
-            }
-        );
-        assert_eq!(
-            b[3].accuracy,
-            Accuracy {
-                detected: 2,
-                total: 2
-            }
-        );
-        assert_eq!(
-            Accuracy::of(&rs),
-            Accuracy {
-                detected: 4,
-                total: 5
-            }
-        );
+        assert_eq!(b[0].accuracy, Accuracy { detected: 1, total: 2 });
+        assert_eq!(b[3].accuracy, Accuracy { detected: 2, total: 2 });
+        assert_eq!(Accuracy::of(&rs), Accuracy { detected: 4, total: 5 });
     }
 }

@@ -43,10 +43,7 @@ fn fonts() {
 }
 
 fn wrap(path: &Path, r: R<()>) -> Result<(), PlotError> {
-    r.map_err(|e| PlotError {
-        path: path.display().to_string(),
-        msg: e.to_string(),
-    })
+    r.map_err(|e| PlotError { path: path.display().to_string(), msg: e.to_string() })
 }
 
 /// One detector's scores by angle.
@@ -58,12 +55,7 @@ pub struct ScoreSeries {
 }
 
 /// Polar plot: radius = max car score, angle = turntable angle (0° up, clockwise); threshold ring.
-pub fn polar_scores(
-    path: &Path,
-    title: &str,
-    series: &[ScoreSeries],
-    threshold: f64,
-) -> Result<(), PlotError> {
+pub fn polar_scores(path: &Path, title: &str, series: &[ScoreSeries], threshold: f64) -> Result<(), PlotError> {
     fonts();
     wrap(
         path,
@@ -75,14 +67,8 @@ pub fn polar_scores(
                 .margin(20)
                 .build_cartesian_2d(-1.3f64..1.3f64, -1.3f64..1.3f64)?;
             let grey = BLACK.mix(0.2);
-            let circle = |r: f64| {
-                (0..=360).map(move |d| {
-                    (
-                        r * (d as f64).to_radians().sin(),
-                        r * (d as f64).to_radians().cos(),
-                    )
-                })
-            };
+            let circle =
+                |r: f64| (0..=360).map(move |d| (r * (d as f64).to_radians().sin(), r * (d as f64).to_radians().cos()));
             for r in [0.25, 0.5, 0.75, 1.0] {
                 ch.draw_series(LineSeries::new(circle(r), grey))?;
                 ch.draw_series(std::iter::once(Text::new(
@@ -102,16 +88,11 @@ pub fn polar_scores(
             }
             ch.draw_series(LineSeries::new(circle(threshold), BLACK.stroke_width(2)))?
                 .label(format!("threshold {threshold}"))
-                .legend(|(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2))
-                });
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
             for (i, s) in series.iter().enumerate() {
                 let c = colour(i);
-                let pts: Vec<(f64, f64)> = s
-                    .points
-                    .iter()
-                    .map(|&(a, r)| (r * a.to_radians().sin(), r * a.to_radians().cos()))
-                    .collect();
+                let pts: Vec<(f64, f64)> =
+                    s.points.iter().map(|&(a, r)| (r * a.to_radians().sin(), r * a.to_radians().cos())).collect();
                 ch.draw_series(pts.iter().map(|&p| Circle::new(p, 2, c.filled())))?
                     .label(s.label.clone())
                     .legend(move |(x, y)| Circle::new((x + 10, y), 4, c.filled()));
@@ -148,10 +129,7 @@ pub fn accuracy_bars(path: &Path, rows: &[SummaryRow], threshold: f32) -> Result
             root.fill(&WHITE)?;
             let n = dets.len() as f64;
             let mut ch = ChartBuilder::on(&root)
-                .caption(
-                    format!("A_physical per detector (threshold {threshold})"),
-                    ("sans-serif", 22),
-                )
+                .caption(format!("A_physical per detector (threshold {threshold})"), ("sans-serif", 22))
                 .margin(15)
                 .x_label_area_size(40)
                 .y_label_area_size(55)
@@ -183,23 +161,14 @@ pub fn accuracy_bars(path: &Path, rows: &[SummaryRow], threshold: f32) -> Result
                     })
                     .collect();
                 ch.draw_series(bars.iter().map(|(x0, r)| {
-                    Rectangle::new(
-                        [
-                            (*x0, 0.0),
-                            (x0 + gw * 0.9, 100.0 * r.accuracy.rate().unwrap_or(0.0)),
-                        ],
-                        c.filled(),
-                    )
+                    Rectangle::new([(*x0, 0.0), (x0 + gw * 0.9, 100.0 * r.accuracy.rate().unwrap_or(0.0))], c.filled())
                 }))?
                 .label(v.to_string())
                 .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], c.filled()));
                 for (x0, r) in &bars {
                     if let Some((lo, hi)) = r.accuracy.wilson(super::physical::Z95) {
                         let xm = x0 + gw * 0.45;
-                        ch.draw_series(LineSeries::new(
-                            [(xm, 100.0 * lo), (xm, 100.0 * hi)],
-                            BLACK.stroke_width(2),
-                        ))?;
+                        ch.draw_series(LineSeries::new([(xm, 100.0 * lo), (xm, 100.0 * hi)], BLACK.stroke_width(2)))?;
                     }
                 }
             }
@@ -231,40 +200,26 @@ pub fn tradeoff(path: &Path, rows: &[super::bench::Tradeoff]) -> Result<(), Plot
             let root = BitMapBackend::new(path, (900, 560)).into_drawing_area();
             root.fill(&WHITE)?;
             let mut ch = ChartBuilder::on(&root)
-                .caption(
-                    "What accuracy costs in time (labels: stride)",
-                    ("sans-serif", 22),
-                )
+                .caption("What accuracy costs in time (labels: stride)", ("sans-serif", 22))
                 .margin(15)
                 .x_label_area_size(45)
                 .y_label_area_size(60)
                 .build_cartesian_2d(0f64..tmax, 0f64..105f64)?;
-            ch.configure_mesh()
-                .x_desc("seconds per video")
-                .y_desc("A_physical [%]")
-                .draw()?;
+            ch.configure_mesh().x_desc("seconds per video").y_desc("A_physical [%]").draw()?;
             for (i, (d, inp)) in keys.iter().enumerate() {
                 let c = colour(i);
-                let pts: Vec<&super::bench::Tradeoff> = rows
-                    .iter()
-                    .filter(|r| &r.detector == d && &r.input == inp)
-                    .collect();
+                let pts: Vec<&super::bench::Tradeoff> =
+                    rows.iter().filter(|r| &r.detector == d && &r.input == inp).collect();
                 ch.draw_series(LineSeries::new(
                     pts.iter().map(|r| (r.seconds, 100.0 * r.a_physical)),
                     c.stroke_width(2),
                 ))?
                 .label(format!("{d} {inp}"))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
-                });
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
                 for r in pts {
                     let p = (r.seconds, 100.0 * r.a_physical);
                     ch.draw_series(std::iter::once(Circle::new(p, 4, c.filled())))?;
-                    ch.draw_series(std::iter::once(Text::new(
-                        format!("{}", r.stride),
-                        p,
-                        ("sans-serif", 14),
-                    )))?;
+                    ch.draw_series(std::iter::once(Text::new(format!("{}", r.stride), p, ("sans-serif", 14))))?;
                 }
             }
             ch.configure_series_labels()

@@ -17,10 +17,7 @@ pub struct ReportError {
 }
 
 fn rerr(path: &Path, e: impl std::fmt::Display) -> ReportError {
-    ReportError {
-        path: path.into(),
-        msg: e.to_string(),
-    }
+    ReportError { path: path.into(), msg: e.to_string() }
 }
 
 /// Streams [`FrameRecord`]s to CSV, flushing each row so an interrupted run keeps every frame.
@@ -32,10 +29,7 @@ pub struct FrameCsv {
 impl FrameCsv {
     /// Creates `path` (truncating).
     pub fn create(path: &Path) -> Result<Self, ReportError> {
-        Ok(FrameCsv {
-            w: csv::Writer::from_path(path).map_err(|e| rerr(path, e))?,
-            path: path.into(),
-        })
+        Ok(FrameCsv { w: csv::Writer::from_path(path).map_err(|e| rerr(path, e))?, path: path.into() })
     }
 
     /// Appends and flushes one record.
@@ -78,16 +72,11 @@ pub struct ReportSettings {
 }
 
 fn pct(x: Option<f64>) -> String {
-    x.map(|v| format!("{:.1}", 100.0 * v))
-        .unwrap_or_else(|| "n/a".into())
+    x.map(|v| format!("{:.1}", 100.0 * v)).unwrap_or_else(|| "n/a".into())
 }
 
 /// Writes `summary.csv`.
-pub fn write_summary_csv(
-    path: &Path,
-    rows: &[SummaryRow],
-    s: &ReportSettings,
-) -> Result<(), ReportError> {
+pub fn write_summary_csv(path: &Path, rows: &[SummaryRow], s: &ReportSettings) -> Result<(), ReportError> {
     let mut w = csv::Writer::from_path(path).map_err(|e| rerr(path, e))?;
     w.write_record([
         "video",
@@ -136,20 +125,10 @@ pub fn write_angles_csv(
     bins: usize,
 ) -> Result<(), ReportError> {
     let mut w = csv::Writer::from_path(path).map_err(|e| rerr(path, e))?;
-    w.write_record([
-        "video",
-        "detector",
-        "bin_start_deg",
-        "bin_end_deg",
-        "frames",
-        "detected",
-        "a_physical",
-    ])
-    .map_err(|e| rerr(path, e))?;
+    w.write_record(["video", "detector", "bin_start_deg", "bin_end_deg", "frames", "detected", "a_physical"])
+        .map_err(|e| rerr(path, e))?;
     for r in rows {
-        let sel = records
-            .iter()
-            .filter(|f| f.video == r.video && f.detector == r.detector);
+        let sel = records.iter().filter(|f| f.video == r.video && f.detector == r.detector);
         for b in angle_bins(sel, bins) {
             w.write_record([
                 r.video.clone(),
@@ -158,10 +137,7 @@ pub fn write_angles_csv(
                 format!("{}", b.end_deg),
                 b.accuracy.total.to_string(),
                 b.accuracy.detected.to_string(),
-                b.accuracy
-                    .rate()
-                    .map(|v| format!("{v:.6}"))
-                    .unwrap_or_default(),
+                b.accuracy.rate().map(|v| format!("{v:.6}")).unwrap_or_default(),
             ])
             .map_err(|e| rerr(path, e))?;
         }
@@ -180,42 +156,20 @@ fn unique<'a>(it: impl Iterator<Item = &'a String>) -> Vec<&'a String> {
 }
 
 /// Renders the Markdown summary: settings, a Table-4-shaped matrix, details with 95 % CIs, angles.
-pub fn summary_markdown(
-    rows: &[SummaryRow],
-    records: &[FrameRecord],
-    s: &ReportSettings,
-) -> String {
+pub fn summary_markdown(rows: &[SummaryRow], records: &[FrameRecord], s: &ReportSettings) -> String {
     let mut md = String::new();
     let videos = unique(rows.iter().map(|r| &r.video));
     let dets = unique(rows.iter().map(|r| &r.detector));
     let classes = unique(rows.iter().map(|r| &r.classes));
-    let _ = writeln!(
-        md,
-        "# A_physical (frames with the car detected / frames scored)\n"
-    );
+    let _ = writeln!(md, "# A_physical (frames with the car detected / frames scored)\n");
     let _ = writeln!(
         md,
         "Score threshold **{}**; target classes **{}**; every {} frame(s) scored.\n",
         s.threshold,
-        classes
-            .iter()
-            .map(|c| c.as_str())
-            .collect::<Vec<_>>()
-            .join(", "),
-        if s.stride == 1 {
-            "single".to_string()
-        } else {
-            format!("{}th", s.stride)
-        }
+        classes.iter().map(|c| c.as_str()).collect::<Vec<_>>().join(", "),
+        if s.stride == 1 { "single".to_string() } else { format!("{}th", s.stride) }
     );
-    let _ = writeln!(
-        md,
-        "| Video | {} |",
-        dets.iter()
-            .map(|d| d.as_str())
-            .collect::<Vec<_>>()
-            .join(" | ")
-    );
+    let _ = writeln!(md, "| Video | {} |", dets.iter().map(|d| d.as_str()).collect::<Vec<_>>().join(" | "));
     let _ = writeln!(md, "|---|{}", "---:|".repeat(dets.len()));
     for v in &videos {
         let cells: Vec<String> = dets
@@ -230,10 +184,7 @@ pub fn summary_markdown(
         let _ = writeln!(md, "| {v} | {} |", cells.join(" | "));
     }
     let _ = writeln!(md, "\nValues in %.\n\n## Details\n");
-    let _ = writeln!(
-        md,
-        "| Video | Detector | f_d | f_o | A_physical % | 95% CI (Wilson) | Status |"
-    );
+    let _ = writeln!(md, "| Video | Detector | f_d | f_o | A_physical % | 95% CI (Wilson) | Status |");
     let _ = writeln!(md, "|---|---|---:|---:|---:|---|---|");
     for r in rows {
         let ci = r
@@ -253,36 +204,17 @@ pub fn summary_markdown(
             r.status
         );
     }
-    let _ = writeln!(
-        md,
-        "\n## Per angle ({} sectors of {:.0}°)\n",
-        s.angle_bins,
-        360.0 / s.angle_bins.max(1) as f64
-    );
+    let _ = writeln!(md, "\n## Per angle ({} sectors of {:.0}°)\n", s.angle_bins, 360.0 / s.angle_bins.max(1) as f64);
     for (v, src) in &s.angle_sources {
         let _ = writeln!(md, "Angles for **{v}**: {src}.\n");
     }
     for v in &videos {
         let _ = writeln!(md, "### {v}\n");
-        let _ = writeln!(
-            md,
-            "| Sector | {} |",
-            dets.iter()
-                .map(|d| d.as_str())
-                .collect::<Vec<_>>()
-                .join(" | ")
-        );
+        let _ = writeln!(md, "| Sector | {} |", dets.iter().map(|d| d.as_str()).collect::<Vec<_>>().join(" | "));
         let _ = writeln!(md, "|---|{}", "---:|".repeat(dets.len()));
         let per_det: Vec<_> = dets
             .iter()
-            .map(|d| {
-                angle_bins(
-                    records
-                        .iter()
-                        .filter(|f| &&f.video == v && &&f.detector == d),
-                    s.angle_bins,
-                )
-            })
+            .map(|d| angle_bins(records.iter().filter(|f| &&f.video == v && &&f.detector == d), s.angle_bins))
             .collect();
         for k in 0..s.angle_bins.max(1) {
             let b = &per_det[0][k];
@@ -297,13 +229,7 @@ pub fn summary_markdown(
                     }
                 })
                 .collect();
-            let _ = writeln!(
-                md,
-                "| {:.0}–{:.0}° | {} |",
-                b.start_deg,
-                b.end_deg,
-                cells.join(" | ")
-            );
+            let _ = writeln!(md, "| {:.0}–{:.0}° | {} |", b.start_deg, b.end_deg, cells.join(" | "));
         }
         let _ = writeln!(md);
     }

@@ -6,8 +6,8 @@
 use super::physical::{Accuracy, FrameRecord};
 use super::plot::{accuracy_bars, polar_scores, ScoreSeries};
 use super::report::{
-    summary_markdown, write_angles_csv, write_summary_csv, write_text, FrameCsv, ReportError,
-    ReportSettings, SummaryRow,
+    summary_markdown, write_angles_csv, write_summary_csv, write_text, FrameCsv, ReportError, ReportSettings,
+    SummaryRow,
 };
 use super::video::VideoReader;
 use crate::detect::Detector;
@@ -91,17 +91,8 @@ impl Angles {
     fn at(&self, frame: usize, fps: f64) -> (f64, Option<f64>) {
         let t = frame as f64 / fps;
         match self {
-            Angles::Sidecar(m) => m
-                .get(&frame)
-                .map(|s| (s.timestamp_s, Some(s.angle_deg)))
-                .unwrap_or((t, None)),
-            Angles::Period {
-                period_s,
-                start_deg,
-            } => (
-                t,
-                Some((start_deg + 360.0 * t / period_s).rem_euclid(360.0)),
-            ),
+            Angles::Sidecar(m) => m.get(&frame).map(|s| (s.timestamp_s, Some(s.angle_deg))).unwrap_or((t, None)),
+            Angles::Period { period_s, start_deg } => (t, Some((start_deg + 360.0 * t / period_s).rem_euclid(360.0))),
         }
     }
 }
@@ -114,17 +105,12 @@ pub fn evaluate(
     stop: &AtomicBool,
 ) -> Result<EvalOutcome, ReportError> {
     let t_run = Instant::now();
-    std::fs::create_dir_all(&opts.out_dir).map_err(|e| ReportError {
-        path: opts.out_dir.clone(),
-        msg: e.to_string(),
-    })?;
+    std::fs::create_dir_all(&opts.out_dir)
+        .map_err(|e| ReportError { path: opts.out_dir.clone(), msg: e.to_string() })?;
     let frames_path = opts.out_dir.join("frames.csv");
     let mut csv = FrameCsv::create(&frames_path)?;
     let mut out = EvalOutcome {
-        timing: Timing {
-            detector_s: vec![0.0; detectors.len()],
-            ..Timing::default()
-        },
+        timing: Timing { detector_s: vec![0.0; detectors.len()], ..Timing::default() },
         ..EvalOutcome::default()
     };
     out.files.push(frames_path);
@@ -132,10 +118,7 @@ pub fn evaluate(
     let stride = opts.stride.max(1);
 
     'videos: for job in jobs {
-        let angles = match job
-            .sidecar
-            .clone()
-            .or_else(|| Some(sidecar::sidecar_path(&job.path)).filter(|p| p.exists()))
+        let angles = match job.sidecar.clone().or_else(|| Some(sidecar::sidecar_path(&job.path)).filter(|p| p.exists()))
         {
             Some(p) => match sidecar::read(&p) {
                 Ok(rows) => {
@@ -150,15 +133,9 @@ pub fn evaluate(
             None => {
                 angle_sources.push((
                     job.label.clone(),
-                    format!(
-                        "no sidecar; {}° + 360° × t / {} s",
-                        opts.start_angle_deg, opts.rotation_period_s
-                    ),
+                    format!("no sidecar; {}° + 360° × t / {} s", opts.start_angle_deg, opts.rotation_period_s),
                 ));
-                Angles::Period {
-                    period_s: opts.rotation_period_s,
-                    start_deg: opts.start_angle_deg,
-                }
+                Angles::Period { period_s: opts.rotation_period_s, start_deg: opts.start_angle_deg }
             }
         };
         let mut reader = match VideoReader::open(&job.path) {
@@ -183,11 +160,9 @@ pub fn evaluate(
         let bar = if opts.progress {
             let b = ProgressBar::new(info.declared_frames as u64);
             b.set_style(
-                ProgressStyle::with_template(
-                    "{msg:>16} [{bar:40}] {pos}/{len} frames {per_sec} eta {eta}",
-                )
-                .expect("static template")
-                .progress_chars("=> "),
+                ProgressStyle::with_template("{msg:>16} [{bar:40}] {pos}/{len} frames {per_sec} eta {eta}")
+                    .expect("static template")
+                    .progress_chars("=> "),
             );
             b.set_message(job.label.clone());
             b
@@ -235,8 +210,7 @@ pub fn evaluate(
                 let props = match result {
                     Ok(p) => p,
                     Err(e) => {
-                        out.failures
-                            .push(format!("{}: frame {idx}: {e}", job.label));
+                        out.failures.push(format!("{}: frame {idx}: {e}", job.label));
                         failed_det[k] = Some(format!("stopped at frame {idx}: {e}"));
                         continue;
                     }
@@ -266,17 +240,10 @@ pub fn evaluate(
         out.timing.frames_decoded += decoded;
         if decoded == 0 && status == "complete" {
             status = "no frames decoded".into();
-            out.failures.push(format!(
-                "{}: no frames could be decoded from {}",
-                job.label,
-                job.path.display()
-            ));
+            out.failures.push(format!("{}: no frames could be decoded from {}", job.label, job.path.display()));
         } else if status == "complete" && info.declared_frames > decoded + 1 {
             // Containers estimate counts from duration; more than one frame short means a cut file.
-            status = format!(
-                "truncated: decoded {decoded} of {} declared frames",
-                info.declared_frames
-            );
+            status = format!("truncated: decoded {decoded} of {} declared frames", info.declared_frames);
             out.failures.push(format!("{}: {status}", job.label));
         }
         let recs = &out.records[first_record..];
@@ -296,12 +263,7 @@ pub fn evaluate(
             break 'videos;
         }
     }
-    let settings = ReportSettings {
-        threshold: opts.threshold,
-        stride,
-        angle_bins: opts.angle_bins,
-        angle_sources,
-    };
+    let settings = ReportSettings { threshold: opts.threshold, stride, angle_bins: opts.angle_bins, angle_sources };
     write_reports(&mut out, &settings, opts, detectors)?;
     out.timing.total_s = t_run.elapsed().as_secs_f64();
     Ok(out)
@@ -332,10 +294,7 @@ fn write_reports(
             videos.push(&r.video);
         }
     }
-    let plot_err = |e: super::plot::PlotError| ReportError {
-        path: PathBuf::from(&e.path),
-        msg: e.msg,
-    };
+    let plot_err = |e: super::plot::PlotError| ReportError { path: PathBuf::from(&e.path), msg: e.msg };
     for v in videos {
         let series: Vec<ScoreSeries> = detectors
             .iter()
@@ -350,13 +309,8 @@ fn write_reports(
             })
             .collect();
         let p = dir.join(format!("polar_{}.png", file_safe(v)));
-        polar_scores(
-            &p,
-            &format!("{v}: car score vs turntable angle"),
-            &series,
-            opts.threshold as f64,
-        )
-        .map_err(plot_err)?;
+        polar_scores(&p, &format!("{v}: car score vs turntable angle"), &series, opts.threshold as f64)
+            .map_err(plot_err)?;
         out.files.push(p);
     }
     if !out.rows.is_empty() {
@@ -369,20 +323,10 @@ fn write_reports(
 
 /// Makes a label usable as part of a file name.
 pub fn file_safe(s: &str) -> String {
-    s.chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect()
+    s.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect()
 }
 
 /// The default label of a video: its file stem.
 pub fn default_label(p: &Path) -> String {
-    p.file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| p.display().to_string())
+    p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| p.display().to_string())
 }

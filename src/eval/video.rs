@@ -60,36 +60,21 @@ impl VideoReader {
         if !path.exists() {
             return Err(VideoError::Missing(path.into()));
         }
-        let unreadable = |why: String| VideoError::Unreadable {
-            path: path.into(),
-            why,
-        };
-        let cap = VideoCapture::from_file(path.as_os_str(), videoio::CAP_FFMPEG)
-            .map_err(|e| unreadable(e.to_string()))?;
+        let unreadable = |why: String| VideoError::Unreadable { path: path.into(), why };
+        let cap =
+            VideoCapture::from_file(path.as_os_str(), videoio::CAP_FFMPEG).map_err(|e| unreadable(e.to_string()))?;
         if !cap.is_opened().unwrap_or(false) {
-            return Err(unreadable(
-                "not a readable video (corrupt, truncated or unsupported format)".into(),
-            ));
+            return Err(unreadable("not a readable video (corrupt, truncated or unsupported format)".into()));
         }
         let prop = |p| cap.get(p).unwrap_or(0.0);
         let fps = prop(videoio::CAP_PROP_FPS);
         let info = VideoInfo {
-            fps: if fps.is_finite() && fps > 0.0 {
-                fps
-            } else {
-                30.0
-            },
+            fps: if fps.is_finite() && fps > 0.0 { fps } else { 30.0 },
             declared_frames: prop(videoio::CAP_PROP_FRAME_COUNT).max(0.0) as usize,
             width: prop(videoio::CAP_PROP_FRAME_WIDTH) as usize,
             height: prop(videoio::CAP_PROP_FRAME_HEIGHT) as usize,
         };
-        Ok(VideoReader {
-            cap,
-            path: path.into(),
-            info,
-            next: 0,
-            mat: Mat::default(),
-        })
+        Ok(VideoReader { cap, path: path.into(), info, next: 0, mat: Mat::default() })
     }
 
     /// The declared stream properties.
@@ -99,10 +84,7 @@ impl VideoReader {
 
     /// Skips one frame without converting it; `false` at end of stream.
     pub fn skip(&mut self) -> Result<bool, VideoError> {
-        let ok = self
-            .cap
-            .grab()
-            .map_err(|e| self.decode_err(e.to_string()))?;
+        let ok = self.cap.grab().map_err(|e| self.decode_err(e.to_string()))?;
         if ok {
             self.next += 1;
         }
@@ -111,12 +93,7 @@ impl VideoReader {
 
     /// Decodes the next frame; `None` at end of stream.
     pub fn read(&mut self) -> Result<Option<(usize, Frame)>, VideoError> {
-        if !self
-            .cap
-            .read(&mut self.mat)
-            .map_err(|e| self.decode_err(e.to_string()))?
-            || self.mat.empty()
-        {
+        if !self.cap.read(&mut self.mat).map_err(|e| self.decode_err(e.to_string()))? || self.mat.empty() {
             return Ok(None);
         }
         let idx = self.next;
@@ -126,11 +103,7 @@ impl VideoReader {
     }
 
     fn decode_err(&self, why: String) -> VideoError {
-        VideoError::Decode {
-            path: self.path.clone(),
-            frame: self.next,
-            why,
-        }
+        VideoError::Decode { path: self.path.clone(), frame: self.next, why }
     }
 }
 
@@ -142,23 +115,15 @@ pub fn mat_to_frame(m: &Mat) -> Result<Frame, String> {
         t if t == opencv::core::CV_8UC1 => contiguous(m)?.iter().flat_map(|&g| [g, g, g]).collect(),
         t => return Err(format!("unsupported pixel type {t} (need 8-bit BGR)")),
     };
-    Ok(Frame {
-        width: w,
-        height: h,
-        bgr,
-    })
+    Ok(Frame { width: w, height: h, bgr })
 }
 
 fn contiguous(m: &Mat) -> Result<std::borrow::Cow<'_, [u8]>, String> {
     if m.is_continuous() {
-        Ok(std::borrow::Cow::Borrowed(
-            m.data_bytes().map_err(|e| e.to_string())?,
-        ))
+        Ok(std::borrow::Cow::Borrowed(m.data_bytes().map_err(|e| e.to_string())?))
     } else {
         let owned = m.try_clone().map_err(|e| e.to_string())?;
-        Ok(std::borrow::Cow::Owned(
-            owned.data_bytes().map_err(|e| e.to_string())?.to_vec(),
-        ))
+        Ok(std::borrow::Cow::Owned(owned.data_bytes().map_err(|e| e.to_string())?.to_vec()))
     }
 }
 

@@ -8,11 +8,7 @@
 /// `camera_position_from_spherical_angles`): `(d·cos e·sin a, d·sin e, d·cos e·cos a)`.
 pub fn spherical(dist: f32, elev_deg: f32, azim_deg: f32) -> [f32; 3] {
     let (e, a) = (elev_deg.to_radians(), azim_deg.to_radians());
-    [
-        dist * e.cos() * a.sin(),
-        dist * e.sin(),
-        dist * e.cos() * a.cos(),
-    ]
+    [dist * e.cos() * a.sin(), dist * e.sin(), dist * e.cos() * a.cos()]
 }
 
 fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
@@ -20,11 +16,7 @@ fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
 }
 /// Cross product.
 pub fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 /// Dot product.
 pub fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
@@ -62,32 +54,18 @@ impl Camera {
         let z = normalize(sub(at, eye));
         let mut x = cross(up, z);
         if dot(x, x) < 1e-12 {
-            let alt = if z[2].abs() < 0.9 {
-                [0.0, 0.0, 1.0]
-            } else {
-                [1.0, 0.0, 0.0]
-            };
+            let alt = if z[2].abs() < 0.9 { [0.0, 0.0, 1.0] } else { [1.0, 0.0, 0.0] };
             x = cross(alt, z);
         }
         let x = normalize(x);
         let y = normalize(cross(z, x));
-        Camera {
-            axes: [x, y, z],
-            eye,
-            fov_deg,
-            znear: 1e-3,
-            mirror_x: false,
-        }
+        Camera { axes: [x, y, z], eye, fov_deg, znear: 1e-3, mirror_x: false }
     }
 
     /// World point → view coordinates.
     pub fn to_view(&self, p: [f32; 3]) -> [f32; 3] {
         let d = sub(p, self.eye);
-        [
-            dot(self.axes[0], d),
-            dot(self.axes[1], d),
-            dot(self.axes[2], d),
-        ]
+        [dot(self.axes[0], d), dot(self.axes[1], d), dot(self.axes[2], d)]
     }
 
     /// View point (z > 0) → pixel coordinates (x right, y down) in an `size × size` image.
@@ -124,11 +102,7 @@ pub fn fca(cam_trans: [[f64; 3]; 2], veh_trans: [[f64; 3]; 2]) -> Camera {
     let q = p + std::f64::consts::FRAC_PI_2;
     let up = [q.cos() * y.cos(), q.cos() * y.sin(), q.sin()];
     let rot = |v: [f64; 3]| {
-        [
-            (v[0] * vy.cos() + v[1] * vy.sin()) as f32,
-            (-v[0] * vy.sin() + v[1] * vy.cos()) as f32,
-            v[2] as f32,
-        ]
+        [(v[0] * vy.cos() + v[1] * vy.sin()) as f32, (-v[0] * vy.sin() + v[1] * vy.cos()) as f32, v[2] as f32]
     };
     let eye = rot(eye0);
     let at = rot([eye0[0] + dir[0], eye0[1] + dir[1], eye0[2] + dir[2]]);
@@ -156,11 +130,7 @@ mod tests {
     fn pole_cameras_stay_finite() {
         for elev in [90.0, -90.0] {
             let c = Camera::look_at(spherical(3.0, elev, 0.0), [0.0; 3], [0.0, 1.0, 0.0], 60.0);
-            assert!(
-                c.axes.iter().flatten().all(|v| v.is_finite()),
-                "{elev}: {:?}",
-                c.axes
-            );
+            assert!(c.axes.iter().flatten().all(|v| v.is_finite()), "{elev}: {:?}", c.axes);
             let v = c.to_view([0.1, 0.0, 0.1]);
             assert!(v.iter().all(|x| x.is_finite()));
         }

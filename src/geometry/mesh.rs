@@ -100,16 +100,9 @@ fn read_mtl(path: &Path) -> HashMap<String, Option<PathBuf>> {
 impl Mesh {
     /// Reads an OBJ file (and its MTL, when present); polygons are fan-triangulated.
     pub fn load_obj(path: &Path) -> Result<Mesh, MeshError> {
-        let text = std::fs::read_to_string(path).map_err(|source| MeshError::Io {
-            path: path.into(),
-            source,
-        })?;
+        let text = std::fs::read_to_string(path).map_err(|source| MeshError::Io { path: path.into(), source })?;
         let p = path.display().to_string();
-        let perr = |line: usize, msg: String| MeshError::Parse {
-            path: p.clone(),
-            line,
-            msg,
-        };
+        let perr = |line: usize, msg: String| MeshError::Parse { path: p.clone(), line, msg };
         let mut m = Mesh {
             positions: Vec::new(),
             uvs: Vec::new(),
@@ -123,10 +116,7 @@ impl Mesh {
         let mut mtl: HashMap<String, Option<PathBuf>> = HashMap::new();
         let mut current = 0u32;
         let mut any_normals = true;
-        let floats = |it: std::str::SplitWhitespace<'_>,
-                      n: usize,
-                      line: usize|
-         -> Result<Vec<f32>, MeshError> {
+        let floats = |it: std::str::SplitWhitespace<'_>, n: usize, line: usize| -> Result<Vec<f32>, MeshError> {
             let v: Vec<f32> = it
                 .take(n)
                 .map(|t| t.parse::<f32>())
@@ -159,19 +149,14 @@ impl Mesh {
                 }
                 Some("mtllib") => {
                     let name = line["mtllib".len()..].trim();
-                    mtl.extend(read_mtl(
-                        &path.parent().unwrap_or(Path::new(".")).join(name),
-                    ));
+                    mtl.extend(read_mtl(&path.parent().unwrap_or(Path::new(".")).join(name)));
                 }
                 Some("usemtl") => {
                     let name = line["usemtl".len()..].trim().to_string();
                     current = match m.materials.iter().position(|x| x.name == name) {
                         Some(k) => k as u32,
                         None => {
-                            m.materials.push(Material {
-                                map_kd: mtl.get(&name).cloned().flatten(),
-                                name,
-                            });
+                            m.materials.push(Material { map_kd: mtl.get(&name).cloned().flatten(), name });
                             (m.materials.len() - 1) as u32
                         }
                     };
@@ -184,55 +169,33 @@ impl Mesh {
                         let t = parts.next().filter(|s| !s.is_empty());
                         let n = parts.next().filter(|s| !s.is_empty());
                         let v = v.ok_or_else(|| {
-                            perr(
-                                ln,
-                                format!(
-                                    "vertex index `{tok}` is out of range ({} positions)",
-                                    m.positions.len()
-                                ),
-                            )
+                            perr(ln, format!("vertex index `{tok}` is out of range ({} positions)", m.positions.len()))
                         })?;
                         let t = t
-                            .ok_or_else(|| {
-                                perr(
-                                    ln,
-                                    format!(
-                                        "face corner `{tok}` has no UV index; the mesh needs UVs"
-                                    ),
-                                )
-                            })
+                            .ok_or_else(|| perr(ln, format!("face corner `{tok}` has no UV index; the mesh needs UVs")))
                             .and_then(|t| {
                                 parse_index(t, m.uvs.len()).ok_or_else(|| {
-                                    perr(
-                                        ln,
-                                        format!(
-                                            "UV index in `{tok}` is out of range ({} UVs)",
-                                            m.uvs.len()
-                                        ),
-                                    )
+                                    perr(ln, format!("UV index in `{tok}` is out of range ({} UVs)", m.uvs.len()))
                                 })
                             })?;
                         let n = match n {
-                            Some(n) => Some(parse_index(n, m.normals.len()).ok_or_else(|| {
-                                perr(ln, format!("normal index in `{tok}` is out of range"))
-                            })?),
+                            Some(n) => Some(
+                                parse_index(n, m.normals.len())
+                                    .ok_or_else(|| perr(ln, format!("normal index in `{tok}` is out of range")))?,
+                            ),
                             None => None,
                         };
                         corner.push((v, t, n));
                     }
                     if corner.len() < 3 {
-                        return Err(perr(
-                            ln,
-                            format!("a face needs 3 corners, found {}", corner.len()),
-                        ));
+                        return Err(perr(ln, format!("a face needs 3 corners, found {}", corner.len())));
                     }
                     any_normals &= corner.iter().all(|c| c.2.is_some());
                     for k in 1..corner.len() - 1 {
                         let (a, b, c) = (corner[0], corner[k], corner[k + 1]);
                         m.faces.push([a.0, b.0, c.0]);
                         m.face_uvs.push([a.1, b.1, c.1]);
-                        m.face_normals
-                            .push([a.2.unwrap_or(0), b.2.unwrap_or(0), c.2.unwrap_or(0)]);
+                        m.face_normals.push([a.2.unwrap_or(0), b.2.unwrap_or(0), c.2.unwrap_or(0)]);
                         m.face_material.push(current);
                     }
                 }
@@ -243,16 +206,10 @@ impl Mesh {
             m.face_normals.clear();
         }
         if m.faces.is_empty() {
-            return Err(MeshError::Invalid {
-                path: p,
-                msg: "no faces".into(),
-            });
+            return Err(MeshError::Invalid { path: p, msg: "no faces".into() });
         }
         if m.materials.is_empty() {
-            m.materials.push(Material {
-                name: "default".into(),
-                map_kd: None,
-            });
+            m.materials.push(Material { name: "default".into(), map_kd: None });
         }
         Ok(m)
     }

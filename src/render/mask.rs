@@ -41,10 +41,7 @@ pub fn c_mid(textured: GreyRange, plain: GreyRange) -> Result<f32, MaskError> {
 
 /// Grey ranges of the pixels labelled textured and plain (`None` = background, ignored).
 pub fn measure(grey: &[f32], label: &[Option<bool>]) -> Result<(GreyRange, GreyRange), MaskError> {
-    let mut r = [GreyRange {
-        min: f32::INFINITY,
-        max: f32::NEG_INFINITY,
-    }; 2];
+    let mut r = [GreyRange { min: f32::INFINITY, max: f32::NEG_INFINITY }; 2];
     for (g, l) in grey.iter().zip(label) {
         if let Some(t) = l {
             let k = *t as usize;
@@ -63,31 +60,16 @@ pub fn measure(grey: &[f32], label: &[Option<bool>]) -> Result<(GreyRange, GreyR
 
 /// P: 1 where the grey value is on the textured side of `c_mid`, else 0 (background → 0).
 /// When the textured range lies below the plain one, the comparison flips.
-pub fn binarize(
-    grey: &[f32],
-    covered: &[bool],
-    c_mid: f32,
-    textured_is_brighter: bool,
-) -> Vec<f32> {
+pub fn binarize(grey: &[f32], covered: &[bool], c_mid: f32, textured_is_brighter: bool) -> Vec<f32> {
     grey.iter()
         .zip(covered)
-        .map(|(&g, &cov)| {
-            if cov && ((g >= c_mid) == textured_is_brighter) {
-                1.0
-            } else {
-                0.0
-            }
-        })
+        .map(|(&g, &cov)| if cov && ((g >= c_mid) == textured_is_brighter) { 1.0 } else { 0.0 })
         .collect()
 }
 
 /// `I_o = I_d·P + I_p·(1−P)`, per pixel over `c` interleaved channels.
 pub fn composite(i_d: &[f32], i_p: &[f32], p: &[f32], c: usize) -> Vec<f32> {
-    i_d.iter()
-        .zip(i_p)
-        .enumerate()
-        .map(|(i, (d, q))| d * p[i / c] + q * (1.0 - p[i / c]))
-        .collect()
+    i_d.iter().zip(i_p).enumerate().map(|(i, (d, q))| d * p[i / c] + q * (1.0 - p[i / c])).collect()
 }
 
 #[cfg(test)]
@@ -103,8 +85,7 @@ mod tests {
         assert_eq!(c_mid(r(0.5, 0.9), r(0.2, 0.5)), Ok(0.5));
         let e = c_mid(r(0.3, 0.6), r(0.5, 0.9)).unwrap_err();
         assert!(
-            e.to_string()
-                .contains("intersect: textured [0.3000, 0.6000] and non-textured [0.5000, 0.9000]"),
+            e.to_string().contains("intersect: textured [0.3000, 0.6000] and non-textured [0.5000, 0.9000]"),
             "{e}"
         );
     }
@@ -114,28 +95,11 @@ mod tests {
         let grey = [0.9, 0.2, 0.85, 0.0, 0.3];
         let label = [Some(true), Some(false), Some(true), None, Some(false)];
         let (t, n) = measure(&grey, &label).unwrap();
-        assert_eq!(
-            (t, n),
-            (
-                GreyRange {
-                    min: 0.85,
-                    max: 0.9
-                },
-                GreyRange { min: 0.2, max: 0.3 }
-            )
-        );
-        let p = binarize(
-            &grey,
-            &[true, true, true, false, true],
-            c_mid(t, n).unwrap(),
-            true,
-        );
+        assert_eq!((t, n), (GreyRange { min: 0.85, max: 0.9 }, GreyRange { min: 0.2, max: 0.3 }));
+        let p = binarize(&grey, &[true, true, true, false, true], c_mid(t, n).unwrap(), true);
         assert_eq!(p, vec![1.0, 0.0, 1.0, 0.0, 0.0]);
         let out = composite(&[1.0; 5], &[0.5; 5], &p, 1);
         assert_eq!(out, vec![1.0, 0.5, 1.0, 0.5, 0.5]);
-        assert_eq!(
-            measure(&grey, &[None; 5]),
-            Err(MaskError::Empty("textured"))
-        );
+        assert_eq!(measure(&grey, &[None; 5]), Err(MaskError::Empty("textured")));
     }
 }

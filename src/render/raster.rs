@@ -48,11 +48,7 @@ fn clip_near(v: [[f32; 3]; 3], znear: f32) -> Vec<([f32; 3], [f32; 3])> {
         if ina != inb {
             let t = (znear - a.0[2]) / (b.0[2] - a.0[2]);
             let lerp = |x: [f32; 3], y: [f32; 3]| {
-                [
-                    x[0] + t * (y[0] - x[0]),
-                    x[1] + t * (y[1] - x[1]),
-                    x[2] + t * (y[2] - x[2]),
-                ]
+                [x[0] + t * (y[0] - x[0]), x[1] + t * (y[1] - x[1]), x[2] + t * (y[2] - x[2])]
             };
             out.push((lerp(a.0, b.0), lerp(a.1, b.1)));
         }
@@ -64,12 +60,7 @@ impl GBuffer {
     /// Rasterizes `mesh` seen by `cam` into a `size × size` G-buffer.
     pub fn render(mesh: &Mesh, cam: &Camera, size: usize) -> GBuffer {
         let n = size * size;
-        let mut g = GBuffer {
-            size,
-            face: vec![EMPTY; n],
-            bary: vec![[0.0; 3]; n],
-            depth: vec![f32::INFINITY; n],
-        };
+        let mut g = GBuffer { size, face: vec![EMPTY; n], bary: vec![[0.0; 3]; n], depth: vec![f32::INFINITY; n] };
         for (fi, f) in mesh.faces.iter().enumerate() {
             let v = [0, 1, 2].map(|k| cam.to_view(mesh.positions[f[k] as usize]));
             if v.iter().all(|p| p[2] < cam.znear) {
@@ -77,11 +68,7 @@ impl GBuffer {
             }
             let poly: Vec<Vtx> = clip_near(v, cam.znear)
                 .into_iter()
-                .map(|(p, b)| Vtx {
-                    px: cam.to_pixel(p, size),
-                    inv_z: 1.0 / p[2],
-                    b,
-                })
+                .map(|(p, b)| Vtx { px: cam.to_pixel(p, size), inv_z: 1.0 / p[2], b })
                 .collect();
             for k in 1..poly.len().saturating_sub(1) {
                 g.fill(fi as u32, [poly[0], poly[k], poly[k + 1]]);
@@ -123,10 +110,7 @@ impl GBuffer {
                     continue;
                 }
                 let bc: [f32; 3] = std::array::from_fn(|k| {
-                    (w0 * t[0].inv_z * t[0].b[k]
-                        + w1 * t[1].inv_z * t[1].b[k]
-                        + w2 * t[2].inv_z * t[2].b[k])
-                        * z
+                    (w0 * t[0].inv_z * t[0].b[k] + w1 * t[1].inv_z * t[1].b[k] + w2 * t[2].inv_z * t[2].b[k]) * z
                 });
                 self.depth[i] = z;
                 self.face[i] = face;
@@ -137,21 +121,17 @@ impl GBuffer {
 
     /// Interpolated UV of every covered pixel, as `(pixel, uv)` samples for a texture gather.
     pub fn uv_samples<'a>(&'a self, mesh: &'a Mesh) -> impl Iterator<Item = (u32, [f32; 2])> + 'a {
-        self.face
-            .iter()
-            .enumerate()
-            .filter(|(_, f)| **f != EMPTY)
-            .map(move |(i, &f)| {
-                let t = mesh.face_uvs[f as usize];
-                let b = self.bary[i];
-                let mut uv = [0.0; 2];
-                for k in 0..3 {
-                    let c = mesh.uvs[t[k] as usize];
-                    uv[0] += b[k] * c[0];
-                    uv[1] += b[k] * c[1];
-                }
-                (i as u32, uv)
-            })
+        self.face.iter().enumerate().filter(|(_, f)| **f != EMPTY).map(move |(i, &f)| {
+            let t = mesh.face_uvs[f as usize];
+            let b = self.bary[i];
+            let mut uv = [0.0; 2];
+            for k in 0..3 {
+                let c = mesh.uvs[t[k] as usize];
+                uv[0] += b[k] * c[0];
+                uv[1] += b[k] * c[1];
+            }
+            (i as u32, uv)
+        })
     }
 
     /// Fraction of pixels covered.
@@ -176,10 +156,7 @@ mod tests {
             faces,
             face_normals: Vec::new(),
             face_material: vec![0; nf],
-            materials: vec![Material {
-                name: "m".into(),
-                map_kd: None,
-            }],
+            materials: vec![Material { name: "m".into(), map_kd: None }],
         }
     }
 
@@ -188,19 +165,13 @@ mod tests {
     }
 
     fn finite(g: &GBuffer) -> bool {
-        g.bary.iter().flatten().all(|v| v.is_finite())
-            && g.depth.iter().all(|d| d.is_finite() || *d == f32::INFINITY)
+        g.bary.iter().flatten().all(|v| v.is_finite()) && g.depth.iter().all(|d| d.is_finite() || *d == f32::INFINITY)
     }
 
     #[test]
     fn a_facing_square_covers_the_centre_with_valid_barycentrics() {
         let m = mesh(
-            vec![
-                [-1.0, -1.0, 0.0],
-                [1.0, -1.0, 0.0],
-                [1.0, 1.0, 0.0],
-                [-1.0, 1.0, 0.0],
-            ],
+            vec![[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]],
             vec![[0, 1, 2], [0, 2, 3]],
         );
         let g = GBuffer::render(&m, &cam(), 64);
@@ -212,8 +183,7 @@ mod tests {
             .iter()
             .zip(&g.face)
             .filter(|(_, f)| **f != EMPTY)
-            .all(|(b, _)| (b.iter().sum::<f32>() - 1.0).abs() < 1e-4
-                && b.iter().all(|v| *v >= -1e-5)));
+            .all(|(b, _)| (b.iter().sum::<f32>() - 1.0).abs() < 1e-4 && b.iter().all(|v| *v >= -1e-5)));
         // The square spans ±1 at distance 3 with a 60° view: 2/(2·3·tan 30°) = 57.7 % of the side.
         let side = (g.coverage()).sqrt();
         assert!((side - 0.577).abs() < 0.03, "{side}");
@@ -223,12 +193,7 @@ mod tests {
     fn perspective_correct_barycentrics_follow_depth() {
         // A floor strip receding from the camera: its UV midpoint in depth is not the screen midpoint.
         let m = mesh(
-            vec![
-                [-1.0, -1.0, 2.0],
-                [1.0, -1.0, 2.0],
-                [1.0, -1.0, -20.0],
-                [-1.0, -1.0, -20.0],
-            ],
+            vec![[-1.0, -1.0, 2.0], [1.0, -1.0, 2.0], [1.0, -1.0, -20.0], [-1.0, -1.0, -20.0]],
             vec![[0, 1, 2], [0, 2, 3]],
         );
         let g = GBuffer::render(&m, &cam(), 128);
@@ -238,10 +203,7 @@ mod tests {
             let f = m.faces[g.face[*i as usize] as usize];
             let z_world: f32 = (0..3).map(|k| b[k] * m.positions[f[k] as usize][2]).sum();
             // View depth of the interpolated world point equals the rasterized depth.
-            assert!(
-                ((3.0 - z_world) - g.depth[*i as usize]).abs() < 1e-2 * g.depth[*i as usize],
-                "pixel {i}"
-            );
+            assert!(((3.0 - z_world) - g.depth[*i as usize]).abs() < 1e-2 * g.depth[*i as usize], "pixel {i}");
         }
         assert!(!uv.is_empty());
     }
@@ -274,10 +236,7 @@ mod tests {
         assert!(
             g.face.iter().all(|f| *f == EMPTY || *f == 3),
             "{:?}",
-            g.face
-                .iter()
-                .filter(|f| **f != EMPTY)
-                .collect::<std::collections::BTreeSet<_>>()
+            g.face.iter().filter(|f| **f != EMPTY).collect::<std::collections::BTreeSet<_>>()
         );
         assert!(g.face.contains(&3));
         assert!(g.depth.iter().filter(|d| d.is_finite()).all(|d| *d >= 1e-3));
@@ -285,25 +244,14 @@ mod tests {
 
     #[test]
     fn cameras_at_the_poles_render() {
-        let m = mesh(
-            vec![[-1.0, 0.0, -1.0], [1.0, 0.0, -1.0], [0.0, 0.0, 1.0]],
-            vec![[0, 1, 2]],
-        );
+        let m = mesh(vec![[-1.0, 0.0, -1.0], [1.0, 0.0, -1.0], [0.0, 0.0, 1.0]], vec![[0, 1, 2]]);
         for elev in [89.999f32, 90.0, -90.0, 0.0] {
-            let c = Camera::look_at(
-                crate::geometry::camera::spherical(3.0, elev, 0.0),
-                [0.0; 3],
-                [0.0, 1.0, 0.0],
-                60.0,
-            );
+            let c =
+                Camera::look_at(crate::geometry::camera::spherical(3.0, elev, 0.0), [0.0; 3], [0.0, 1.0, 0.0], 60.0);
             let g = GBuffer::render(&m, &c, 48);
             assert!(finite(&g), "elev {elev}");
             if elev.abs() > 89.0 {
-                assert!(
-                    g.coverage() > 0.05,
-                    "elev {elev}: coverage {}",
-                    g.coverage()
-                );
+                assert!(g.coverage() > 0.05, "elev {elev}: coverage {}", g.coverage());
             }
         }
     }

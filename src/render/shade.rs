@@ -27,21 +27,11 @@ pub struct Lights {
 impl Lights {
     /// The authors' scene: ambient 0.7, diffuse 0.4, specular 0.2, direction (1, 1, 1),
     /// PyTorch3D's default shininess 64.
-    pub const PAV_CAMOU: Lights = Lights {
-        ambient: 0.7,
-        diffuse: 0.4,
-        specular: 0.2,
-        direction: [1.0, 1.0, 1.0],
-        shininess: 64.0,
-    };
+    pub const PAV_CAMOU: Lights =
+        Lights { ambient: 0.7, diffuse: 0.4, specular: 0.2, direction: [1.0, 1.0, 1.0], shininess: 64.0 };
     /// Dark light mode: no directional or point light, only ambient.
-    pub const DARK: Lights = Lights {
-        ambient: 1.0,
-        diffuse: 0.0,
-        specular: 0.0,
-        direction: [1.0, 1.0, 1.0],
-        shininess: 64.0,
-    };
+    pub const DARK: Lights =
+        Lights { ambient: 1.0, diffuse: 0.0, specular: 0.0, direction: [1.0, 1.0, 1.0], shininess: 64.0 };
 }
 
 /// Area-weighted vertex normals from the faces (as PyTorch3D's `Meshes` computes them; the OBJ's
@@ -73,13 +63,7 @@ pub struct Shading {
 
 impl Shading {
     /// Shades the G-buffer `g` of `mesh` seen by `cam`.
-    pub fn new(
-        g: &GBuffer,
-        mesh: &Mesh,
-        normals: &[[f32; 3]],
-        cam: &Camera,
-        lights: &Lights,
-    ) -> Shading {
+    pub fn new(g: &GBuffer, mesh: &Mesh, normals: &[[f32; 3]], cam: &Camera, lights: &Lights) -> Shading {
         let l = normalize(lights.direction);
         let n_px = g.face.len();
         let (mut mul, mut add) = (vec![0.0; n_px], vec![0.0; n_px]);
@@ -100,27 +84,11 @@ impl Shading {
             let nrm = normalize(nrm);
             let cos = dot(nrm, l);
             let diffuse = lights.diffuse * cos.max(0.0);
-            let view = normalize([
-                cam.eye[0] - pos[0],
-                cam.eye[1] - pos[1],
-                cam.eye[2] - pos[2],
-            ]);
-            let refl = [
-                2.0 * cos * nrm[0] - l[0],
-                2.0 * cos * nrm[1] - l[1],
-                2.0 * cos * nrm[2] - l[2],
-            ];
-            let spec = if cos > 0.0 {
-                lights.specular * dot(view, refl).max(0.0).powf(lights.shininess)
-            } else {
-                0.0
-            };
+            let view = normalize([cam.eye[0] - pos[0], cam.eye[1] - pos[1], cam.eye[2] - pos[2]]);
+            let refl = [2.0 * cos * nrm[0] - l[0], 2.0 * cos * nrm[1] - l[1], 2.0 * cos * nrm[2] - l[2]];
+            let spec = if cos > 0.0 { lights.specular * dot(view, refl).max(0.0).powf(lights.shininess) } else { 0.0 };
             // Degenerate normals (zero-area neighbourhoods) give NaN: fall back to ambient only.
-            mul[i] = if diffuse.is_finite() {
-                lights.ambient + diffuse
-            } else {
-                lights.ambient
-            };
+            mul[i] = if diffuse.is_finite() { lights.ambient + diffuse } else { lights.ambient };
             add[i] = if spec.is_finite() { spec } else { 0.0 };
         }
         Shading { mul, add }
@@ -164,19 +132,13 @@ mod tests {
             face_uvs: vec![[0, 0, 0]; 3],
             face_normals: Vec::new(),
             face_material: vec![0; 3],
-            materials: vec![Material {
-                name: "m".into(),
-                map_kd: None,
-            }],
+            materials: vec![Material { name: "m".into(), map_kd: None }],
         };
         let n = vertex_normals(&m);
         assert_eq!(n[0], [0.0, 0.0, 1.0]);
         let cam = Camera::look_at([0.0, 0.0, 3.0], [0.0; 3], [0.0, 1.0, 0.0], 60.0);
         let g = GBuffer::render(&m, &cam, 32);
-        let lights = Lights {
-            direction: [0.0, 0.0, 1.0],
-            ..Lights::PAV_CAMOU
-        };
+        let lights = Lights { direction: [0.0, 0.0, 1.0], ..Lights::PAV_CAMOU };
         let s = Shading::new(&g, &m, &n, &cam, &lights);
         let c = 16 * 32 + 16;
         assert!((s.mul[c] - 1.1).abs() < 1e-5, "{}", s.mul[c]);
@@ -185,10 +147,6 @@ mod tests {
         s.apply(&mut img, 1);
         assert!((img[c] - (0.55 + s.add[c])).abs() < 1e-6);
         let dark = Shading::new(&g, &m, &n, &cam, &Lights::DARK);
-        assert!(dark.mul.iter().zip(&g.face).all(|(v, f)| if *f == EMPTY {
-            *v == 0.0
-        } else {
-            *v == 1.0
-        }));
+        assert!(dark.mul.iter().zip(&g.face).all(|(v, f)| if *f == EMPTY { *v == 0.0 } else { *v == 1.0 }));
     }
 }

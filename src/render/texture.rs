@@ -18,34 +18,19 @@ pub struct Texture {
 impl Texture {
     /// Reads a PNG (or any 8-bit image the `image` crate decodes) as RGB in [0, 1].
     pub fn load(path: &std::path::Path) -> Result<Texture, String> {
-        let img = image::open(path)
-            .map_err(|e| format!("cannot read texture {}: {e}", path.display()))?
-            .to_rgb8();
+        let img = image::open(path).map_err(|e| format!("cannot read texture {}: {e}", path.display()))?.to_rgb8();
         let (w, h) = img.dimensions();
         Ok(Texture {
             width: w as usize,
             height: h as usize,
-            rgb: img
-                .into_raw()
-                .into_iter()
-                .map(|v| v as f32 / 255.0)
-                .collect(),
+            rgb: img.into_raw().into_iter().map(|v| v as f32 / 255.0).collect(),
         })
     }
 
     /// The optimizable region as PAV-Camou marks it: 1 where a texel is pure white (every
     /// channel exactly 1.0, i.e. 255), else 0.
     pub fn white_mask(&self) -> Vec<f32> {
-        self.rgb
-            .chunks(3)
-            .map(|c| {
-                if c.iter().all(|v| *v == 1.0) {
-                    1.0
-                } else {
-                    0.0
-                }
-            })
-            .collect()
+        self.rgb.chunks(3).map(|c| if c.iter().all(|v| *v == 1.0) { 1.0 } else { 0.0 }).collect()
     }
 }
 
@@ -67,22 +52,11 @@ impl Gather {
         let (mut pixels, mut taps) = (Vec::new(), Vec::new());
         for (p, [u, v]) in samples {
             // Non-finite UVs (degenerate faces) fall back to the texture's first texel, never NaN.
-            let u = if u.is_finite() {
-                u.clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let v = if v.is_finite() {
-                v.clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
+            let u = if u.is_finite() { u.clamp(0.0, 1.0) } else { 0.0 };
+            let v = if v.is_finite() { v.clamp(0.0, 1.0) } else { 0.0 };
             let x = u * (w - 1) as f32;
             let y = (1.0 - v) * (h - 1) as f32;
-            let (x0, y0) = (
-                (x.floor() as usize).min(w - 1),
-                (y.floor() as usize).min(h - 1),
-            );
+            let (x0, y0) = ((x.floor() as usize).min(w - 1), (y.floor() as usize).min(h - 1));
             let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
             let (fx, fy) = (x - x0 as f32, y - y0 as f32);
             let t = |xx: usize, yy: usize| (yy * w + xx) as u32;
@@ -94,11 +68,7 @@ impl Gather {
             ]);
             pixels.push(p);
         }
-        Gather {
-            tex_size: (w, h),
-            pixels,
-            taps,
-        }
+        Gather { tex_size: (w, h), pixels, taps }
     }
 
     /// `out[pixel] = Σ w·tex[texel]` for `c`-channel interleaved data; pixels not covered are untouched.
@@ -132,9 +102,7 @@ mod tests {
     use super::*;
 
     fn lcg(seed: &mut u64) -> f32 {
-        *seed = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
+        *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         (*seed >> 40) as f32 / (1u64 << 24) as f32
     }
 
@@ -142,13 +110,7 @@ mod tests {
     fn corners_hit_texel_centres_and_edges_clamp() {
         let tex: Vec<f32> = (0..6).map(|i| i as f32).collect(); // 3x2, one channel
         let g = Gather::new(
-            [
-                (0, [0.0, 1.0]),
-                (1, [1.0, 0.0]),
-                (2, [0.5, 0.5]),
-                (3, [2.0, -1.0]),
-                (4, [f32::NAN, 0.5]),
-            ],
+            [(0, [0.0, 1.0]), (1, [1.0, 0.0]), (2, [0.5, 0.5]), (3, [2.0, -1.0]), (4, [f32::NAN, 0.5])],
             3,
             2,
         );
@@ -162,9 +124,7 @@ mod tests {
     fn adjoint_is_exact_and_matches_finite_differences() {
         let (w, h, c) = (7, 5, 3);
         let mut s = 42;
-        let samples: Vec<(u32, [f32; 2])> = (0..40)
-            .map(|p| (p, [lcg(&mut s) * 1.2 - 0.1, lcg(&mut s)]))
-            .collect();
+        let samples: Vec<(u32, [f32; 2])> = (0..40).map(|p| (p, [lcg(&mut s) * 1.2 - 0.1, lcg(&mut s)])).collect();
         let g = Gather::new(samples, w, h);
         let x: Vec<f32> = (0..w * h * c).map(|_| lcg(&mut s)).collect();
         let y: Vec<f32> = (0..40 * c).map(|_| lcg(&mut s) - 0.5).collect();
@@ -173,40 +133,22 @@ mod tests {
         let mut aty = vec![0.0; w * h * c];
         g.adjoint(&y, c, &mut aty);
         // <Ax, y> = <x, Aᵀy>
-        let lhs: f64 = ax
-            .iter()
-            .zip(&y)
-            .map(|(a, b)| (*a as f64) * (*b as f64))
-            .sum();
-        let rhs: f64 = x
-            .iter()
-            .zip(&aty)
-            .map(|(a, b)| (*a as f64) * (*b as f64))
-            .sum();
-        assert!(
-            (lhs - rhs).abs() < 1e-5 * lhs.abs().max(1.0),
-            "{lhs} vs {rhs}"
-        );
+        let lhs: f64 = ax.iter().zip(&y).map(|(a, b)| (*a as f64) * (*b as f64)).sum();
+        let rhs: f64 = x.iter().zip(&aty).map(|(a, b)| (*a as f64) * (*b as f64)).sum();
+        assert!((lhs - rhs).abs() < 1e-5 * lhs.abs().max(1.0), "{lhs} vs {rhs}");
         // d/dx_i of L = <Ax, y> by central differences equals (Aᵀy)_i.
         for i in [0, 17, 50, w * h * c - 1] {
             let eps = 1e-2;
             let loss = |xx: &Vec<f32>| {
                 let mut o = vec![0.0; 40 * c];
                 g.apply(xx, c, &mut o);
-                o.iter()
-                    .zip(&y)
-                    .map(|(a, b)| (*a as f64) * (*b as f64))
-                    .sum::<f64>()
+                o.iter().zip(&y).map(|(a, b)| (*a as f64) * (*b as f64)).sum::<f64>()
             };
             let (mut xp, mut xm) = (x.clone(), x.clone());
             xp[i] += eps;
             xm[i] -= eps;
             let fd = (loss(&xp) - loss(&xm)) / (2.0 * eps as f64);
-            assert!(
-                (fd - aty[i] as f64).abs() < 1e-4,
-                "texel {i}: fd {fd} vs adjoint {}",
-                aty[i]
-            );
+            assert!((fd - aty[i] as f64).abs() < 1e-4, "texel {i}: fd {fd} vs adjoint {}", aty[i]);
         }
     }
 }

@@ -64,21 +64,11 @@ pub fn latency(table: &mut Turntable, link: &str, n: usize) -> Result<Latency> {
 
 /// Captures one simulated revolution and compares every sidecar angle with the simulator's truth.
 pub fn angle_sync(time_scale: f64, fps: f64, dir: &Path) -> Result<AngleSync> {
-    let sim = SimTurntable::spawn(SimOptions {
-        time_scale,
-        ..SimOptions::default()
-    })?;
-    let mut table = Turntable::open(
-        &sim.path().to_string_lossy(),
-        115_200,
-        Duration::from_millis(500),
-    )?;
+    let sim = SimTurntable::spawn(SimOptions { time_scale, ..SimOptions::default() })?;
+    let mut table = Turntable::open(&sim.path().to_string_lossy(), 115_200, Duration::from_millis(500))?;
     let mut cam = SimCamera::new(sim.truth(), 160, 120, fps);
     let video = dir.join(format!("sync_x{time_scale}.mp4"));
-    let opts = CaptureOptions {
-        fourcc: ['m', 'p', '4', 'v'],
-        ..CaptureOptions::new(video.clone())
-    };
+    let opts = CaptureOptions { fourcc: ['m', 'p', '4', 'v'], ..CaptureOptions::new(video.clone()) };
     capture(&mut table, &mut cam, &opts, &AtomicBool::new(false))?;
     let rows = crate::sidecar::read(&crate::sidecar::sidecar_path(&video))?;
     let mut err: Vec<f64> = rows

@@ -77,10 +77,7 @@ impl LiveCapture {
         }
         let name = format!("V4L2 camera {}", device.display());
         let mut cap = videoio::VideoCapture::from_file(device.as_os_str(), videoio::CAP_V4L2)
-            .map_err(|e| CameraError::Open {
-                source_name: name.clone(),
-                why: e.to_string(),
-            })?;
+            .map_err(|e| CameraError::Open { source_name: name.clone(), why: e.to_string() })?;
         for (prop, v) in [
             (videoio::CAP_PROP_FRAME_WIDTH, width as f64),
             (videoio::CAP_PROP_FRAME_HEIGHT, height as f64),
@@ -97,39 +94,19 @@ impl LiveCapture {
             "videotestsrc is-live=true pattern=ball ! video/x-raw,width={width},height={height},framerate={fps}/1 ! videoconvert ! video/x-raw,format=BGR ! appsink drop=false max-buffers=4"
         );
         let name = "GStreamer videotestsrc".to_string();
-        let cap =
-            videoio::VideoCapture::from_file(&pipeline, videoio::CAP_GSTREAMER).map_err(|e| {
-                CameraError::Open {
-                    source_name: name.clone(),
-                    why: e.to_string(),
-                }
-            })?;
+        let cap = videoio::VideoCapture::from_file(&pipeline, videoio::CAP_GSTREAMER)
+            .map_err(|e| CameraError::Open { source_name: name.clone(), why: e.to_string() })?;
         Self::wrap(cap, name)
     }
 
     fn wrap(cap: videoio::VideoCapture, name: String) -> Result<Self, CameraError> {
         if !cap.is_opened().unwrap_or(false) {
-            return Err(CameraError::Open {
-                source_name: name,
-                why: "OpenCV could not start the stream".into(),
-            });
+            return Err(CameraError::Open { source_name: name, why: "OpenCV could not start the stream".into() });
         }
         let g = |p| cap.get(p).unwrap_or(0.0);
-        let size = (
-            g(videoio::CAP_PROP_FRAME_WIDTH) as usize,
-            g(videoio::CAP_PROP_FRAME_HEIGHT) as usize,
-        );
-        let fps = Some(g(videoio::CAP_PROP_FPS))
-            .filter(|f| f.is_finite() && *f > 0.0)
-            .unwrap_or(30.0);
-        Ok(LiveCapture {
-            cap,
-            name,
-            size,
-            fps,
-            mat: Mat::default(),
-            index: 0,
-        })
+        let size = (g(videoio::CAP_PROP_FRAME_WIDTH) as usize, g(videoio::CAP_PROP_FRAME_HEIGHT) as usize);
+        let fps = Some(g(videoio::CAP_PROP_FPS)).filter(|f| f.is_finite() && *f > 0.0).unwrap_or(30.0);
+        Ok(LiveCapture { cap, name, size, fps, mat: Mat::default(), index: 0 })
     }
 }
 
@@ -144,15 +121,8 @@ impl FrameSource for LiveCapture {
         self.fps
     }
     fn grab(&mut self) -> Result<Option<(Frame, Instant)>, CameraError> {
-        let err = |why: String| CameraError::Read {
-            source_name: self.name.clone(),
-            frame: self.index,
-            why,
-        };
-        let ok = self
-            .cap
-            .read(&mut self.mat)
-            .map_err(|e| err(e.to_string()))?;
+        let err = |why: String| CameraError::Read { source_name: self.name.clone(), frame: self.index, why };
+        let ok = self.cap.read(&mut self.mat).map_err(|e| err(e.to_string()))?;
         let at = Instant::now();
         if !ok || self.mat.empty() {
             return Err(err("the camera stopped delivering frames".into()));
@@ -174,17 +144,10 @@ pub struct FileSource {
 impl FileSource {
     /// Opens `path`.
     pub fn open(path: &Path) -> Result<Self, CameraError> {
-        let reader = VideoReader::open(path).map_err(|e| CameraError::Open {
-            source_name: path.display().to_string(),
-            why: e.to_string(),
-        })?;
+        let reader = VideoReader::open(path)
+            .map_err(|e| CameraError::Open { source_name: path.display().to_string(), why: e.to_string() })?;
         let period = Duration::from_secs_f64(1.0 / reader.info().fps);
-        Ok(FileSource {
-            reader,
-            path: path.into(),
-            due: Instant::now(),
-            period,
-        })
+        Ok(FileSource { reader, path: path.into(), due: Instant::now(), period })
     }
 }
 
@@ -203,11 +166,7 @@ impl FrameSource for FileSource {
         match self.reader.read() {
             Ok(Some((_, f))) => Ok(Some((f, at))),
             Ok(None) => Ok(None),
-            Err(e) => Err(CameraError::Read {
-                source_name: self.describe(),
-                frame: 0,
-                why: e.to_string(),
-            }),
+            Err(e) => Err(CameraError::Read { source_name: self.describe(), frame: 0, why: e.to_string() }),
         }
     }
 }
@@ -241,36 +200,13 @@ impl SimCamera {
 
     fn render(&self, angle: f64) -> opencv::Result<Mat> {
         let (w, h) = self.size;
-        let mut m = frame_to_mat(&Frame {
-            width: w,
-            height: h,
-            bgr: vec![40; w * h * 3],
-        })?;
+        let mut m = frame_to_mat(&Frame { width: w, height: h, bgr: vec![40; w * h * 3] })?;
         let c = Point::new(w as i32 / 2, h as i32 / 2);
         let r = (w.min(h) as f64 * 0.4) as i32;
-        imgproc::circle(
-            &mut m,
-            c,
-            r,
-            Scalar::new(90.0, 90.0, 90.0, 0.0),
-            -1,
-            imgproc::LINE_AA,
-            0,
-        )?;
+        imgproc::circle(&mut m, c, r, Scalar::new(90.0, 90.0, 90.0, 0.0), -1, imgproc::LINE_AA, 0)?;
         let t = angle.to_radians();
-        let tip = Point::new(
-            c.x + (r as f64 * t.sin()) as i32,
-            c.y - (r as f64 * t.cos()) as i32,
-        );
-        imgproc::line(
-            &mut m,
-            c,
-            tip,
-            Scalar::new(0.0, 200.0, 255.0, 0.0),
-            4,
-            imgproc::LINE_AA,
-            0,
-        )?;
+        let tip = Point::new(c.x + (r as f64 * t.sin()) as i32, c.y - (r as f64 * t.cos()) as i32);
+        imgproc::line(&mut m, c, tip, Scalar::new(0.0, 200.0, 255.0, 0.0), 4, imgproc::LINE_AA, 0)?;
         let label = format!("frame {} angle {angle:.2}", self.index);
         imgproc::put_text(
             &mut m,
@@ -307,11 +243,7 @@ impl FrameSource for SimCamera {
         }
         let at = pace(&mut self.due, Duration::from_secs_f64(1.0 / self.fps));
         let angle = self.truth.angle_at(at);
-        let err = |why: String| CameraError::Read {
-            source_name: "simulated camera".into(),
-            frame: self.index,
-            why,
-        };
+        let err = |why: String| CameraError::Read { source_name: "simulated camera".into(), frame: self.index, why };
         let m = self.render(angle).map_err(|e| err(e.to_string()))?;
         let f = mat_to_frame(&m).map_err(err)?;
         self.true_angles.push(angle);

@@ -136,16 +136,8 @@ impl AngleTrack {
         let [n, sh, sd, shh, shd] = self.sums;
         let var = n * shh - sh * sh;
         // Until the reports span some time, assume the device clock runs at host speed.
-        let rate = if n >= 2.0 && var > 1e-6 * n * n {
-            (n * shd - sh * sd) / var
-        } else {
-            1.0
-        };
-        let c = self
-            .samples
-            .iter()
-            .map(|s| s.1 - rate * s.0)
-            .fold(f64::NEG_INFINITY, f64::max);
+        let rate = if n >= 2.0 && var > 1e-6 * n * n { (n * shd - sh * sd) / var } else { 1.0 };
+        let c = self.samples.iter().map(|s| s.1 - rate * s.0).fold(f64::NEG_INFINITY, f64::max);
         (rate, c)
     }
 
@@ -198,13 +190,9 @@ pub fn capture(
     }
     if opts.home {
         let seq = table.command(Command::Home).map_err(|e| setup(&e))?;
-        table
-            .wait_done(seq, opts.no_progress)
-            .map_err(|e| setup(&e))?;
+        table.wait_done(seq, opts.no_progress).map_err(|e| setup(&e))?;
     }
-    table
-        .command_retry(Command::Report(opts.report_ms.max(1)), 3)
-        .map_err(|e| setup(&e))?;
+    table.command_retry(Command::Report(opts.report_ms.max(1)), 3).map_err(|e| setup(&e))?;
     let rev = table.usteps_per_rev() as f64;
     let (w, h) = cam.size();
     if let Some(dir) = opts.video.parent().filter(|d| !d.as_os_str().is_empty()) {
@@ -232,18 +220,9 @@ pub fn capture(
     let mut side = sidecar::Writer::create(&side_path).map_err(|e| setup(&e))?;
 
     let period_ms = (opts.period_s * 1000.0).round() as i64;
-    let seq = table
-        .command(Command::Spin {
-            period_s: Milli(period_ms),
-            turns: opts.turns,
-        })
-        .map_err(|e| setup(&e))?;
+    let seq = table.command(Command::Spin { period_s: Milli(period_ms), turns: opts.turns }).map_err(|e| setup(&e))?;
     let expected = (cam.fps() * opts.period_s.abs() * opts.turns as f64).round() as u64;
-    let bar = if opts.progress {
-        ProgressBar::new(expected)
-    } else {
-        ProgressBar::hidden()
-    };
+    let bar = if opts.progress { ProgressBar::new(expected) } else { ProgressBar::hidden() };
     bar.set_style(
         ProgressStyle::with_template("recording [{bar:40}] {pos}/{len} frames {msg}")
             .expect("static template")
@@ -256,15 +235,10 @@ pub fn capture(
     let (mut frames, mut interpolated) = (0usize, 0usize);
     let mut last_event = Instant::now();
     let mut final_pos = None;
-    let write_row =
-        |side: &mut sidecar::Writer, idx: usize, at: Instant, pos: f64, first: Instant| {
-            let angle = (pos * 360.0 / rev).rem_euclid(360.0);
-            side.push(AngleSample {
-                frame: idx,
-                timestamp_s: at.duration_since(first).as_secs_f64(),
-                angle_deg: angle,
-            })
-        };
+    let write_row = |side: &mut sidecar::Writer, idx: usize, at: Instant, pos: f64, first: Instant| {
+        let angle = (pos * 360.0 / rev).rem_euclid(360.0);
+        side.push(AngleSample { frame: idx, timestamp_s: at.duration_since(first).as_secs_f64(), angle_deg: angle })
+    };
     let cause: Option<String> = 'rec: loop {
         if stop.load(Ordering::Relaxed) {
             let _ = table.command(Command::Stop);
@@ -303,9 +277,7 @@ pub fn capture(
                     track.finished = true;
                     final_pos = Some(pos);
                 }
-                Ok(Some(Event::Alarm(a))) => {
-                    break 'rec Some(format!("turntable alarm: {}", a.text()))
-                }
+                Ok(Some(Event::Alarm(a))) => break 'rec Some(format!("turntable alarm: {}", a.text())),
                 Ok(Some(_)) => {}
                 Ok(None) => break,
                 Err(e) => break 'rec Some(e.to_string()),
@@ -325,10 +297,7 @@ pub fn capture(
             break None;
         }
         if last_event.elapsed() > opts.no_progress {
-            break Some(format!(
-                "turntable sent no angle report for {:?}",
-                opts.no_progress
-            ));
+            break Some(format!("turntable sent no angle report for {:?}", opts.no_progress));
         }
     };
     bar.finish_and_clear();
@@ -358,9 +327,7 @@ pub fn capture(
             frames,
             angle: last_angle
                 .or_else(|| track.samples.last().map(|s| s.2 as f64))
-                .map_or("an unknown angle".into(), |p| {
-                    format!("{:.1}°", (p * 360.0 / rev).rem_euclid(360.0))
-                }),
+                .map_or("an unknown angle".into(), |p| format!("{:.1}°", (p * 360.0 / rev).rem_euclid(360.0))),
             video: opts.video.display().to_string(),
             sidecar: side_path.display().to_string(),
         }),
@@ -380,11 +347,7 @@ mod tests {
             let host = k as f64 * 0.01;
             let lat = 0.0002 + ((k * 7919) % 11) as f64 * 0.0002;
             let dev_ms = ((host * 3.0 + 5.0) * 1000.0).round() as u64;
-            tr.push(
-                dev_ms,
-                k as i64 * 10,
-                t0 + Duration::from_secs_f64(host + lat),
-            );
+            tr.push(dev_ms, k as i64 * 10, t0 + Duration::from_secs_f64(host + lat));
         }
         let (rate, c) = tr.clock();
         assert!((rate - 3.0).abs() < 0.01, "rate {rate}");

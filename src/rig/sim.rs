@@ -41,12 +41,7 @@ pub struct SimOptions {
 
 impl Default for SimOptions {
     fn default() -> Self {
-        SimOptions {
-            config: Config::default(),
-            time_scale: 1.0,
-            faults: Faults::default(),
-            seed: 1,
-        }
+        SimOptions { config: Config::default(), time_scale: 1.0, faults: Faults::default(), seed: 1 }
     }
 }
 
@@ -63,8 +58,7 @@ pub struct Truth {
 impl Truth {
     /// True position in microsteps from home at wall-clock instant `at`.
     pub fn position_at(&self, at: Instant) -> i64 {
-        let sim_us =
-            (at.saturating_duration_since(self.start).as_secs_f64() * self.time_scale * 1e6) as u64;
+        let sim_us = (at.saturating_duration_since(self.start).as_secs_f64() * self.time_scale * 1e6) as u64;
         let (m, origin) = *self.motion.lock().expect("truth lock");
         m.position_at(sim_us) - origin
     }
@@ -108,14 +102,8 @@ impl SimTurntable {
     /// Starts a simulator; the host opens [`SimTurntable::path`] like a real serial device.
     pub fn spawn(opts: SimOptions) -> std::io::Result<Self> {
         let (mut master, slave) = TTYPort::pair().map_err(std::io::Error::other)?;
-        let path = PathBuf::from(
-            slave
-                .name()
-                .ok_or_else(|| std::io::Error::other("pty has no name"))?,
-        );
-        master
-            .set_timeout(Duration::from_millis(2))
-            .map_err(std::io::Error::other)?;
+        let path = PathBuf::from(slave.name().ok_or_else(|| std::io::Error::other("pty has no name"))?);
+        master.set_timeout(Duration::from_millis(2)).map_err(std::io::Error::other)?;
         let stop = Arc::new(AtomicBool::new(false));
         let truth = Truth {
             start: Instant::now(),
@@ -124,19 +112,12 @@ impl SimTurntable {
             motion: Arc::new(Mutex::new((Motion::Idle(0), 0))),
         };
         let (stop2, truth2) = (stop.clone(), truth.clone());
-        let thread = std::thread::Builder::new()
-            .name("sim-turntable".into())
-            .spawn(move || {
-                // Keep the slave end open so the master never reads EIO between host sessions.
-                let _slave = slave;
-                serve(master, opts, stop2, truth2);
-            })?;
-        Ok(SimTurntable {
-            path,
-            stop,
-            thread: Some(thread),
-            truth,
-        })
+        let thread = std::thread::Builder::new().name("sim-turntable".into()).spawn(move || {
+            // Keep the slave end open so the master never reads EIO between host sessions.
+            let _slave = slave;
+            serve(master, opts, stop2, truth2);
+        })?;
+        Ok(SimTurntable { path, stop, thread: Some(thread), truth })
     }
 
     /// The pty path to open, e.g. `/dev/pts/7`.
@@ -196,9 +177,7 @@ fn serve(mut port: TTYPort, opts: SimOptions, stop: Arc<AtomicBool>, truth: Trut
         dev.poll(t, &mut Out { lines: &mut lines });
         let moving = matches!(
             dev.state(),
-            turntable_proto::State::Moving
-                | turntable_proto::State::Spinning
-                | turntable_proto::State::Homing
+            turntable_proto::State::Moving | turntable_proto::State::Spinning | turntable_proto::State::Homing
         );
         if moving && motion_started.is_none() {
             motion_started = Some(t);

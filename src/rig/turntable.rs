@@ -142,13 +142,7 @@ impl Reader {
                             partial.extend_from_slice(&buf[..n]);
                             while let Some(i) = partial.iter().position(|&b| b == b'\n') {
                                 let line: Vec<u8> = partial.drain(..=i).collect();
-                                if tx
-                                    .send(Ok((
-                                        String::from_utf8_lossy(&line).trim().to_string(),
-                                        at,
-                                    )))
-                                    .is_err()
-                                {
+                                if tx.send(Ok((String::from_utf8_lossy(&line).trim().to_string(), at))).is_err() {
                                     return;
                                 }
                             }
@@ -160,9 +154,7 @@ impl Reader {
                         Err(e)
                             if matches!(
                                 e.kind(),
-                                ErrorKind::TimedOut
-                                    | ErrorKind::WouldBlock
-                                    | ErrorKind::Interrupted
+                                ErrorKind::TimedOut | ErrorKind::WouldBlock | ErrorKind::Interrupted
                             ) => {}
                         Err(e) => {
                             let _ = tx.send(Err(format!("{path}: {e}")));
@@ -172,11 +164,7 @@ impl Reader {
                 }
             })
             .expect("spawning the serial reader thread");
-        Reader {
-            rx,
-            stop,
-            thread: Some(thread),
-        }
+        Reader { rx, stop, thread: Some(thread) }
     }
 }
 
@@ -193,20 +181,14 @@ fn open_port(path: &str, baud: u32) -> Result<Box<dyn SerialPort>> {
     serialport::new(path, baud)
         .timeout(Duration::from_millis(20))
         .open()
-        .map_err(|e| TurntableError::Open {
-            path: path.into(),
-            msg: e.to_string(),
-        })
+        .map_err(|e| TurntableError::Open { path: path.into(), msg: e.to_string() })
 }
 
 impl Turntable {
     /// Opens `path` and checks that a pav turntable answers; `timeout` bounds each command.
     pub fn open(path: &str, baud: u32, timeout: Duration) -> Result<Self> {
         let port = open_port(path, baud)?;
-        let reader = port.try_clone().map_err(|e| TurntableError::Open {
-            path: path.into(),
-            msg: e.to_string(),
-        })?;
+        let reader = port.try_clone().map_err(|e| TurntableError::Open { path: path.into(), msg: e.to_string() })?;
         let mut t = Turntable {
             lines: Some(Reader::spawn(reader, path.into())),
             port: Some(port),
@@ -240,17 +222,13 @@ impl Turntable {
 
     fn port(&mut self) -> Result<&mut Box<dyn SerialPort>> {
         let path = &self.path;
-        self.port
-            .as_mut()
-            .ok_or_else(|| TurntableError::Disconnected(format!("{path} is not open")))
+        self.port.as_mut().ok_or_else(|| TurntableError::Disconnected(format!("{path} is not open")))
     }
 
     fn write(&mut self, bytes: &[u8]) -> Result<()> {
         let path = self.path.clone();
         let p = self.port()?;
-        p.write_all(bytes)
-            .and_then(|_| p.flush())
-            .map_err(|e| TurntableError::Disconnected(format!("{path}: {e}")))
+        p.write_all(bytes).and_then(|_| p.flush()).map_err(|e| TurntableError::Disconnected(format!("{path}: {e}")))
     }
 
     /// Drops every byte and line received but not yet read.
@@ -272,37 +250,24 @@ impl Turntable {
                 Err(e) => return Err(e),
             }
         }
-        Err(TurntableError::NoDevice {
-            path: self.path.clone(),
-            after: self.timeout * 3,
-        })
+        Err(TurntableError::NoDevice { path: self.path.clone(), after: self.timeout * 3 })
     }
 
     /// Next line with its arrival time, or `None` when `deadline` passes first (a past deadline
     /// still returns a line that is already waiting, so this doubles as a non-blocking poll).
     fn read_line(&mut self, deadline: Instant) -> Result<Option<(String, Instant)>> {
         let path = self.path.clone();
-        let r = self
-            .lines
-            .as_ref()
-            .ok_or_else(|| TurntableError::Disconnected(format!("{path} is not open")))?;
+        let r = self.lines.as_ref().ok_or_else(|| TurntableError::Disconnected(format!("{path} is not open")))?;
         let got = match r.rx.try_recv() {
             Ok(x) => Some(x),
             Err(TryRecvError::Disconnected) => {
-                return Err(TurntableError::Disconnected(format!(
-                    "{path}: reader stopped"
-                )))
+                return Err(TurntableError::Disconnected(format!("{path}: reader stopped")))
             }
-            Err(TryRecvError::Empty) => match r
-                .rx
-                .recv_timeout(deadline.saturating_duration_since(Instant::now()))
-            {
+            Err(TryRecvError::Empty) => match r.rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
                 Ok(x) => Some(x),
                 Err(RecvTimeoutError::Timeout) => None,
                 Err(RecvTimeoutError::Disconnected) => {
-                    return Err(TurntableError::Disconnected(format!(
-                        "{path}: reader stopped"
-                    )))
+                    return Err(TurntableError::Disconnected(format!("{path}: reader stopped")))
                 }
             },
         };
@@ -325,9 +290,7 @@ impl Turntable {
             Reply::Angle { t_ms, pos } => self.events.push_back(Event::Angle { t_ms, pos, rx }),
             Reply::Done { seq, pos } => self.events.push_back(Event::Done { seq, pos }),
             Reply::Alarm(a) => self.events.push_back(Event::Alarm(a)),
-            Reply::Banner {
-                fw, usteps_per_rev, ..
-            } => {
+            Reply::Banner { fw, usteps_per_rev, .. } => {
                 self.usteps_per_rev = usteps_per_rev;
                 self.firmware = fw.to_string();
             }
@@ -340,10 +303,7 @@ impl Turntable {
     fn request(&mut self, cmd: Command, timeout: Duration) -> Result<(u32, Option<Status>)> {
         self.seq = self.seq.wrapping_add(1) % 1_000_000_000;
         let seq = self.seq;
-        let frame = Frame {
-            seq: Some(seq),
-            cmd,
-        };
+        let frame = Frame { seq: Some(seq), cmd };
         let text = frame.encode(true);
         let mut line = text.as_str().as_bytes().to_vec();
         line.push(b'\n');
@@ -353,16 +313,8 @@ impl Turntable {
         while let Some((l, rx)) = self.read_line(deadline)? {
             match self.file(&l, rx) {
                 Some(Reply::Ok { seq: Some(s) }) if s == seq => return Ok((seq, status)),
-                Some(Reply::Error {
-                    code,
-                    seq: Some(s),
-                    msg,
-                }) if s == seq => {
-                    return Err(TurntableError::Refused {
-                        cmd: cmd.to_string(),
-                        code,
-                        msg: msg.to_string(),
-                    });
+                Some(Reply::Error { code, seq: Some(s), msg }) if s == seq => {
+                    return Err(TurntableError::Refused { cmd: cmd.to_string(), code, msg: msg.to_string() });
                 }
                 // A checksum failure cannot be tied to a sequence number if the N field was hit.
                 Some(Reply::Error {
@@ -371,32 +323,14 @@ impl Turntable {
                     ..
                 }) => {
                     self.resync()?;
-                    return Err(TurntableError::Timeout {
-                        cmd: cmd.to_string(),
-                        after: timeout,
-                    });
+                    return Err(TurntableError::Timeout { cmd: cmd.to_string(), after: timeout });
                 }
-                Some(Reply::Status {
-                    state,
-                    alarm,
-                    pos,
-                    t_ms,
-                }) => {
-                    status = Some(Status {
-                        state,
-                        alarm,
-                        pos,
-                        t_ms,
-                    })
-                }
+                Some(Reply::Status { state, alarm, pos, t_ms }) => status = Some(Status { state, alarm, pos, t_ms }),
                 _ => {}
             }
         }
         self.resync()?;
-        Err(TurntableError::Timeout {
-            cmd: cmd.to_string(),
-            after: timeout,
-        })
+        Err(TurntableError::Timeout { cmd: cmd.to_string(), after: timeout })
     }
 
     /// Drops everything buffered and confirms a fresh round trip, so late replies to a timed-out
@@ -405,15 +339,7 @@ impl Turntable {
         self.discard_input()?;
         self.seq = self.seq.wrapping_add(1) % 1_000_000_000;
         let seq = self.seq;
-        let line = format!(
-            "{}\n",
-            Frame {
-                seq: Some(seq),
-                cmd: Command::Ping
-            }
-            .encode(true)
-            .as_str()
-        );
+        let line = format!("{}\n", Frame { seq: Some(seq), cmd: Command::Ping }.encode(true).as_str());
         self.write(line.as_bytes())?;
         let deadline = Instant::now() + self.timeout;
         while let Some((l, rx)) = self.read_line(deadline)? {
@@ -435,10 +361,7 @@ impl Turntable {
     /// Sends a command that is safe to repeat (not a motion), retrying after timeouts.
     pub fn command_retry(&mut self, cmd: Command, attempts: usize) -> Result<u32> {
         assert!(
-            !matches!(
-                cmd,
-                Command::Home | Command::MoveTo(_) | Command::MoveBy(_) | Command::Spin { .. }
-            ),
+            !matches!(cmd, Command::Home | Command::MoveTo(_) | Command::MoveBy(_) | Command::Spin { .. }),
             "motions are not retried: a lost `ok` would start them twice"
         );
         let mut last = None;
@@ -458,10 +381,7 @@ impl Turntable {
             match self.request(Command::Status, self.timeout) {
                 Ok((_, Some(st))) => return Ok(st),
                 Ok((_, None)) => {
-                    last = Some(TurntableError::Timeout {
-                        cmd: "STATUS (report line)".into(),
-                        after: self.timeout,
-                    })
+                    last = Some(TurntableError::Timeout { cmd: "STATUS (report line)".into(), after: self.timeout })
                 }
                 Err(e @ TurntableError::Timeout { .. }) => last = Some(e),
                 Err(e) => return Err(e),
@@ -511,10 +431,8 @@ impl Turntable {
         self.port = None;
         for _ in 0..attempts.max(1) {
             match open_port(&self.path, self.baud).and_then(|p| {
-                let r = p.try_clone().map_err(|e| TurntableError::Open {
-                    path: self.path.clone(),
-                    msg: e.to_string(),
-                })?;
+                let r =
+                    p.try_clone().map_err(|e| TurntableError::Open { path: self.path.clone(), msg: e.to_string() })?;
                 Ok((p, r))
             }) {
                 Ok((p, r)) => {

@@ -22,13 +22,9 @@ pub fn shared_data() -> Option<PathBuf> {
 /// Panics with the fix when scripts/setup.sh has not installed ONNX Runtime and the models.
 pub fn require_setup() {
     let deps = repo().join(".deps");
-    for f in [
-        "onnxruntime/libonnxruntime.so",
-        "models/yolov3-tiny/yolov3-tiny.onnx",
-    ] {
+    for f in ["onnxruntime/libonnxruntime.so", "models/yolov3-tiny/yolov3-tiny.onnx"] {
         assert!(
-            deps.join(f).exists()
-                || std::env::var_os("ORT_DYLIB_PATH").is_some() && f.starts_with("onnx"),
+            deps.join(f).exists() || std::env::var_os("ORT_DYLIB_PATH").is_some() && f.starts_with("onnx"),
             ".deps/{f} is missing: run scripts/setup.sh before the tests"
         );
     }
@@ -44,28 +40,19 @@ pub fn real_data() -> Option<PathBuf> {
 
 /// A detector config from configs/detectors.
 pub fn detector_config(name: &str) -> PathBuf {
-    repo()
-        .join("configs/detectors")
-        .join(format!("{name}.toml"))
+    repo().join("configs/detectors").join(format!("{name}.toml"))
 }
 
 /// Reads `derived_test_labels.tsv` as (npz path, column → value).
-pub fn reference_labels(
-    shared: &Path,
-) -> Vec<(PathBuf, std::collections::HashMap<String, String>)> {
-    let text = std::fs::read_to_string(shared.join("fca/carla_dataset/derived_test_labels.tsv"))
-        .expect("labels tsv");
+pub fn reference_labels(shared: &Path) -> Vec<(PathBuf, std::collections::HashMap<String, String>)> {
+    let text = std::fs::read_to_string(shared.join("fca/carla_dataset/derived_test_labels.tsv")).expect("labels tsv");
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().expect("header").split('\t').collect();
     lines
         .filter(|l| !l.trim().is_empty())
         .map(|l| {
             let cols: Vec<&str> = l.split('\t').collect();
-            let map = header
-                .iter()
-                .zip(&cols)
-                .map(|(h, c)| (h.to_string(), c.to_string()))
-                .collect();
+            let map = header.iter().zip(&cols).map(|(h, c)| (h.to_string(), c.to_string())).collect();
             (shared.join("..").join(cols[0]), map)
         })
         .collect()

@@ -46,13 +46,7 @@ pub struct LineCodec<const N: usize> {
 
 impl<const N: usize> Default for LineCodec<N> {
     fn default() -> Self {
-        LineCodec {
-            buf: [0; N],
-            len: 0,
-            overflow: false,
-            garbage: false,
-            ready: false,
-        }
+        LineCodec { buf: [0; N], len: 0, overflow: false, garbage: false, ready: false }
     }
 }
 
@@ -108,9 +102,7 @@ impl<const N: usize> LineCodec<N> {
         if !self.ready {
             return "";
         }
-        core::str::from_utf8(&self.buf[..self.len])
-            .unwrap_or("")
-            .trim()
+        core::str::from_utf8(&self.buf[..self.len]).unwrap_or("").trim()
     }
 }
 

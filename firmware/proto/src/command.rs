@@ -72,9 +72,7 @@ impl ParseError {
     /// The sequence number the reply should echo.
     pub fn seq(&self) -> Option<u32> {
         match *self {
-            ParseError::Checksum { seq }
-            | ParseError::Unknown { seq }
-            | ParseError::BadArgument { seq } => seq,
+            ParseError::Checksum { seq } | ParseError::Unknown { seq } | ParseError::BadArgument { seq } => seq,
         }
     }
 }
@@ -112,10 +110,7 @@ impl Frame {
             _ => None,
         };
         if let Some(sum) = sum {
-            let ok = sum
-                .parse::<u8>()
-                .map(|v| v == checksum(body))
-                .unwrap_or(false);
+            let ok = sum.parse::<u8>().map(|v| v == checksum(body)).unwrap_or(false);
             if !ok {
                 return Err(ParseError::Checksum { seq });
             }
@@ -141,12 +136,8 @@ impl Frame {
             "UNLOCK" => Command::Unlock,
             "MOVE" => Command::MoveTo(milli(arg())?),
             "MOVEBY" => Command::MoveBy(milli(arg())?),
-            "SPEED" => {
-                Command::Speed(milli(arg()).and_then(|m| if m.0 > 0 { Ok(m) } else { Err(bad) })?)
-            }
-            "ACCEL" => {
-                Command::Accel(milli(arg()).and_then(|m| if m.0 > 0 { Ok(m) } else { Err(bad) })?)
-            }
+            "SPEED" => Command::Speed(milli(arg()).and_then(|m| if m.0 > 0 { Ok(m) } else { Err(bad) })?),
+            "ACCEL" => Command::Accel(milli(arg()).and_then(|m| if m.0 > 0 { Ok(m) } else { Err(bad) })?),
             "REPORT" => Command::Report(arg().and_then(parse_u32).ok_or(bad)?),
             "SPIN" => {
                 let period_s = milli(arg())?;
@@ -208,27 +199,12 @@ mod tests {
 
     #[test]
     fn parses_plain_sequenced_and_checksummed_lines() {
-        assert_eq!(
-            Frame::parse("move 90"),
-            Ok(Frame {
-                seq: None,
-                cmd: Command::MoveTo(Milli(90_000))
-            })
-        );
+        assert_eq!(Frame::parse("move 90"), Ok(Frame { seq: None, cmd: Command::MoveTo(Milli(90_000)) }));
         assert_eq!(
             Frame::parse("N7 SPIN 28 2"),
-            Ok(Frame {
-                seq: Some(7),
-                cmd: Command::Spin {
-                    period_s: Milli(28_000),
-                    turns: 2
-                }
-            })
+            Ok(Frame { seq: Some(7), cmd: Command::Spin { period_s: Milli(28_000), turns: 2 } })
         );
-        let f = Frame {
-            seq: Some(12),
-            cmd: Command::MoveBy(Milli(-45_500)),
-        };
+        let f = Frame { seq: Some(12), cmd: Command::MoveBy(Milli(-45_500)) };
         let line = f.encode(true);
         assert_eq!(Frame::parse(line.as_str()), Ok(f));
         assert!(line.as_str().starts_with("N12 MOVEBY -45.500*"));
@@ -236,34 +212,13 @@ mod tests {
 
     #[test]
     fn errors_keep_the_sequence_number() {
-        assert_eq!(
-            Frame::parse("N3 MOVE 90*1"),
-            Err(ParseError::Checksum { seq: Some(3) })
-        );
-        assert_eq!(
-            Frame::parse("N4 FLY"),
-            Err(ParseError::Unknown { seq: Some(4) })
-        );
-        assert_eq!(
-            Frame::parse("N5 MOVE"),
-            Err(ParseError::BadArgument { seq: Some(5) })
-        );
-        assert_eq!(
-            Frame::parse("MOVE 1 2"),
-            Err(ParseError::BadArgument { seq: None })
-        );
-        assert_eq!(
-            Frame::parse("SPIN 0"),
-            Err(ParseError::BadArgument { seq: None })
-        );
-        assert_eq!(
-            Frame::parse("SPEED -3"),
-            Err(ParseError::BadArgument { seq: None })
-        );
+        assert_eq!(Frame::parse("N3 MOVE 90*1"), Err(ParseError::Checksum { seq: Some(3) }));
+        assert_eq!(Frame::parse("N4 FLY"), Err(ParseError::Unknown { seq: Some(4) }));
+        assert_eq!(Frame::parse("N5 MOVE"), Err(ParseError::BadArgument { seq: Some(5) }));
+        assert_eq!(Frame::parse("MOVE 1 2"), Err(ParseError::BadArgument { seq: None }));
+        assert_eq!(Frame::parse("SPIN 0"), Err(ParseError::BadArgument { seq: None }));
+        assert_eq!(Frame::parse("SPEED -3"), Err(ParseError::BadArgument { seq: None }));
         assert_eq!(Frame::parse(""), Err(ParseError::Unknown { seq: None }));
-        assert_eq!(
-            Frame::parse("SUPERCALIFRAGILISTIC"),
-            Err(ParseError::Unknown { seq: None })
-        );
+        assert_eq!(Frame::parse("SUPERCALIFRAGILISTIC"), Err(ParseError::Unknown { seq: None }));
     }
 }

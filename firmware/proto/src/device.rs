@@ -38,14 +38,7 @@ pub struct Config {
 impl Default for Config {
     fn default() -> Self {
         // 200-step motor, 16 microsteps, direct drive; one turn per second at most.
-        Config {
-            fw_version: "0.1.0",
-            usteps_per_rev: 3200,
-            max_speed: 3200,
-            accel: 6400,
-            report_ms: 50,
-            busy_ms: 1000,
-        }
+        Config { fw_version: "0.1.0", usteps_per_rev: 3200, max_speed: 3200, accel: 6400, report_ms: 50, busy_ms: 1000 }
     }
 }
 
@@ -99,11 +92,7 @@ impl Device {
         self.motion.halt(now_us);
         self.active = None;
         self.codec = LineCodec::default();
-        self.state = if self.alarm.is_some() {
-            State::Alarm
-        } else {
-            State::Idle
-        };
+        self.state = if self.alarm.is_some() { State::Alarm } else { State::Idle };
         send(out, self.banner());
     }
 
@@ -134,11 +123,7 @@ impl Device {
     }
 
     fn banner(&self) -> Reply<'static> {
-        Reply::Banner {
-            fw: self.cfg.fw_version,
-            usteps_per_rev: self.cfg.usteps_per_rev,
-            proto: PROTOCOL_VERSION,
-        }
+        Reply::Banner { fw: self.cfg.fw_version, usteps_per_rev: self.cfg.usteps_per_rev, proto: PROTOCOL_VERSION }
     }
 
     fn t_ms(&self, now_us: u64) -> u64 {
@@ -146,12 +131,7 @@ impl Device {
     }
 
     fn status(&self, now_us: u64) -> Reply<'static> {
-        Reply::Status {
-            state: self.state,
-            alarm: self.alarm,
-            pos: self.position(now_us),
-            t_ms: self.t_ms(now_us),
-        }
+        Reply::Status { state: self.state, alarm: self.alarm, pos: self.position(now_us), t_ms: self.t_ms(now_us) }
     }
 
     /// Raises an alarm detected by the hardware layer (stall, homing failure): halts and locks.
@@ -170,22 +150,12 @@ impl Device {
             Some(Event::Realtime(Realtime::EStop)) => self.fault(Alarm::EStop, now_us, out),
             Some(Event::Realtime(Realtime::Status)) => send(out, self.status(now_us)),
             Some(Event::Realtime(Realtime::Reset)) => self.reset(now_us, out),
-            Some(Event::Overflow) => send(
-                out,
-                Reply::Error {
-                    code: ErrorCode::LineTooLong,
-                    seq: None,
-                    msg: "line too long",
-                },
-            ),
-            Some(Event::Garbage) => send(
-                out,
-                Reply::Error {
-                    code: ErrorCode::Garbage,
-                    seq: None,
-                    msg: "non-printable bytes",
-                },
-            ),
+            Some(Event::Overflow) => {
+                send(out, Reply::Error { code: ErrorCode::LineTooLong, seq: None, msg: "line too long" })
+            }
+            Some(Event::Garbage) => {
+                send(out, Reply::Error { code: ErrorCode::Garbage, seq: None, msg: "non-printable bytes" })
+            }
             Some(Event::Line) => {
                 if self.codec.line().is_empty() {
                     return;
@@ -196,18 +166,9 @@ impl Device {
                         let (code, msg) = match e {
                             ParseError::Checksum { .. } => (ErrorCode::Checksum, "bad checksum"),
                             ParseError::Unknown { .. } => (ErrorCode::Unknown, "unknown command"),
-                            ParseError::BadArgument { .. } => {
-                                (ErrorCode::BadArgument, "bad argument")
-                            }
+                            ParseError::BadArgument { .. } => (ErrorCode::BadArgument, "bad argument"),
                         };
-                        send(
-                            out,
-                            Reply::Error {
-                                code,
-                                seq: e.seq(),
-                                msg,
-                            },
-                        );
+                        send(out, Reply::Error { code, seq: e.seq(), msg });
                     }
                 }
             }
@@ -218,11 +179,7 @@ impl Device {
         // Round half away from zero: deg·rev/360, with deg in thousandths.
         let n = deg.0 as i128 * self.cfg.usteps_per_rev as i128;
         let d = 360_000i128;
-        (if n >= 0 {
-            (n + d / 2) / d
-        } else {
-            (n - d / 2) / d
-        }) as i64
+        (if n >= 0 { (n + d / 2) / d } else { (n - d / 2) / d }) as i64
     }
 
     fn execute(&mut self, f: Frame, now: u64, out: &mut impl Sink) {
@@ -267,25 +224,11 @@ impl Device {
             }
             Command::Home | Command::MoveTo(_) | Command::MoveBy(_) | Command::Spin { .. } => {
                 if let Some(a) = self.alarm {
-                    send(
-                        out,
-                        Reply::Error {
-                            code: ErrorCode::Locked,
-                            seq,
-                            msg: a.text(),
-                        },
-                    );
+                    send(out, Reply::Error { code: ErrorCode::Locked, seq, msg: a.text() });
                     return;
                 }
                 if self.active.is_some() {
-                    send(
-                        out,
-                        Reply::Error {
-                            code: ErrorCode::Busy,
-                            seq,
-                            msg: "moving: wait for done or STOP",
-                        },
-                    );
+                    send(out, Reply::Error { code: ErrorCode::Busy, seq, msg: "moving: wait for done or STOP" });
                     return;
                 }
                 let here = self.physical_position(now);
@@ -295,40 +238,18 @@ impl Device {
                         // Nearest whole turn of the current count; origin moves there when done.
                         let rel = here - self.origin;
                         let target = self.origin + (rel + rel.signum() * rev / 2) / rev * rev;
-                        (
-                            Profile::new(here, target, self.cfg.max_speed, self.cfg.accel, now),
-                            State::Homing,
-                        )
+                        (Profile::new(here, target, self.cfg.max_speed, self.cfg.accel, now), State::Homing)
                     }
                     Command::MoveTo(d) => (
-                        Profile::new(
-                            here,
-                            self.origin + self.usteps(d),
-                            self.cfg.max_speed,
-                            self.cfg.accel,
-                            now,
-                        ),
+                        Profile::new(here, self.origin + self.usteps(d), self.cfg.max_speed, self.cfg.accel, now),
                         State::Moving,
                     ),
                     Command::MoveBy(d) => (
-                        Profile::new(
-                            here,
-                            here + self.usteps(d),
-                            self.cfg.max_speed,
-                            self.cfg.accel,
-                            now,
-                        ),
+                        Profile::new(here, here + self.usteps(d), self.cfg.max_speed, self.cfg.accel, now),
                         State::Moving,
                     ),
                     Command::Spin { period_s, turns } => (
-                        Profile::spin(
-                            here,
-                            self.cfg.usteps_per_rev,
-                            period_s.0,
-                            turns,
-                            self.cfg.accel,
-                            now,
-                        ),
+                        Profile::spin(here, self.cfg.usteps_per_rev, period_s.0, turns, self.cfg.accel, now),
                         State::Spinning,
                     ),
                     _ => unreachable!("motion commands only"),
@@ -354,30 +275,12 @@ impl Device {
             }
             self.state = State::Idle;
             self.active = None;
-            send(
-                out,
-                Reply::Angle {
-                    t_ms: self.t_ms(now_us),
-                    pos: self.position(now_us),
-                },
-            );
-            send(
-                out,
-                Reply::Done {
-                    seq,
-                    pos: self.position(now_us),
-                },
-            );
+            send(out, Reply::Angle { t_ms: self.t_ms(now_us), pos: self.position(now_us) });
+            send(out, Reply::Done { seq, pos: self.position(now_us) });
             return;
         }
         if self.cfg.report_ms > 0 && now_us >= self.next_report_us {
-            send(
-                out,
-                Reply::Angle {
-                    t_ms: self.t_ms(now_us),
-                    pos: self.position(now_us),
-                },
-            );
+            send(out, Reply::Angle { t_ms: self.t_ms(now_us), pos: self.position(now_us) });
             let period = self.cfg.report_ms as u64 * 1000;
             // Skip missed slots instead of bursting when polled late.
             self.next_report_us = (self.next_report_us + period).max(now_us + 1);

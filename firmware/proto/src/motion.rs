@@ -46,13 +46,7 @@ impl Profile {
     }
 
     /// As [`Profile::new`] with the speed limit in thousandths of a microstep per second.
-    pub fn with_milli_speed(
-        from: i64,
-        to: i64,
-        vmax_milli: i64,
-        accel: i64,
-        start_us: u64,
-    ) -> Self {
+    pub fn with_milli_speed(from: i64, to: i64, vmax_milli: i64, accel: i64, start_us: u64) -> Self {
         let (vmax_milli, a) = (vmax_milli.max(1), accel.max(1));
         let dist = (to - from).abs();
         let dir = if to >= from { 1 } else { -1 };
@@ -72,38 +66,17 @@ impl Profile {
             };
         }
         // Peak speed: vmax, or √(a·d) when the move is too short to reach it (triangle).
-        let vm = vmax_milli
-            .min(((a as i128 * dist as i128 * 1_000_000) as u128).isqrt() as i64)
-            .max(1);
+        let vm = vmax_milli.min(((a as i128 * dist as i128 * 1_000_000) as u128).isqrt() as i64).max(1);
         let t_acc_us = (vm as i128 * 1000 / a as i128) as u64;
         let d_acc = dist_at(a, t_acc_us).min(dist / 2);
         let cruise = dist - 2 * d_acc;
         let t_cruise_us = ((cruise as i128 * US * 1000 + vm as i128 - 1) / vm as i128) as u64;
-        Profile {
-            start_us,
-            from,
-            dir,
-            dist,
-            vm,
-            a,
-            t_acc_us,
-            t_cruise_us,
-            t_dec_us: t_acc_us,
-            d_acc,
-            d_dec: d_acc,
-        }
+        Profile { start_us, from, dir, dist, vm, a, t_acc_us, t_cruise_us, t_dec_us: t_acc_us, d_acc, d_dec: d_acc }
     }
 
     /// A constant-rate spin of `turns` revolutions (`u64::MAX`-like distance when `turns` is 0),
     /// ramping at `accel` to `usteps_per_rev / period`.
-    pub fn spin(
-        from: i64,
-        usteps_per_rev: u32,
-        period_ms: i64,
-        turns: u32,
-        accel: i64,
-        start_us: u64,
-    ) -> Self {
+    pub fn spin(from: i64, usteps_per_rev: u32, period_ms: i64, turns: u32, accel: i64, start_us: u64) -> Self {
         let rev = usteps_per_rev as i64;
         let vm = ((rev as i128 * 1_000_000) / period_ms.unsigned_abs() as i128).max(1) as i64;
         // "Endless" is 2^40 turns away: centuries at any speed the rig can reach.
@@ -241,11 +214,7 @@ mod tests {
     fn short_moves_are_triangles_and_reverse_moves_work() {
         let p = Profile::new(100, 90, 10_000, 1_000, 0);
         assert_eq!(p.position_at(p.end_us()), 90);
-        assert!(
-            p.speed_at(p.end_us() / 2).abs() <= 100,
-            "{}",
-            p.speed_at(p.end_us() / 2)
-        );
+        assert!(p.speed_at(p.end_us() / 2).abs() <= 100, "{}", p.speed_at(p.end_us() / 2));
         let z = Profile::new(5, 5, 100, 100, 0);
         assert_eq!((z.end_us(), z.position_at(10)), (0, 5));
     }
@@ -258,10 +227,7 @@ mod tests {
         let v = p.speed_at(t);
         assert_eq!(p.milli_speed_at(t), 3_200_000_000 / 28_000);
         assert_eq!(s.position_at(t), p.position_at(t));
-        assert!(
-            s.target() > p.position_at(t)
-                && s.target() - p.position_at(t) <= v * v / (2 * 2000) + 1
-        );
+        assert!(s.target() > p.position_at(t) && s.target() - p.position_at(t) <= v * v / (2 * 2000) + 1);
         assert_eq!(s.speed_at(s.end_us()), 0);
     }
 }

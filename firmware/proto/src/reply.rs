@@ -182,25 +182,15 @@ impl fmt::Display for Reply<'_> {
             Reply::Error { code, seq, msg } => write!(f, "error:{}{} {msg}", code as u8, Seq(seq)),
             Reply::Done { seq, pos } => write!(f, "done{} pos={pos}", Seq(seq)),
             Reply::Busy { seq } => write!(f, "busy{}", Seq(seq)),
-            Reply::Status {
-                state,
-                alarm,
-                pos,
-                t_ms,
-            } => match alarm {
+            Reply::Status { state, alarm, pos, t_ms } => match alarm {
                 Some(a) => write!(f, "<Alarm:{} pos={pos} t={t_ms}>", a as u8),
                 None => write!(f, "<{} pos={pos} t={t_ms}>", state.name()),
             },
             Reply::Angle { t_ms, pos } => write!(f, "@{t_ms} {pos}"),
             Reply::Alarm(a) => write!(f, "ALARM:{} {}", a as u8, a.text()),
-            Reply::Banner {
-                fw,
-                usteps_per_rev,
-                proto,
-            } => write!(
-                f,
-                "pav-turntable {fw} usteps={usteps_per_rev} proto={proto}"
-            ),
+            Reply::Banner { fw, usteps_per_rev, proto } => {
+                write!(f, "pav-turntable {fw} usteps={usteps_per_rev} proto={proto}")
+            }
         }
     }
 }
@@ -230,30 +220,20 @@ impl<'a> Reply<'a> {
             let code = ErrorCode::from_code(code.parse().ok()?)?;
             let rest = rest.trim_start();
             let (seq, msg) = match rest.split_once(' ') {
-                Some((w, m)) if w.starts_with('N') && w[1..].parse::<u32>().is_ok() => {
-                    (w[1..].parse().ok(), m)
-                }
-                _ if rest.starts_with('N') && rest[1..].parse::<u32>().is_ok() => {
-                    (rest[1..].parse().ok(), "")
-                }
+                Some((w, m)) if w.starts_with('N') && w[1..].parse::<u32>().is_ok() => (w[1..].parse().ok(), m),
+                _ if rest.starts_with('N') && rest[1..].parse::<u32>().is_ok() => (rest[1..].parse().ok(), ""),
                 _ => (None, rest),
             };
             return Some(Reply::Error { code, seq, msg });
         }
         if let Some(rest) = line.strip_prefix("done") {
             let mut w = rest.split_ascii_whitespace().peekable();
-            let seq = if w.peek().is_some_and(|x| x.starts_with('N')) {
-                seq_word(w.next())?
-            } else {
-                None
-            };
+            let seq = if w.peek().is_some_and(|x| x.starts_with('N')) { seq_word(w.next())? } else { None };
             let pos = kv(w.next()?, "pos")?.parse().ok()?;
             return Some(Reply::Done { seq, pos });
         }
         if let Some(rest) = line.strip_prefix("busy") {
-            return Some(Reply::Busy {
-                seq: seq_word(rest.split_ascii_whitespace().next())?,
-            });
+            return Some(Reply::Busy { seq: seq_word(rest.split_ascii_whitespace().next())? });
         }
         if let Some(rest) = line.strip_prefix('<').and_then(|r| r.strip_suffix('>')) {
             let mut w = rest.split_ascii_whitespace();
@@ -264,19 +244,11 @@ impl<'a> Reply<'a> {
             };
             let pos = kv(w.next()?, "pos")?.parse().ok()?;
             let t_ms = kv(w.next()?, "t")?.parse().ok()?;
-            return Some(Reply::Status {
-                state,
-                alarm,
-                pos,
-                t_ms,
-            });
+            return Some(Reply::Status { state, alarm, pos, t_ms });
         }
         if let Some(rest) = line.strip_prefix('@') {
             let (t, p) = rest.split_once(' ')?;
-            return Some(Reply::Angle {
-                t_ms: t.parse().ok()?,
-                pos: p.trim().parse().ok()?,
-            });
+            return Some(Reply::Angle { t_ms: t.parse().ok()?, pos: p.trim().parse().ok()? });
         }
         if let Some(rest) = line.strip_prefix("ALARM:") {
             let code = rest.split(' ').next()?;
@@ -287,11 +259,7 @@ impl<'a> Reply<'a> {
             let fw = w.next()?;
             let usteps_per_rev = kv(w.next()?, "usteps")?.parse().ok()?;
             let proto = kv(w.next()?, "proto")?.parse().ok()?;
-            return Some(Reply::Banner {
-                fw,
-                usteps_per_rev,
-                proto,
-            });
+            return Some(Reply::Banner { fw, usteps_per_rev, proto });
         }
         None
     }
@@ -299,10 +267,7 @@ impl<'a> Reply<'a> {
     /// The sequence number this reply answers, if any.
     pub fn seq(&self) -> Option<u32> {
         match *self {
-            Reply::Ok { seq }
-            | Reply::Error { seq, .. }
-            | Reply::Done { seq, .. }
-            | Reply::Busy { seq } => seq,
+            Reply::Ok { seq } | Reply::Error { seq, .. } | Reply::Done { seq, .. } | Reply::Busy { seq } => seq,
             _ => None,
         }
     }
@@ -319,46 +284,17 @@ mod tests {
         let all = [
             Reply::Ok { seq: None },
             Reply::Ok { seq: Some(4) },
-            Reply::Error {
-                code: ErrorCode::Busy,
-                seq: Some(9),
-                msg: "moving",
-            },
-            Reply::Error {
-                code: ErrorCode::Checksum,
-                seq: None,
-                msg: "bad checksum",
-            },
-            Reply::Error {
-                code: ErrorCode::Garbage,
-                seq: Some(1),
-                msg: "",
-            },
-            Reply::Done {
-                seq: Some(2),
-                pos: -3200,
-            },
+            Reply::Error { code: ErrorCode::Busy, seq: Some(9), msg: "moving" },
+            Reply::Error { code: ErrorCode::Checksum, seq: None, msg: "bad checksum" },
+            Reply::Error { code: ErrorCode::Garbage, seq: Some(1), msg: "" },
+            Reply::Done { seq: Some(2), pos: -3200 },
             Reply::Done { seq: None, pos: 5 },
             Reply::Busy { seq: Some(8) },
-            Reply::Status {
-                state: State::Spinning,
-                alarm: None,
-                pos: 77,
-                t_ms: 1234,
-            },
-            Reply::Status {
-                state: State::Alarm,
-                alarm: Some(Alarm::Stall),
-                pos: -1,
-                t_ms: 0,
-            },
+            Reply::Status { state: State::Spinning, alarm: None, pos: 77, t_ms: 1234 },
+            Reply::Status { state: State::Alarm, alarm: Some(Alarm::Stall), pos: -1, t_ms: 0 },
             Reply::Angle { t_ms: 99, pos: -12 },
             Reply::Alarm(Alarm::EStop),
-            Reply::Banner {
-                fw: "0.1.0",
-                usteps_per_rev: 3200,
-                proto: 1,
-            },
+            Reply::Banner { fw: "0.1.0", usteps_per_rev: 3200, proto: 1 },
         ];
         for r in all {
             let mut t: Text<96> = Text::default();

@@ -11,10 +11,7 @@ pub struct Text<const N: usize> {
 
 impl<const N: usize> Default for Text<N> {
     fn default() -> Self {
-        Text {
-            buf: [0; N],
-            len: 0,
-        }
+        Text { buf: [0; N], len: 0 }
     }
 }
 

@@ -94,17 +94,12 @@ fn spin_reports_track_the_angle_at_the_commanded_rate() {
         })
         .collect();
     assert!(samples.len() > 250, "{} samples", samples.len());
-    assert!(samples
-        .windows(2)
-        .all(|w| w[1].0 > w[0].0 && w[1].1 >= w[0].1));
+    assert!(samples.windows(2).all(|w| w[1].0 > w[0].0 && w[1].1 >= w[0].1));
     // Mid-revolution: 3200 usteps per 28 s, minus the lag of the ramp (v·t_acc/2, t_acc = v/a).
     let (t, p) = samples.iter().find(|s| s.0 >= 14_000).copied().unwrap();
     let v = 3200.0 / 28.0;
     let expect = v * (t as f64 / 1000.0 - v / 6400.0 / 2.0);
-    assert!(
-        (p as f64 - expect).abs() < 1.0,
-        "t={t} pos={p} expected {expect:.2}"
-    );
+    assert!((p as f64 - expect).abs() < 1.0, "t={t} pos={p} expected {expect:.2}");
     assert_eq!(samples.last().unwrap().1, 3200);
 }
 
@@ -113,10 +108,7 @@ fn estop_locks_until_unlock_and_busy_refuses_a_second_move() {
     let mut r = Rig::new();
     r.send("N1 SPIN 10");
     r.now += 2_000_000;
-    assert_eq!(
-        r.send("N2 MOVE 90"),
-        ["error:6 N2 moving: wait for done or STOP"]
-    );
+    assert_eq!(r.send("N2 MOVE 90"), ["error:6 N2 moving: wait for done or STOP"]);
     let held = r.dev.position(r.now);
     assert_eq!(r.byte(b'!'), ["ALARM:3 emergency stop"]);
     r.now += 1_000_000;
@@ -149,10 +141,7 @@ fn line_errors_are_answered_once_with_their_sequence() {
     assert_eq!(r.send("N9 MOVE 90*0"), ["error:3 N9 bad checksum"]);
     assert_eq!(r.send("N10 JUMP"), ["error:1 N10 unknown command"]);
     assert_eq!(r.send(&"X".repeat(300)), ["error:4 line too long"]);
-    let f = Frame {
-        seq: Some(11),
-        cmd: Command::MoveBy(Milli(45_000)),
-    };
+    let f = Frame { seq: Some(11), cmd: Command::MoveBy(Milli(45_000)) };
     assert_eq!(r.send(f.encode(true).as_str()), ["ok N11"]);
 }
 

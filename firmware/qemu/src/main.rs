@@ -98,10 +98,7 @@ impl Stepper {
             let dir = if target > self.at { 1 } else { -1 };
             // SAFETY: GPIO port F data register, bit-masked address for pins 0 and 1.
             unsafe {
-                write_volatile(
-                    reg(GPIOF + ((STEP_PIN | DIR_PIN) as usize) * 4),
-                    if dir > 0 { DIR_PIN } else { 0 },
-                );
+                write_volatile(reg(GPIOF + ((STEP_PIN | DIR_PIN) as usize) * 4), if dir > 0 { DIR_PIN } else { 0 });
                 write_volatile(
                     reg(GPIOF + ((STEP_PIN | DIR_PIN) as usize) * 4),
                     STEP_PIN | if dir > 0 { DIR_PIN } else { 0 },
@@ -127,17 +124,8 @@ fn main() -> ! {
     cp.SYST.clear_current();
     cp.SYST.enable_interrupt();
     cp.SYST.enable_counter();
-    let mut clock = Clock {
-        syst: cp.SYST,
-        ms: 0,
-    };
-    let mut dev = Device::new(
-        Config {
-            fw_version: "0.1.0-qemu",
-            ..Config::default()
-        },
-        0,
-    );
+    let mut clock = Clock { syst: cp.SYST, ms: 0 };
+    let mut dev = Device::new(Config { fw_version: "0.1.0-qemu", ..Config::default() }, 0);
     dev.reset(0, &mut Uart);
     let mut stepper = Stepper { at: 0 };
     loop {

@@ -12,9 +12,7 @@ use embassy_executor::Spawner;
 use embassy_rp::bind_interrupts;
 use embassy_rp::gpio::{Level, Output};
 use embassy_rp::peripherals::{UART0, USB};
-use embassy_rp::uart::{
-    BufferedInterruptHandler, BufferedUart, BufferedUartRx, BufferedUartTx, Config as UartConfig,
-};
+use embassy_rp::uart::{BufferedInterruptHandler, BufferedUart, BufferedUartRx, BufferedUartTx, Config as UartConfig};
 use embassy_rp::usb::{Driver, InterruptHandler as UsbInterruptHandler};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::blocking_mutex::Mutex;
@@ -73,11 +71,7 @@ fn feed(bytes: &[u8]) {
 
 /// Follows the commanded position with STEP pulses and polls the device every 100 µs.
 #[embassy_executor::task]
-async fn stepper_task(
-    mut step: Output<'static>,
-    mut dir: Output<'static>,
-    mut en: Output<'static>,
-) {
+async fn stepper_task(mut step: Output<'static>, mut dir: Output<'static>, mut en: Output<'static>) {
     let mut at: i64 = 0;
     loop {
         let (target, alarm) = with_device(|d| {
@@ -169,13 +163,7 @@ async fn cdc_tx_task(mut tx: Sender<'static, UsbDrv>) {
 async fn main(spawner: Spawner) {
     let p = embassy_rp::init(Default::default());
     DEVICE.lock(|d| {
-        let mut dev = Device::new(
-            Config {
-                fw_version: "0.1.0-rp2040",
-                ..Config::default()
-            },
-            now_us(),
-        );
+        let mut dev = Device::new(Config { fw_version: "0.1.0-rp2040", ..Config::default() }, now_us());
         dev.reset(now_us(), &mut Fanout);
         *d.borrow_mut() = Some(dev);
     });
@@ -188,15 +176,7 @@ async fn main(spawner: Spawner) {
     static RXB: StaticCell<[u8; 256]> = StaticCell::new();
     let mut ucfg = UartConfig::default();
     ucfg.baudrate = 115_200;
-    let uart = BufferedUart::new(
-        p.UART0,
-        p.PIN_0,
-        p.PIN_1,
-        Irqs,
-        TXB.init([0; 256]),
-        RXB.init([0; 256]),
-        ucfg,
-    );
+    let uart = BufferedUart::new(p.UART0, p.PIN_0, p.PIN_1, Irqs, TXB.init([0; 256]), RXB.init([0; 256]), ucfg);
     let (tx, rx) = uart.split();
     spawner.spawn(uart_rx_task(rx).unwrap());
     spawner.spawn(uart_tx_task(tx).unwrap());
@@ -212,14 +192,8 @@ async fn main(spawner: Spawner) {
     static BOS_DESC: StaticCell<[u8; 256]> = StaticCell::new();
     static CTRL: StaticCell<[u8; 64]> = StaticCell::new();
     static STATE: StaticCell<CdcState> = StaticCell::new();
-    let mut builder = Builder::new(
-        driver,
-        config,
-        CFG_DESC.init([0; 256]),
-        BOS_DESC.init([0; 256]),
-        &mut [],
-        CTRL.init([0; 64]),
-    );
+    let mut builder =
+        Builder::new(driver, config, CFG_DESC.init([0; 256]), BOS_DESC.init([0; 256]), &mut [], CTRL.init([0; 64]));
     let class = CdcAcmClass::new(&mut builder, STATE.init(CdcState::new()), 64);
     let usb = builder.build();
     let (tx, rx) = class.split();

@@ -93,11 +93,7 @@ fn parse_sections(text: &str, path: &str) -> Result<Vec<Section>, DarknetError> 
                 line: i + 1,
                 msg: format!("unterminated section header `{line}`"),
             })?;
-            out.push(Section {
-                kind: kind.trim().to_string(),
-                line: i + 1,
-                kv: BTreeMap::new(),
-            });
+            out.push(Section { kind: kind.trim().to_string(), line: i + 1, kv: BTreeMap::new() });
         } else {
             let (k, v) = line.split_once('=').ok_or_else(|| DarknetError::Cfg {
                 path: path.into(),
@@ -109,20 +105,14 @@ fn parse_sections(text: &str, path: &str) -> Result<Vec<Section>, DarknetError> 
                 line: i + 1,
                 msg: "option before the first [section]".into(),
             })?;
-            sec.kv
-                .insert(k.trim().to_string(), (v.trim().to_string(), i + 1));
+            sec.kv.insert(k.trim().to_string(), (v.trim().to_string(), i + 1));
         }
     }
     Ok(out)
 }
 
 impl Section {
-    fn get<T: std::str::FromStr>(
-        &self,
-        key: &str,
-        default: Option<T>,
-        path: &str,
-    ) -> Result<T, DarknetError> {
+    fn get<T: std::str::FromStr>(&self, key: &str, default: Option<T>, path: &str) -> Result<T, DarknetError> {
         match self.kv.get(key) {
             Some((v, line)) => v.parse().map_err(|_| DarknetError::Cfg {
                 path: path.into(),
@@ -159,10 +149,7 @@ impl Section {
 impl Network {
     /// Reads and parses a `.cfg` file.
     pub fn from_file(path: &Path) -> Result<Self, DarknetError> {
-        let text = std::fs::read_to_string(path).map_err(|source| DarknetError::Io {
-            path: path.into(),
-            source,
-        })?;
+        let text = std::fs::read_to_string(path).map_err(|source| DarknetError::Io { path: path.into(), source })?;
         Self::parse(&text, &path.display().to_string())
     }
 
@@ -191,10 +178,7 @@ impl Network {
                     let size: usize = s.get("size", Some(1), origin)?;
                     let pad_flag: usize = s.get("pad", Some(0), origin)?;
                     let padding: usize = s.get("padding", Some(0), origin)?;
-                    let activation = match s
-                        .get::<String>("activation", Some("logistic".into()), origin)?
-                        .as_str()
-                    {
+                    let activation = match s.get::<String>("activation", Some("logistic".into()), origin)?.as_str() {
                         "linear" => Activation::Linear,
                         "leaky" => Activation::Leaky,
                         other => {
@@ -220,9 +204,7 @@ impl Network {
                     let stride = s.get("stride", Some(1), origin)?;
                     Layer::MaxPool { size, stride }
                 }
-                "upsample" => Layer::Upsample {
-                    stride: s.get("stride", Some(2), origin)?,
-                },
+                "upsample" => Layer::Upsample { stride: s.get("stride", Some(2), origin)? },
                 "route" => {
                     let rel: Vec<i64> = s.list("layers", origin)?;
                     let mut abs = Vec::with_capacity(rel.len());
@@ -268,27 +250,15 @@ impl Network {
                             msg: format!("scale_x_y={scale}"),
                         });
                     }
-                    Layer::Yolo(YoloHead {
-                        anchors,
-                        classes: s.get("classes", None, origin)?,
-                    })
+                    Layer::Yolo(YoloHead { anchors, classes: s.get("classes", None, origin)? })
                 }
                 other => {
-                    return Err(DarknetError::Unsupported {
-                        index,
-                        kind: other.into(),
-                        msg: "unknown section".into(),
-                    })
+                    return Err(DarknetError::Unsupported { index, kind: other.into(), msg: "unknown section".into() })
                 }
             };
             layers.push(layer);
         }
-        Ok(Network {
-            width,
-            height,
-            channels,
-            layers,
-        })
+        Ok(Network { width, height, channels, layers })
     }
 
     /// Output channels of every layer, in order (needed to size convolution weights).
@@ -330,22 +300,8 @@ mod tests {
         assert_eq!((n.width, n.height, n.channels), (32, 32, 3));
         assert_eq!(n.layers.len(), 7);
         // size=1 with pad=1 gives no padding (size/2 = 0).
-        assert!(matches!(
-            n.layers[2],
-            Layer::Conv {
-                pad: 0,
-                filters: 6,
-                ..
-            }
-        ));
-        assert!(matches!(
-            n.layers[0],
-            Layer::Conv {
-                pad: 1,
-                batch_normalize: true,
-                ..
-            }
-        ));
+        assert!(matches!(n.layers[2], Layer::Conv { pad: 0, filters: 6, .. }));
+        assert!(matches!(n.layers[0], Layer::Conv { pad: 1, batch_normalize: true, .. }));
         assert_eq!(n.layers[4], Layer::Route { layers: vec![1] });
         assert_eq!(n.layers[6], Layer::Route { layers: vec![5, 0] });
         assert_eq!(n.channels_per_layer(), vec![4, 4, 6, 6, 4, 4, 8]);
@@ -354,17 +310,11 @@ mod tests {
 
     #[test]
     fn bad_input_names_the_line() {
-        let e = Network::parse("[net]\nwidth=a\nheight=3", "x.cfg")
-            .unwrap_err()
-            .to_string();
+        let e = Network::parse("[net]\nwidth=a\nheight=3", "x.cfg").unwrap_err().to_string();
         assert!(e.contains("x.cfg:2"), "{e}");
-        let e = Network::parse("[net]\nwidth=3\nheight=3\n[route]\nlayers=-1", "x.cfg")
-            .unwrap_err()
-            .to_string();
+        let e = Network::parse("[net]\nwidth=3\nheight=3\n[route]\nlayers=-1", "x.cfg").unwrap_err().to_string();
         assert!(e.contains("not before it"), "{e}");
-        let e = Network::parse("[net]\nwidth=3\nheight=3\n[shortcut]\nfrom=-3", "x.cfg")
-            .unwrap_err()
-            .to_string();
+        let e = Network::parse("[net]\nwidth=3\nheight=3\n[shortcut]\nfrom=-3", "x.cfg").unwrap_err().to_string();
         assert!(e.contains("[shortcut]"), "{e}");
     }
 }

@@ -23,185 +23,152 @@ pub fn export(net: &Network, weights: &Weights) -> Result<Model, DarknetError> {
     let (mut h, mut w) = (net.height, net.width);
     let mut sizes: Vec<(usize, usize)> = Vec::new();
     let chans = net.channels_per_layer();
-    let node =
-        |op: &str, name: String, inputs: Vec<String>, out: String, attrs: Vec<(String, Attr)>| {
-            Node {
-                op_type: op.into(),
-                name,
-                inputs,
-                outputs: vec![out],
-                attrs,
+    let node = |op: &str, name: String, inputs: Vec<String>, out: String, attrs: Vec<(String, Attr)>| Node {
+        op_type: op.into(),
+        name,
+        inputs,
+        outputs: vec![out],
+        attrs,
+    };
+    for (i, layer) in net.layers.iter().enumerate() {
+        let prev = names.last().cloned().unwrap_or_else(|| INPUT_NAME.to_string());
+        let out = format!("l{i}");
+        let name = match layer {
+            Layer::Conv { size, stride, pad, activation, .. } => {
+                let cw = convs.next().filter(|c| c.layer == i).ok_or_else(|| DarknetError::Weights {
+                    path: String::new(),
+                    msg: format!("no weights for convolution layer {i}"),
+                })?;
+                let (wn, bn) = (format!("w{i}"), format!("b{i}"));
+                inits.push(Initializer {
+                    name: wn.clone(),
+                    dims: cw.shape.iter().map(|&d| d as i64).collect(),
+                    data: InitData::F32(cw.weight.clone()),
+                });
+                inits.push(Initializer {
+                    name: bn.clone(),
+                    dims: vec![cw.shape[0] as i64],
+                    data: InitData::F32(cw.bias.clone()),
+                });
+                let (k, s, p) = (*size as i64, *stride as i64, *pad as i64);
+                let conv_out = if *activation == Activation::Linear { out.clone() } else { format!("{out}_conv") };
+                nodes.push(node(
+                    "Conv",
+                    format!("conv{i}"),
+                    vec![prev, wn, bn],
+                    conv_out.clone(),
+                    vec![
+                        ("kernel_shape".into(), Attr::Ints(vec![k, k])),
+                        ("strides".into(), Attr::Ints(vec![s, s])),
+                        ("pads".into(), Attr::Ints(vec![p, p, p, p])),
+                    ],
+                ));
+                if *activation == Activation::Leaky {
+                    nodes.push(node(
+                        "LeakyRelu",
+                        format!("leaky{i}"),
+                        vec![conv_out],
+                        out.clone(),
+                        vec![("alpha".into(), Attr::Float(0.1))],
+                    ));
+                }
+                h = (h + 2 * pad - size) / stride + 1;
+                w = (w + 2 * pad - size) / stride + 1;
+                out
+            }
+            Layer::MaxPool { size, stride } => {
+                // Darknet pads size-1 in total, bottom/right first, with values that never win the max.
+                let (k, s) = (*size as i64, *stride as i64);
+                let total = k - 1;
+                let (lo, hi) = (total / 2, total - total / 2);
+                nodes.push(node(
+                    "MaxPool",
+                    format!("pool{i}"),
+                    vec![prev],
+                    out.clone(),
+                    vec![
+                        ("kernel_shape".into(), Attr::Ints(vec![k, k])),
+                        ("strides".into(), Attr::Ints(vec![s, s])),
+                        ("pads".into(), Attr::Ints(vec![lo, lo, hi, hi])),
+                    ],
+                ));
+                h = (h + total as usize - size) / stride + 1;
+                w = (w + total as usize - size) / stride + 1;
+                out
+            }
+            Layer::Upsample { stride } => {
+                let sc = format!("scales{i}");
+                inits.push(Initializer {
+                    name: sc.clone(),
+                    dims: vec![4],
+                    data: InitData::F32(vec![1.0, 1.0, *stride as f32, *stride as f32]),
+                });
+                nodes.push(node(
+                    "Resize",
+                    format!("upsample{i}"),
+                    vec![prev, String::new(), sc],
+                    out.clone(),
+                    vec![
+                        ("mode".into(), Attr::Str("nearest".into())),
+                        ("coordinate_transformation_mode".into(), Attr::Str("asymmetric".into())),
+                        ("nearest_mode".into(), Attr::Str("floor".into())),
+                    ],
+                ));
+                h *= stride;
+                w *= stride;
+                out
+            }
+            Layer::Route { layers } => {
+                (h, w) = sizes[layers[0]];
+                if let Some(&bad) = layers.iter().find(|&&l| sizes[l] != (h, w)) {
+                    return Err(DarknetError::Unsupported {
+                        index: i,
+                        kind: "route".into(),
+                        msg: format!("layer {bad} is {:?}, layer {} is {:?}", sizes[bad], layers[0], (h, w)),
+                    });
+                }
+                if layers.len() == 1 {
+                    names[layers[0]].clone()
+                } else {
+                    nodes.push(node(
+                        "Concat",
+                        format!("route{i}"),
+                        layers.iter().map(|&l| names[l].clone()).collect(),
+                        out.clone(),
+                        vec![("axis".into(), Attr::Int(1))],
+                    ));
+                    out
+                }
+            }
+            Layer::Yolo(head) => {
+                let expect = head.anchors.len() * (5 + head.classes);
+                let got = chans[i.saturating_sub(1)];
+                if i == 0 || got != expect {
+                    return Err(DarknetError::Unsupported {
+                        index: i,
+                        kind: "yolo".into(),
+                        msg: format!(
+                            "input has {got} channels, {} anchors × (5+{}) = {expect} expected",
+                            head.anchors.len(),
+                            head.classes
+                        ),
+                    });
+                }
+                let out_name = format!("head{}", outputs.len());
+                nodes.push(node("Identity", format!("yolo{i}"), vec![prev.clone()], out_name.clone(), vec![]));
+                outputs.push(ValueInfo {
+                    name: out_name,
+                    elem_type: FLOAT,
+                    dims: vec![
+                        Err("N".into()),
+                        Ok(expect as i64),
+                        Err(format!("H/{}", net.height / h)),
+                        Err(format!("W/{}", net.width / w)),
+                    ],
+                });
+                prev
             }
         };
-    for (i, layer) in net.layers.iter().enumerate() {
-        let prev = names
-            .last()
-            .cloned()
-            .unwrap_or_else(|| INPUT_NAME.to_string());
-        let out = format!("l{i}");
-        let name =
-            match layer {
-                Layer::Conv {
-                    size,
-                    stride,
-                    pad,
-                    activation,
-                    ..
-                } => {
-                    let cw = convs.next().filter(|c| c.layer == i).ok_or_else(|| {
-                        DarknetError::Weights {
-                            path: String::new(),
-                            msg: format!("no weights for convolution layer {i}"),
-                        }
-                    })?;
-                    let (wn, bn) = (format!("w{i}"), format!("b{i}"));
-                    inits.push(Initializer {
-                        name: wn.clone(),
-                        dims: cw.shape.iter().map(|&d| d as i64).collect(),
-                        data: InitData::F32(cw.weight.clone()),
-                    });
-                    inits.push(Initializer {
-                        name: bn.clone(),
-                        dims: vec![cw.shape[0] as i64],
-                        data: InitData::F32(cw.bias.clone()),
-                    });
-                    let (k, s, p) = (*size as i64, *stride as i64, *pad as i64);
-                    let conv_out = if *activation == Activation::Linear {
-                        out.clone()
-                    } else {
-                        format!("{out}_conv")
-                    };
-                    nodes.push(node(
-                        "Conv",
-                        format!("conv{i}"),
-                        vec![prev, wn, bn],
-                        conv_out.clone(),
-                        vec![
-                            ("kernel_shape".into(), Attr::Ints(vec![k, k])),
-                            ("strides".into(), Attr::Ints(vec![s, s])),
-                            ("pads".into(), Attr::Ints(vec![p, p, p, p])),
-                        ],
-                    ));
-                    if *activation == Activation::Leaky {
-                        nodes.push(node(
-                            "LeakyRelu",
-                            format!("leaky{i}"),
-                            vec![conv_out],
-                            out.clone(),
-                            vec![("alpha".into(), Attr::Float(0.1))],
-                        ));
-                    }
-                    h = (h + 2 * pad - size) / stride + 1;
-                    w = (w + 2 * pad - size) / stride + 1;
-                    out
-                }
-                Layer::MaxPool { size, stride } => {
-                    // Darknet pads size-1 in total, bottom/right first, with values that never win the max.
-                    let (k, s) = (*size as i64, *stride as i64);
-                    let total = k - 1;
-                    let (lo, hi) = (total / 2, total - total / 2);
-                    nodes.push(node(
-                        "MaxPool",
-                        format!("pool{i}"),
-                        vec![prev],
-                        out.clone(),
-                        vec![
-                            ("kernel_shape".into(), Attr::Ints(vec![k, k])),
-                            ("strides".into(), Attr::Ints(vec![s, s])),
-                            ("pads".into(), Attr::Ints(vec![lo, lo, hi, hi])),
-                        ],
-                    ));
-                    h = (h + total as usize - size) / stride + 1;
-                    w = (w + total as usize - size) / stride + 1;
-                    out
-                }
-                Layer::Upsample { stride } => {
-                    let sc = format!("scales{i}");
-                    inits.push(Initializer {
-                        name: sc.clone(),
-                        dims: vec![4],
-                        data: InitData::F32(vec![1.0, 1.0, *stride as f32, *stride as f32]),
-                    });
-                    nodes.push(node(
-                        "Resize",
-                        format!("upsample{i}"),
-                        vec![prev, String::new(), sc],
-                        out.clone(),
-                        vec![
-                            ("mode".into(), Attr::Str("nearest".into())),
-                            (
-                                "coordinate_transformation_mode".into(),
-                                Attr::Str("asymmetric".into()),
-                            ),
-                            ("nearest_mode".into(), Attr::Str("floor".into())),
-                        ],
-                    ));
-                    h *= stride;
-                    w *= stride;
-                    out
-                }
-                Layer::Route { layers } => {
-                    (h, w) = sizes[layers[0]];
-                    if let Some(&bad) = layers.iter().find(|&&l| sizes[l] != (h, w)) {
-                        return Err(DarknetError::Unsupported {
-                            index: i,
-                            kind: "route".into(),
-                            msg: format!(
-                                "layer {bad} is {:?}, layer {} is {:?}",
-                                sizes[bad],
-                                layers[0],
-                                (h, w)
-                            ),
-                        });
-                    }
-                    if layers.len() == 1 {
-                        names[layers[0]].clone()
-                    } else {
-                        nodes.push(node(
-                            "Concat",
-                            format!("route{i}"),
-                            layers.iter().map(|&l| names[l].clone()).collect(),
-                            out.clone(),
-                            vec![("axis".into(), Attr::Int(1))],
-                        ));
-                        out
-                    }
-                }
-                Layer::Yolo(head) => {
-                    let expect = head.anchors.len() * (5 + head.classes);
-                    let got = chans[i.saturating_sub(1)];
-                    if i == 0 || got != expect {
-                        return Err(DarknetError::Unsupported {
-                            index: i,
-                            kind: "yolo".into(),
-                            msg: format!(
-                                "input has {got} channels, {} anchors × (5+{}) = {expect} expected",
-                                head.anchors.len(),
-                                head.classes
-                            ),
-                        });
-                    }
-                    let out_name = format!("head{}", outputs.len());
-                    nodes.push(node(
-                        "Identity",
-                        format!("yolo{i}"),
-                        vec![prev.clone()],
-                        out_name.clone(),
-                        vec![],
-                    ));
-                    outputs.push(ValueInfo {
-                        name: out_name,
-                        elem_type: FLOAT,
-                        dims: vec![
-                            Err("N".into()),
-                            Ok(expect as i64),
-                            Err(format!("H/{}", net.height / h)),
-                            Err(format!("W/{}", net.width / w)),
-                        ],
-                    });
-                    prev
-                }
-            };
         names.push(name);
         sizes.push((h, w));
     }
@@ -223,12 +190,7 @@ pub fn export(net: &Network, weights: &Weights) -> Result<Model, DarknetError> {
             elem_type: FLOAT,
             // Spatial size is symbolic: the network is fully convolutional with anchors in pixels,
             // so any multiple of its total stride works (320, 416, 608, ...).
-            dims: vec![
-                Err("N".into()),
-                Ok(net.channels as i64),
-                Err("H".into()),
-                Err("W".into()),
-            ],
+            dims: vec![Err("N".into()), Ok(net.channels as i64), Err("H".into()), Err("W".into())],
         }],
         outputs,
     })

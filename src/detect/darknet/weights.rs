@@ -30,41 +30,26 @@ pub struct Weights {
 impl Weights {
     /// Reads `path` and checks that its size matches `net` exactly.
     pub fn from_file(path: &Path, net: &Network) -> Result<Self, DarknetError> {
-        let bytes = std::fs::read(path).map_err(|source| DarknetError::Io {
-            path: path.into(),
-            source,
-        })?;
+        let bytes = std::fs::read(path).map_err(|source| DarknetError::Io { path: path.into(), source })?;
         Self::parse(&bytes, net, &path.display().to_string())
     }
 
     /// Parses weights bytes for `net`; `origin` names the file in errors.
     pub fn parse(bytes: &[u8], net: &Network, origin: &str) -> Result<Self, DarknetError> {
-        let err = |msg: String| DarknetError::Weights {
-            path: origin.into(),
-            msg,
-        };
+        let err = |msg: String| DarknetError::Weights { path: origin.into(), msg };
         if bytes.len() < 16 {
-            return Err(err(format!(
-                "{} bytes is too short for a header",
-                bytes.len()
-            )));
+            return Err(err(format!("{} bytes is too short for a header", bytes.len())));
         }
-        let word =
-            |i: usize| i32::from_le_bytes(bytes[4 * i..4 * i + 4].try_into().expect("4 bytes"));
+        let word = |i: usize| i32::from_le_bytes(bytes[4 * i..4 * i + 4].try_into().expect("4 bytes"));
         let (major, minor) = (word(0), word(1));
         // Header: major, minor, revision (int32), then `seen` as int64 from format 0.2 on.
         let header = if major * 10 + minor >= 2 { 20 } else { 16 };
         let body = &bytes[header.min(bytes.len())..];
         if body.len() % 4 != 0 {
-            return Err(err(format!(
-                "body of {} bytes is not a whole number of float32",
-                body.len()
-            )));
+            return Err(err(format!("body of {} bytes is not a whole number of float32", body.len())));
         }
-        let floats: Vec<f32> = body
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
-            .collect();
+        let floats: Vec<f32> =
+            body.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect();
         let chans = net.channels_per_layer();
         let mut pos = 0usize;
         let mut take = |n: usize, what: &str, layer: usize| -> Result<Vec<f32>, DarknetError> {
@@ -82,23 +67,13 @@ impl Weights {
         };
         let mut convs = Vec::new();
         for (i, layer) in net.layers.iter().enumerate() {
-            let Layer::Conv {
-                filters,
-                size,
-                batch_normalize,
-                ..
-            } = *layer
-            else {
+            let Layer::Conv { filters, size, batch_normalize, .. } = *layer else {
                 continue;
             };
             let cin = if i == 0 { net.channels } else { chans[i - 1] };
             let mut bias = take(filters, "biases", i)?;
             let bn = if batch_normalize {
-                Some((
-                    take(filters, "bn scales", i)?,
-                    take(filters, "bn means", i)?,
-                    take(filters, "bn variances", i)?,
-                ))
+                Some((take(filters, "bn scales", i)?, take(filters, "bn means", i)?, take(filters, "bn variances", i)?))
             } else {
                 None
             };
@@ -114,16 +89,9 @@ impl Weights {
                 }
             }
             if let Some(bad) = weight.iter().chain(bias.iter()).find(|v| !v.is_finite()) {
-                return Err(err(format!(
-                    "layer {i} has a non-finite parameter ({bad}) after folding"
-                )));
+                return Err(err(format!("layer {i} has a non-finite parameter ({bad}) after folding")));
             }
-            convs.push(ConvWeights {
-                layer: i,
-                weight,
-                bias,
-                shape: [filters, cin, size, size],
-            });
+            convs.push(ConvWeights { layer: i, weight, bias, shape: [filters, cin, size, size] });
         }
         if pos != floats.len() {
             return Err(err(format!(
@@ -169,17 +137,11 @@ mod tests {
 
     #[test]
     fn size_mismatch_is_an_error() {
-        let short = Weights::parse(&file(&[0.5, 2.0, 1.0]), &net(), "t")
-            .unwrap_err()
-            .to_string();
+        let short = Weights::parse(&file(&[0.5, 2.0, 1.0]), &net(), "t").unwrap_err().to_string();
         assert!(short.contains("ends inside layer 0"), "{short}");
-        let long = Weights::parse(&file(&[0.5, 2.0, 1.0, 4.0, 3.0, 9.0]), &net(), "t")
-            .unwrap_err()
-            .to_string();
+        let long = Weights::parse(&file(&[0.5, 2.0, 1.0, 4.0, 3.0, 9.0]), &net(), "t").unwrap_err().to_string();
         assert!(long.contains("left over"), "{long}");
-        let nan = Weights::parse(&file(&[0.5, 2.0, 1.0, -1.0, 3.0]), &net(), "t")
-            .unwrap_err()
-            .to_string();
+        let nan = Weights::parse(&file(&[0.5, 2.0, 1.0, -1.0, 3.0]), &net(), "t").unwrap_err().to_string();
         assert!(nan.contains("non-finite"), "{nan}");
     }
 }
