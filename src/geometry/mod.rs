@@ -3,3 +3,4 @@
 pub mod camera;
 pub mod mesh;
 pub mod uv;
+pub mod uv_adjust;
