@@ -153,10 +153,8 @@ fn uv_distortion_of_the_patch() {
     assert!(sides < -0.4 && tops > 0.2, "sides {sides}, tops {tops}");
 }
 
-/// Automatic UV adjustment on the real patch, as far as it works today: the relative stretch
-/// between islands drops by more than half and the rest of the map is untouched. (Not yet: the
-/// shapes, whose area-weighted anisotropy rises 1.14 → 1.62, and containment, as one thin island
-/// ends 0.003 outside its original box; see `uv_adjust::adjust`.)
+/// Automatic UV adjustment on the real patch: less stretch and less shape distortion, every
+/// island inside its original UV box, and the rest of the map untouched.
 #[test]
 fn uv_adjustment_reduces_distortion_in_place() {
     use pav::geometry::uv::{distortion, faces_in_mask, summary};
@@ -167,7 +165,15 @@ fn uv_adjustment_reduces_distortion_in_place() {
     let half = Texture::load(&shared.join("pav-camou/half.png")).unwrap();
     let patch = faces_in_mask(&mesh, &half.white_mask(), half.width, half.height);
     let before = summary(&distortion(&mesh, &patch));
-    let n_islands = islands(&mesh, &patch).len();
+    let bbox = |m: &Mesh, isl: &[usize]| {
+        let uv: Vec<[f32; 2]> = isl.iter().flat_map(|&f| m.face_uvs[f]).map(|i| m.uvs[i as usize]).collect();
+        let lo = uv.iter().fold([f32::MAX; 2], |a, p| [a[0].min(p[0]), a[1].min(p[1])]);
+        let hi = uv.iter().fold([f32::MIN; 2], |a, p| [a[0].max(p[0]), a[1].max(p[1])]);
+        (lo, hi)
+    };
+    let before_islands = islands(&mesh, &patch);
+    let boxes: Vec<_> = before_islands.iter().map(|i| bbox(&mesh, i)).collect();
+    let n_islands = before_islands.len();
     let others: Vec<(usize, [[f32; 2]; 3])> = (0..mesh.faces.len())
         .filter(|f| !patch.contains(f))
         .map(|f| (f, mesh.face_uvs[f].map(|i| mesh.uvs[i as usize])))
@@ -186,5 +192,13 @@ fn uv_adjustment_reduces_distortion_in_place() {
         n_islands, before.0, after.0, before.1, after.1
     );
     assert!(after.0 < before.0 * 0.5, "stretch {before:?} -> {after:?}");
+    assert!(an_after < an_before, "area-weighted anisotropy {an_before} -> {an_after}");
+    for (isl, (lo, hi)) in before_islands.iter().zip(&boxes) {
+        let (l, h) = bbox(&mesh, isl);
+        assert!(
+            l[0] >= lo[0] - 1e-5 && l[1] >= lo[1] - 1e-5 && h[0] <= hi[0] + 1e-5 && h[1] <= hi[1] + 1e-5,
+            "island moved out of {lo:?}..{hi:?}: {l:?}..{h:?}"
+        );
+    }
     assert!(others.iter().all(|(f, uv)| mesh.face_uvs[*f].map(|i| mesh.uvs[i as usize]) == *uv));
 }

@@ -83,6 +83,68 @@ enum UvCmd {
         #[arg(long, short = 'o', default_value = "out/uv")]
         out: PathBuf,
     },
+    /// Re-flatten the optimizable patch automatically (LSCM per UV island, kept in place, one
+    /// common texel density); writes the adjusted OBJ, its UV mask, and before/after heat maps.
+    Adjust {
+        /// OBJ mesh with UVs.
+        #[arg(long, default_value = "../shared/data/pav-camou/xfl_yxz.obj")]
+        mesh: PathBuf,
+        /// UV map whose pure-white texels mark the optimizable patch.
+        #[arg(long, default_value = "../shared/data/pav-camou/half.png")]
+        mask: PathBuf,
+        /// Output directory.
+        #[arg(long, short = 'o', default_value = "out/uv_adjusted")]
+        out: PathBuf,
+    },
+}
+
+fn uv_adjust(mesh_path: &std::path::Path, mask: &std::path::Path, out: &std::path::Path) -> Result<()> {
+    use pav::geometry::uv::{distortion, faces_in_mask, paint_uv, summary};
+    use pav::geometry::uv_adjust::adjust;
+    let original = Mesh::load_obj(mesh_path)?;
+    let tex = Texture::load(mask).map_err(anyhow::Error::msg)?;
+    let patch = faces_in_mask(&original, &tex.white_mask(), tex.width, tex.height);
+    if patch.is_empty() {
+        bail!("{} marks no face of {}", mask.display(), mesh_path.display());
+    }
+    let before = summary(&distortion(&original, &patch));
+    let mut m = original.clone();
+    let density = adjust(&mut m, &patch);
+    let after = summary(&distortion(&m, &patch));
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    m.write_obj(&out.join("adjusted.obj"), None).with_context(|| format!("writing {}", out.display()))?;
+    // The new mask: the original map with the patch painted over in the body colour, then the
+    // adjusted islands painted white.
+    let (w, h) = (tex.width, tex.height);
+    let mut rgb: Vec<u8> = tex.rgb.iter().map(|v| (v * 255.0).round() as u8).collect();
+    let body = [67u8, 74, 114];
+    let was_white = tex.white_mask();
+    for (i, px) in rgb.chunks_mut(3).enumerate() {
+        if was_white[i] == 1.0 {
+            px.copy_from_slice(&body);
+        }
+    }
+    anyhow::ensure!(w == h, "the UV mask must be square, got {w}x{h}");
+    let white = paint_uv(&m, &patch.iter().map(|&f| (f, [255u8, 255, 255])).collect::<Vec<_>>(), w, [0, 0, 0]);
+    for (px, wv) in rgb.chunks_mut(3).zip(white.chunks(3)) {
+        if wv[0] == 255 {
+            px.copy_from_slice(&[255, 255, 255]);
+        }
+    }
+    image::RgbImage::from_raw(w as u32, h as u32, rgb).context("mask image")?.save(out.join("adjusted_mask.png"))?;
+    uv_check(&out.join("adjusted.obj"), &out.join("adjusted_mask.png"), &out.join("after"))?;
+    uv_check(mesh_path, mask, &out.join("before"))?;
+    println!(
+        "adjusted {} faces: mean |log2 stretch| {:.3} -> {:.3}, 95th-percentile anisotropy {:.2} -> {:.2}; texel density kept {:.0} %",
+        patch.len(),
+        before.0,
+        after.0,
+        before.1,
+        after.1,
+        100.0 * density
+    );
+    eprintln!("wrote {}/adjusted.obj, adjusted_mask.png, before/ and after/", out.display());
+    Ok(())
 }
 
 fn uv_check(mesh: &std::path::Path, mask: &std::path::Path, out: &std::path::Path) -> Result<()> {
@@ -216,6 +278,7 @@ fn main() -> Result<()> {
     let (mesh, texture, pose, orbit, size, out) = match Cli::parse().cmd {
         Cmd::BenchRender { mesh, sizes, views, out } => return bench_render(&mesh, &sizes, views, &out),
         Cmd::Uv(UvCmd::Check { mesh, mask, out }) => return uv_check(&mesh, &mask, &out),
+        Cmd::Uv(UvCmd::Adjust { mesh, mask, out }) => return uv_adjust(&mesh, &mask, &out),
         Cmd::Render { mesh, texture, pose, orbit, size, out } => (mesh, texture, pose, orbit, size, out),
     };
     let mut m = Mesh::load_obj(&mesh)?;

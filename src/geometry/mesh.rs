@@ -214,6 +214,53 @@ impl Mesh {
         Ok(m)
     }
 
+    /// Writes the mesh as OBJ (positions as stored, UVs, normals, one `usemtl` group per material
+    /// run), with `mtllib` pointing at `mtl` when given.
+    pub fn write_obj(&self, path: &Path, mtl: Option<&str>) -> std::io::Result<()> {
+        use std::io::Write;
+        let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
+        writeln!(w, "# written by pav")?;
+        if let Some(m) = mtl {
+            writeln!(w, "mtllib {m}")?;
+        }
+        for p in &self.positions {
+            writeln!(w, "v {} {} {}", p[0], p[1], p[2])?;
+        }
+        for t in &self.uvs {
+            writeln!(w, "vt {} {}", t[0], t[1])?;
+        }
+        for n in &self.normals {
+            writeln!(w, "vn {} {} {}", n[0], n[1], n[2])?;
+        }
+        let mut current = u32::MAX;
+        for f in 0..self.faces.len() {
+            if self.face_material[f] != current {
+                current = self.face_material[f];
+                writeln!(w, "usemtl {}", self.materials[current as usize].name)?;
+            }
+            let (v, t) = (self.faces[f], self.face_uvs[f]);
+            if self.face_normals.is_empty() {
+                writeln!(w, "f {}/{} {}/{} {}/{}", v[0] + 1, t[0] + 1, v[1] + 1, t[1] + 1, v[2] + 1, t[2] + 1)?;
+            } else {
+                let n = self.face_normals[f];
+                writeln!(
+                    w,
+                    "f {}/{}/{} {}/{}/{} {}/{}/{}",
+                    v[0] + 1,
+                    t[0] + 1,
+                    n[0] + 1,
+                    v[1] + 1,
+                    t[1] + 1,
+                    n[1] + 1,
+                    v[2] + 1,
+                    t[2] + 1,
+                    n[2] + 1
+                )?;
+            }
+        }
+        w.flush()
+    }
+
     /// neural_renderer's `load_obj` normalization (used by FCA and DAS): the bounding box is
     /// centred and its longest side scaled to 2.
     pub fn normalize_bbox(&mut self) {

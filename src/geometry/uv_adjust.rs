@@ -1,5 +1,4 @@
-//! Automatic UV adjustment of the optimizable patch (what the paper did by hand in MAYA; work in
-//! progress, see [`adjust`]): each
+//! Automatic UV adjustment of the optimizable patch (what the paper did by hand in MAYA): each
 //! UV island is re-flattened by least-squares conformal maps (LSCM), fitted back onto its original
 //! island by a similarity transform (so its placement is kept), and all islands are scaled to one
 //! common texel density, as large as still fits every island inside its original bounding box.
@@ -215,19 +214,37 @@ fn fit_similarity(from: &[[f64; 2]], to: &[[f64; 2]]) -> impl Fn([f64; 2]) -> [f
     }
 }
 
-/// Adjusts the UVs of the islands among `faces` in place; returns the common density scale used
-/// relative to the islands' original average (area ratio).
-///
-/// Status: on the Impala patch this evens out the texel density (mean |log₂ stretch| 0.47 →
-/// 0.16) but not yet the shapes: area-weighted anisotropy rises 1.14 → 1.62 although LSCM is exact
-/// on flat synthetic patches, so something in these islands (slivers, folds, pins) still defeats
-/// it. One thin island also ends 0.003 outside its original box, so the containment step is not
-/// right yet either. Not exposed as a command until both are understood.
-/// It is ≤ 1 when an island had to shrink to stay inside its original bounding box. UV indices
-/// shared with faces outside `faces` are given copies first, so the rest of the map never moves.
+/// Adjusts the UVs of the islands among `faces` in place and returns the common density kept,
+/// as an area ratio to the islands' original average (< 1 when an island had to shrink to stay
+/// inside its original bounding box). UV indices shared with other faces or other islands get
+/// copies first, so nothing outside an island moves with it.
 pub fn adjust(mesh: &mut Mesh, faces: &[usize]) -> f64 {
     detach(mesh, faces);
     let isl = islands(mesh, faces);
+    // Islands touching at a single (hinge) vertex share its UV index; each must move its own copy.
+    let mut owner: HashMap<u32, usize> = HashMap::new();
+    for (k, island) in isl.iter().enumerate() {
+        let mut copy: HashMap<u32, u32> = HashMap::new();
+        for &f in island {
+            for c in 0..3 {
+                let t = mesh.face_uvs[f][c];
+                match owner.get(&t) {
+                    Some(&o) if o != k => {
+                        let n = *copy.entry(t).or_insert_with(|| {
+                            mesh.uvs.push(mesh.uvs[t as usize]);
+                            (mesh.uvs.len() - 1) as u32
+                        });
+                        mesh.face_uvs[f][c] = n;
+                        owner.insert(n, k);
+                    }
+                    Some(_) => {}
+                    None => {
+                        owner.insert(t, k);
+                    }
+                }
+            }
+        }
+    }
     let area3 = |m: &Mesh, f: usize| {
         let v = m.faces[f].map(|i| m.positions[i as usize]);
         let e1 = [v[1][0] - v[0][0], v[1][1] - v[0][1], v[1][2] - v[0][2]];
