@@ -1,0 +1,67 @@
+//! `pav render` and `pav uv check|adjust` as a user runs them: images and CSVs on real data,
+//! clear errors on bad meshes.
+
+mod common;
+
+use std::process::{Command, Output};
+
+fn pav() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_pav"));
+    c.current_dir(common::repo()).env("RUST_BACKTRACE", "0");
+    c
+}
+
+fn text(o: &Output) -> String {
+    format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+#[test]
+fn render_and_uv_commands_write_their_files() {
+    if common::shared_data().is_none() {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let png = tmp.path().join("r.png");
+    let o = pav().args(["render", "--size", "200", "-o"]).arg(&png).output().unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let img = image::open(&png).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (200, 200));
+    // The car is drawn: not every pixel is the white background.
+    assert!(img.pixels().filter(|p| p.0 != [255, 255, 255]).count() > 2000);
+    assert!(tmp.path().join("r_mask.png").exists());
+
+    let o = pav().args(["uv", "adjust", "-o"]).arg(tmp.path().join("adj")).output().unwrap();
+    let out = text(&o);
+    assert!(o.status.success(), "{out}");
+    assert!(out.contains("adjusted 281 faces: mean |log2 stretch| 0.474 -> 0.005"), "{out}");
+    for f in [
+        "adjusted.obj",
+        "adjusted_mask.png",
+        "before/uv_heat_mesh.png",
+        "after/uv_heat_uv.png",
+        "after/uv_distortion.csv",
+    ] {
+        assert!(tmp.path().join("adj").join(f).exists(), "{f}");
+    }
+}
+
+#[test]
+fn bad_meshes_are_clear_errors() {
+    let tmp = tempfile::tempdir().unwrap();
+    let o = pav().args(["render", "--mesh", "no/such.obj"]).output().unwrap();
+    assert!(!o.status.success());
+    assert!(text(&o).contains("cannot read no/such.obj"), "{}", text(&o));
+    let obj = tmp.path().join("nouv.obj");
+    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let o = pav().args(["uv", "check", "--mesh"]).arg(&obj).output().unwrap();
+    assert!(!o.status.success());
+    assert!(text(&o).contains("nouv.obj:4: face corner `1` has no UV index; the mesh needs UVs"), "{}", text(&o));
+    let obj = tmp.path().join("badidx.obj");
+    std::fs::write(&obj, "v 0 0 0\nvt 0 0\nf 1/1 2/1 3/1\n").unwrap();
+    let o = pav().args(["render", "--mesh"]).arg(&obj).output().unwrap();
+    assert!(text(&o).contains("vertex index `2/1` is out of range (1 positions)"), "{}", text(&o));
+    let obj = tmp.path().join("nan.obj");
+    std::fs::write(&obj, "v 0 nan 0\n").unwrap();
+    let o = pav().args(["render", "--mesh"]).arg(&obj).output().unwrap();
+    assert!(text(&o).contains("nan.obj:1: non-finite value NaN"), "{}", text(&o));
+}
