@@ -214,6 +214,21 @@ impl Mesh {
         Ok(m)
     }
 
+    /// A single-material mesh whose UV indices equal its position indices (one UV per vertex).
+    pub fn from_triangles(positions: Vec<[f32; 3]>, uvs: Vec<[f32; 2]>, faces: Vec<[u32; 3]>) -> Mesh {
+        let nf = faces.len();
+        Mesh {
+            positions,
+            uvs,
+            normals: Vec::new(),
+            face_uvs: faces.clone(),
+            faces,
+            face_normals: Vec::new(),
+            face_material: vec![0; nf],
+            materials: vec![Material { name: "default".into(), map_kd: None }],
+        }
+    }
+
     /// Writes the mesh as OBJ (positions as stored, UVs, normals, one `usemtl` group per material
     /// run), with `mtllib` pointing at `mtl` when given.
     pub fn write_obj(&self, path: &Path, mtl: Option<&str>) -> std::io::Result<()> {

@@ -147,19 +147,9 @@ pub fn paint_uv(mesh: &Mesh, faces: &[(usize, [u8; 3])], size: usize, background
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::mesh::Material;
 
     fn tri(pos: [[f32; 3]; 3], uv: [[f32; 2]; 3]) -> Mesh {
-        Mesh {
-            positions: pos.to_vec(),
-            uvs: uv.to_vec(),
-            normals: Vec::new(),
-            faces: vec![[0, 1, 2]],
-            face_uvs: vec![[0, 1, 2]],
-            face_normals: Vec::new(),
-            face_material: vec![0],
-            materials: vec![Material { name: "m".into(), map_kd: None }],
-        }
+        Mesh::from_triangles(pos.to_vec(), uv.to_vec(), vec![[0, 1, 2]])
     }
 
     #[test]

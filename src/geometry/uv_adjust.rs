@@ -312,7 +312,6 @@ pub fn adjust(mesh: &mut Mesh, faces: &[usize]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::mesh::Material;
 
     /// A flat 4×3 grid in the XZ plane with UVs = a scaled, rotated copy of its coordinates.
     fn grid(mirror: bool) -> Mesh {
@@ -334,17 +333,7 @@ mod tests {
                 faces.push([a, a + 5, a + 4]);
             }
         }
-        let nf = faces.len();
-        Mesh {
-            positions,
-            uvs,
-            normals: Vec::new(),
-            face_uvs: faces.clone(),
-            faces,
-            face_normals: Vec::new(),
-            face_material: vec![0; nf],
-            materials: vec![Material { name: "m".into(), map_kd: None }],
-        }
+        Mesh::from_triangles(positions, uvs, faces)
     }
 
     #[test]

@@ -144,20 +144,10 @@ impl GBuffer {
 mod tests {
     use super::*;
     use crate::geometry::camera::Camera;
-    use crate::geometry::mesh::Material;
 
     fn mesh(positions: Vec<[f32; 3]>, faces: Vec<[u32; 3]>) -> Mesh {
-        let nf = faces.len();
-        Mesh {
-            uvs: positions.iter().map(|p| [p[0], p[1]]).collect(),
-            positions,
-            normals: Vec::new(),
-            face_uvs: faces.clone(),
-            faces,
-            face_normals: Vec::new(),
-            face_material: vec![0; nf],
-            materials: vec![Material { name: "m".into(), map_kd: None }],
-        }
+        let uvs = positions.iter().map(|p| [p[0], p[1]]).collect();
+        Mesh::from_triangles(positions, uvs, faces)
     }
 
     fn cam() -> Camera {

@@ -112,12 +112,11 @@ impl Shading {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::mesh::Material;
 
     #[test]
     fn facing_quad_gets_ambient_plus_lambert_and_degenerate_stays_finite() {
-        let m = Mesh {
-            positions: vec![
+        let m = Mesh::from_triangles(
+            vec![
                 [-1.0, -1.0, 0.0],
                 [1.0, -1.0, 0.0],
                 [1.0, 1.0, 0.0],
@@ -126,14 +125,9 @@ mod tests {
                 [0.0, 0.0, 0.5],
                 [0.0, 0.0, 0.5],
             ],
-            uvs: vec![[0.0, 0.0]; 7],
-            normals: Vec::new(),
-            faces: vec![[0, 1, 2], [0, 2, 3], [4, 5, 6]],
-            face_uvs: vec![[0, 0, 0]; 3],
-            face_normals: Vec::new(),
-            face_material: vec![0; 3],
-            materials: vec![Material { name: "m".into(), map_kd: None }],
-        };
+            vec![[0.0, 0.0]; 7],
+            vec![[0, 1, 2], [0, 2, 3], [4, 5, 6]],
+        );
         let n = vertex_normals(&m);
         assert_eq!(n[0], [0.0, 0.0, 1.0]);
         let cam = Camera::look_at([0.0, 0.0, 3.0], [0.0; 3], [0.0, 1.0, 0.0], 60.0);
