@@ -1,6 +1,8 @@
 //! PNG plots: detector score vs turntable angle (polar) and A_physical bars per detector.
 
 use super::report::SummaryRow;
+use plotters::coord::types::RangedCoordf64;
+use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::{register_font, FontStyle};
 use std::path::Path;
@@ -44,6 +46,15 @@ fn fonts() {
 
 fn wrap(path: &Path, r: R<()>) -> Result<(), PlotError> {
     r.map_err(|e| PlotError { path: path.display().to_string(), msg: e.to_string() })
+}
+
+type Chart<'a> = ChartContext<'a, BitMapBackend<'a>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// Draws the legend box at `pos` and writes the image.
+fn finish(ch: &mut Chart<'_>, root: &DrawingArea<BitMapBackend<'_>, Shift>, pos: SeriesLabelPosition) -> R<()> {
+    ch.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).position(pos).draw()?;
+    root.present()?;
+    Ok(())
 }
 
 /// One detector's scores by angle.
@@ -97,13 +108,7 @@ pub fn polar_scores(path: &Path, title: &str, series: &[ScoreSeries], threshold:
                     .label(s.label.clone())
                     .legend(move |(x, y)| Circle::new((x + 10, y), 4, c.filled()));
             }
-            ch.configure_series_labels()
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .position(SeriesLabelPosition::LowerRight)
-                .draw()?;
-            root.present()?;
-            Ok(())
+            finish(&mut ch, &root, SeriesLabelPosition::LowerRight)
         })(),
     )
 }
@@ -172,13 +177,7 @@ pub fn accuracy_bars(path: &Path, rows: &[SummaryRow], threshold: f32) -> Result
                     }
                 }
             }
-            ch.configure_series_labels()
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .position(SeriesLabelPosition::UpperRight)
-                .draw()?;
-            root.present()?;
-            Ok(())
+            finish(&mut ch, &root, SeriesLabelPosition::UpperRight)
         })(),
     )
 }
@@ -222,13 +221,7 @@ pub fn tradeoff(path: &Path, rows: &[super::bench::Tradeoff]) -> Result<(), Plot
                     ch.draw_series(std::iter::once(Text::new(format!("{}", r.stride), p, ("sans-serif", 14))))?;
                 }
             }
-            ch.configure_series_labels()
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .position(SeriesLabelPosition::LowerRight)
-                .draw()?;
-            root.present()?;
-            Ok(())
+            finish(&mut ch, &root, SeriesLabelPosition::LowerRight)
         })(),
     )
 }
