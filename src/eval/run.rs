@@ -9,7 +9,7 @@ use super::report::{
     summary_markdown, write_angles_csv, write_summary_csv, write_text, FrameCsv, ReportError, ReportSettings,
     SummaryRow,
 };
-use super::video::VideoReader;
+use super::video::{Prefetch, Step, VideoReader};
 use crate::detect::Detector;
 use crate::sidecar::{self, AngleSample};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -138,7 +138,7 @@ pub fn evaluate(
                 Angles::Period { period_s: opts.rotation_period_s, start_deg: opts.start_angle_deg }
             }
         };
-        let mut reader = match VideoReader::open(&job.path) {
+        let reader = match VideoReader::open(&job.path) {
             Ok(r) => r,
             Err(e) => {
                 out.failures.push(e.to_string());
@@ -157,6 +157,7 @@ pub fn evaluate(
             }
         };
         let info = reader.info().clone();
+        let mut frames = Prefetch::new(reader, stride, 4);
         let bar = if opts.progress {
             let b = ProgressBar::new(info.declared_frames as u64);
             b.set_style(
@@ -179,25 +180,28 @@ pub fn evaluate(
                 out.interrupted = true;
                 break;
             }
+            // Time spent waiting for the decoder thread (decoding itself overlaps inference).
             let t0 = Instant::now();
-            let step = if decoded % stride == 0 {
-                reader.read().map(|f| f.map(Some))
-            } else {
-                reader.skip().map(|ok| ok.then_some(None))
-            };
+            let step = frames.next_step();
             out.timing.decode_s += t0.elapsed().as_secs_f64();
-            let frame = match step {
-                Ok(None) => break,
-                Ok(Some(f)) => f,
-                Err(e) => {
+            let (idx, frame) = match step {
+                Step::End => break,
+                Step::Error(e) => {
                     status = format!("stopped: {e}");
                     out.failures.push(e.to_string());
                     break;
                 }
+                Step::Skipped => {
+                    decoded += 1;
+                    bar.inc(1);
+                    continue;
+                }
+                Step::Frame(i, f) => {
+                    decoded += 1;
+                    bar.inc(1);
+                    (i, f)
+                }
             };
-            decoded += 1;
-            bar.inc(1);
-            let Some((idx, frame)) = frame else { continue };
             out.timing.frames_scored += 1;
             let (time_s, angle_deg) = angles.at(idx, info.fps);
             for (k, det) in detectors.iter_mut().enumerate() {

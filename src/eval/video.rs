@@ -133,3 +133,76 @@ pub fn frame_to_mat(f: &Frame) -> opencv::Result<Mat> {
     let m = flat.reshape(3, f.height as i32)?;
     m.try_clone()
 }
+
+/// What the prefetching decoder hands over next.
+pub enum Step {
+    /// A decoded frame with its index.
+    Frame(usize, Frame),
+    /// A frame skipped by the stride (grabbed, not converted).
+    Skipped,
+    /// End of stream.
+    End,
+    /// Decoding failed; nothing follows.
+    Error(VideoError),
+}
+
+/// Decodes on a background thread a few frames ahead, so decoding overlaps inference.
+pub struct Prefetch {
+    rx: std::sync::mpsc::Receiver<Step>,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Prefetch {
+    /// Starts decoding `reader`, converting every `stride`-th frame, at most `depth` frames ahead.
+    pub fn new(mut reader: VideoReader, stride: usize, depth: usize) -> Self {
+        let (tx, rx) = std::sync::mpsc::sync_channel(depth.max(1));
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let flag = stop.clone();
+        let thread = std::thread::spawn(move || {
+            let stride = stride.max(1);
+            let mut n = 0usize;
+            while !flag.load(std::sync::atomic::Ordering::Relaxed) {
+                let step = if n % stride == 0 {
+                    match reader.read() {
+                        Ok(Some((i, f))) => Step::Frame(i, f),
+                        Ok(None) => Step::End,
+                        Err(e) => Step::Error(e),
+                    }
+                } else {
+                    match reader.skip() {
+                        Ok(true) => Step::Skipped,
+                        Ok(false) => Step::End,
+                        Err(e) => Step::Error(e),
+                    }
+                };
+                n += 1;
+                let last = matches!(step, Step::End | Step::Error(_));
+                if tx.send(step).is_err() || last {
+                    return;
+                }
+            }
+        });
+        Prefetch { rx, stop, thread: Some(thread) }
+    }
+
+    /// The next step; `End` once the decoder thread has finished.
+    pub fn next_step(&mut self) -> Step {
+        self.rx.recv().unwrap_or(Step::End)
+    }
+}
+
+impl Drop for Prefetch {
+    fn drop(&mut self) {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        // Unblock a sender waiting on a full queue, then wait for the thread.
+        while self.rx.try_recv().is_ok() {}
+        if let Some(t) = self.thread.take() {
+            while !t.is_finished() {
+                while self.rx.try_recv().is_ok() {}
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
+            let _ = t.join();
+        }
+    }
+}
