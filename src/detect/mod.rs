@@ -1,5 +1,7 @@
 //! Object detectors: configs, preprocessing, output decoding, NMS and backends.
 
+#[cfg(feature = "optimize")]
+pub mod candle_darknet;
 pub mod coco;
 pub mod config;
 pub mod darknet;
