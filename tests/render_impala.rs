@@ -44,15 +44,10 @@ fn impala_renders_with_its_textured_region() {
     assert!(textured > 0.02 && textured < cov, "textured share {textured} of the image, car {cov}");
     // Textured pixels belong to the faces whose UV centroid lies in the white region
     // (281 faces per CONVENTIONS.md): a flipped or shifted UV mapping would break this.
-    let centroid_white = |f: usize| {
-        let c = mesh.face_uvs[f]
-            .iter()
-            .fold([0f32; 2], |a, &t| [a[0] + mesh.uvs[t as usize][0] / 3.0, a[1] + mesh.uvs[t as usize][1] / 3.0]);
-        let x = ((c[0].clamp(0.0, 1.0)) * (tex.width - 1) as f32).round() as usize;
-        let y = ((1.0 - c[1].clamp(0.0, 1.0)) * (tex.height - 1) as f32).round() as usize;
-        white[y * tex.width + x] == 1.0
-    };
-    assert_eq!((0..mesh.faces.len()).filter(|&f| centroid_white(f)).count(), 281);
+    let patch: std::collections::HashSet<usize> =
+        pav::geometry::uv::faces_in_mask(&mesh, &white, tex.width, tex.height).into_iter().collect();
+    let centroid_white = |f: usize| patch.contains(&f);
+    assert_eq!(patch.len(), 281);
     let (mut inside, mut total) = (0, 0);
     for (i, v) in m.iter().enumerate() {
         if *v > 0.5 && g.face[i] != EMPTY {

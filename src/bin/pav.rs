@@ -103,7 +103,8 @@ fn uv_adjust(mesh_path: &std::path::Path, mask: &std::path::Path, out: &std::pat
     use pav::geometry::uv_adjust::adjust;
     let original = Mesh::load_obj(mesh_path)?;
     let tex = Texture::load(mask).map_err(anyhow::Error::msg)?;
-    let patch = faces_in_mask(&original, &tex.white_mask(), tex.width, tex.height);
+    let was_white = tex.white_mask();
+    let patch = faces_in_mask(&original, &was_white, tex.width, tex.height);
     if patch.is_empty() {
         bail!("{} marks no face of {}", mask.display(), mesh_path.display());
     }
@@ -118,7 +119,6 @@ fn uv_adjust(mesh_path: &std::path::Path, mask: &std::path::Path, out: &std::pat
     let (w, h) = (tex.width, tex.height);
     let mut rgb: Vec<u8> = tex.rgb.iter().map(|v| (v * 255.0).round() as u8).collect();
     let body = [67u8, 74, 114];
-    let was_white = tex.white_mask();
     for (i, px) in rgb.chunks_mut(3).enumerate() {
         if was_white[i] == 1.0 {
             px.copy_from_slice(&body);

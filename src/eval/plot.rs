@@ -1,6 +1,6 @@
 //! PNG plots: detector score vs turntable angle (polar) and A_physical bars per detector.
 
-use super::report::SummaryRow;
+use super::report::{unique, SummaryRow};
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -116,16 +116,8 @@ pub fn polar_scores(path: &Path, title: &str, series: &[ScoreSeries], threshold:
 /// Grouped bars: A_physical (%) per detector, one bar per video, with 95 % Wilson whiskers.
 pub fn accuracy_bars(path: &Path, rows: &[SummaryRow], threshold: f32) -> Result<(), PlotError> {
     fonts();
-    let mut dets: Vec<&str> = Vec::new();
-    let mut vids: Vec<&str> = Vec::new();
-    for r in rows {
-        if !dets.contains(&r.detector.as_str()) {
-            dets.push(&r.detector);
-        }
-        if !vids.contains(&r.video.as_str()) {
-            vids.push(&r.video);
-        }
-    }
+    let dets = unique(rows.iter().map(|r| r.detector.as_str()));
+    let vids = unique(rows.iter().map(|r| r.video.as_str()));
     wrap(
         path,
         (|| -> R<()> {
@@ -185,13 +177,7 @@ pub fn accuracy_bars(path: &Path, rows: &[SummaryRow], threshold: f32) -> Result
 /// Accuracy-vs-time scatter: one series per (detector, input size), one point per stride.
 pub fn tradeoff(path: &Path, rows: &[super::bench::Tradeoff]) -> Result<(), PlotError> {
     fonts();
-    let mut keys: Vec<(String, String)> = Vec::new();
-    for r in rows {
-        let k = (r.detector.clone(), r.input.clone());
-        if !keys.contains(&k) {
-            keys.push(k);
-        }
-    }
+    let keys = unique(rows.iter().map(|r| (r.detector.clone(), r.input.clone())));
     let tmax = rows.iter().map(|r| r.seconds).fold(0.0, f64::max) * 1.1 + 1e-3;
     wrap(
         path,

@@ -145,8 +145,9 @@ pub fn write_angles_csv(
     w.flush().map_err(|e| rerr(path, e))
 }
 
-fn unique<'a>(it: impl Iterator<Item = &'a String>) -> Vec<&'a String> {
-    let mut v: Vec<&String> = Vec::new();
+/// The distinct items of `it` in first-seen order (report rows and columns keep input order).
+pub fn unique<T: PartialEq>(it: impl IntoIterator<Item = T>) -> Vec<T> {
+    let mut v: Vec<T> = Vec::new();
     for s in it {
         if !v.contains(&s) {
             v.push(s);

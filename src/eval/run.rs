@@ -292,12 +292,7 @@ fn write_reports(
     if !opts.plots {
         return Ok(());
     }
-    let mut videos: Vec<&str> = Vec::new();
-    for r in &out.records {
-        if !videos.contains(&r.video.as_str()) {
-            videos.push(&r.video);
-        }
-    }
+    let videos = super::report::unique(out.records.iter().map(|r| r.video.clone()));
     let plot_err = |e: super::plot::PlotError| ReportError { path: PathBuf::from(&e.path), msg: e.msg };
     for v in videos {
         let series: Vec<ScoreSeries> = detectors
@@ -312,7 +307,7 @@ fn write_reports(
                     .collect(),
             })
             .collect();
-        let p = dir.join(format!("polar_{}.png", file_safe(v)));
+        let p = dir.join(format!("polar_{}.png", file_safe(&v)));
         polar_scores(&p, &format!("{v}: car score vs turntable angle"), &series, opts.threshold as f64)
             .map_err(plot_err)?;
         out.files.push(p);
