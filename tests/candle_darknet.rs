@@ -77,3 +77,23 @@ fn input_gradient_matches_central_differences() {
         assert!((fd - g[i]).abs() <= 1e-5 * (1.0 + fd.abs()), "pixel {i}: {} vs {fd}", g[i]);
     }
 }
+
+#[test]
+fn frozen_conv_backward_equals_stock_backward() {
+    if common::real_data().is_none() {
+        return;
+    }
+    let n = 96usize;
+    let data: Vec<f64> = (0..3 * n * n).map(|i| ((i * 2654435761usize) % 1000) as f64 / 1000.0).collect();
+    let grad = |m: &CandleDarknet| -> Vec<f64> {
+        let var = Var::from_tensor(&Tensor::from_vec(data.clone(), (1, 3, n, n), &Device::Cpu).unwrap()).unwrap();
+        let heads = m.forward(var.as_tensor()).unwrap();
+        let l = (heads[0].sqr().unwrap().sum_all().unwrap() + heads[1].sum_all().unwrap()).unwrap();
+        l.backward().unwrap().get(var.as_tensor()).unwrap().flatten_all().unwrap().to_vec1().unwrap()
+    };
+    let (frozen, stock) = (grad(&model(DType::F64)), grad(&model(DType::F64).with_stock_conv()));
+    let scale = stock.iter().fold(0f64, |a, v| a.max(v.abs()));
+    let worst = frozen.iter().zip(&stock).map(|(a, b)| (a - b).abs()).fold(0f64, f64::max);
+    eprintln!("max |frozen - stock| = {worst:e} (gradient scale {scale:e})");
+    assert!(scale > 0.0 && worst <= 1e-10 * scale, "{worst} vs scale {scale}");
+}

@@ -72,7 +72,7 @@ fn axis_taps(src: usize, dst: usize, filter: Interpolation) -> Vec<Taps> {
 }
 
 /// Resizes an interleaved 3-channel u8 image to `nw × nh`, returning values on the 0–255 scale.
-fn resize(frame: &Frame, nw: usize, nh: usize, filter: Interpolation) -> Vec<f32> {
+pub fn resize(frame: &Frame, nw: usize, nh: usize, filter: Interpolation) -> Vec<f32> {
     match filter {
         Interpolation::Bilinear => resize_float(frame, nw, nh),
         Interpolation::Antialias => resize_pil(frame, nw, nh),
@@ -139,6 +139,18 @@ fn resize_pil(frame: &Frame, nw: usize, nh: usize) -> Vec<f32> {
         }
     }
     out
+}
+
+/// The resampling of `src` samples to `dst` as a dense row-major `dst × src` matrix, so a
+/// differentiable pipeline can resize with two matrix products (`A_h · X · A_wᵀ`).
+pub fn interpolation_matrix(src: usize, dst: usize, filter: Interpolation) -> Vec<f32> {
+    let mut m = vec![0f32; dst * src];
+    for (d, t) in axis_taps(src, dst, filter).into_iter().enumerate() {
+        for (k, w) in t.weights.iter().enumerate() {
+            m[d * src + t.start + k] += *w as f32;
+        }
+    }
+    m
 }
 
 /// Builds the NCHW float input (batch 1) for `frame` and the map back to frame pixels.
@@ -268,5 +280,33 @@ mod tests {
         // Weights sum to one, so a flat image stays flat.
         let (flat, _) = prepare(&solid(37, 11, [200, 200, 200]), &c);
         assert!(flat[..15].iter().all(|&v| v == 200.0));
+    }
+
+    #[test]
+    fn interpolation_matrices_reproduce_the_resize() {
+        let (w, h, nw, nh) = (13, 7, 5, 4);
+        let bgr: Vec<u8> = (0..w * h * 3).map(|i| ((i * 37) % 256) as u8).collect();
+        let f = Frame { width: w, height: h, bgr };
+        let direct = resize(&f, nw, nh, Interpolation::Bilinear);
+        let (ax, ay) = (
+            interpolation_matrix(w, nw, Interpolation::Bilinear),
+            interpolation_matrix(h, nh, Interpolation::Bilinear),
+        );
+        for r in 0..nw {
+            assert!((ax[r * w..(r + 1) * w].iter().sum::<f32>() - 1.0).abs() < 1e-6);
+        }
+        for y in 0..nh {
+            for x in 0..nw {
+                for c in 0..3 {
+                    let mut v = 0.0;
+                    for sy in 0..h {
+                        for sx in 0..w {
+                            v += ay[y * h + sy] * ax[x * w + sx] * f.bgr[(sy * w + sx) * 3 + c] as f32;
+                        }
+                    }
+                    assert!((v.round() - direct[(y * nw + x) * 3 + c]).abs() <= 1.0, "({x},{y},{c})");
+                }
+            }
+        }
     }
 }

@@ -67,6 +67,38 @@ pub fn binarize(grey: &[f32], covered: &[bool], c_mid: f32, textured_is_brighter
         .collect()
 }
 
+/// The grey values of the two-valued map T_m: the textured region and the rest.
+pub const C_T: f32 = 0.6;
+/// Grey value of the non-textured part of T_m.
+pub const C_N: f32 = 0.45;
+
+/// The paper's mask for one view: renders T_m (`C_T` on texels where `region` is 1, `C_N`
+/// elsewhere) in dark light, measures both grey ranges on the pixels whose bilinear taps all lie
+/// on one side of the region border, and binarizes every covered pixel at c_mid. Dark light is
+/// ambient 1 with no directional light, so its render is the gathered albedo unchanged.
+/// Returns P over `n_pixels` pixels and c_mid.
+pub fn dual_render_mask(
+    gather: &super::texture::Gather,
+    region: &[f32],
+    n_pixels: usize,
+) -> Result<(Vec<f32>, f32), MaskError> {
+    let t_m: Vec<f32> = region.iter().map(|r| if *r > 0.5 { C_T } else { C_N }).collect();
+    let mut grey = vec![0f32; n_pixels];
+    gather.apply(&t_m, 1, &mut grey);
+    let (mut label, mut covered) = (vec![None; n_pixels], vec![false; n_pixels]);
+    for (p, taps) in gather.pixels.iter().zip(&gather.taps) {
+        covered[*p as usize] = true;
+        let mut sides = taps.iter().filter(|t| t.1 > 0.0).map(|t| region[t.0 as usize] > 0.5);
+        let first = sides.next().unwrap_or(false);
+        if sides.all(|s| s == first) {
+            label[*p as usize] = Some(first);
+        }
+    }
+    let (t, n) = measure(&grey, &label)?;
+    let mid = c_mid(t, n)?;
+    Ok((binarize(&grey, &covered, mid, t.min >= n.max), mid))
+}
+
 /// `I_o = I_d·P + I_p·(1−P)`, per pixel over `c` interleaved channels.
 pub fn composite(i_d: &[f32], i_p: &[f32], p: &[f32], c: usize) -> Vec<f32> {
     i_d.iter().zip(i_p).enumerate().map(|(i, (d, q))| d * p[i / c] + q * (1.0 - p[i / c])).collect()
@@ -88,6 +120,20 @@ mod tests {
             e.to_string().contains("intersect: textured [0.3000, 0.6000] and non-textured [0.5000, 0.9000]"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn dual_render_mask_splits_at_the_region_border() {
+        // A 4×1 texture, textured on the right half, sampled at 5 pixels along u.
+        let region = [0.0, 0.0, 1.0, 1.0];
+        let us = [0.0, 0.25, 0.55, 0.75, 1.0];
+        let g = super::super::texture::Gather::new((0..5).map(|i| (i, [us[i as usize], 0.5])), 4, 1);
+        let (p, mid) = dual_render_mask(&g, &region, 6).unwrap();
+        assert!((mid - (C_T + C_N) / 2.0).abs() < 1e-6);
+        // Pixel 2 straddles the border (grey 0.5475 > c_mid 0.525): unlabelled, binarized textured.
+        assert_eq!(p, vec![0.0, 0.0, 1.0, 1.0, 1.0, 0.0]);
+        let none = super::super::texture::Gather::new((0..2).map(|i| (i, [0.0, 0.5])), 4, 1);
+        assert_eq!(dual_render_mask(&none, &region, 2), Err(MaskError::Empty("textured")));
     }
 
     #[test]

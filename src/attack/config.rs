@@ -1,0 +1,188 @@
+//! `pav optimize` configs (TOML). Relative paths are resolved against the config's folder.
+
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// How the mesh is normalized, which fixes the camera convention that fits it.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum CameraConvention {
+    /// FCA/DAS: neural_renderer's bbox normalization, 90° FoV (FCA's CARLA samples).
+    Fca,
+    /// PAV-Camou: vertex-mean centring, max-abs scaling, 60° FoV.
+    PavCamou,
+}
+
+/// The car and its optimizable region.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MeshConfig {
+    /// OBJ with UVs.
+    pub obj: PathBuf,
+    /// UV-space image whose pure-white texels are optimized.
+    pub region: PathBuf,
+    /// Camera convention of the views (and the matching mesh normalization).
+    pub camera: CameraConvention,
+    /// Texture side in texels (the region image is resampled to it).
+    pub texture_size: usize,
+    /// Initial texture value (the authors use 0.5).
+    #[serde(default = "half")]
+    pub init: f32,
+    /// Real-world car length in metres, for the printable sheet (mesh units are not trusted).
+    pub car_length_m: f64,
+}
+
+fn half() -> f32 {
+    0.5
+}
+
+/// The PBR views.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ViewsConfig {
+    /// Training npz files (FCA format).
+    pub train: Vec<PathBuf>,
+    /// Held-out npz files.
+    #[serde(default)]
+    pub test: Vec<PathBuf>,
+    /// Render (and composite) size in pixels.
+    pub size: usize,
+    /// Ground-truth boxes (FCA's derived_test_labels.tsv) for P@0.5.
+    pub labels: Option<PathBuf>,
+}
+
+/// The white-box detector.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct DetectorSection {
+    /// Darknet cfg.
+    pub cfg: PathBuf,
+    /// Darknet weights.
+    pub weights: PathBuf,
+    /// Target class indices (COCO car = 2).
+    pub target: Vec<usize>,
+    /// Objectness from which a prediction counts as a box in L1/L2.
+    pub box_threshold: f32,
+}
+
+/// Loss weights: L = L1 + β·L2 + γ·Ls.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LossConfig {
+    /// β.
+    pub beta: f32,
+    /// γ.
+    pub gamma: f32,
+}
+
+/// Adam and the schedule.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct OptimizerConfig {
+    /// Learning rate.
+    pub lr: f32,
+    /// Passes over the training views.
+    pub epochs: usize,
+    /// Seed for the view order and EoT draws.
+    #[serde(default)]
+    pub seed: u64,
+    /// Texture values are kept in this range.
+    #[serde(default = "clamp_default")]
+    pub clamp: [f32; 2],
+}
+
+fn clamp_default() -> [f32; 2] {
+    [1e-4, 1.0 - 1e-4]
+}
+
+/// A whole optimization config.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct OptimizeConfig {
+    /// Scene TOML (lighting and EoT effects).
+    pub scene: PathBuf,
+    /// Mesh and region.
+    pub mesh: MeshConfig,
+    /// Views.
+    pub views: ViewsConfig,
+    /// White-box detector.
+    pub detector: DetectorSection,
+    /// Loss weights.
+    pub loss: LossConfig,
+    /// Optimizer.
+    pub optimizer: OptimizerConfig,
+}
+
+/// Errors reading a config.
+#[derive(Debug, thiserror::Error)]
+#[error("optimize config {path}: {msg}")]
+pub struct ConfigError {
+    /// The file.
+    pub path: String,
+    /// What is wrong.
+    pub msg: String,
+}
+
+impl OptimizeConfig {
+    /// Reads, resolves relative paths against the file's folder, and checks the values.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let err = |msg: String| ConfigError { path: path.display().to_string(), msg };
+        let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+        let mut c: OptimizeConfig = toml::from_str(&text).map_err(|e| err(e.to_string()))?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let fix = |p: &mut PathBuf| {
+            if p.is_relative() {
+                *p = dir.join(&*p);
+            }
+        };
+        fix(&mut c.scene);
+        fix(&mut c.mesh.obj);
+        fix(&mut c.mesh.region);
+        c.views.train.iter_mut().for_each(fix);
+        c.views.test.iter_mut().for_each(fix);
+        if let Some(l) = c.views.labels.as_mut() {
+            fix(l);
+        }
+        fix(&mut c.detector.cfg);
+        fix(&mut c.detector.weights);
+        c.check().map_err(err)?;
+        Ok(c)
+    }
+
+    /// Value checks with messages that say what to change.
+    pub fn check(&self) -> Result<(), String> {
+        let o = &self.optimizer;
+        if !(o.lr.is_finite() && o.lr > 0.0) {
+            return Err(format!("optimizer.lr must be > 0, got {}", o.lr));
+        }
+        if o.epochs == 0 {
+            return Err("optimizer.epochs must be at least 1".into());
+        }
+        if !(0.0 <= o.clamp[0] && o.clamp[0] < o.clamp[1] && o.clamp[1] <= 1.0) {
+            return Err(format!("optimizer.clamp must satisfy 0 ≤ lo < hi ≤ 1, got {:?}", o.clamp));
+        }
+        if self.views.train.is_empty() {
+            return Err("views.train lists no npz file".into());
+        }
+        if !(32..=4096).contains(&self.views.size) {
+            return Err(format!("views.size must be in 32..=4096, got {}", self.views.size));
+        }
+        if !(16..=8192).contains(&self.mesh.texture_size) {
+            return Err(format!("mesh.texture_size must be in 16..=8192, got {}", self.mesh.texture_size));
+        }
+        if !(0.0..=1.0).contains(&self.mesh.init) {
+            return Err(format!("mesh.init must be in [0, 1], got {}", self.mesh.init));
+        }
+        if !(self.mesh.car_length_m > 0.0) {
+            return Err(format!("mesh.car_length_m must be > 0, got {}", self.mesh.car_length_m));
+        }
+        let l = &self.loss;
+        if !(l.beta.is_finite() && l.beta >= 0.0 && l.gamma.is_finite() && l.gamma >= 0.0) {
+            return Err(format!("loss.beta and loss.gamma must be ≥ 0, got {} and {}", l.beta, l.gamma));
+        }
+        if self.detector.target.is_empty() {
+            return Err("detector.target lists no class".into());
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,117 @@
+//! One training or test view: a PBR photo, the camera that matches it, and everything the
+//! texture-to-image map needs, computed once (the geometry and poses are fixed).
+//!
+//! The composite `I_o = I_d'·P + I_p·(1−P)` with a binary P takes the transformed render at the
+//! P = 1 pixels and the photo elsewhere, so only those pixels are rendered, shaded and transformed.
+
+use crate::detect::config::Interpolation;
+use crate::detect::preprocess::resize;
+use crate::detect::Frame;
+use crate::geometry::camera::Camera;
+use crate::geometry::mesh::Mesh;
+use crate::render::mask::{dual_render_mask, MaskError};
+use crate::render::raster::GBuffer;
+use crate::render::shade::{Lights, Shading};
+use crate::render::texture::Gather;
+use crate::rng::Rng;
+use crate::scene::eot::{self, EotTape};
+use crate::scene::Scene;
+
+/// A view ready for rendering.
+#[derive(Clone, Debug)]
+pub struct View {
+    /// Name (the photo's file stem).
+    pub name: String,
+    /// Image side in pixels.
+    pub size: usize,
+    /// The photo resized to `size`, RGB in [0, 1], interleaved.
+    pub photo: Vec<f32>,
+    /// Pixels where P = 1, in the order of `gather`.
+    pub active: Vec<u32>,
+    /// Share of the image the car covers.
+    pub coverage: f32,
+    /// The mask threshold found for this view.
+    pub c_mid: f32,
+    /// Texture lookup at the active pixels.
+    gather: Gather,
+    /// Shading factor and added light per active pixel, when the scene is lit.
+    shade: Option<(Vec<f32>, Vec<f32>)>,
+}
+
+impl View {
+    /// Rasterizes `mesh` from `cam` at `size`, computes P from the texel `region` of a
+    /// `tex_w × tex_h` texture, and shades with `lights` (`None`: unlit albedo).
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        name: &str,
+        mesh: &Mesh,
+        normals: &[[f32; 3]],
+        cam: &Camera,
+        photo: &Frame,
+        size: usize,
+        region: &[f32],
+        (tex_w, tex_h): (usize, usize),
+        lights: Option<&Lights>,
+    ) -> Result<View, MaskError> {
+        let g = GBuffer::render(mesh, cam, size);
+        let full = Gather::new(g.uv_samples(mesh), tex_w, tex_h);
+        let (p, c_mid) = dual_render_mask(&full, region, size * size)?;
+        let keep: Vec<bool> = full.pixels.iter().map(|px| p[*px as usize] == 1.0).collect();
+        let pick = |v: &[u32]| v.iter().zip(&keep).filter(|(_, k)| **k).map(|(x, _)| *x).collect::<Vec<u32>>();
+        let active = pick(&full.pixels);
+        let taps = full.taps.iter().zip(&keep).filter(|(_, k)| **k).map(|(t, _)| *t).collect();
+        let gather = Gather { tex_size: full.tex_size, pixels: active.clone(), taps };
+        let shade = lights.map(|l| {
+            let s = Shading::new(&g, mesh, normals, cam, l);
+            (active.iter().map(|p| s.mul[*p as usize]).collect(), active.iter().map(|p| s.add[*p as usize]).collect())
+        });
+        let bgr = resize(photo, size, size, Interpolation::Antialias);
+        let photo = bgr.chunks(3).flat_map(|c| [c[2] / 255.0, c[1] / 255.0, c[0] / 255.0]).collect();
+        Ok(View { name: name.into(), size, photo, active, coverage: g.coverage(), c_mid, gather, shade })
+    }
+
+    /// The composite for texture `tex` (RGB interleaved, in [0, 1]) with the scene's EoT drawn
+    /// from `rng`, and the tape for [`View::backward`].
+    pub fn render(&self, tex: &[f32], scene: &Scene, rng: &mut Rng) -> (Vec<f32>, EotTape) {
+        let mut img = self.render_plain(tex);
+        let tape = eot::apply(scene, &mut img, 3, &self.active, rng);
+        (img, tape)
+    }
+
+    /// The composite before EoT (lit texture at P = 1, photo elsewhere), not yet clamped.
+    pub fn render_plain(&self, tex: &[f32]) -> Vec<f32> {
+        let mut img = self.photo.clone();
+        self.gather.apply(tex, 3, &mut img);
+        if let Some((mul, add)) = &self.shade {
+            for (k, p) in self.active.iter().enumerate() {
+                for v in &mut img[*p as usize * 3..*p as usize * 3 + 3] {
+                    *v = *v * mul[k] + add[k];
+                }
+            }
+        }
+        img
+    }
+
+    /// Accumulates `∂L/∂texture` into `grad_tex` from `∂L/∂image` (interleaved RGB).
+    pub fn backward(&self, tape: &EotTape, grad_img: &[f32], grad_tex: &mut [f32]) {
+        let mut g = vec![0f32; grad_img.len()];
+        for p in &self.active {
+            let i = *p as usize * 3;
+            g[i..i + 3].copy_from_slice(&grad_img[i..i + 3]);
+        }
+        eot::backward(tape, &mut g, 3, &self.active);
+        if let Some((mul, _)) = &self.shade {
+            for (k, p) in self.active.iter().enumerate() {
+                for v in &mut g[*p as usize * 3..*p as usize * 3 + 3] {
+                    *v *= mul[k];
+                }
+            }
+        }
+        self.gather.adjoint(&g, 3, grad_tex);
+    }
+
+    /// Share of the image that shows the texture (P = 1).
+    pub fn textured_share(&self) -> f32 {
+        self.active.len() as f32 / (self.size * self.size) as f32
+    }
+}
