@@ -1,9 +1,15 @@
 //! The attack (paper Algorithm 1): views → composite → detector → loss → texture.
 
 pub mod adam;
+pub mod checkpoint;
 pub mod config;
+pub mod export;
 #[cfg(feature = "optimize")]
 pub mod loss;
+#[cfg(feature = "optimize")]
+pub mod optimize;
+#[cfg(feature = "optimize")]
+pub mod outputs;
 pub mod setup;
 pub mod smooth;
 pub mod view;

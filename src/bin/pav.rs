@@ -18,6 +18,29 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Cmd {
+    /// Optimize an adversarial texture (PAV-Camou, paper Algorithm 1) against the white-box
+    /// YOLOv3-tiny; writes the texture, a printable sheet, loss curves, previews and scores.
+    #[cfg(feature = "optimize")]
+    Optimize {
+        /// Optimization config.
+        #[arg(long, default_value = "configs/optimize/paper.toml")]
+        config: PathBuf,
+        /// Output folder.
+        #[arg(long, short = 'o', default_value = "out/optimize")]
+        out: PathBuf,
+        /// Continue from the checkpoint in the output folder.
+        #[arg(long)]
+        resume: bool,
+        /// Override the config's epochs.
+        #[arg(long)]
+        epochs: Option<usize>,
+        /// Model scale of the printable sheet (20 = 1:20).
+        #[arg(long, default_value_t = 20.0)]
+        scale: f64,
+        /// Printer resolution of the sheet.
+        #[arg(long, default_value_t = 300.0)]
+        dpi: f64,
+    },
     /// UV map tools.
     #[command(subcommand)]
     Uv(UvCmd),
@@ -274,8 +297,85 @@ fn bench_render(mesh: &std::path::Path, sizes: &[usize], views: usize, out: &std
     Ok(())
 }
 
+#[cfg(feature = "optimize")]
+fn optimize(
+    config: &std::path::Path,
+    out: &std::path::Path,
+    resume: bool,
+    epochs: Option<usize>,
+    scale: f64,
+    dpi: f64,
+) -> Result<()> {
+    use pav::attack::config::OptimizeConfig;
+    use pav::attack::export::{atlas_side_m, write_sheet, PrintSpec};
+    use pav::attack::optimize::{run, Finish, RunOptions};
+    use pav::attack::outputs::{eval_scene, plot_log, preview, save_rgb, score_views};
+    use pav::attack::setup::Setup;
+    use pav::attack::whitebox::WhiteBox;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::Arc;
+    let cfg = OptimizeConfig::load(config)?;
+    let t = std::time::Instant::now();
+    let setup = Setup::load(&cfg, None)?;
+    let wb = WhiteBox::load(&cfg.detector, cfg.views.size)?;
+    eprintln!(
+        "{} training and {} held-out views at {}², texture {}² ({} optimizable values), scene {}; prepared in {:.1} s",
+        setup.train.len(),
+        setup.test.len(),
+        cfg.views.size,
+        setup.tex_size,
+        setup.region_values.len(),
+        setup.scene.describe(),
+        t.elapsed().as_secs_f64()
+    );
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
+    let opts =
+        RunOptions { out: out.to_path_buf(), resume, checkpoint_every: 20, max_skips: 5, epochs, progress: true };
+    let o = run(config, &cfg, &setup, &wb, &opts, &stop)?;
+    let n = setup.tex_size;
+    save_rgb(&out.join("texture.png"), n, n, &o.texture).map_err(anyhow::Error::msg)?;
+    plot_log(&out.join("loss.png"), &o.log, setup.train.len()).map_err(anyhow::Error::msg)?;
+    if matches!(o.finish, Finish::Stopped) {
+        eprintln!("stopped: state saved in {}; run again with --resume", out.join("checkpoint.bin").display());
+        return Ok(());
+    }
+    let views: Vec<&pav::attack::view::View> = setup.train.iter().chain(&setup.test).collect();
+    preview(&out.join("preview.png"), &views, &o.texture, &eval_scene(&setup)).map_err(anyhow::Error::msg)?;
+    let initial = setup.initial_texture(cfg.mesh.init);
+    let scores = score_views(&setup, &wb, &initial, &o.texture).map_err(anyhow::Error::msg)?;
+    let mut w = csv::Writer::from_path(out.join("scores.csv"))?;
+    for s in &scores {
+        w.serialize(s)?;
+    }
+    w.flush()?;
+    println!("white-box YOLOv3-tiny car score per view (no EoT): original photo / initial texture / optimized");
+    for s in &scores {
+        println!("  {:5} {:10} {:.3} / {:.3} / {:.3}", s.split, s.view, s.original, s.initial, s.optimized);
+    }
+    let (side, spread) = atlas_side_m(&setup.mesh, &setup.region, n, cfg.mesh.car_length_m)
+        .context("the optimizable region covers no face with area")?;
+    let sheet = write_sheet(&out.join("texture_print.png"), &o.texture, n, side, spread, PrintSpec { scale, dpi })
+        .map_err(anyhow::Error::msg)?;
+    println!(
+        "printable sheet: {} ({}x{} px at {dpi} dpi): print at 100 % so the atlas is {:.1} mm wide for a 1:{scale} model (the bar is 10 mm; texel density varies {:.2}x between faces, 10th-90th percentile)",
+        out.join("texture_print.png").display(),
+        sheet.width_px,
+        sheet.height_px,
+        sheet.atlas_mm,
+        sheet.density_spread
+    );
+    eprintln!("wrote texture.png, texture_print.png, loss.csv, loss.png, preview.png, scores.csv in {}", out.display());
+    Ok(())
+}
+
 fn main() -> Result<()> {
     let (mesh, texture, pose, orbit, size, out) = match Cli::parse().cmd {
+        #[cfg(feature = "optimize")]
+        Cmd::Optimize { config, out, resume, epochs, scale, dpi } => {
+            return optimize(&config, &out, resume, epochs, scale, dpi)
+        }
         Cmd::BenchRender { mesh, sizes, views, out } => return bench_render(&mesh, &sizes, views, &out),
         Cmd::Uv(UvCmd::Check { mesh, mask, out }) => return uv_check(&mesh, &mask, &out),
         Cmd::Uv(UvCmd::Adjust { mesh, mask, out }) => return uv_adjust(&mesh, &mask, &out),

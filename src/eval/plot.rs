@@ -211,3 +211,51 @@ pub fn tradeoff(path: &Path, rows: &[super::bench::Tradeoff]) -> Result<(), Plot
         })(),
     )
 }
+
+/// Optimization curves over steps: named series of (step, value), each drawn faint per step with
+/// its per-`window` running mean on top; `threshold` draws a dashed line for score series.
+pub fn loss_curve(
+    path: &Path,
+    title: &str,
+    series: &[(String, Vec<(f64, f64)>)],
+    window: usize,
+    threshold: Option<f64>,
+) -> Result<(), PlotError> {
+    fonts();
+    let xmax = series.iter().flat_map(|s| s.1.iter().map(|p| p.0)).fold(1.0, f64::max);
+    let ymax = series.iter().flat_map(|s| s.1.iter().map(|p| p.1)).filter(|v| v.is_finite()).fold(1.0, f64::max) * 1.05;
+    wrap(
+        path,
+        (|| -> R<()> {
+            let root = BitMapBackend::new(path, (900, 520)).into_drawing_area();
+            root.fill(&WHITE)?;
+            let mut ch = ChartBuilder::on(&root)
+                .caption(title, ("sans-serif", 22))
+                .margin(15)
+                .x_label_area_size(45)
+                .y_label_area_size(60)
+                .build_cartesian_2d(0f64..xmax, 0f64..ymax)?;
+            ch.configure_mesh().x_desc("step").draw()?;
+            if let Some(t) = threshold {
+                ch.draw_series(DashedLineSeries::new([(0.0, t), (xmax, t)], 6, 4, BLACK.stroke_width(1)))?;
+            }
+            for (i, (name, pts)) in series.iter().enumerate() {
+                let c = colour(i);
+                let finite: Vec<(f64, f64)> = pts.iter().copied().filter(|p| p.1.is_finite()).collect();
+                ch.draw_series(LineSeries::new(finite.iter().copied(), c.mix(0.3).stroke_width(1)))?;
+                let w = window.max(1);
+                let smooth: Vec<(f64, f64)> = (0..finite.len())
+                    .map(|k| {
+                        let lo = k.saturating_sub(w - 1);
+                        let s = &finite[lo..=k];
+                        (finite[k].0, s.iter().map(|p| p.1).sum::<f64>() / s.len() as f64)
+                    })
+                    .collect();
+                ch.draw_series(LineSeries::new(smooth, c.stroke_width(3)))?
+                    .label(name.as_str())
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(3)));
+            }
+            finish(&mut ch, &root, SeriesLabelPosition::UpperRight)
+        })(),
+    )
+}

@@ -1,0 +1,172 @@
+//! The printable sheet: the texture atlas resampled so that, printed at the stated DPI, its
+//! texels have the size they have on the scale model (PNG with its DPI in the pHYs chunk, and a
+//! 10 mm scale bar in the margin to check the printer did not rescale).
+
+use crate::detect::config::Interpolation;
+use crate::detect::preprocess::resize;
+use crate::detect::Frame;
+use crate::geometry::mesh::Mesh;
+use crate::geometry::uv::faces_in_mask;
+use std::path::Path;
+
+/// Print settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PrintSpec {
+    /// Model scale denominator (20 for 1:20).
+    pub scale: f64,
+    /// Printer resolution.
+    pub dpi: f64,
+}
+
+/// What was written.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sheet {
+    /// Atlas side on the real car (m): the UV square spans this much surface per side.
+    pub atlas_side_m: f64,
+    /// Atlas side on the sheet (mm).
+    pub atlas_mm: f64,
+    /// Image size in pixels (atlas plus margin).
+    pub width_px: u32,
+    /// Image height in pixels.
+    pub height_px: u32,
+    /// Texel spread: ratio of the 90th to the 10th percentile of per-face linear density.
+    pub density_spread: f64,
+}
+
+fn area3(p: [[f32; 3]; 3]) -> f64 {
+    let e1 = [p[1][0] - p[0][0], p[1][1] - p[0][1], p[1][2] - p[0][2]];
+    let e2 = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
+    let c = crate::geometry::camera::cross(e1, e2);
+    0.5 * ((c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) as f64).sqrt()
+}
+
+fn area2(t: [[f32; 2]; 3]) -> f64 {
+    0.5 * (((t[1][0] - t[0][0]) * (t[2][1] - t[0][1]) - (t[2][0] - t[0][0]) * (t[1][1] - t[0][1])) as f64).abs()
+}
+
+/// Real-world side (m) of the UV square over the faces of `mesh` in `region` (`n × n` texels),
+/// for a car `car_length_m` long: sqrt(surface area / UV area), and the per-face density spread.
+pub fn atlas_side_m(mesh: &Mesh, region: &[f32], n: usize, car_length_m: f64) -> Option<(f64, f64)> {
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for p in &mesh.positions {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    let length = (0..3).map(|k| (hi[k] - lo[k]) as f64).fold(0.0, f64::max);
+    if length <= 0.0 {
+        return None;
+    }
+    let m_per_unit = car_length_m / length;
+    let (mut a3, mut a2) = (0.0, 0.0);
+    let mut dens = Vec::new();
+    for f in faces_in_mask(mesh, region, n, n) {
+        let p = mesh.faces[f].map(|i| mesh.positions[i as usize]);
+        let t = mesh.face_uvs[f].map(|i| mesh.uvs[i as usize]);
+        let (x, y) = (area3(p) * m_per_unit * m_per_unit, area2(t));
+        if x > 0.0 && y > 0.0 {
+            dens.push((x / y).sqrt());
+        }
+        a3 += x;
+        a2 += y;
+    }
+    if a2 <= 0.0 || dens.is_empty() {
+        return None;
+    }
+    dens.sort_by(f64::total_cmp);
+    let q = |f: f64| dens[((dens.len() - 1) as f64 * f) as usize];
+    Some(((a3 / a2).sqrt(), q(0.9) / q(0.1)))
+}
+
+/// Writes the sheet for the `n × n` RGB texture `tex` to `path`.
+pub fn write_sheet(
+    path: &Path,
+    tex: &[f32],
+    n: usize,
+    side_m: f64,
+    spread: f64,
+    spec: PrintSpec,
+) -> Result<Sheet, String> {
+    let atlas_mm = side_m * 1000.0 / spec.scale;
+    let px_per_mm = spec.dpi / 25.4;
+    let side = (atlas_mm * px_per_mm).round().max(1.0) as usize;
+    if side > 20_000 {
+        return Err(format!("the sheet would be {side} px wide ({atlas_mm:.0} mm at {} dpi): lower the DPI", spec.dpi));
+    }
+    let frame =
+        Frame { width: n, height: n, bgr: tex.iter().map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect() };
+    let atlas = resize(&frame, side, side, Interpolation::Bilinear);
+    let margin = (15.0 * px_per_mm).round() as usize;
+    let (w, h) = (side.max((12.0 * px_per_mm) as usize), side + margin);
+    let mut rgb = vec![255u8; w * h * 3];
+    for y in 0..side {
+        for x in 0..side {
+            for c in 0..3 {
+                rgb[(y * w + x) * 3 + c] = atlas[(y * side + x) * 3 + c] as u8;
+            }
+        }
+    }
+    // 10 mm × 1 mm bar with 1 mm ticks, 5 mm below the atlas, 1 mm from the left edge.
+    let (bx, by) = ((1.0 * px_per_mm) as usize, side + (5.0 * px_per_mm) as usize);
+    let len = (10.0 * px_per_mm).round() as usize;
+    let thick = px_per_mm.round().max(1.0) as usize;
+    let mut ink = |x: usize, y: usize| {
+        if x < w && y < h {
+            rgb[(y * w + x) * 3..(y * w + x) * 3 + 3].fill(0);
+        }
+    };
+    for y in by..by + thick {
+        for x in bx..bx + len {
+            ink(x, y);
+        }
+    }
+    for k in 0..=10 {
+        let x = bx + (k as f64 * px_per_mm).round() as usize;
+        let tick = if k % 5 == 0 { 2 * thick } else { thick };
+        for y in by - tick..by {
+            ink(x.min(bx + len - 1), y);
+        }
+    }
+    let file = std::fs::File::create(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w as u32, h as u32);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    let ppm = (spec.dpi / 0.0254).round() as u32;
+    enc.set_pixel_dims(Some(png::PixelDimensions { xppu: ppm, yppu: ppm, unit: png::Unit::Meter }));
+    let mut wr = enc.write_header().map_err(|e| format!("{}: {e}", path.display()))?;
+    wr.write_image_data(&rgb).map_err(|e| format!("{}: {e}", path.display()))?;
+    wr.finish().map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok(Sheet { atlas_side_m: side_m, atlas_mm, width_px: w as u32, height_px: h as u32, density_spread: spread })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unit_square_mapped_to_a_2m_square_prints_at_100mm_for_1_20() {
+        // A 2 m × 2 m quad (the "car" is 2 m long) mapped onto the whole UV square.
+        let m = Mesh::from_triangles(
+            vec![[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [2.0, 2.0, 0.0], [0.0, 2.0, 0.0]],
+            vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]],
+            vec![[0, 1, 2], [0, 2, 3]],
+        );
+        let (side, spread) = atlas_side_m(&m, &[1.0; 16], 4, 2.0).unwrap();
+        assert!((side - 2.0).abs() < 1e-9 && (spread - 1.0).abs() < 1e-9);
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("s.png");
+        let s = write_sheet(&p, &[0.5; 4 * 4 * 3], 4, side, spread, PrintSpec { scale: 20.0, dpi: 254.0 }).unwrap();
+        assert!((s.atlas_mm - 100.0).abs() < 1e-9);
+        assert_eq!((s.width_px, s.height_px), (1000, 1150));
+        let dec = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&p).unwrap()));
+        let r = dec.read_info().unwrap();
+        assert_eq!(r.info().pixel_dims.unwrap().xppu, 10_000);
+        // The scale bar is 10 mm = 100 px of ink at 254 dpi.
+        let img = image::open(&p).unwrap().to_rgb8();
+        let row = 1000 + 50;
+        let dark = (0..1000).filter(|x| img.get_pixel(*x, row).0 == [0, 0, 0]).count();
+        assert_eq!(dark, 100);
+    }
+}

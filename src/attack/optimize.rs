@@ -1,0 +1,301 @@
+//! The optimization loop (paper Algorithm 1): for each epoch and each training view, render the
+//! texture, apply EoT, composite, run the white-box detector, and take an Adam step on
+//! L = L1 + β·L2 + γ·Ls over the optimizable texels only.
+//!
+//! Checkpoints are written every epoch and every `checkpoint_every` steps (and on a stop
+//! request); a non-finite loss or gradient skips the step instead of poisoning the texture.
+
+use super::adam::Adam;
+use super::checkpoint::{fingerprint, Checkpoint};
+use super::config::OptimizeConfig;
+use super::setup::Setup;
+use super::smooth::smoothness;
+use super::view::View;
+use super::whitebox::WhiteBox;
+use crate::rng::Rng;
+use crate::scene::eot;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+/// One step's record (a row of `loss.csv`), with the time split per stage.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepLog {
+    /// Global step (0-based).
+    pub step: u64,
+    /// Epoch (0-based).
+    pub epoch: u64,
+    /// Training view.
+    pub view: String,
+    /// L1: mean objectness over boxes.
+    pub l1: f32,
+    /// L2: mean car confidence over car proposals.
+    pub l2: f32,
+    /// Ls: smoothness of the texture.
+    pub ls: f64,
+    /// L1 + β·L2 + γ·Ls.
+    pub total: f64,
+    /// Boxes (n_o).
+    pub boxes: usize,
+    /// Car proposals (n_c).
+    pub proposals: usize,
+    /// Highest car score on this (EoT-transformed) composite.
+    pub max_score: f32,
+    /// Whether the step was skipped (non-finite loss or gradient).
+    pub skipped: bool,
+    /// Texture → composite (gather + shading), ms.
+    pub render_ms: f64,
+    /// EoT, ms.
+    pub eot_ms: f64,
+    /// Detector forward and loss, ms.
+    pub forward_ms: f64,
+    /// Detector backward, ms.
+    pub backward_ms: f64,
+    /// Adjoint of EoT, shading and gather into the texture, ms.
+    pub adjoint_ms: f64,
+    /// Smoothness loss and Adam step, ms.
+    pub optimizer_ms: f64,
+}
+
+/// How a run ended.
+#[derive(Debug)]
+pub enum Finish {
+    /// All epochs done.
+    Done,
+    /// A stop was requested; the checkpoint holds the state.
+    Stopped,
+}
+
+/// Options for [`run`] beyond the config.
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    /// Output folder.
+    pub out: PathBuf,
+    /// Continue from `out/checkpoint.bin`.
+    pub resume: bool,
+    /// Steps between checkpoints (besides every epoch end).
+    pub checkpoint_every: u64,
+    /// Give up after this many consecutive skipped steps.
+    pub max_skips: u64,
+    /// Override the epochs of the config.
+    pub epochs: Option<usize>,
+    /// Show a progress bar.
+    pub progress: bool,
+}
+
+/// Errors of a run.
+#[derive(Debug, thiserror::Error)]
+pub enum OptimizeError {
+    /// Preparing the problem.
+    #[error(transparent)]
+    Setup(#[from] super::setup::SetupError),
+    /// The detector.
+    #[error(transparent)]
+    WhiteBox(#[from] super::whitebox::WhiteBoxError),
+    /// Checkpoints.
+    #[error(transparent)]
+    Checkpoint(#[from] super::checkpoint::CheckpointError),
+    /// Anything else, with its context.
+    #[error("{0}")]
+    Other(String),
+}
+
+/// The result of a run: the texture, its log, and the prepared problem for reporting.
+pub struct Outcome {
+    /// Final texture (RGB interleaved, `tex_size²`).
+    pub texture: Vec<f32>,
+    /// All step records, resumed runs included.
+    pub log: Vec<StepLog>,
+    /// How it ended.
+    pub finish: Finish,
+}
+
+/// View order of `epoch`: a permutation from the seed, independent of the EoT draws so a resumed
+/// run visits the same views.
+pub fn epoch_order(n: usize, seed: u64, epoch: u64) -> Vec<usize> {
+    let mut r = Rng::new(seed ^ epoch.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0x5eed);
+    let mut p: Vec<usize> = (0..n).collect();
+    for i in (1..n).rev() {
+        let j = (r.next_u64() % (i as u64 + 1)) as usize;
+        p.swap(i, j);
+    }
+    p
+}
+
+/// One step on `view`: returns its record and adds ∂L/∂texture into `grad`.
+pub fn step(
+    setup: &Setup,
+    wb: &WhiteBox,
+    cfg: &OptimizeConfig,
+    view: &View,
+    tex: &[f32],
+    rng: &mut Rng,
+    grad: &mut [f32],
+) -> Result<StepLog, OptimizeError> {
+    let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
+    let t = Instant::now();
+    let mut img = view.render_plain(tex);
+    let render_ms = ms(t);
+    let t = Instant::now();
+    let tape = eot::apply(&setup.scene, &mut img, 3, &view.active, rng);
+    let eot_ms = ms(t);
+    let g = wb.loss_and_grad(&img, view.size, cfg.loss.beta)?;
+    let t = Instant::now();
+    view.backward(&tape, &g.grad, grad);
+    let adjoint_ms = ms(t);
+    let t = Instant::now();
+    let ls = smoothness(tex, setup.tex_size, setup.tex_size, cfg.loss.gamma, grad);
+    let optimizer_ms = ms(t);
+    let d = g.loss;
+    Ok(StepLog {
+        step: 0,
+        epoch: 0,
+        view: view.name.clone(),
+        l1: d.l1,
+        l2: d.l2,
+        ls,
+        total: d.l1 as f64 + cfg.loss.beta as f64 * d.l2 as f64 + cfg.loss.gamma as f64 * ls,
+        boxes: d.boxes,
+        proposals: d.proposals,
+        max_score: d.max_score,
+        skipped: false,
+        render_ms,
+        eot_ms,
+        forward_ms: g.forward_ms,
+        backward_ms: g.backward_ms,
+        adjoint_ms,
+        optimizer_ms,
+    })
+}
+
+fn write_log(path: &Path, log: &[StepLog]) -> Result<(), OptimizeError> {
+    let e = |x: &dyn std::fmt::Display| OptimizeError::Other(format!("writing {}: {x}", path.display()));
+    let tmp = path.with_extension("csv.tmp");
+    let mut w = csv::Writer::from_path(&tmp).map_err(|x| e(&x))?;
+    for r in log {
+        w.serialize(r).map_err(|x| e(&x))?;
+    }
+    w.flush().map_err(|x| e(&x))?;
+    std::fs::rename(&tmp, path).map_err(|x| e(&x))
+}
+
+fn read_log(path: &Path, upto: u64) -> Vec<StepLog> {
+    let Ok(mut r) = csv::Reader::from_path(path) else { return Vec::new() };
+    r.deserialize::<StepLog>().filter_map(Result::ok).filter(|s| s.step < upto).collect()
+}
+
+/// Runs (or resumes) the optimization of `cfg` (loaded from `cfg_path`) on `setup`.
+pub fn run(
+    cfg_path: &Path,
+    cfg: &OptimizeConfig,
+    setup: &Setup,
+    wb: &WhiteBox,
+    opts: &RunOptions,
+    stop: &AtomicBool,
+) -> Result<Outcome, OptimizeError> {
+    std::fs::create_dir_all(&opts.out)
+        .map_err(|e| OptimizeError::Other(format!("creating {}: {e}", opts.out.display())))?;
+    let hash = fingerprint(
+        &std::fs::read(cfg_path).map_err(|e| OptimizeError::Other(format!("{}: {e}", cfg_path.display())))?,
+    );
+    let ckpt_path = opts.out.join("checkpoint.bin");
+    let log_path = opts.out.join("loss.csv");
+    let n_values = setup.tex_size * setup.tex_size * 3;
+    let (mut tex, mut adam, mut rng, start, mut log) = if opts.resume && ckpt_path.exists() {
+        let c = Checkpoint::load(&ckpt_path)?;
+        if c.config_hash != hash {
+            return Err(OptimizeError::Other(format!(
+                "{} was written for a different config than {}: resume with the same config or use another --out",
+                ckpt_path.display(),
+                cfg_path.display()
+            )));
+        }
+        if c.texture.len() != n_values {
+            return Err(OptimizeError::Other(format!("{}: texture size does not match", ckpt_path.display())));
+        }
+        let log = read_log(&log_path, c.steps_done);
+        eprintln!("resuming from step {} ({})", c.steps_done, ckpt_path.display());
+        (c.texture, c.adam, Rng { state: c.rng_state }, c.steps_done, log)
+    } else {
+        if ckpt_path.exists() {
+            return Err(OptimizeError::Other(format!(
+                "{} exists: pass --resume to continue it, or choose another --out",
+                ckpt_path.display()
+            )));
+        }
+        let tex = setup.initial_texture(cfg.mesh.init);
+        (tex, Adam::new(n_values, cfg.optimizer.lr), Rng::new(cfg.optimizer.seed), 0, Vec::new())
+    };
+    let n = setup.train.len() as u64;
+    let epochs = opts.epochs.unwrap_or(cfg.optimizer.epochs) as u64;
+    let total = n * epochs;
+    let save = |tex: &[f32], adam: &Adam, rng: &Rng, done: u64, log: &[StepLog]| -> Result<(), OptimizeError> {
+        Checkpoint {
+            config_hash: hash,
+            steps_done: done,
+            rng_state: rng.state,
+            texture: tex.to_vec(),
+            adam: adam.clone(),
+        }
+        .save(&ckpt_path)?;
+        write_log(&log_path, log)
+    };
+    let bar = if opts.progress {
+        let b = indicatif::ProgressBar::new(total);
+        b.set_style(
+            indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] step {pos}/{len} (eta {eta}) {msg}")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        b.set_position(start);
+        b
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let mut grad = vec![0f32; n_values];
+    let mut skips = 0u64;
+    let mut order = epoch_order(n as usize, cfg.optimizer.seed, start / n.max(1));
+    for s in start..total {
+        if stop.load(Ordering::SeqCst) {
+            save(&tex, &adam, &rng, s, &log)?;
+            bar.abandon_with_message("stopped; continue with --resume");
+            return Ok(Outcome { texture: tex, log, finish: Finish::Stopped });
+        }
+        let (epoch, k) = (s / n, (s % n) as usize);
+        if k == 0 {
+            order = epoch_order(n as usize, cfg.optimizer.seed, epoch);
+        }
+        let view = &setup.train[order[k]];
+        grad.fill(0.0);
+        let mut rec = step(setup, wb, cfg, view, &tex, &mut rng, &mut grad)?;
+        (rec.step, rec.epoch) = (s, epoch);
+        let finite = rec.total.is_finite() && setup.region_values.iter().all(|&i| grad[i as usize].is_finite());
+        if finite {
+            let t = Instant::now();
+            adam.step(&mut tex, &grad, &setup.region_values, (cfg.optimizer.clamp[0], cfg.optimizer.clamp[1]));
+            rec.optimizer_ms += t.elapsed().as_secs_f64() * 1e3;
+            skips = 0;
+        } else {
+            rec.skipped = true;
+            skips += 1;
+            bar.println(format!("step {s} ({}): non-finite loss or gradient, step skipped", view.name));
+            if skips >= opts.max_skips {
+                save(&tex, &adam, &rng, s, &log)?;
+                return Err(OptimizeError::Other(format!(
+                    "{skips} consecutive steps had a non-finite loss or gradient (last at step {s}, view {}); the last good state is in {}",
+                    view.name,
+                    ckpt_path.display()
+                )));
+            }
+        }
+        bar.set_message(format!("L {:.3} car {:.2}", rec.total, rec.max_score));
+        bar.inc(1);
+        log.push(rec);
+        let done = s + 1;
+        if done % n == 0 || done % opts.checkpoint_every.max(1) == 0 || done == total {
+            save(&tex, &adam, &rng, done, &log)?;
+        }
+    }
+    bar.finish_and_clear();
+    Ok(Outcome { texture: tex, log, finish: Finish::Done })
+}
