@@ -173,7 +173,7 @@ impl OptimizeConfig {
         if !(0.0..=1.0).contains(&self.mesh.init) {
             return Err(format!("mesh.init must be in [0, 1], got {}", self.mesh.init));
         }
-        if !(self.mesh.car_length_m > 0.0) {
+        if !self.mesh.car_length_m.is_finite() || self.mesh.car_length_m <= 0.0 {
             return Err(format!("mesh.car_length_m must be > 0, got {}", self.mesh.car_length_m));
         }
         let l = &self.loss;

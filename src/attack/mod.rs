@@ -3,6 +3,8 @@
 pub mod adam;
 pub mod checkpoint;
 pub mod config;
+#[cfg(feature = "optimize")]
+pub mod digital;
 pub mod export;
 #[cfg(feature = "optimize")]
 pub mod loss;

@@ -131,6 +131,18 @@ impl Setup {
         Ok(Setup { mesh, tex_size: ts, region, region_values, scene, train, test, boxes })
     }
 
+    /// The "random" baseline: uniform random colours in `block × block` texel squares (at the
+    /// default 1024² atlas a 16-texel block prints about 5 mm wide at 1:20, so the baseline is a
+    /// printable pattern, not sub-pixel noise that aliases in the render).
+    pub fn random_texture(&self, block: usize, seed: u64) -> Vec<f32> {
+        let n = self.tex_size;
+        let b = block.max(1);
+        let cells = n.div_ceil(b);
+        let mut rng = crate::rng::Rng::new(seed);
+        let colours: Vec<f32> = (0..cells * cells * 3).map(|_| rng.unit()).collect();
+        (0..n * n * 3).map(|i| colours[(((i / 3) / n / b) * cells + ((i / 3) % n) / b) * 3 + i % 3]).collect()
+    }
+
     /// The starting texture: `init` everywhere.
     pub fn initial_texture(&self, init: f32) -> Vec<f32> {
         vec![init; self.tex_size * self.tex_size * 3]

@@ -42,7 +42,7 @@ mod tests {
         let tex: Vec<f32> = (0..w * h * 3).map(|i| ((i * 7919) % 97) as f32 / 97.0).collect();
         // One vertical step of 1 between two rows of a 2×2 one-value-per-channel texture: 2 pairs × 3 channels.
         let step: Vec<f32> = [0.0, 0.0, 1.0, 1.0].iter().flat_map(|v| [*v; 3]).collect();
-        assert_eq!(smoothness(&step, 2, 2, 1.0, &mut vec![0.0; 12]), 6.0 / 4.0);
+        assert_eq!(smoothness(&step, 2, 2, 1.0, &mut [0.0; 12]), 6.0 / 4.0);
         let mut grad = vec![0.0; tex.len()];
         let l0 = smoothness(&tex, w, h, 1.0, &mut grad);
         assert!(l0 > 0.0);

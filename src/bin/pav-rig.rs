@@ -3,8 +3,7 @@
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 use pav::detect::darknet::{to_onnx, Network, Weights};
-use pav::detect::onnx::OnnxDetector;
-use pav::detect::{Detector, DetectorConfig};
+
 use pav::eval::run::{default_label, evaluate, EvalOptions, VideoJob};
 use pav::rig::camera::{FileSource, FrameSource, LiveCapture, SimCamera};
 use pav::rig::capture::{capture, CaptureOptions};
@@ -280,59 +279,6 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
     }
 }
 
-/// Expands directories into the TOML files they hold (sorted); files pass through.
-fn expand_configs(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
-    let mut out = Vec::new();
-    for p in paths {
-        if p.is_dir() {
-            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
-                .with_context(|| format!("listing {}", p.display()))?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|f| f.extension().is_some_and(|x| x == "toml"))
-                .collect();
-            if found.is_empty() {
-                bail!("{} holds no detector configs (*.toml)", p.display());
-            }
-            found.sort();
-            out.extend(found);
-        } else {
-            out.push(p.clone());
-        }
-    }
-    Ok(out)
-}
-
-fn load_detectors(paths: &[PathBuf], classes: &[String], threads: usize) -> Result<Vec<Box<dyn Detector>>> {
-    let paths = &expand_configs(paths)?;
-    // Validate every config before loading any model, so all config mistakes show at once.
-    let mut cfgs = Vec::new();
-    let mut errors = Vec::new();
-    for p in paths {
-        match DetectorConfig::load(p) {
-            Ok(mut c) => {
-                if !classes.is_empty() {
-                    if let Err(e) = c.set_targets(classes) {
-                        errors.push(format!("{}: {e}", p.display()));
-                    }
-                }
-                cfgs.push(c);
-            }
-            Err(e) => errors.push(e.to_string()),
-        }
-    }
-    if !errors.is_empty() {
-        bail!("invalid detector config:\n  {}", errors.join("\n  "));
-    }
-    let mut names: Vec<&str> = cfgs.iter().map(|c| c.name.as_str()).collect();
-    names.sort();
-    if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
-        bail!("two detector configs are both named `{}`", w[0]);
-    }
-    cfgs.into_iter()
-        .map(|c| OnnxDetector::new(c, threads).map(|d| Box::new(d) as Box<dyn Detector>).map_err(anyhow::Error::from))
-        .collect()
-}
-
 fn jobs(a: &EvaluateArgs) -> Result<Vec<VideoJob>> {
     if !a.labels.is_empty() && a.labels.len() != a.videos.len() {
         bail!("{} labels given for {} videos: give one --label per video or none", a.labels.len(), a.videos.len());
@@ -356,7 +302,7 @@ fn cmd_evaluate(a: &EvaluateArgs) -> Result<()> {
         bail!("--threshold {} must be within [0, 1]", a.threshold);
     }
     let jobs = jobs(a)?;
-    let mut detectors = load_detectors(&a.detectors, &a.classes, a.threads)?;
+    let mut detectors = pav::eval::detectors::load_detectors(&a.detectors, &a.classes, a.threads)?;
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
@@ -420,7 +366,7 @@ fn cmd_darknet2onnx(cfg: &Path, weights: &Path, out: &Path) -> Result<()> {
 
 fn cmd_bench(b: &BenchArgs) -> Result<()> {
     let given = if b.detectors.is_empty() { vec![PathBuf::from("configs/detectors")] } else { b.detectors.clone() };
-    let detectors = expand_configs(&given)?;
+    let detectors = pav::eval::detectors::expand_configs(&given)?;
     if b.strides.is_empty() || b.strides.contains(&0) {
         bail!("--strides must be positive, got {:?}", b.strides);
     }

@@ -34,12 +34,38 @@ enum Cmd {
         /// Override the config's epochs.
         #[arg(long)]
         epochs: Option<usize>,
+        /// Override the config's render size (views.size).
+        #[arg(long)]
+        size: Option<usize>,
         /// Model scale of the printable sheet (20 = 1:20).
         #[arg(long, default_value_t = 20.0)]
         scale: f64,
         /// Printer resolution of the sheet.
         #[arg(long, default_value_t = 300.0)]
         dpi: f64,
+    },
+    /// Digital evaluation in the shape of the paper's Table 2: ASR and P@0.5 of every detector on
+    /// the views composited with the original paint, a random texture and each given texture.
+    #[cfg(feature = "optimize")]
+    EvalDigital {
+        /// Optimization config (mesh, views, scene lighting).
+        #[arg(long, default_value = "configs/optimize/paper.toml")]
+        config: PathBuf,
+        /// Texture PNGs to evaluate (named by their folder).
+        #[arg(long = "texture", short = 't')]
+        textures: Vec<PathBuf>,
+        /// Detector configs or folders of them.
+        #[arg(long = "detectors", short = 'd', default_value = "configs/detectors")]
+        detectors: Vec<PathBuf>,
+        /// A car counts as detected above this score (paper 0.5; the authors' code 0.6).
+        #[arg(long, default_value_t = 0.5)]
+        threshold: f32,
+        /// Name of the white-box detector (starred).
+        #[arg(long, default_value = "yolov3-tiny")]
+        white_box: String,
+        /// Output folder.
+        #[arg(long, short = 'o', default_value = "out/digital")]
+        out: PathBuf,
     },
     /// UV map tools.
     #[command(subcommand)]
@@ -298,11 +324,13 @@ fn bench_render(mesh: &std::path::Path, sizes: &[usize], views: usize, out: &std
 }
 
 #[cfg(feature = "optimize")]
+#[allow(clippy::too_many_arguments)]
 fn optimize(
     config: &std::path::Path,
     out: &std::path::Path,
     resume: bool,
     epochs: Option<usize>,
+    size: Option<usize>,
     scale: f64,
     dpi: f64,
 ) -> Result<()> {
@@ -314,7 +342,8 @@ fn optimize(
     use pav::attack::whitebox::WhiteBox;
     use std::sync::atomic::{AtomicBool, Ordering};
     use std::sync::Arc;
-    let cfg = OptimizeConfig::load(config)?;
+    let mut cfg = OptimizeConfig::load(config)?;
+    cfg.views.size = size.unwrap_or(cfg.views.size);
     let t = std::time::Instant::now();
     let setup = Setup::load(&cfg, None)?;
     let wb = WhiteBox::load(&cfg.detector, cfg.views.size)?;
@@ -370,11 +399,72 @@ fn optimize(
     Ok(())
 }
 
+#[cfg(feature = "optimize")]
+fn eval_digital(
+    config: &std::path::Path,
+    textures: &[PathBuf],
+    detectors: &[PathBuf],
+    threshold: f32,
+    white_box: &str,
+    out: &std::path::Path,
+) -> Result<()> {
+    use pav::attack::config::OptimizeConfig;
+    use pav::attack::digital::{evaluate, markdown, AP_MIN_SCORE};
+    use pav::attack::setup::Setup;
+    let cfg = OptimizeConfig::load(config)?;
+    let setup = Setup::load(&cfg, None)?;
+    let mut conditions: Vec<(String, Option<Vec<f32>>)> =
+        vec![("original".into(), None), ("random".into(), Some(setup.random_texture(16, 1)))];
+    for t in textures {
+        let tex = Texture::load(t).map_err(anyhow::Error::msg)?;
+        if (tex.width, tex.height) != (setup.tex_size, setup.tex_size) {
+            bail!("{} is {}x{}, the config's texture is {}²", t.display(), tex.width, tex.height, setup.tex_size);
+        }
+        let name = t
+            .parent()
+            .and_then(|p| p.file_name())
+            .or(t.file_stem())
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| t.display().to_string());
+        conditions.push((name, Some(tex.rgb)));
+    }
+    let mut dets = pav::eval::detectors::load_detectors(detectors, &[], 1)?;
+    let total = (conditions.len() * (setup.train.len() + setup.test.len())) as u64;
+    let bar = indicatif::ProgressBar::new(total);
+    let rows = evaluate(&setup, &mut dets, &conditions, threshold, white_box, || bar.inc(1))?;
+    bar.finish_and_clear();
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let mut w = csv::Writer::from_path(out.join("digital.csv"))?;
+    for r in &rows {
+        w.serialize(r)?;
+    }
+    w.flush()?;
+    let mut md = format!(
+        "# Digital evaluation (ASR / P@0.5 in %, * = white-box)\n\nCar = COCO `car`; detected above score {threshold}; P@0.5 is car AP at IoU 0.5 over boxes from score {AP_MIN_SCORE}. Views composited at {}² (lit, no EoT), 8-bit. Config: {}.\n",
+        cfg.views.size,
+        config.display()
+    );
+    for (split, title) in [("train", "training views"), ("test", "held-out views"), ("all", "all views")] {
+        if rows.iter().any(|r| r.split == split) {
+            let n = rows.iter().find(|r| r.split == split).map(|r| r.images).unwrap_or(0);
+            md.push_str(&format!("\n## {title} ({n})\n\n{}", markdown(&rows, split)));
+        }
+    }
+    std::fs::write(out.join("digital.md"), &md).with_context(|| format!("writing {}", out.display()))?;
+    println!("{md}");
+    eprintln!("wrote {}/digital.csv and digital.md", out.display());
+    Ok(())
+}
+
 fn main() -> Result<()> {
     let (mesh, texture, pose, orbit, size, out) = match Cli::parse().cmd {
         #[cfg(feature = "optimize")]
-        Cmd::Optimize { config, out, resume, epochs, scale, dpi } => {
-            return optimize(&config, &out, resume, epochs, scale, dpi)
+        Cmd::EvalDigital { config, textures, detectors, threshold, white_box, out } => {
+            return eval_digital(&config, &textures, &detectors, threshold, &white_box, &out)
+        }
+        #[cfg(feature = "optimize")]
+        Cmd::Optimize { config, out, resume, epochs, size, scale, dpi } => {
+            return optimize(&config, &out, resume, epochs, size, scale, dpi)
         }
         Cmd::BenchRender { mesh, sizes, views, out } => return bench_render(&mesh, &sizes, views, &out),
         Cmd::Uv(UvCmd::Check { mesh, mask, out }) => return uv_check(&mesh, &mask, &out),

@@ -62,6 +62,23 @@ impl Proposals {
         best
     }
 
+    /// Target-class detections: each proposal scored by its best target class (not its arg-max
+    /// class, so a car also rated "truck" still counts as a car), kept from `min_score`, NMS at `iou`.
+    pub fn target_detections(&self, classes: &[usize], min_score: f32, iou: f32) -> Vec<Detection> {
+        let mut out = Vec::new();
+        for (i, b) in self.boxes.iter().enumerate() {
+            let row = self.row(i);
+            if let Some((c, s)) =
+                classes.iter().filter_map(|&c| row.get(c).map(|s| (c, *s))).max_by(|a, b| a.1.total_cmp(&b.1))
+            {
+                if s >= min_score {
+                    out.push(Detection { class_id: c, score: s, bbox: *b });
+                }
+            }
+        }
+        nms(out, iou)
+    }
+
     /// Arg-max class detections with score ≥ `min_score`, after per-class NMS at `iou`.
     pub fn detections(&self, min_score: f32, iou: f32) -> Vec<Detection> {
         let mut out = Vec::new();

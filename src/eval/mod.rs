@@ -1,7 +1,11 @@
-//! Scoring recorded videos: decode, detect, A_physical, reports and plots.
+//! Scoring detectors: recorded videos (decode, detect, A_physical, reports, plots) and digital
+//! composites (ASR, P@0.5).
 
 #[cfg(feature = "eval")]
 pub mod bench;
+#[cfg(feature = "eval")]
+pub mod detectors;
+pub mod digital;
 pub mod physical;
 #[cfg(feature = "eval")]
 pub mod plot;

@@ -1,0 +1,65 @@
+//! Loading detectors from config files and folders of them.
+
+use crate::detect::onnx::OnnxDetector;
+use crate::detect::{DetectError, Detector, DetectorConfig};
+use std::path::PathBuf;
+
+fn config_error(path: &std::path::Path, msg: String) -> DetectError {
+    DetectError::Config { path: path.display().to_string(), msg }
+}
+
+/// Expands directories into the TOML files they hold (sorted); files pass through.
+pub fn expand_configs(paths: &[PathBuf]) -> Result<Vec<PathBuf>, DetectError> {
+    let mut out = Vec::new();
+    for p in paths {
+        if p.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
+                .map_err(|e| config_error(p, format!("cannot list the folder: {e}")))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|f| f.extension().is_some_and(|x| x == "toml"))
+                .collect();
+            if found.is_empty() {
+                return Err(config_error(p, "the folder holds no detector configs (*.toml)".into()));
+            }
+            found.sort();
+            out.extend(found);
+        } else {
+            out.push(p.clone());
+        }
+    }
+    Ok(out)
+}
+
+/// Loads every detector of `paths` (files or folders), with `classes` as targets when given.
+/// Every config is checked before any model loads, so all config mistakes show at once.
+pub fn load_detectors(
+    paths: &[PathBuf],
+    classes: &[String],
+    threads: usize,
+) -> Result<Vec<Box<dyn Detector>>, DetectError> {
+    let paths = &expand_configs(paths)?;
+    let mut cfgs = Vec::new();
+    let mut errors = Vec::new();
+    for p in paths {
+        match DetectorConfig::load(p) {
+            Ok(mut c) => {
+                if !classes.is_empty() {
+                    if let Err(e) = c.set_targets(classes) {
+                        errors.push(format!("{}: {e}", p.display()));
+                    }
+                }
+                cfgs.push(c);
+            }
+            Err(e) => errors.push(e.to_string()),
+        }
+    }
+    if !errors.is_empty() {
+        return Err(DetectError::Runtime(format!("invalid detector config:\n  {}", errors.join("\n  "))));
+    }
+    let mut names: Vec<&str> = cfgs.iter().map(|c| c.name.as_str()).collect();
+    names.sort();
+    if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
+        return Err(DetectError::Runtime(format!("two detector configs are both named `{}`", w[0])));
+    }
+    cfgs.into_iter().map(|c| OnnxDetector::new(c, threads).map(|d| Box::new(d) as Box<dyn Detector>)).collect()
+}

@@ -1,0 +1,106 @@
+//! Digital-world metrics of the paper's Table 2 over a set of images with one car each.
+//!
+//! ASR = 1 − (images where some car detection scores above the threshold) / images, as the
+//! authors compute it. P@0.5 is the car class's average precision at IoU 0.5 (COCO's
+//! 101-point interpolation), which is what the authors report under that name.
+
+use crate::detect::BBox;
+
+/// Car detections on one image and its ground-truth box.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImageDetections {
+    /// Ground-truth car box (None: no box known; the image counts only for ASR).
+    pub gt: Option<BBox>,
+    /// (score, box) of every car detection after NMS.
+    pub cars: Vec<(f32, BBox)>,
+}
+
+/// Intersection over union of two boxes.
+pub fn iou(a: BBox, b: BBox) -> f32 {
+    let iw = (a[2].min(b[2]) - a[0].max(b[0])).max(0.0);
+    let ih = (a[3].min(b[3]) - a[1].max(b[1])).max(0.0);
+    let inter = iw * ih;
+    let union =
+        (a[2] - a[0]).max(0.0) * (a[3] - a[1]).max(0.0) + (b[2] - b[0]).max(0.0) * (b[3] - b[1]).max(0.0) - inter;
+    if union > 0.0 {
+        inter / union
+    } else {
+        0.0
+    }
+}
+
+/// Attack success rate at `threshold` (None for no images).
+pub fn asr(images: &[ImageDetections], threshold: f32) -> Option<f64> {
+    if images.is_empty() {
+        return None;
+    }
+    let detected = images.iter().filter(|i| i.cars.iter().any(|(s, _)| *s > threshold)).count();
+    Some(1.0 - detected as f64 / images.len() as f64)
+}
+
+/// Car AP at IoU 0.5 over the images with a ground-truth box (None when there are none).
+pub fn ap50(images: &[ImageDetections]) -> Option<f64> {
+    let with_gt: Vec<&ImageDetections> = images.iter().filter(|i| i.gt.is_some()).collect();
+    if with_gt.is_empty() {
+        return None;
+    }
+    let mut dets: Vec<(f32, usize, BBox)> =
+        with_gt.iter().enumerate().flat_map(|(k, im)| im.cars.iter().map(move |(s, b)| (*s, k, *b))).collect();
+    dets.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mut matched = vec![false; with_gt.len()];
+    let (mut tp, mut fp) = (0usize, 0usize);
+    let mut pr = Vec::with_capacity(dets.len());
+    for (_, k, b) in dets {
+        let gt = with_gt[k].gt.unwrap_or_default();
+        if !matched[k] && iou(b, gt) >= 0.5 {
+            matched[k] = true;
+            tp += 1;
+        } else {
+            fp += 1;
+        }
+        pr.push((tp as f64 / with_gt.len() as f64, tp as f64 / (tp + fp) as f64));
+    }
+    // Precision envelope (non-increasing from the right), sampled at 101 recall levels.
+    for i in (0..pr.len().saturating_sub(1)).rev() {
+        pr[i].1 = pr[i].1.max(pr[i + 1].1);
+    }
+    let mut sum = 0.0;
+    for r in 0..=100 {
+        let r = r as f64 / 100.0;
+        sum += pr.iter().find(|(rec, _)| *rec >= r - 1e-12).map(|p| p.1).unwrap_or(0.0);
+    }
+    Some(sum / 101.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn im(gt: BBox, cars: &[(f32, BBox)]) -> ImageDetections {
+        ImageDetections { gt: Some(gt), cars: cars.to_vec() }
+    }
+
+    #[test]
+    fn asr_counts_images_with_a_car_above_threshold() {
+        let b = [0.0, 0.0, 10.0, 10.0];
+        let ims = [im(b, &[(0.7, b)]), im(b, &[(0.4, b)]), im(b, &[]), im(b, &[(0.5, b)])];
+        assert_eq!(asr(&ims, 0.5), Some(0.75));
+        assert_eq!(asr(&ims, 0.3), Some(0.25));
+        assert_eq!(asr(&[], 0.5), None);
+    }
+
+    #[test]
+    fn ap50_perfect_missing_and_ranked() {
+        let g = [0.0, 0.0, 10.0, 10.0];
+        let off = [20.0, 20.0, 30.0, 30.0];
+        assert_eq!(ap50(&[im(g, &[(0.9, g)]), im(g, &[(0.8, g)])]), Some(1.0));
+        assert_eq!(ap50(&[im(g, &[]), im(g, &[(0.8, off)])]), Some(0.0));
+        // One hit ranked below one false positive: precision 0.5 up to recall 0.5, then nothing.
+        let ap = ap50(&[im(g, &[(0.6, g)]), im(g, &[(0.9, off)])]).unwrap();
+        assert!((ap - 0.5 * 51.0 / 101.0).abs() < 1e-9, "{ap}");
+        // A duplicate of a matched box is a false positive.
+        let ap = ap50(&[im(g, &[(0.9, g), (0.8, g)])]).unwrap();
+        assert!((ap - 1.0).abs() < 1e-9);
+        assert!((iou(g, [5.0, 0.0, 15.0, 10.0]) - 1.0 / 3.0).abs() < 1e-6);
+    }
+}
