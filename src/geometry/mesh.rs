@@ -276,9 +276,8 @@ impl Mesh {
         w.flush()
     }
 
-    /// neural_renderer's `load_obj` normalization (used by FCA and DAS): the bounding box is
-    /// centred and its longest side scaled to 2.
-    pub fn normalize_bbox(&mut self) {
+    /// Axis-aligned bounding box (min, max) of the positions (±∞ for an empty mesh).
+    pub fn bounds(&self) -> ([f32; 3], [f32; 3]) {
         let mut lo = [f32::INFINITY; 3];
         let mut hi = [f32::NEG_INFINITY; 3];
         for p in &self.positions {
@@ -287,6 +286,13 @@ impl Mesh {
                 hi[k] = hi[k].max(p[k]);
             }
         }
+        (lo, hi)
+    }
+
+    /// neural_renderer's `load_obj` normalization (used by FCA and DAS): the bounding box is
+    /// centred and its longest side scaled to 2.
+    pub fn normalize_bbox(&mut self) {
+        let (lo, hi) = self.bounds();
         let side = (0..3).map(|k| hi[k] - lo[k]).fold(0f32, f32::max);
         let s = if side > 0.0 { 2.0 / side } else { 1.0 };
         for p in &mut self.positions {
