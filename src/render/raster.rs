@@ -245,4 +245,54 @@ mod tests {
             }
         }
     }
+
+    /// A UV seam: two triangles share a 3D edge but sit in far-apart UV islands (u near 1 on the
+    /// left face, near 0 on the right one, as a wrap-around map does). Each pixel must take UVs
+    /// from its own island only, never an interpolation across the atlas, and the gather over
+    /// the seam stays finite with an exact adjoint.
+    #[test]
+    fn uvs_across_a_seam_stay_in_their_own_island() {
+        let mut m = Mesh::from_triangles(
+            vec![
+                [-1.0, -1.0, 0.0],
+                [0.0, -1.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [0.0, -1.0, 0.0],
+                [1.0, -1.0, 0.0],
+                [0.0, 1.0, 0.0],
+            ],
+            vec![[0.90, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 0.0], [0.10, 0.0], [0.0, 1.0]],
+            vec![[0, 1, 2], [3, 4, 5]],
+        );
+        // Weld the shared edge in 3D (one set of positions), keeping the two UV sets.
+        m.faces[1] = [1, 4, 2];
+        let g = GBuffer::render(&m, &cam(), 64);
+        assert!(finite(&g));
+        let (mut left, mut right) = (0, 0);
+        for (p, uv) in g.uv_samples(&m) {
+            assert!(uv[0].is_finite() && uv[1].is_finite());
+            match g.face[p as usize] {
+                0 => {
+                    left += 1;
+                    assert!(uv[0] >= 0.90 - 1e-5, "left face pixel {p} reads u = {}", uv[0]);
+                }
+                _ => {
+                    right += 1;
+                    assert!(uv[0] <= 0.10 + 1e-5, "right face pixel {p} reads u = {}", uv[0]);
+                }
+            }
+        }
+        assert!(left > 100 && right > 100, "{left} / {right} pixels");
+        let gather = crate::render::texture::Gather::new(g.uv_samples(&m), 16, 16);
+        let tex: Vec<f32> = (0..16 * 16).map(|i| (i % 7) as f32 / 7.0).collect();
+        let mut img = vec![0.0; 64 * 64];
+        gather.apply(&tex, 1, &mut img);
+        assert!(img.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v)));
+        let y: Vec<f32> = (0..64 * 64).map(|i| ((i * 31) % 11) as f32 - 5.0).collect();
+        let mut aty = vec![0.0; 16 * 16];
+        gather.adjoint(&y, 1, &mut aty);
+        let lhs: f64 = img.iter().zip(&y).map(|(a, b)| (*a as f64) * (*b as f64)).sum();
+        let rhs: f64 = tex.iter().zip(&aty).map(|(a, b)| (*a as f64) * (*b as f64)).sum();
+        assert!((lhs - rhs).abs() < 1e-6 * lhs.abs().max(1.0), "{lhs} vs {rhs}");
+    }
 }
