@@ -7,6 +7,7 @@ use super::setup::Setup;
 use super::view::View;
 use crate::detect::{Detector, Frame};
 use crate::eval::digital::{ap50, asr, ImageDetections};
+use crate::render::texture::to_u8;
 
 /// Lowest car score kept for P@0.5 (COCO evaluations keep low-scoring boxes for the PR curve).
 pub const AP_MIN_SCORE: f32 = 0.05;
@@ -42,11 +43,10 @@ fn frame(view: &View, tex: Option<&[f32]>, setup: &Setup) -> Frame {
         Some(t) => composite(view, t, &eval_scene(setup)),
         None => view.photo.clone(),
     };
-    let q = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
     Frame {
         width: view.size,
         height: view.size,
-        bgr: img.chunks(3).flat_map(|c| [q(c[2]), q(c[1]), q(c[0])]).collect(),
+        bgr: img.chunks(3).flat_map(|c| [to_u8(c[2]), to_u8(c[1]), to_u8(c[0])]).collect(),
     }
 }
 

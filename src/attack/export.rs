@@ -7,6 +7,7 @@ use crate::detect::preprocess::resize;
 use crate::detect::Frame;
 use crate::geometry::mesh::Mesh;
 use crate::geometry::uv::faces_in_mask;
+use crate::render::texture::to_u8;
 use std::path::Path;
 
 /// Print settings.
@@ -88,8 +89,7 @@ pub fn write_sheet(
     if side > 20_000 {
         return Err(format!("the sheet would be {side} px wide ({atlas_mm:.0} mm at {} dpi): lower the DPI", spec.dpi));
     }
-    let frame =
-        Frame { width: n, height: n, bgr: tex.iter().map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect() };
+    let frame = Frame { width: n, height: n, bgr: tex.iter().map(|v| to_u8(*v)).collect() };
     let atlas = resize(&frame, side, side, Interpolation::Bilinear);
     let margin = (15.0 * px_per_mm).round() as usize;
     let (w, h) = (side.max((12.0 * px_per_mm) as usize), side + margin);

@@ -5,18 +5,10 @@ use super::optimize::StepLog;
 use super::setup::Setup;
 use super::view::View;
 use super::whitebox::WhiteBox;
+pub use crate::render::texture::save_rgb;
 use crate::rng::Rng;
 use crate::scene::Scene;
 use std::path::Path;
-
-/// Writes an interleaved RGB image in [0, 1] as PNG.
-pub fn save_rgb(path: &Path, w: usize, h: usize, rgb: &[f32]) -> Result<(), String> {
-    let bytes: Vec<u8> = rgb.iter().map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect();
-    image::RgbImage::from_raw(w as u32, h as u32, bytes)
-        .ok_or_else(|| format!("{}: image buffer does not match {w}x{h}", path.display()))?
-        .save(path)
-        .map_err(|e| format!("writing {}: {e}", path.display()))
-}
 
 /// The deterministic evaluation scene: the run's lighting, no EoT.
 pub fn eval_scene(setup: &Setup) -> Scene {

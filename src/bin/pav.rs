@@ -6,7 +6,7 @@ use pav::dataset::fca::CarlaSample;
 use pav::geometry::camera::{pav_camou, spherical, Camera};
 use pav::geometry::mesh::Mesh;
 use pav::render::raster::GBuffer;
-use pav::render::texture::{Gather, Texture};
+use pav::render::texture::{save_rgb, Gather, Texture};
 use std::path::PathBuf;
 
 #[derive(Parser)]
@@ -107,14 +107,6 @@ enum Cmd {
         #[arg(long, short = 'o', default_value = "out/render.png")]
         out: PathBuf,
     },
-}
-
-fn save_rgb(path: &std::path::Path, size: usize, rgb: &[f32]) -> Result<()> {
-    let bytes: Vec<u8> = rgb.iter().map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect();
-    image::RgbImage::from_raw(size as u32, size as u32, bytes)
-        .context("image buffer size")?
-        .save(path)
-        .with_context(|| format!("writing {}", path.display()))
 }
 
 #[derive(Subcommand)]
@@ -337,7 +329,7 @@ fn optimize(
     use pav::attack::config::OptimizeConfig;
     use pav::attack::export::{atlas_side_m, write_sheet, PrintSpec};
     use pav::attack::optimize::{run, Finish, RunOptions};
-    use pav::attack::outputs::{eval_scene, plot_log, preview, save_rgb, score_views};
+    use pav::attack::outputs::{eval_scene, plot_log, preview, score_views};
     use pav::attack::setup::Setup;
     use pav::attack::whitebox::WhiteBox;
     use std::sync::atomic::{AtomicBool, Ordering};
@@ -508,10 +500,10 @@ fn main() -> Result<()> {
     if let Some(d) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(d)?;
     }
-    save_rgb(&out, size, &rgb)?;
+    save_rgb(&out, size, size, &rgb).map_err(anyhow::Error::msg)?;
     let mask_path = out.with_file_name(format!("{}_mask.png", out.file_stem().unwrap_or_default().to_string_lossy()));
     let mask_rgb: Vec<f32> = mask.iter().flat_map(|v| [*v; 3]).collect();
-    save_rgb(&mask_path, size, &mask_rgb)?;
+    save_rgb(&mask_path, size, size, &mask_rgb).map_err(anyhow::Error::msg)?;
     eprintln!(
         "car covers {:.1} % of the image; wrote {} and {}",
         100.0 * g.coverage(),

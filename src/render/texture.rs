@@ -34,6 +34,19 @@ impl Texture {
     }
 }
 
+/// A value in [0, 1] as an 8-bit channel (clamped, rounded), as every saved image stores it.
+pub fn to_u8(v: f32) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+/// Writes an interleaved RGB image in [0, 1] as PNG.
+pub fn save_rgb(path: &std::path::Path, w: usize, h: usize, rgb: &[f32]) -> Result<(), String> {
+    image::RgbImage::from_raw(w as u32, h as u32, rgb.iter().map(|v| to_u8(*v)).collect())
+        .ok_or_else(|| format!("{}: image buffer does not match {w}x{h}", path.display()))?
+        .save(path)
+        .map_err(|e| format!("writing {}: {e}", path.display()))
+}
+
 /// Texel convention: `align_corners = True` as in PyTorch3D's `TexturesUV`. u = 0 and u = 1 are
 /// the centres of the first and last columns; v = 1 is the top row; outside [0, 1] clamps.
 #[derive(Clone, Debug, PartialEq)]
