@@ -197,3 +197,45 @@ fn uv_adjustment_reduces_distortion_in_place() {
     }
     assert!(others.iter().all(|(f, uv)| mesh.face_uvs[*f].map(|i| mesh.uvs[i as usize]) == *uv));
 }
+
+/// UV adjustment by 3D charts on the real patch: doors come out as single pieces joining the
+/// several UV islands the original map cut them into, the flattening has no folds and almost no
+/// distortion, the charts overlap neither each other nor any other face's texels, and the common
+/// density beats the original average (the island method kept only 32 %).
+#[test]
+fn uv_charts_join_islands_and_raise_density() {
+    use pav::geometry::uv::{distortion, faces_in_mask, paint_uv, summary};
+    use pav::geometry::uv_charts::adjust_charts;
+    let Some(shared) = common::shared_data() else { return };
+    let mut mesh = Mesh::load_obj(&shared.join("pav-camou/xfl_yxz.obj")).unwrap();
+    let half = Texture::load(&shared.join("pav-camou/half.png")).unwrap();
+    let patch = faces_in_mask(&mesh, &half.white_mask(), half.width, half.height);
+    let before = summary(&distortion(&mesh, &patch));
+    let others: Vec<usize> = (0..mesh.faces.len()).filter(|f| !patch.contains(f)).collect();
+    let others_uv: Vec<[[f32; 2]; 3]> =
+        others.iter().map(|&f| mesh.face_uvs[f].map(|i| mesh.uvs[i as usize])).collect();
+    let r = adjust_charts(&mut mesh, &patch, 45.0, 512, 1).unwrap();
+    let after = summary(&distortion(&mesh, &patch));
+    eprintln!(
+        "{r:?}; mean |log2 stretch| {:.3} -> {:.3}, p95 anisotropy {:.2} -> {:.2}",
+        before.0, after.0, before.1, after.1
+    );
+    // Measured: 41 charts, one joining 5 islands, density 1.72, no folds, stretch 0.474 -> 0.002.
+    assert!(r.max_islands_joined >= 3, "{r:?}");
+    assert_eq!(r.flipped, 0);
+    assert!(r.density > 1.0, "{r:?}");
+    assert!(after.0 < 0.05 && after.1 < 1.2, "{after:?}");
+    assert_eq!(others_uv, others.iter().map(|&f| mesh.face_uvs[f].map(|i| mesh.uvs[i as usize])).collect::<Vec<_>>());
+    // Texel ownership at the atlas resolution: no texel under two patch faces or under a patch
+    // face and another face.
+    let n = 1024;
+    let mut owner = vec![0u8; n * n];
+    for &f in &patch {
+        for (o, p) in owner.iter_mut().zip(paint_uv(&mesh, &[(f, [255; 3])], n, [0; 3]).chunks(3)) {
+            *o += (p[0] == 255) as u8;
+        }
+    }
+    assert!(owner.iter().all(|o| *o <= 1), "patch faces overlap in UV");
+    let rest = paint_uv(&mesh, &others.iter().map(|&f| (f, [255u8; 3])).collect::<Vec<_>>(), n, [0; 3]);
+    assert!(owner.iter().zip(rest.chunks(3)).all(|(o, p)| !(*o == 1 && p[0] == 255)), "a chart covers another face");
+}

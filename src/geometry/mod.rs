@@ -2,5 +2,7 @@
 
 pub mod camera;
 pub mod mesh;
+pub mod parts;
 pub mod uv;
 pub mod uv_adjust;
+pub mod uv_charts;

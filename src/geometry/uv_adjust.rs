@@ -103,6 +103,29 @@ fn cholesky_solve(mut a: Vec<f64>, mut b: Vec<f64>, n: usize) -> Option<Vec<f64>
 /// LSCM of one island: new (u, v) per UV index, with the two 3D-farthest vertices pinned at
 /// their original UVs. `None` when the system is singular (e.g. a single degenerate face).
 pub fn lscm(mesh: &Mesh, island: &[usize]) -> Option<HashMap<u32, [f64; 2]>> {
+    // Each triangle keeps the orientation it has in the original UV map: game meshes mix 3D
+    // windings, and a conformal map cannot undo a reflection.
+    let hand = |f: usize| {
+        let t = mesh.face_uvs[f].map(|i| mesh.uvs[i as usize].map(|x| x as f64));
+        let s = (t[1][0] - t[0][0]) * (t[2][1] - t[0][1]) - (t[2][0] - t[0][0]) * (t[1][1] - t[0][1]);
+        if s < 0.0 {
+            -1.0
+        } else {
+            1.0
+        }
+    };
+    lscm_with(mesh, island, &hand, None)
+}
+
+/// LSCM with a given orientation per face (±1: which side of its 3D triangle the flattening is
+/// seen from) and, optionally, pins: `None` pins the two 3D-farthest vertices at their current
+/// UVs, `Some(d)` pins them at (0, 0) and (d, 0).
+pub fn lscm_with(
+    mesh: &Mesh,
+    island: &[usize],
+    hand: &dyn Fn(usize) -> f64,
+    pin_span: Option<f64>,
+) -> Option<HashMap<u32, [f64; 2]>> {
     let verts: Vec<u32> = island.iter().flat_map(|&f| mesh.face_uvs[f]).collect::<BTreeSet<_>>().into_iter().collect();
     let index: HashMap<u32, usize> = verts.iter().enumerate().map(|(k, &v)| (v, k)).collect();
     // 3D position of each UV index (first corner that uses it).
@@ -126,17 +149,6 @@ pub fn lscm(mesh: &Mesh, island: &[usize]) -> Option<HashMap<u32, [f64; 2]>> {
         return None;
     }
     let n = verts.len();
-    // Each triangle keeps the orientation it has in the original UV map: game meshes mix 3D
-    // windings, and a conformal map cannot undo a reflection.
-    let hand = |f: usize| {
-        let t = mesh.face_uvs[f].map(|i| mesh.uvs[i as usize].map(|x| x as f64));
-        let s = (t[1][0] - t[0][0]) * (t[2][1] - t[0][1]) - (t[2][0] - t[0][0]) * (t[1][1] - t[0][1]);
-        if s < 0.0 {
-            -1.0
-        } else {
-            1.0
-        }
-    };
     // Rows of the real LSCM system over x = [u_0..u_n, v_0..v_n]: two rows per triangle.
     let mut rows: Vec<Vec<(usize, f64)>> = Vec::new();
     for &f in island {
@@ -166,7 +178,10 @@ pub fn lscm(mesh: &Mesh, island: &[usize]) -> Option<HashMap<u32, [f64; 2]>> {
     }
     let pinned = [pa, pb, n + pa, n + pb];
     let orig = |k: usize| mesh.uvs[verts[k] as usize];
-    let pin_val = [orig(pa)[0] as f64, orig(pb)[0] as f64, orig(pa)[1] as f64, orig(pb)[1] as f64];
+    let pin_val = match pin_span {
+        Some(d) => [0.0, d, 0.0, 0.0],
+        None => [orig(pa)[0] as f64, orig(pb)[0] as f64, orig(pa)[1] as f64, orig(pb)[1] as f64],
+    };
     let free: Vec<usize> = (0..2 * n).filter(|c| !pinned.contains(c)).collect();
     let col: HashMap<usize, usize> = free.iter().enumerate().map(|(i, &c)| (c, i)).collect();
     let m = free.len();
