@@ -56,3 +56,22 @@ fn uv_mapped_etron_is_the_fca_audi() {
         assert!((x - y).abs() < 2e-3, "FCA mesh {a:?} vs e-tron {b:?}");
     }
 }
+
+/// `mesh.parts` (configs/optimize/half.toml: doors and roof-like faces) cuts the e-tron's body
+/// region down to a strict subset that every FCA view still sees.
+#[test]
+fn a_parts_region_is_a_visible_subset_of_the_body() {
+    use pav::attack::config::OptimizeConfig;
+    use pav::attack::setup::Setup;
+    let Some(_) = common::shared_data() else { return };
+    let load = |name: &str| {
+        let cfg = OptimizeConfig::load(&common::repo().join("configs/optimize").join(name)).unwrap();
+        Setup::load(&cfg, Some(128)).unwrap_or_else(|e| panic!("{name}: {e}"))
+    };
+    let (full, half) = (load("paper.toml"), load("half.toml"));
+    assert!(half.region.iter().zip(&full.region).all(|(h, f)| *h <= *f), "not a subset");
+    let share = half.region_values.len() as f64 / full.region_values.len() as f64;
+    // Measured: 0.75 (the bumpers, the fender ends and the front and rear faces drop out).
+    assert!((0.5..0.9).contains(&share), "{share}");
+    assert!(half.train.iter().chain(&half.test).all(|v| !v.active.is_empty()));
+}

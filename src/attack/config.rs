@@ -30,6 +30,17 @@ pub struct MeshConfig {
     pub init: f32,
     /// Real-world car length in metres, for the printable sheet (mesh units are not trusted).
     pub car_length_m: f64,
+    /// Limits the region to these parts (`top`, `side`, `end`, each optionally `:a-b` along the
+    /// length), like PAV-Camou's half.png; empty keeps the whole region.
+    #[serde(default)]
+    pub parts: Vec<String>,
+    /// A face belongs to a part when |cos| between its normal and the part's axis reaches this.
+    #[serde(default = "parts_min_cos")]
+    pub parts_min_cos: f32,
+}
+
+fn parts_min_cos() -> f32 {
+    0.7
 }
 
 fn half() -> f32 {
@@ -183,6 +194,46 @@ impl OptimizeConfig {
         if self.detector.target.is_empty() {
             return Err("detector.target lists no class".into());
         }
+        self.parts().map_err(|e| format!("mesh.parts: {e}"))?;
+        if !(self.mesh.parts_min_cos > 0.0 && self.mesh.parts_min_cos <= 1.0) {
+            return Err(format!("mesh.parts_min_cos must be in (0, 1], got {}", self.mesh.parts_min_cos));
+        }
         Ok(())
+    }
+
+    /// The parsed `mesh.parts`.
+    pub fn parts(&self) -> Result<Vec<crate::geometry::parts::Part>, crate::geometry::parts::PartError> {
+        self.mesh.parts.iter().map(|s| s.parse()).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shipped(name: &str) -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/optimize").join(name)
+    }
+
+    #[test]
+    fn shipped_configs_load_and_resolve_paths() {
+        for name in ["paper.toml", "authors.toml", "half.toml"] {
+            let c = OptimizeConfig::load(&shipped(name)).unwrap_or_else(|e| panic!("{e}"));
+            assert!(c.mesh.obj.starts_with(shipped("").parent().unwrap()), "{name}: {:?}", c.mesh.obj);
+        }
+        let half = OptimizeConfig::load(&shipped("half.toml")).unwrap();
+        assert_eq!(half.parts().unwrap().len(), 2);
+    }
+
+    #[test]
+    fn a_bad_part_is_refused_by_name() {
+        let text = std::fs::read_to_string(shipped("half.toml")).unwrap().replace("\"top\"", "\"roof\"");
+        let dir = std::env::temp_dir().join(format!("pav-config-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("bad.toml");
+        std::fs::write(&p, text).unwrap();
+        let e = OptimizeConfig::load(&p).unwrap_err().to_string();
+        assert!(e.contains("mesh.parts") && e.contains("roof"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -50,6 +50,51 @@ fn frame(view: &View, tex: Option<&[f32]>, setup: &Setup) -> Frame {
     }
 }
 
+/// The car detections of every detector on `view` composited with `tex` (`None` = the photo).
+pub fn detect_view(
+    view: &View,
+    tex: Option<&[f32]>,
+    setup: &Setup,
+    detectors: &mut [Box<dyn Detector>],
+) -> Result<Vec<ImageDetections>, crate::detect::DetectError> {
+    let f = frame(view, tex, setup);
+    let mut out = Vec::with_capacity(detectors.len());
+    for det in detectors.iter_mut() {
+        let p = det.propose(&f)?;
+        let cars = p
+            .target_detections(det.target_classes(), AP_MIN_SCORE, NMS_IOU)
+            .into_iter()
+            .map(|x| (x.score, x.bbox))
+            .collect();
+        out.push(ImageDetections { gt: setup.boxes.get(&view.name).copied(), cars });
+    }
+    Ok(out)
+}
+
+/// One cell from the detections of its images; `None` when there are none.
+pub fn aggregate(
+    detector: &str,
+    white_box: bool,
+    texture: &str,
+    split: &str,
+    ims: &[ImageDetections],
+    threshold: f32,
+) -> Option<DigitalRow> {
+    let a = asr(ims, threshold)?;
+    Some(DigitalRow {
+        detector: detector.to_string(),
+        white_box,
+        texture: texture.to_string(),
+        split: split.into(),
+        images: ims.len(),
+        asr: a,
+        p50: ap50(ims).unwrap_or(f64::NAN),
+        mean_score: ims.iter().map(|i| i.cars.iter().map(|c| c.0 as f64).fold(0.0, f64::max)).sum::<f64>()
+            / ims.len() as f64,
+        threshold,
+    })
+}
+
 /// Scores every (detector, texture, split) of `setup`; `textures` pairs a name with a texture
 /// (`None` = the unmodified photo).
 pub fn evaluate(
@@ -65,15 +110,8 @@ pub fn evaluate(
         let mut per: Vec<Vec<(&'static str, ImageDetections)>> = vec![Vec::new(); detectors.len()];
         for (split, views) in [("train", &setup.train), ("test", &setup.test)] {
             for v in views.iter() {
-                let f = frame(v, tex.as_deref(), setup);
-                for (d, det) in detectors.iter_mut().enumerate() {
-                    let p = det.propose(&f)?;
-                    let cars = p
-                        .target_detections(det.target_classes(), AP_MIN_SCORE, NMS_IOU)
-                        .into_iter()
-                        .map(|x| (x.score, x.bbox))
-                        .collect();
-                    per[d].push((split, ImageDetections { gt: setup.boxes.get(&v.name).copied(), cars }));
+                for (d, im) in detect_view(v, tex.as_deref(), setup, detectors)?.into_iter().enumerate() {
+                    per[d].push((split, im));
                 }
                 progress();
             }
@@ -82,19 +120,7 @@ pub fn evaluate(
             for split in ["train", "test", "all"] {
                 let ims: Vec<ImageDetections> =
                     per[d].iter().filter(|(s, _)| split == "all" || *s == split).map(|(_, i)| i.clone()).collect();
-                let Some(a) = asr(&ims, threshold) else { continue };
-                rows.push(DigitalRow {
-                    detector: det.name().to_string(),
-                    white_box: det.name() == white_box,
-                    texture: tname.clone(),
-                    split: split.into(),
-                    images: ims.len(),
-                    asr: a,
-                    p50: ap50(&ims).unwrap_or(f64::NAN),
-                    mean_score: ims.iter().map(|i| i.cars.iter().map(|c| c.0 as f64).fold(0.0, f64::max)).sum::<f64>()
-                        / ims.len() as f64,
-                    threshold,
-                });
+                rows.extend(aggregate(det.name(), det.name() == white_box, tname, split, &ims, threshold));
             }
         }
     }
@@ -104,6 +130,15 @@ pub fn evaluate(
 /// The table in the paper's shape: detectors down, textures across, "ASR / P@0.5" in percent,
 /// white-box cells starred; one table per split.
 pub fn markdown(rows: &[DigitalRow], split: &str) -> String {
+    table(rows, split, |r, star| format!("{:.1}{star} / {:.1}{star}", 100.0 * r.asr, 100.0 * r.p50))
+}
+
+/// The same table with the mean best car score per cell: the attack's effect below the threshold.
+pub fn markdown_scores(rows: &[DigitalRow], split: &str) -> String {
+    table(rows, split, |r, star| format!("{:.3}{star}", r.mean_score))
+}
+
+fn table(rows: &[DigitalRow], split: &str, cell: impl Fn(&DigitalRow, &str) -> String) -> String {
     let textures = crate::eval::report::unique(rows.iter().map(|r| r.texture.clone()));
     let detectors = crate::eval::report::unique(rows.iter().map(|r| (r.detector.clone(), r.white_box)));
     let mut s = format!("| detector | {} |\n|---|{}\n", textures.join(" | "), "---|".repeat(textures.len()));
@@ -112,8 +147,7 @@ pub fn markdown(rows: &[DigitalRow], split: &str) -> String {
         for t in &textures {
             match rows.iter().find(|r| &r.detector == d && &r.texture == t && r.split == split) {
                 Some(r) => {
-                    let star = if r.white_box && t != "original" { "*" } else { "" };
-                    s.push_str(&format!(" {:.1}{star} / {:.1}{star} |", 100.0 * r.asr, 100.0 * r.p50));
+                    s.push_str(&format!(" {} |", cell(r, if r.white_box && t != "original" { "*" } else { "" })))
                 }
                 None => s.push_str(" – |"),
             }

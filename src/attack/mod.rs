@@ -4,6 +4,8 @@ pub mod adam;
 pub mod checkpoint;
 pub mod config;
 #[cfg(feature = "optimize")]
+pub mod crossval;
+#[cfg(feature = "optimize")]
 pub mod digital;
 pub mod export;
 #[cfg(feature = "optimize")]

@@ -7,6 +7,8 @@ use crate::dataset::fca::CarlaSample;
 use crate::detect::BBox;
 use crate::geometry::camera::{fca, pav_camou};
 use crate::geometry::mesh::Mesh;
+use crate::geometry::parts::select_faces;
+use crate::geometry::uv::paint_uv;
 use crate::render::shade::vertex_normals;
 use crate::render::texture::Texture;
 use crate::scene::Scene;
@@ -19,6 +21,7 @@ use std::path::Path;
 pub struct SetupError(pub String);
 
 /// The prepared problem.
+#[derive(Clone)]
 pub struct Setup {
     /// The normalized mesh.
     pub mesh: Mesh,
@@ -85,13 +88,28 @@ impl Setup {
         let normals = if scene.lighting.is_some() { vertex_normals(&mesh) } else { Vec::new() };
         let mask = Texture::load(&cfg.mesh.region).map_err(|x| e(&x))?;
         let ts = cfg.mesh.texture_size;
-        let region = resample_region(&mask.white_mask(), mask.width, mask.height, ts);
+        let mut region = resample_region(&mask.white_mask(), mask.width, mask.height, ts);
+        let parts = cfg.parts().map_err(|x| e(&x))?;
+        if !parts.is_empty() {
+            let up = match cfg.mesh.camera {
+                CameraConvention::Fca => 2,
+                CameraConvention::PavCamou => 1,
+            };
+            let faces = select_faces(&mesh, up, &parts, cfg.mesh.parts_min_cos);
+            let painted = paint_uv(&mesh, &faces.iter().map(|&f| (f, [255u8; 3])).collect::<Vec<_>>(), ts, [0; 3]);
+            for (r, px) in region.iter_mut().zip(painted.chunks(3)) {
+                if px[0] == 0 {
+                    *r = 0.0;
+                }
+            }
+        }
         let region_values: Vec<u32> =
             (0..ts * ts).filter(|i| region[*i] > 0.5).flat_map(|i| (0..3).map(move |c| (i * 3 + c) as u32)).collect();
         if region_values.is_empty() {
             return Err(SetupError(format!(
-                "{} has no pure-white texel: nothing to optimize",
-                cfg.mesh.region.display()
+                "{} has no pure-white texel{}: nothing to optimize",
+                cfg.mesh.region.display(),
+                if parts.is_empty() { String::new() } else { format!(" on the parts {:?}", cfg.mesh.parts) }
             )));
         }
         let size = size.unwrap_or(cfg.views.size);

@@ -67,6 +67,33 @@ enum Cmd {
         #[arg(long, short = 'o', default_value = "out/digital")]
         out: PathBuf,
     },
+    /// k-fold cross-validation of the attack: every view is held out once, the texture is
+    /// optimized on the rest, and the held-out views are scored by every detector against the
+    /// photo and several random textures (a Table 2 in which no texture has seen its test views).
+    #[cfg(feature = "optimize")]
+    Crossval {
+        /// Optimization config; its training and held-out views are pooled and re-split.
+        #[arg(long, default_value = "configs/optimize/half.toml")]
+        config: PathBuf,
+        /// Number of folds (default: one per view, leave-one-out).
+        #[arg(long)]
+        folds: Option<usize>,
+        /// Random textures per fold (pooled as "random").
+        #[arg(long, default_value_t = 5)]
+        random_seeds: u64,
+        /// Detector configs or folders of them.
+        #[arg(long = "detectors", short = 'd', default_value = "configs/detectors")]
+        detectors: Vec<PathBuf>,
+        /// A car counts as detected above this score.
+        #[arg(long, default_value_t = 0.5)]
+        threshold: f32,
+        /// Name of the white-box detector (starred).
+        #[arg(long, default_value = "yolov3-tiny")]
+        white_box: String,
+        /// Output folder; an interrupted run resumes from it.
+        #[arg(long, short = 'o', default_value = "out/crossval")]
+        out: PathBuf,
+    },
     /// UV map tools.
     #[command(subcommand)]
     Uv(UvCmd),
@@ -124,8 +151,8 @@ enum UvCmd {
         #[arg(long, short = 'o', default_value = "out/uv")]
         out: PathBuf,
     },
-    /// Re-flatten the optimizable patch automatically (LSCM per UV island, kept in place, one
-    /// common texel density); writes the adjusted OBJ, its UV mask, and before/after heat maps.
+    /// Re-flatten the optimizable patch automatically at one common texel density; writes the
+    /// adjusted OBJ, its UV mask, and before/after heat maps.
     Adjust {
         /// OBJ mesh with UVs.
         #[arg(long, default_value = "../shared/data/pav-camou/xfl_yxz.obj")]
@@ -133,15 +160,38 @@ enum UvCmd {
         /// UV map whose pure-white texels mark the optimizable patch.
         #[arg(long, default_value = "../shared/data/pav-camou/half.png")]
         mask: PathBuf,
+        /// charts: cut by the 3D surface (a door is one piece) and pack into the free texels;
+        /// islands: LSCM per original UV island, kept inside its original box.
+        #[arg(long, value_enum, default_value_t = AdjustMode::Charts)]
+        mode: AdjustMode,
+        /// Charts: largest angle between a face's normal and its chart's seed normal.
+        #[arg(long, default_value_t = 45.0)]
+        max_angle: f64,
         /// Output directory.
         #[arg(long, short = 'o', default_value = "out/uv_adjusted")]
         out: PathBuf,
     },
 }
 
-fn uv_adjust(mesh_path: &std::path::Path, mask: &std::path::Path, out: &std::path::Path) -> Result<()> {
+/// How `pav uv adjust` re-flattens the patch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum AdjustMode {
+    /// 3D charts packed into the free texels.
+    Charts,
+    /// Original UV islands, each kept in its box.
+    Islands,
+}
+
+fn uv_adjust(
+    mesh_path: &std::path::Path,
+    mask: &std::path::Path,
+    mode: AdjustMode,
+    max_angle: f64,
+    out: &std::path::Path,
+) -> Result<()> {
     use pav::geometry::uv::{distortion, faces_in_mask, paint_uv, summary};
     use pav::geometry::uv_adjust::adjust;
+    use pav::geometry::uv_charts::adjust_charts;
     let original = Mesh::load_obj(mesh_path)?;
     let tex = Texture::load(mask).map_err(anyhow::Error::msg)?;
     let was_white = tex.white_mask();
@@ -151,7 +201,19 @@ fn uv_adjust(mesh_path: &std::path::Path, mask: &std::path::Path, out: &std::pat
     }
     let before = summary(&distortion(&original, &patch));
     let mut m = original.clone();
-    let density = adjust(&mut m, &patch);
+    anyhow::ensure!(tex.width == tex.height, "the UV mask must be square, got {}x{}", tex.width, tex.height);
+    let (density, pieces) = match mode {
+        AdjustMode::Islands => (adjust(&mut m, &patch), String::new()),
+        AdjustMode::Charts => {
+            // One packing cell per 4 texels, one free cell around each chart.
+            let r = adjust_charts(&mut m, &patch, max_angle, (tex.width / 4).max(64), 1)?;
+            let pieces = format!(
+                "; {} charts (one joins up to {} original UV islands), {} folded faces",
+                r.charts, r.max_islands_joined, r.flipped
+            );
+            (r.density, pieces)
+        }
+    };
     let after = summary(&distortion(&m, &patch));
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     m.write_obj(&out.join("adjusted.obj"), None).with_context(|| format!("writing {}", out.display()))?;
@@ -165,7 +227,6 @@ fn uv_adjust(mesh_path: &std::path::Path, mask: &std::path::Path, out: &std::pat
             px.copy_from_slice(&body);
         }
     }
-    anyhow::ensure!(w == h, "the UV mask must be square, got {w}x{h}");
     let white = paint_uv(&m, &patch.iter().map(|&f| (f, [255u8, 255, 255])).collect::<Vec<_>>(), w, [0, 0, 0]);
     for (px, wv) in rgb.chunks_mut(3).zip(white.chunks(3)) {
         if wv[0] == 255 {
@@ -176,7 +237,7 @@ fn uv_adjust(mesh_path: &std::path::Path, mask: &std::path::Path, out: &std::pat
     uv_check(&out.join("adjusted.obj"), &out.join("adjusted_mask.png"), &out.join("after"))?;
     uv_check(mesh_path, mask, &out.join("before"))?;
     println!(
-        "adjusted {} faces: mean |log2 stretch| {:.3} -> {:.3}, 95th-percentile anisotropy {:.2} -> {:.2}; texel density kept {:.0} %",
+        "adjusted {} faces: mean |log2 stretch| {:.3} -> {:.3}, 95th-percentile anisotropy {:.2} -> {:.2}; texel density {:.0} % of the original{pieces}",
         patch.len(),
         before.0,
         after.0,
@@ -340,15 +401,19 @@ fn optimize(
     let setup = Setup::load(&cfg, None)?;
     let wb = WhiteBox::load(&cfg.detector, cfg.views.size)?;
     eprintln!(
-        "{} training and {} held-out views at {}², texture {}² ({} optimizable values), scene {}; prepared in {:.1} s",
+        "{} training and {} held-out views at {}², texture {}² ({} optimizable values, {:.1} % of the atlas), scene {}; prepared in {:.1} s",
         setup.train.len(),
         setup.test.len(),
         cfg.views.size,
         setup.tex_size,
         setup.region_values.len(),
+        100.0 * setup.region_values.len() as f64 / (3 * setup.tex_size * setup.tex_size) as f64,
         setup.scene.describe(),
         t.elapsed().as_secs_f64()
     );
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let region_rgb: Vec<f32> = setup.region.iter().flat_map(|v| [*v; 3]).collect();
+    save_rgb(&out.join("region.png"), setup.tex_size, setup.tex_size, &region_rgb).map_err(anyhow::Error::msg)?;
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
@@ -387,7 +452,10 @@ fn optimize(
         sheet.atlas_mm,
         sheet.density_spread
     );
-    eprintln!("wrote texture.png, texture_print.png, loss.csv, loss.png, preview.png, scores.csv in {}", out.display());
+    eprintln!(
+        "wrote region.png, texture.png, texture_print.png, loss.csv, loss.png, preview.png, scores.csv in {}",
+        out.display()
+    );
     Ok(())
 }
 
@@ -448,6 +516,83 @@ fn eval_digital(
     Ok(())
 }
 
+#[cfg(feature = "optimize")]
+#[allow(clippy::too_many_arguments)]
+fn crossval_cmd(
+    config: &std::path::Path,
+    folds: Option<usize>,
+    random_seeds: u64,
+    detectors: &[PathBuf],
+    threshold: f32,
+    white_box: &str,
+    out: &std::path::Path,
+) -> Result<()> {
+    use pav::attack::config::OptimizeConfig;
+    use pav::attack::crossval::{crossval, CrossvalOptions};
+    use pav::attack::digital::{markdown, markdown_scores, AP_MIN_SCORE};
+    use pav::attack::setup::Setup;
+    use pav::attack::whitebox::WhiteBox;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::Arc;
+    let cfg = OptimizeConfig::load(config)?;
+    let setup = Setup::load(&cfg, None)?;
+    let wb = WhiteBox::load(&cfg.detector, cfg.views.size)?;
+    let mut dets = pav::eval::detectors::load_detectors(detectors, &[], 1)?;
+    let n = setup.train.len() + setup.test.len();
+    let k = folds.unwrap_or(n);
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
+    let opts = CrossvalOptions {
+        folds: k,
+        random_seeds,
+        random_block: 16,
+        out: out.to_path_buf(),
+        threshold,
+        white_box: white_box.to_string(),
+    };
+    let bar = indicatif::ProgressBar::new(2 * k as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} (eta {eta}) {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let t = std::time::Instant::now();
+    let (rows, records) = crossval(config, &cfg, &setup, &wb, &mut dets, &opts, &stop, |f, stage| {
+        bar.set_message(format!("fold {}/{k}: {stage}", f + 1));
+        if stage != "optimizing" {
+            bar.inc(1);
+        }
+    })?;
+    bar.finish_and_clear();
+    let mut w = csv::Writer::from_path(out.join("crossval.csv"))?;
+    for r in &rows {
+        w.serialize(r)?;
+    }
+    w.flush()?;
+    let mut w = csv::Writer::from_path(out.join("crossval_views.csv"))?;
+    for r in &records {
+        w.serialize(r)?;
+    }
+    w.flush()?;
+    let mut md = format!(
+        "# Cross-validation, {k} folds over {n} views ({:.0} s)\n\nEach texture is optimized on the other folds' views ({}, {} epochs) and scored on its held-out views; \"random\" pools {random_seeds} random 16-texel block textures per fold. Car detected above {threshold}; P@0.5 over boxes from score {AP_MIN_SCORE}; * = white-box.\n",
+        t.elapsed().as_secs_f64(),
+        config.display(),
+        cfg.optimizer.epochs
+    );
+    for (split, title) in
+        [("held-out", "held-out views"), ("train", "training views (each view once per fold it trained in)")]
+    {
+        md.push_str(&format!("\n## {title}: ASR / P@0.5 (%)\n\n{}", markdown(&rows, split)));
+        md.push_str(&format!("\n## {title}: mean best car score\n\n{}", markdown_scores(&rows, split)));
+    }
+    std::fs::write(out.join("crossval.md"), &md).with_context(|| format!("writing {}", out.display()))?;
+    println!("{md}");
+    eprintln!("wrote crossval.csv, crossval_views.csv, crossval.md and a folder per fold in {}", out.display());
+    Ok(())
+}
+
 fn main() -> Result<()> {
     let (mesh, texture, pose, orbit, size, out) = match Cli::parse().cmd {
         #[cfg(feature = "optimize")]
@@ -458,9 +603,15 @@ fn main() -> Result<()> {
         Cmd::Optimize { config, out, resume, epochs, size, scale, dpi } => {
             return optimize(&config, &out, resume, epochs, size, scale, dpi)
         }
+        #[cfg(feature = "optimize")]
+        Cmd::Crossval { config, folds, random_seeds, detectors, threshold, white_box, out } => {
+            return crossval_cmd(&config, folds, random_seeds, &detectors, threshold, &white_box, &out)
+        }
         Cmd::BenchRender { mesh, sizes, views, out } => return bench_render(&mesh, &sizes, views, &out),
         Cmd::Uv(UvCmd::Check { mesh, mask, out }) => return uv_check(&mesh, &mask, &out),
-        Cmd::Uv(UvCmd::Adjust { mesh, mask, out }) => return uv_adjust(&mesh, &mask, &out),
+        Cmd::Uv(UvCmd::Adjust { mesh, mask, mode, max_angle, out }) => {
+            return uv_adjust(&mesh, &mask, mode, max_angle, &out)
+        }
         Cmd::Render { mesh, texture, pose, orbit, size, out } => (mesh, texture, pose, orbit, size, out),
     };
     let mut m = Mesh::load_obj(&mesh)?;

@@ -1,0 +1,163 @@
+//! `pav crossval`: k-fold cross-validation of the whole attack. FCA's public set has eleven
+//! photos, too few for a fixed train/test split to say whether an optimized texture generalizes
+//! better than random paint. So every view is held out once: the texture is optimized on the
+//! other folds and scored on the held-out views by every detector, next to the photo and
+//! several random textures.
+
+use super::config::OptimizeConfig;
+use super::digital::{aggregate, detect_view, DigitalRow};
+use super::optimize::{run, Finish, OptimizeError, RunOptions};
+use super::setup::Setup;
+use super::whitebox::WhiteBox;
+use crate::detect::Detector;
+use crate::eval::digital::ImageDetections;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+
+/// Options of a cross-validation.
+#[derive(Clone, Debug)]
+pub struct CrossvalOptions {
+    /// Number of folds (the number of views gives leave-one-out).
+    pub folds: usize,
+    /// Random textures drawn per fold (pooled as "random").
+    pub random_seeds: u64,
+    /// Edge of the random colour blocks, in texels.
+    pub random_block: usize,
+    /// Output folder; fold `f` of `k` runs in `fold{f}of{k}` and resumes from there.
+    pub out: PathBuf,
+    /// Score threshold for ASR.
+    pub threshold: f32,
+    /// Name of the white-box detector.
+    pub white_box: String,
+}
+
+/// The best car score of one detector on one view under one texture.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ViewRecord {
+    /// Fold index.
+    pub fold: usize,
+    /// "train" or "held-out" in that fold.
+    pub role: &'static str,
+    /// View name.
+    pub view: String,
+    /// "original", "random" or "optimized".
+    pub texture: String,
+    /// Random seed (0 for the others).
+    pub seed: u64,
+    /// Detector name.
+    pub detector: String,
+    /// Best car score (0 without a car box).
+    pub score: f32,
+}
+
+/// Views of fold `f`: index `i` of `all` is held out when `i % k == f`.
+pub fn fold_split(n: usize, k: usize, f: usize) -> (Vec<usize>, Vec<usize>) {
+    (0..n).partition(|i| i % k != f)
+}
+
+/// Runs every fold; returns the pooled table rows (splits "held-out" and "train") and the
+/// per-view records. `progress(fold, stage)` reports "optimizing", "scoring" and "done".
+#[allow(clippy::too_many_arguments)]
+pub fn crossval(
+    cfg_path: &Path,
+    cfg: &OptimizeConfig,
+    setup: &Setup,
+    wb: &WhiteBox,
+    detectors: &mut [Box<dyn Detector>],
+    opts: &CrossvalOptions,
+    stop: &AtomicBool,
+    mut progress: impl FnMut(usize, &str),
+) -> Result<(Vec<DigitalRow>, Vec<ViewRecord>), OptimizeError> {
+    let all: Vec<_> = setup.train.iter().chain(&setup.test).cloned().collect();
+    let k = opts.folds;
+    if k < 2 || k > all.len() {
+        return Err(OptimizeError::Other(format!("folds must be in 2..={} (the number of views), got {k}", all.len())));
+    }
+    // (role, texture, detector index) → detections, pooled over folds and seeds.
+    let mut pooled: Vec<((&'static str, String, usize), ImageDetections)> = Vec::new();
+    let mut records = Vec::new();
+    for f in 0..k {
+        let (tr, te) = fold_split(all.len(), k, f);
+        let mut fs = setup.clone();
+        fs.train = tr.iter().map(|&i| all[i].clone()).collect();
+        fs.test = te.iter().map(|&i| all[i].clone()).collect();
+        progress(f, "optimizing");
+        let ro = RunOptions {
+            out: opts.out.join(format!("fold{f}of{k}")),
+            resume: true,
+            checkpoint_every: 20,
+            max_skips: 5,
+            epochs: None,
+            progress: false,
+        };
+        let o = run(cfg_path, cfg, &fs, wb, &ro, stop)?;
+        if matches!(o.finish, Finish::Stopped) {
+            return Err(OptimizeError::Other(format!(
+                "stopped in fold {f}; run again to resume from {}",
+                ro.out.display()
+            )));
+        }
+        crate::render::texture::save_rgb(&ro.out.join("texture.png"), fs.tex_size, fs.tex_size, &o.texture)
+            .map_err(OptimizeError::Other)?;
+        progress(f, "scoring");
+        let mut textures: Vec<(String, u64, Option<Vec<f32>>)> =
+            vec![("original".into(), 0, None), ("optimized".into(), 0, Some(o.texture))];
+        for s in 0..opts.random_seeds {
+            let seed = 1 + s + 1000 * f as u64;
+            textures.push(("random".into(), seed, Some(fs.random_texture(opts.random_block, seed))));
+        }
+        for (role, views) in [("train", &fs.train), ("held-out", &fs.test)] {
+            for v in views.iter() {
+                for (tname, seed, tex) in &textures {
+                    let dets = detect_view(v, tex.as_deref(), &fs, detectors)
+                        .map_err(|e| OptimizeError::Other(format!("fold {f}, view {}: {e}", v.name)))?;
+                    for (d, im) in dets.into_iter().enumerate() {
+                        records.push(ViewRecord {
+                            fold: f,
+                            role,
+                            view: v.name.clone(),
+                            texture: tname.clone(),
+                            seed: *seed,
+                            detector: detectors[d].name().to_string(),
+                            score: im.cars.iter().map(|c| c.0).fold(0.0, f32::max),
+                        });
+                        pooled.push(((role, tname.clone(), d), im));
+                    }
+                }
+            }
+        }
+        progress(f, "done");
+    }
+    let mut rows = Vec::new();
+    for tname in ["original", "random", "optimized"] {
+        for (d, det) in detectors.iter().enumerate() {
+            for role in ["held-out", "train"] {
+                let ims: Vec<ImageDetections> = pooled
+                    .iter()
+                    .filter(|((r, t, dd), _)| *r == role && t == tname && *dd == d)
+                    .map(|(_, im)| im.clone())
+                    .collect();
+                rows.extend(aggregate(det.name(), det.name() == opts.white_box, tname, role, &ims, opts.threshold));
+            }
+        }
+    }
+    Ok((rows, records))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_view_is_held_out_exactly_once() {
+        let (n, k) = (11, 4);
+        let mut held = vec![0; n];
+        for f in 0..k {
+            let (tr, te) = fold_split(n, k, f);
+            assert_eq!(tr.len() + te.len(), n);
+            assert!(tr.iter().all(|i| !te.contains(i)));
+            te.iter().for_each(|&i| held[i] += 1);
+        }
+        assert!(held.iter().all(|&h| h == 1));
+    }
+}
