@@ -39,7 +39,7 @@ fn optimization_lowers_the_car_score_and_resume_is_exact() {
     assert!(matches!(straight.finish, Finish::Done));
     assert_eq!(straight.log.len(), 6);
     // Only the region moved, and it stayed inside the clamp.
-    let init = s.initial_texture(cfg.mesh.init);
+    let init = s.initial_texture(cfg.mesh.init, cfg.optimizer.seed);
     let region: std::collections::HashSet<u32> = s.region_values.iter().copied().collect();
     for (i, (a, b)) in straight.texture.iter().zip(&init).enumerate() {
         if region.contains(&(i as u32)) {

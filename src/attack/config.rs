@@ -25,9 +25,9 @@ pub struct MeshConfig {
     pub camera: CameraConvention,
     /// Texture side in texels (the region image is resampled to it).
     pub texture_size: usize,
-    /// Initial texture value (the authors use 0.5).
-    #[serde(default = "half")]
-    pub init: f32,
+    /// Initial texture: a grey value (the authors use 0.5) or "random" (16-texel colour blocks).
+    #[serde(default)]
+    pub init: Init,
     /// Real-world car length in metres, for the printable sheet (mesh units are not trusted).
     pub car_length_m: f64,
     /// Limits the region to these parts (`top`, `side`, `end`, each optionally `:a-b` along the
@@ -43,8 +43,28 @@ fn parts_min_cos() -> f32 {
     0.7
 }
 
-fn half() -> f32 {
-    0.5
+/// The texture an optimization starts from.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(untagged)]
+pub enum Init {
+    /// Every value this grey.
+    Grey(f32),
+    /// Named start: only "random" (16-texel uniform colour blocks, seeded by optimizer.seed).
+    Named(InitName),
+}
+
+/// Named initial textures.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum InitName {
+    /// Uniform random colours in 16-texel blocks: the "random" baseline as a starting point.
+    Random,
+}
+
+impl Default for Init {
+    fn default() -> Self {
+        Init::Grey(0.5)
+    }
 }
 
 /// The PBR views.
@@ -181,8 +201,10 @@ impl OptimizeConfig {
         if !(16..=8192).contains(&self.mesh.texture_size) {
             return Err(format!("mesh.texture_size must be in 16..=8192, got {}", self.mesh.texture_size));
         }
-        if !(0.0..=1.0).contains(&self.mesh.init) {
-            return Err(format!("mesh.init must be in [0, 1], got {}", self.mesh.init));
+        if let Init::Grey(g) = self.mesh.init {
+            if !(0.0..=1.0).contains(&g) {
+                return Err(format!("mesh.init must be in [0, 1] or \"random\", got {g}"));
+            }
         }
         if !self.mesh.car_length_m.is_finite() || self.mesh.car_length_m <= 0.0 {
             return Err(format!("mesh.car_length_m must be > 0, got {}", self.mesh.car_length_m));

@@ -224,7 +224,7 @@ pub fn run(
                 ckpt_path.display()
             )));
         }
-        let tex = setup.initial_texture(cfg.mesh.init);
+        let tex = setup.initial_texture(cfg.mesh.init, cfg.optimizer.seed);
         (tex, Adam::new(n_values, cfg.optimizer.lr), Rng::new(cfg.optimizer.seed), 0, Vec::new())
     };
     let n = setup.train.len() as u64;

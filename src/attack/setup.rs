@@ -1,7 +1,10 @@
 //! Everything an optimization or a digital evaluation reads once: the normalized mesh, the
 //! optimizable texels, the scene and the prepared views.
 
-use super::config::{CameraConvention, OptimizeConfig};
+use super::config::{CameraConvention, Init, InitName, OptimizeConfig};
+
+/// Edge of the random baseline's colour blocks, in texels.
+pub const RANDOM_BLOCK: usize = 16;
 use super::view::View;
 use crate::dataset::fca::CarlaSample;
 use crate::detect::BBox;
@@ -161,9 +164,13 @@ impl Setup {
         (0..n * n * 3).map(|i| colours[(((i / 3) / n / b) * cells + ((i / 3) % n) / b) * 3 + i % 3]).collect()
     }
 
-    /// The starting texture: `init` everywhere.
-    pub fn initial_texture(&self, init: f32) -> Vec<f32> {
-        vec![init; self.tex_size * self.tex_size * 3]
+    /// The starting texture; a random start draws its blocks from `seed`.
+    pub fn initial_texture(&self, init: Init, seed: u64) -> Vec<f32> {
+        match init {
+            Init::Grey(g) => vec![g; self.tex_size * self.tex_size * 3],
+            // Not seed itself: the random baselines of eval-digital and crossval draw small seeds.
+            Init::Named(InitName::Random) => self.random_texture(RANDOM_BLOCK, seed ^ 0x1417_0000),
+        }
     }
 }
 

@@ -429,7 +429,7 @@ fn optimize(
     }
     let views: Vec<&pav::attack::view::View> = setup.train.iter().chain(&setup.test).collect();
     preview(&out.join("preview.png"), &views, &o.texture, &eval_scene(&setup)).map_err(anyhow::Error::msg)?;
-    let initial = setup.initial_texture(cfg.mesh.init);
+    let initial = setup.initial_texture(cfg.mesh.init, cfg.optimizer.seed);
     let scores = score_views(&setup, &wb, &initial, &o.texture).map_err(anyhow::Error::msg)?;
     let mut w = csv::Writer::from_path(out.join("scores.csv"))?;
     for s in &scores {
@@ -473,8 +473,10 @@ fn eval_digital(
     use pav::attack::setup::Setup;
     let cfg = OptimizeConfig::load(config)?;
     let setup = Setup::load(&cfg, None)?;
-    let mut conditions: Vec<(String, Option<Vec<f32>>)> =
-        vec![("original".into(), None), ("random".into(), Some(setup.random_texture(16, 1)))];
+    let mut conditions: Vec<(String, Option<Vec<f32>>)> = vec![
+        ("original".into(), None),
+        ("random".into(), Some(setup.random_texture(pav::attack::setup::RANDOM_BLOCK, 1))),
+    ];
     for t in textures {
         let tex = Texture::load(t).map_err(anyhow::Error::msg)?;
         if (tex.width, tex.height) != (setup.tex_size, setup.tex_size) {
@@ -547,7 +549,7 @@ fn crossval_cmd(
     let opts = CrossvalOptions {
         folds: k,
         random_seeds,
-        random_block: 16,
+        random_block: pav::attack::setup::RANDOM_BLOCK,
         out: out.to_path_buf(),
         threshold,
         white_box: white_box.to_string(),
