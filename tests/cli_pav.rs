@@ -33,7 +33,9 @@ fn render_and_uv_commands_write_their_files() {
     let o = pav().args(["uv", "adjust", "-o"]).arg(tmp.path().join("adj")).output().unwrap();
     let out = text(&o);
     assert!(o.status.success(), "{out}");
-    assert!(out.contains("adjusted 281 faces: mean |log2 stretch| 0.474 -> 0.005"), "{out}");
+    assert!(out.contains("adjusted 281 faces: mean |log2 stretch| 0.474 -> 0.002"), "{out}");
+    // The new mask marks every patch face again, thin strips included.
+    assert!(out.contains("281 patch faces: area-weighted mean |log2 stretch| 0.002"), "{out}");
     for f in [
         "adjusted.obj",
         "adjusted_mask.png",

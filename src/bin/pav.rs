@@ -189,7 +189,7 @@ fn uv_adjust(
     max_angle: f64,
     out: &std::path::Path,
 ) -> Result<()> {
-    use pav::geometry::uv::{distortion, faces_in_mask, paint_uv, summary};
+    use pav::geometry::uv::{distortion, faces_in_mask, faces_mask, summary};
     use pav::geometry::uv_adjust::adjust;
     use pav::geometry::uv_charts::adjust_charts;
     let original = Mesh::load_obj(mesh_path)?;
@@ -227,9 +227,9 @@ fn uv_adjust(
             px.copy_from_slice(&body);
         }
     }
-    let white = paint_uv(&m, &patch.iter().map(|&f| (f, [255u8, 255, 255])).collect::<Vec<_>>(), w, [0, 0, 0]);
-    for (px, wv) in rgb.chunks_mut(3).zip(white.chunks(3)) {
-        if wv[0] == 255 {
+    let white = faces_mask(&m, &patch, w);
+    for (px, wv) in rgb.chunks_mut(3).zip(&white) {
+        if *wv {
             px.copy_from_slice(&[255, 255, 255]);
         }
     }

@@ -109,6 +109,27 @@ pub fn faces_in_mask(mesh: &Mesh, mask: &[f32], w: usize, h: usize) -> Vec<usize
         .collect()
 }
 
+/// Texels of a `size × size` map (row 0 at the top) that `faces` cover: their UV triangles plus
+/// the texels under their centroids and corners, so a face thinner than a texel still owns the
+/// texels it samples (and [`faces_in_mask`] finds it again).
+pub fn faces_mask(mesh: &Mesh, faces: &[usize], size: usize) -> Vec<bool> {
+    let painted = paint_uv(mesh, &faces.iter().map(|&f| (f, [255u8; 3])).collect::<Vec<_>>(), size, [0; 3]);
+    let mut out: Vec<bool> = painted.chunks(3).map(|p| p[0] == 255).collect();
+    let texel = |uv: [f32; 2]| {
+        let x = (uv[0].clamp(0.0, 1.0) * (size - 1) as f32).round() as usize;
+        let y = ((1.0 - uv[1].clamp(0.0, 1.0)) * (size - 1) as f32).round() as usize;
+        y * size + x
+    };
+    for &f in faces {
+        let t = mesh.face_uvs[f].map(|i| mesh.uvs[i as usize]);
+        for uv in t {
+            out[texel(uv)] = true;
+        }
+        out[texel([(t[0][0] + t[1][0] + t[2][0]) / 3.0, (t[0][1] + t[1][1] + t[2][1]) / 3.0])] = true;
+    }
+    out
+}
+
 /// Paints each face's UV triangle in `colour(face)` on a `size × size` RGB image (v up).
 pub fn paint_uv(mesh: &Mesh, faces: &[(usize, [u8; 3])], size: usize, background: [u8; 3]) -> Vec<u8> {
     let mut img: Vec<u8> = (0..size * size).flat_map(|_| background).collect();
