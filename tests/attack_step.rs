@@ -42,7 +42,7 @@ fn texture_gradient_matches_finite_differences_through_the_detector() {
             0.5 + 0.2 * (x * 0.031 + c).sin() * (y * 0.027 - c).cos()
         })
         .collect();
-    let lit = Scene { lighting: s.scene.lighting.clone(), effects: vec![] };
+    let lit = Scene { lighting: s.scene.lighting, effects: vec![] };
     let (img, tape) = v.render(&tex, &lit, &mut rng);
     let g = wb.loss_and_grad(&img, v.size, 1.0).unwrap();
 

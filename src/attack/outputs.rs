@@ -12,7 +12,7 @@ use std::path::Path;
 
 /// The deterministic evaluation scene: the run's lighting, no EoT.
 pub fn eval_scene(setup: &Setup) -> Scene {
-    Scene { lighting: setup.scene.lighting.clone(), effects: Vec::new() }
+    Scene { lighting: setup.scene.lighting, effects: Vec::new() }
 }
 
 /// A composite without EoT (clamped to [0, 1]).

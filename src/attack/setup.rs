@@ -116,7 +116,7 @@ impl Setup {
             )));
         }
         let size = size.unwrap_or(cfg.views.size);
-        let lights = scene.lighting.as_ref().map(|l| l.lights());
+        let lights = scene.lighting;
         let labels = match &cfg.views.labels {
             Some(p) => read_boxes(p)?,
             None => HashMap::new(),

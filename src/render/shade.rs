@@ -9,8 +9,9 @@ use super::raster::{GBuffer, EMPTY};
 use crate::geometry::camera::{cross, dot, normalize, Camera};
 use crate::geometry::mesh::Mesh;
 
-/// Light intensities (white light) and the material's shininess.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// Light intensities (white light) and the material's shininess; a scene's `[lighting]` table.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Lights {
     /// Ambient intensity.
     pub ambient: f32,
@@ -20,8 +21,13 @@ pub struct Lights {
     pub specular: f32,
     /// Direction towards the light, world space.
     pub direction: [f32; 3],
-    /// Phong exponent.
+    /// Phong exponent (PyTorch3D's default 64 when a scene leaves it out).
+    #[serde(default = "default_shininess")]
     pub shininess: f32,
+}
+
+fn default_shininess() -> f32 {
+    64.0
 }
 
 impl Lights {

@@ -63,46 +63,12 @@ pub enum Effect {
     },
 }
 
-/// Phong lighting of the textured render.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct Lighting {
-    /// Ambient intensity.
-    pub ambient: f32,
-    /// Diffuse intensity.
-    pub diffuse: f32,
-    /// Specular intensity.
-    pub specular: f32,
-    /// Direction towards the light (world).
-    pub direction: [f32; 3],
-    /// Phong exponent (PyTorch3D default 64).
-    #[serde(default = "default_shininess")]
-    pub shininess: f32,
-}
-
-fn default_shininess() -> f32 {
-    64.0
-}
-
-impl Lighting {
-    /// As the renderer's light set.
-    pub fn lights(&self) -> Lights {
-        Lights {
-            ambient: self.ambient,
-            diffuse: self.diffuse,
-            specular: self.specular,
-            direction: self.direction,
-            shininess: self.shininess,
-        }
-    }
-}
-
 /// A scene: lighting of the textured render and the EoT effects.
 #[derive(Clone, Debug, Default, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct Scene {
-    /// Phong lighting; `None` renders the albedo.
-    pub lighting: Option<Lighting>,
+    /// Phong lighting (the renderer's light set, read as is); `None` renders the albedo.
+    pub lighting: Option<Lights>,
     /// EoT effects in order.
     #[serde(default)]
     pub effects: Vec<Effect>,
