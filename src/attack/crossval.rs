@@ -8,9 +8,11 @@ use super::config::OptimizeConfig;
 use super::digital::{aggregate, detect_view, DigitalRow};
 use super::optimize::{run, Finish, OptimizeError, RunOptions};
 use super::setup::Setup;
+use super::view::View;
 use super::whitebox::WhiteBox;
 use crate::detect::Detector;
 use crate::eval::digital::ImageDetections;
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
@@ -68,19 +70,18 @@ pub fn crossval(
     stop: &AtomicBool,
     mut progress: impl FnMut(usize, &str),
 ) -> Result<(Vec<DigitalRow>, Vec<ViewRecord>), OptimizeError> {
-    let all: Vec<_> = setup.train.iter().chain(&setup.test).cloned().collect();
+    let all: Vec<&View> = setup.train.iter().chain(&setup.test).collect();
     let k = opts.folds;
     if k < 2 || k > all.len() {
         return Err(OptimizeError::Other(format!("folds must be in 2..={} (the number of views), got {k}", all.len())));
     }
     // (role, texture, detector index) → detections, pooled over folds and seeds.
-    let mut pooled: Vec<((&'static str, String, usize), ImageDetections)> = Vec::new();
+    let mut pooled: HashMap<(&'static str, &'static str, usize), Vec<ImageDetections>> = HashMap::new();
     let mut records = Vec::new();
     for f in 0..k {
         let (tr, te) = fold_split(all.len(), k, f);
-        let mut fs = setup.clone();
-        fs.train = tr.iter().map(|&i| all[i].clone()).collect();
-        fs.test = te.iter().map(|&i| all[i].clone()).collect();
+        let fs = setup
+            .with_views(tr.iter().map(|&i| all[i].clone()).collect(), te.iter().map(|&i| all[i].clone()).collect());
         progress(f, "optimizing");
         let ro = RunOptions {
             out: opts.out.join(format!("fold{f}of{k}")),
@@ -100,11 +101,11 @@ pub fn crossval(
         crate::render::texture::save_rgb(&ro.out.join("texture.png"), fs.tex_size, fs.tex_size, &o.texture)
             .map_err(OptimizeError::Other)?;
         progress(f, "scoring");
-        let mut textures: Vec<(String, u64, Option<Vec<f32>>)> =
-            vec![("original".into(), 0, None), ("optimized".into(), 0, Some(o.texture))];
+        let mut textures: Vec<(&'static str, u64, Option<Vec<f32>>)> =
+            vec![("original", 0, None), ("optimized", 0, Some(o.texture))];
         for s in 0..opts.random_seeds {
             let seed = 1 + s + 1000 * f as u64;
-            textures.push(("random".into(), seed, Some(fs.random_texture(opts.random_block, seed))));
+            textures.push(("random", seed, Some(fs.random_texture(opts.random_block, seed))));
         }
         for (role, views) in [("train", &fs.train), ("held-out", &fs.test)] {
             for v in views.iter() {
@@ -116,12 +117,12 @@ pub fn crossval(
                             fold: f,
                             role,
                             view: v.name.clone(),
-                            texture: tname.clone(),
+                            texture: tname.to_string(),
                             seed: *seed,
                             detector: detectors[d].name().to_string(),
-                            score: im.cars.iter().map(|c| c.0).fold(0.0, f32::max),
+                            score: im.best_score(),
                         });
-                        pooled.push(((role, tname.clone(), d), im));
+                        pooled.entry((role, *tname, d)).or_default().push(im);
                     }
                 }
             }
@@ -132,12 +133,8 @@ pub fn crossval(
     for tname in ["original", "random", "optimized"] {
         for (d, det) in detectors.iter().enumerate() {
             for role in ["held-out", "train"] {
-                let ims: Vec<ImageDetections> = pooled
-                    .iter()
-                    .filter(|((r, t, dd), _)| *r == role && t == tname && *dd == d)
-                    .map(|(_, im)| im.clone())
-                    .collect();
-                rows.extend(aggregate(det.name(), det.name() == opts.white_box, tname, role, &ims, opts.threshold));
+                let ims = pooled.get(&(role, tname, d)).map(Vec::as_slice).unwrap_or_default();
+                rows.extend(aggregate(det.name(), det.name() == opts.white_box, tname, role, ims, opts.threshold));
             }
         }
     }

@@ -89,8 +89,7 @@ pub fn aggregate(
         images: ims.len(),
         asr: a,
         p50: ap50(ims).unwrap_or(f64::NAN),
-        mean_score: ims.iter().map(|i| i.cars.iter().map(|c| c.0 as f64).fold(0.0, f64::max)).sum::<f64>()
-            / ims.len() as f64,
+        mean_score: ims.iter().map(|i| i.best_score() as f64).sum::<f64>() / ims.len() as f64,
         threshold,
     })
 }

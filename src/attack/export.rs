@@ -48,8 +48,7 @@ fn area2(t: [[f32; 2]; 3]) -> f64 {
 /// Real-world side (m) of the UV square over the faces of `mesh` in `region` (`n × n` texels),
 /// for a car `car_length_m` long: sqrt(surface area / UV area), and the per-face density spread.
 pub fn atlas_side_m(mesh: &Mesh, region: &[f32], n: usize, car_length_m: f64) -> Option<(f64, f64)> {
-    let (lo, hi) = mesh.bounds();
-    let length = (0..3).map(|k| (hi[k] - lo[k]) as f64).fold(0.0, f64::max);
+    let length = mesh.largest_side() as f64;
     if length <= 0.0 {
         return None;
     }

@@ -2,9 +2,6 @@
 //! optimizable texels, the scene and the prepared views.
 
 use super::config::{CameraConvention, Init, InitName, OptimizeConfig};
-
-/// Edge of the random baseline's colour blocks, in texels.
-pub const RANDOM_BLOCK: usize = 16;
 use super::view::View;
 use crate::dataset::fca::CarlaSample;
 use crate::detect::BBox;
@@ -18,13 +15,15 @@ use crate::scene::Scene;
 use std::collections::HashMap;
 use std::path::Path;
 
+/// Edge of the random baseline's colour blocks, in texels.
+pub const RANDOM_BLOCK: usize = 16;
+
 /// Errors preparing an optimization.
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
 pub struct SetupError(pub String);
 
 /// The prepared problem.
-#[derive(Clone)]
 pub struct Setup {
     /// The normalized mesh.
     pub mesh: Mesh,
@@ -150,6 +149,20 @@ impl Setup {
         let train = views(&cfg.views.train)?;
         let test = views(&cfg.views.test)?;
         Ok(Setup { mesh, tex_size: ts, region, region_values, scene, train, test, boxes })
+    }
+
+    /// The same problem over other views (cross-validation folds).
+    pub fn with_views(&self, train: Vec<View>, test: Vec<View>) -> Setup {
+        Setup {
+            mesh: self.mesh.clone(),
+            tex_size: self.tex_size,
+            region: self.region.clone(),
+            region_values: self.region_values.clone(),
+            scene: self.scene.clone(),
+            train,
+            test,
+            boxes: self.boxes.clone(),
+        }
     }
 
     /// The "random" baseline: uniform random colours in `block × block` texel squares (at the

@@ -490,8 +490,8 @@ fn cmd_bench_rig(b: &BenchRigArgs) -> Result<()> {
         sync.push(r);
     }
     let _ = std::fs::remove_dir_all(&tmp);
-    pav::eval::bench::write_csv(&b.out.join("rig_latency.csv"), &lat)?;
-    pav::eval::bench::write_csv(&b.out.join("rig_angle_sync.csv"), &sync)?;
+    pav::eval::report::write_csv(&b.out.join("rig_latency.csv"), &lat)?;
+    pav::eval::report::write_csv(&b.out.join("rig_angle_sync.csv"), &sync)?;
     eprintln!("wrote {} and {}", b.out.join("rig_latency.csv").display(), b.out.join("rig_angle_sync.csv").display());
     Ok(())
 }

@@ -3,6 +3,7 @@
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use pav::dataset::fca::CarlaSample;
+use pav::eval::report::write_csv;
 use pav::geometry::camera::{pav_camou, spherical, Camera};
 use pav::geometry::mesh::Mesh;
 use pav::render::raster::GBuffer;
@@ -261,11 +262,7 @@ fn uv_check(mesh: &std::path::Path, mask: &std::path::Path, out: &std::path::Pat
     let d = distortion(&m, &patch);
     let (mean_abs, p95) = summary(&d);
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let mut w = csv::Writer::from_path(out.join("uv_distortion.csv"))?;
-    for r in &d {
-        w.serialize(r)?;
-    }
-    w.flush()?;
+    write_csv(&out.join("uv_distortion.csv"), &d)?;
     let colours: Vec<(usize, [u8; 3])> = d.iter().map(|r| (r.face, heat_colour(r.log2_stretch))).collect();
     let size = 1024;
     let uv_img = paint_uv(&m, &colours, size, [255, 255, 255]);
@@ -367,11 +364,7 @@ fn bench_render(mesh: &std::path::Path, sizes: &[usize], views: usize, out: &std
     if let Some(d) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(d)?;
     }
-    let mut w = csv::Writer::from_path(out).with_context(|| format!("writing {}", out.display()))?;
-    for r in &rows {
-        w.serialize(r)?;
-    }
-    w.flush()?;
+    write_csv(out, &rows)?;
     eprintln!("wrote {}", out.display());
     Ok(())
 }
@@ -393,8 +386,6 @@ fn optimize(
     use pav::attack::outputs::{eval_scene, plot_log, preview, score_views};
     use pav::attack::setup::Setup;
     use pav::attack::whitebox::WhiteBox;
-    use std::sync::atomic::{AtomicBool, Ordering};
-    use std::sync::Arc;
     let mut cfg = OptimizeConfig::load(config)?;
     cfg.views.size = size.unwrap_or(cfg.views.size);
     let t = std::time::Instant::now();
@@ -414,9 +405,7 @@ fn optimize(
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let region_rgb: Vec<f32> = setup.region.iter().flat_map(|v| [*v; 3]).collect();
     save_rgb(&out.join("region.png"), setup.tex_size, setup.tex_size, &region_rgb).map_err(anyhow::Error::msg)?;
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
+    let stop = stop_on_ctrl_c()?;
     let opts =
         RunOptions { out: out.to_path_buf(), resume, checkpoint_every: 20, max_skips: 5, epochs, progress: true };
     let o = run(config, &cfg, &setup, &wb, &opts, &stop)?;
@@ -431,11 +420,7 @@ fn optimize(
     preview(&out.join("preview.png"), &views, &o.texture, &eval_scene(&setup)).map_err(anyhow::Error::msg)?;
     let initial = setup.initial_texture(cfg.mesh.init, cfg.optimizer.seed);
     let scores = score_views(&setup, &wb, &initial, &o.texture).map_err(anyhow::Error::msg)?;
-    let mut w = csv::Writer::from_path(out.join("scores.csv"))?;
-    for s in &scores {
-        w.serialize(s)?;
-    }
-    w.flush()?;
+    write_csv(&out.join("scores.csv"), &scores)?;
     println!("white-box YOLOv3-tiny car score per view (no EoT): original photo / initial texture / optimized");
     for s in &scores {
         println!("  {:5} {:10} {:.3} / {:.3} / {:.3}", s.split, s.view, s.original, s.initial, s.optimized);
@@ -457,6 +442,16 @@ fn optimize(
         out.display()
     );
     Ok(())
+}
+
+/// A flag that Ctrl-C raises, so long runs save their state and stop between steps.
+#[cfg(feature = "optimize")]
+fn stop_on_ctrl_c() -> Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let stop = std::sync::Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
+    Ok(stop)
 }
 
 #[cfg(feature = "optimize")]
@@ -496,11 +491,7 @@ fn eval_digital(
     let rows = evaluate(&setup, &mut dets, &conditions, threshold, white_box, || bar.inc(1))?;
     bar.finish_and_clear();
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let mut w = csv::Writer::from_path(out.join("digital.csv"))?;
-    for r in &rows {
-        w.serialize(r)?;
-    }
-    w.flush()?;
+    write_csv(&out.join("digital.csv"), &rows)?;
     let mut md = format!(
         "# Digital evaluation (ASR / P@0.5 in %, * = white-box)\n\nCar = COCO `car`; detected above score {threshold}; P@0.5 is car AP at IoU 0.5 over boxes from score {AP_MIN_SCORE}. Views composited at {}² (lit, no EoT), 8-bit. Config: {}.\n",
         cfg.views.size,
@@ -534,8 +525,6 @@ fn crossval_cmd(
     use pav::attack::digital::{markdown, markdown_scores, AP_MIN_SCORE};
     use pav::attack::setup::Setup;
     use pav::attack::whitebox::WhiteBox;
-    use std::sync::atomic::{AtomicBool, Ordering};
-    use std::sync::Arc;
     let cfg = OptimizeConfig::load(config)?;
     let setup = Setup::load(&cfg, None)?;
     let wb = WhiteBox::load(&cfg.detector, cfg.views.size)?;
@@ -543,9 +532,7 @@ fn crossval_cmd(
     let n = setup.train.len() + setup.test.len();
     let k = folds.unwrap_or(n);
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
+    let stop = stop_on_ctrl_c()?;
     let opts = CrossvalOptions {
         folds: k,
         random_seeds,
@@ -567,16 +554,8 @@ fn crossval_cmd(
         }
     })?;
     bar.finish_and_clear();
-    let mut w = csv::Writer::from_path(out.join("crossval.csv"))?;
-    for r in &rows {
-        w.serialize(r)?;
-    }
-    w.flush()?;
-    let mut w = csv::Writer::from_path(out.join("crossval_views.csv"))?;
-    for r in &records {
-        w.serialize(r)?;
-    }
-    w.flush()?;
+    write_csv(&out.join("crossval.csv"), &rows)?;
+    write_csv(&out.join("crossval_views.csv"), &records)?;
     let mut md = format!(
         "# Cross-validation, {k} folds over {n} views ({:.0} s)\n\nEach texture is optimized on the other folds' views ({}, {} epochs) and scored on its held-out views; \"random\" pools {random_seeds} random 16-texel block textures per fold. Car detected above {threshold}; P@0.5 over boxes from score {AP_MIN_SCORE}; * = white-box.\n",
         t.elapsed().as_secs_f64(),

@@ -5,6 +5,7 @@
 //! for each stride and input size).
 
 use super::physical::Accuracy;
+use super::report::write_csv;
 use super::run::{evaluate, EvalOptions, VideoJob};
 use super::video::VideoReader;
 use crate::detect::onnx::OnnxDetector;
@@ -216,14 +217,4 @@ pub fn run(opts: &BenchOptions) -> Result<(Vec<Throughput>, Vec<Tradeoff>)> {
     write_csv(&opts.out_dir.join("tradeoff.csv"), &trade)?;
     super::plot::tradeoff(&opts.out_dir.join("tradeoff.png"), &trade).map_err(|e| anyhow::anyhow!(e.to_string()))?;
     Ok((thr, trade))
-}
-
-/// Writes serializable rows as a CSV file with a header.
-pub fn write_csv<T: serde::Serialize>(path: &Path, rows: &[T]) -> Result<()> {
-    let mut w = csv::Writer::from_path(path).with_context(|| format!("writing {}", path.display()))?;
-    for r in rows {
-        w.serialize(r)?;
-    }
-    w.flush()?;
-    Ok(())
 }

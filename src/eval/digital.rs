@@ -15,6 +15,13 @@ pub struct ImageDetections {
     pub cars: Vec<(f32, BBox)>,
 }
 
+impl ImageDetections {
+    /// The best car score (0 without a car detection).
+    pub fn best_score(&self) -> f32 {
+        self.cars.iter().map(|c| c.0).fold(0.0, f32::max)
+    }
+}
+
 /// Intersection over union of two boxes.
 pub fn iou(a: BBox, b: BBox) -> f32 {
     let iw = (a[2].min(b[2]) - a[0].max(b[0])).max(0.0);

@@ -20,6 +20,15 @@ fn rerr(path: &Path, e: impl std::fmt::Display) -> ReportError {
     ReportError { path: path.into(), msg: e.to_string() }
 }
 
+/// Writes serializable rows as a CSV file with a header.
+pub fn write_csv<T: serde::Serialize>(path: &Path, rows: &[T]) -> Result<(), ReportError> {
+    let mut w = csv::Writer::from_path(path).map_err(|e| rerr(path, e))?;
+    for r in rows {
+        w.serialize(r).map_err(|e| rerr(path, e))?;
+    }
+    w.flush().map_err(|e| rerr(path, e))
+}
+
 /// Streams [`FrameRecord`]s to CSV, flushing each row so an interrupted run keeps every frame.
 pub struct FrameCsv {
     w: csv::Writer<std::fs::File>,

@@ -289,11 +289,17 @@ impl Mesh {
         (lo, hi)
     }
 
+    /// Longest side of the bounding box (0 for an empty mesh).
+    pub fn largest_side(&self) -> f32 {
+        let (lo, hi) = self.bounds();
+        (0..3).map(|k| hi[k] - lo[k]).fold(0f32, f32::max)
+    }
+
     /// neural_renderer's `load_obj` normalization (used by FCA and DAS): the bounding box is
     /// centred and its longest side scaled to 2.
     pub fn normalize_bbox(&mut self) {
         let (lo, hi) = self.bounds();
-        let side = (0..3).map(|k| hi[k] - lo[k]).fold(0f32, f32::max);
+        let side = self.largest_side();
         let s = if side > 0.0 { 2.0 / side } else { 1.0 };
         for p in &mut self.positions {
             for k in 0..3 {

@@ -93,6 +93,13 @@ pub fn summary(d: &[FaceDistortion]) -> (f64, f64) {
     (mean_abs, p95)
 }
 
+/// Index of the texel nearest `uv` in a `w × h` map (row 0 at the top), clamped to the map.
+fn texel(uv: [f32; 2], w: usize, h: usize) -> usize {
+    let x = (uv[0].clamp(0.0, 1.0) * (w - 1) as f32).round() as usize;
+    let y = ((1.0 - uv[1].clamp(0.0, 1.0)) * (h - 1) as f32).round() as usize;
+    y * w + x
+}
+
 /// Faces whose UV centroid falls on a texel where `mask` (one value per texel, `w × h`,
 /// row 0 at the top) is 1: the optimizable patch, as PAV-Camou marks it in half.png.
 pub fn faces_in_mask(mesh: &Mesh, mask: &[f32], w: usize, h: usize) -> Vec<usize> {
@@ -102,9 +109,7 @@ pub fn faces_in_mask(mesh: &Mesh, mask: &[f32], w: usize, h: usize) -> Vec<usize
                 let uv = mesh.uvs[t as usize];
                 [a[0] + uv[0] / 3.0, a[1] + uv[1] / 3.0]
             });
-            let x = (c[0].clamp(0.0, 1.0) * (w - 1) as f32).round() as usize;
-            let y = ((1.0 - c[1].clamp(0.0, 1.0)) * (h - 1) as f32).round() as usize;
-            mask[y * w + x] == 1.0
+            mask[texel(c, w, h)] == 1.0
         })
         .collect()
 }
@@ -115,17 +120,12 @@ pub fn faces_in_mask(mesh: &Mesh, mask: &[f32], w: usize, h: usize) -> Vec<usize
 pub fn faces_mask(mesh: &Mesh, faces: &[usize], size: usize) -> Vec<bool> {
     let painted = paint_uv(mesh, &faces.iter().map(|&f| (f, [255u8; 3])).collect::<Vec<_>>(), size, [0; 3]);
     let mut out: Vec<bool> = painted.chunks(3).map(|p| p[0] == 255).collect();
-    let texel = |uv: [f32; 2]| {
-        let x = (uv[0].clamp(0.0, 1.0) * (size - 1) as f32).round() as usize;
-        let y = ((1.0 - uv[1].clamp(0.0, 1.0)) * (size - 1) as f32).round() as usize;
-        y * size + x
-    };
     for &f in faces {
         let t = mesh.face_uvs[f].map(|i| mesh.uvs[i as usize]);
         for uv in t {
-            out[texel(uv)] = true;
+            out[texel(uv, size, size)] = true;
         }
-        out[texel([(t[0][0] + t[1][0] + t[2][0]) / 3.0, (t[0][1] + t[1][1] + t[2][1]) / 3.0])] = true;
+        out[texel([(t[0][0] + t[1][0] + t[2][0]) / 3.0, (t[0][1] + t[1][1] + t[2][1]) / 3.0], size, size)] = true;
     }
     out
 }

@@ -35,8 +35,7 @@ pub enum ChartError {
 /// One id per distinct 3D position (OBJ exports often duplicate vertices along seams).
 fn weld(mesh: &Mesh) -> Vec<u32> {
     let mut ids: HashMap<[i64; 3], u32> = HashMap::new();
-    let (lo, hi) = mesh.bounds();
-    let scale = (0..3).map(|k| hi[k] - lo[k]).fold(0f32, f32::max).max(f32::MIN_POSITIVE) as f64;
+    let scale = mesh.largest_side().max(f32::MIN_POSITIVE) as f64;
     mesh.positions
         .iter()
         .map(|p| {
