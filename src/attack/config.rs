@@ -25,7 +25,7 @@ pub struct MeshConfig {
     pub camera: CameraConvention,
     /// Texture side in texels (the region image is resampled to it).
     pub texture_size: usize,
-    /// Initial texture: a grey value (the authors use 0.5) or "random" (16-texel colour blocks).
+    /// Initial texture: a grey value (the authors use 0.5) or "random" (colour blocks, 1/64 of the atlas side).
     #[serde(default)]
     pub init: Init,
     /// Real-world car length in metres, for the printable sheet (mesh units are not trusted).
@@ -49,7 +49,7 @@ fn parts_min_cos() -> f32 {
 pub enum Init {
     /// Every value this grey.
     Grey(f32),
-    /// Named start: only "random" (16-texel uniform colour blocks, seeded by optimizer.seed).
+    /// Named start: only "random" (uniform colour blocks 1/64 of the atlas side, seeded by optimizer.seed).
     Named(InitName),
 }
 
@@ -57,7 +57,7 @@ pub enum Init {
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
 pub enum InitName {
-    /// Uniform random colours in 16-texel blocks: the "random" baseline as a starting point.
+    /// Uniform random colours in blocks 1/64 of the atlas side: the "random" baseline as a starting point.
     Random,
 }
 
@@ -80,6 +80,11 @@ pub struct ViewsConfig {
     pub size: usize,
     /// Ground-truth boxes (FCA's derived_test_labels.tsv) for P@0.5.
     pub labels: Option<PathBuf>,
+    /// Synthetic training views: every training photo again with the car turned in place by
+    /// each of these yaw angles (degrees), drawn from an appearance baked from the training
+    /// photos (`render::bake`). Used for training only; reports score the photos.
+    #[serde(default)]
+    pub turns: Vec<f64>,
 }
 
 /// The white-box detector.
@@ -198,6 +203,9 @@ impl OptimizeConfig {
         if !(32..=4096).contains(&self.views.size) {
             return Err(format!("views.size must be in 32..=4096, got {}", self.views.size));
         }
+        if let Some(t) = self.views.turns.iter().find(|t| !(t.is_finite() && **t != 0.0 && t.abs() < 180.0)) {
+            return Err(format!("views.turns must be non-zero angles within ±180°, got {t}"));
+        }
         if !(16..=8192).contains(&self.mesh.texture_size) {
             return Err(format!("mesh.texture_size must be in 16..=8192, got {}", self.mesh.texture_size));
         }
@@ -239,12 +247,26 @@ mod tests {
 
     #[test]
     fn shipped_configs_load_and_resolve_paths() {
-        for name in ["paper.toml", "authors.toml", "half.toml"] {
+        for name in ["paper.toml", "authors.toml", "half.toml", "half-random.toml", "half-turns.toml"] {
             let c = OptimizeConfig::load(&shipped(name)).unwrap_or_else(|e| panic!("{e}"));
             assert!(c.mesh.obj.starts_with(shipped("").parent().unwrap()), "{name}: {:?}", c.mesh.obj);
         }
         let half = OptimizeConfig::load(&shipped("half.toml")).unwrap();
         assert_eq!(half.parts().unwrap().len(), 2);
+        let turns = OptimizeConfig::load(&shipped("half-turns.toml")).unwrap();
+        assert_eq!((half.views.turns.len(), turns.views.turns.len()), (0, 4));
+    }
+
+    #[test]
+    fn a_zero_or_full_turn_is_refused() {
+        let mut c = OptimizeConfig::load(&shipped("half-turns.toml")).unwrap();
+        for bad in [0.0, 180.0, f64::NAN] {
+            c.views.turns = vec![15.0, bad];
+            let e = c.check().unwrap_err();
+            assert!(e.contains("views.turns"), "{e}");
+        }
+        c.views.turns = vec![-179.0, 15.0];
+        c.check().unwrap();
     }
 
     #[test]

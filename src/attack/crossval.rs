@@ -80,8 +80,14 @@ pub fn crossval(
     let mut records = Vec::new();
     for f in 0..k {
         let (tr, te) = fold_split(all.len(), k, f);
-        let fs = setup
-            .with_views(tr.iter().map(|&i| all[i].clone()).collect(), te.iter().map(|&i| all[i].clone()).collect());
+        // Synthetic views come from this fold's training photos only.
+        let names: Vec<&str> = tr.iter().map(|&i| all[i].name.as_str()).collect();
+        let synthetic = setup.turned_views(&names)?;
+        let fs = setup.with_views(
+            tr.iter().map(|&i| all[i].clone()).collect(),
+            synthetic,
+            te.iter().map(|&i| all[i].clone()).collect(),
+        );
         progress(f, "optimizing");
         let ro = RunOptions {
             out: opts.out.join(format!("fold{f}of{k}")),

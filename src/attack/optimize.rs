@@ -227,7 +227,8 @@ pub fn run(
         let tex = setup.initial_texture(cfg.mesh.init, cfg.optimizer.seed);
         (tex, Adam::new(n_values, cfg.optimizer.lr), Rng::new(cfg.optimizer.seed), 0, Vec::new())
     };
-    let n = setup.train.len() as u64;
+    let views = setup.training_views();
+    let n = views.len() as u64;
     let epochs = opts.epochs.unwrap_or(cfg.optimizer.epochs) as u64;
     let total = n * epochs;
     let save = |tex: &[f32], adam: &Adam, rng: &Rng, done: u64, log: &[StepLog]| -> Result<(), OptimizeError> {
@@ -265,7 +266,7 @@ pub fn run(
         if k == 0 {
             order = epoch_order(n as usize, cfg.optimizer.seed, epoch);
         }
-        let view = &setup.train[order[k]];
+        let view = views[order[k]];
         grad.fill(0.0);
         let mut rec = step(setup, wb, cfg, view, &tex, &mut rng, &mut grad)?;
         (rec.step, rec.epoch) = (s, epoch);

@@ -5,18 +5,22 @@ use super::config::{CameraConvention, Init, InitName, OptimizeConfig};
 use super::view::View;
 use crate::dataset::fca::CarlaSample;
 use crate::detect::BBox;
-use crate::geometry::camera::{fca, pav_camou};
+use crate::detect::Frame;
+use crate::geometry::camera::{fca, pav_camou, Camera};
 use crate::geometry::mesh::Mesh;
 use crate::geometry::parts::select_faces;
-use crate::geometry::uv::paint_uv;
-use crate::render::shade::vertex_normals;
+use crate::geometry::uv::faces_mask;
+use crate::render::bake::{bake, turned_photo, Shot, BAKE_SIZE};
+use crate::render::shade::{vertex_normals, Lights};
 use crate::render::texture::Texture;
 use crate::scene::Scene;
 use std::collections::HashMap;
 use std::path::Path;
 
-/// Edge of the random baseline's colour blocks, in texels.
-pub const RANDOM_BLOCK: usize = 16;
+/// The random baseline has this many colour blocks across the atlas side, whatever its
+/// resolution (16 texels at 1024², about 5 mm when printed at 1:20), so baselines stay the same
+/// printed pattern when `mesh.texture_size` changes.
+pub const RANDOM_BLOCKS_PER_SIDE: usize = 64;
 
 /// Errors preparing an optimization.
 #[derive(Debug, thiserror::Error)]
@@ -35,12 +39,52 @@ pub struct Setup {
     pub region_values: Vec<u32>,
     /// Lighting and EoT.
     pub scene: Scene,
-    /// Training views.
+    /// Training views (photos).
     pub train: Vec<View>,
+    /// Synthetic training views (`views.turns`): trained on, never scored.
+    pub synthetic: Vec<View>,
     /// Held-out views.
     pub test: Vec<View>,
     /// Ground-truth car boxes by view name, in view pixels.
     pub boxes: HashMap<String, BBox>,
+    /// The photos behind `train` and `test` by view name, for synthetic views of any subset.
+    samples: HashMap<String, CarlaSample>,
+    maker: ViewMaker,
+}
+
+/// What turns a CARLA sample into a [`View`].
+#[derive(Clone)]
+struct ViewMaker {
+    camera: CameraConvention,
+    size: usize,
+    normals: Vec<[f32; 3]>,
+    lights: Option<Lights>,
+    turns: Vec<f64>,
+}
+
+impl ViewMaker {
+    /// The camera of `s` with the car turned in place by `turn_deg`.
+    fn camera(&self, s: &CarlaSample, turn_deg: f64) -> Camera {
+        let mut veh = s.veh_trans;
+        veh[1][1] += turn_deg;
+        match self.camera {
+            CameraConvention::Fca => fca(s.cam_trans, veh),
+            CameraConvention::PavCamou => pav_camou(s.cam_trans, veh[1][1]),
+        }
+    }
+
+    fn view(
+        &self,
+        name: &str,
+        mesh: &Mesh,
+        cam: &Camera,
+        photo: &Frame,
+        region: &[f32],
+        ts: usize,
+    ) -> Result<View, String> {
+        View::new(name, mesh, &self.normals, cam, photo, self.size, region, (ts, ts), self.lights.as_ref())
+            .map_err(|x| x.to_string())
+    }
 }
 
 /// Nearest-neighbour resampling of a region mask to `size × size` texels.
@@ -98,9 +142,9 @@ impl Setup {
                 CameraConvention::PavCamou => 1,
             };
             let faces = select_faces(&mesh, up, &parts, cfg.mesh.parts_min_cos);
-            let painted = paint_uv(&mesh, &faces.iter().map(|&f| (f, [255u8; 3])).collect::<Vec<_>>(), ts, [0; 3]);
-            for (r, px) in region.iter_mut().zip(painted.chunks(3)) {
-                if px[0] == 0 {
+            // Conservative: a face thinner than a texel still keeps the texels its corners read.
+            for (r, on) in region.iter_mut().zip(faces_mask(&mesh, &faces, ts)) {
+                if !on {
                     *r = 0.0;
                 }
             }
@@ -115,22 +159,26 @@ impl Setup {
             )));
         }
         let size = size.unwrap_or(cfg.views.size);
-        let lights = scene.lighting;
+        let maker = ViewMaker {
+            camera: cfg.mesh.camera,
+            size,
+            normals,
+            lights: scene.lighting,
+            turns: cfg.views.turns.clone(),
+        };
         let labels = match &cfg.views.labels {
             Some(p) => read_boxes(p)?,
             None => HashMap::new(),
         };
         let mut boxes = HashMap::new();
+        let mut samples = HashMap::new();
         let mut views = |files: &[std::path::PathBuf]| -> Result<Vec<View>, SetupError> {
             let mut out = Vec::new();
             for f in files {
                 let s = CarlaSample::load(f).map_err(|x| e(&x))?;
-                let cam = match cfg.mesh.camera {
-                    CameraConvention::Fca => fca(s.cam_trans, s.veh_trans),
-                    CameraConvention::PavCamou => pav_camou(s.cam_trans, s.veh_trans[1][1]),
-                };
                 let name = f.file_stem().map(|x| x.to_string_lossy().into_owned()).unwrap_or_default();
-                let v = View::new(&name, &mesh, &normals, &cam, &s.image, size, &region, (ts, ts), lights.as_ref())
+                let v = maker
+                    .view(&name, &mesh, &maker.camera(&s, 0.0), &s.image, &region, ts)
                     .map_err(|x| SetupError(format!("{}: {x}", f.display())))?;
                 if v.active.is_empty() {
                     return Err(SetupError(format!(
@@ -142,17 +190,75 @@ impl Setup {
                     let (sx, sy) = (size as f32 / s.image.width as f32, size as f32 / s.image.height as f32);
                     boxes.insert(name.clone(), [b[0] * sx, b[1] * sy, b[2] * sx, b[3] * sy]);
                 }
+                if samples.insert(name.clone(), s).is_some() {
+                    return Err(SetupError(format!("{}: a view named {name} is listed twice", f.display())));
+                }
                 out.push(v);
             }
             Ok(out)
         };
         let train = views(&cfg.views.train)?;
         let test = views(&cfg.views.test)?;
-        Ok(Setup { mesh, tex_size: ts, region, region_values, scene, train, test, boxes })
+        let mut setup = Setup {
+            mesh,
+            tex_size: ts,
+            region,
+            region_values,
+            scene,
+            train,
+            synthetic: Vec::new(),
+            test,
+            boxes,
+            samples,
+            maker,
+        };
+        let names: Vec<&str> = setup.train.iter().map(|v| v.name.as_str()).collect();
+        setup.synthetic = setup.turned_views(&names)?;
+        Ok(setup)
+    }
+
+    /// The synthetic views of `views.turns` for the photos named `names`, from an appearance
+    /// baked from those photos only (so a held-out photo never leaks into training).
+    pub fn turned_views(&self, names: &[&str]) -> Result<Vec<View>, SetupError> {
+        if self.maker.turns.is_empty() || names.is_empty() {
+            return Ok(Vec::new());
+        }
+        let samples: Vec<(&str, &CarlaSample)> = names
+            .iter()
+            .map(|n| self.samples.get(*n).map(|s| (*n, s)).ok_or_else(|| SetupError(format!("no view named {n}"))))
+            .collect::<Result<_, _>>()?;
+        let shots: Vec<Shot> =
+            samples.iter().map(|(_, s)| Shot { cam: self.maker.camera(s, 0.0), photo: &s.image }).collect();
+        let n = samples[0].1.image.width;
+        let app = bake(&self.mesh, &shots, BAKE_SIZE, (n / 200).max(2))
+            .map_err(|x| SetupError(format!("baking the car's appearance: {x}")))?;
+        let mut out = Vec::new();
+        for (name, s) in samples {
+            for &turn in &self.maker.turns {
+                let cam = self.maker.camera(s, turn);
+                let photo = turned_photo(&self.mesh, &app, &s.image, &self.maker.camera(s, 0.0), &cam, n / 50)
+                    .map_err(|x| SetupError(format!("{name} turned {turn}°: {x}")))?;
+                let vname = format!("{name}@{turn:+}");
+                let v = self
+                    .maker
+                    .view(&vname, &self.mesh, &cam, &photo, &self.region, self.tex_size)
+                    .map_err(|x| SetupError(format!("{vname}: {x}")))?;
+                // A turn can hide the region (the car end-on under a side-only region): no view.
+                if !v.active.is_empty() {
+                    out.push(v);
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// The views an optimization steps through: the photos, then the synthetic views.
+    pub fn training_views(&self) -> Vec<&View> {
+        self.train.iter().chain(&self.synthetic).collect()
     }
 
     /// The same problem over other views (cross-validation folds).
-    pub fn with_views(&self, train: Vec<View>, test: Vec<View>) -> Setup {
+    pub fn with_views(&self, train: Vec<View>, synthetic: Vec<View>, test: Vec<View>) -> Setup {
         Setup {
             mesh: self.mesh.clone(),
             tex_size: self.tex_size,
@@ -160,13 +266,20 @@ impl Setup {
             region_values: self.region_values.clone(),
             scene: self.scene.clone(),
             train,
+            synthetic,
             test,
             boxes: self.boxes.clone(),
+            samples: self.samples.clone(),
+            maker: self.maker.clone(),
         }
     }
 
-    /// The "random" baseline: uniform random colours in `block × block` texel squares (at the
-    /// default 1024² atlas a 16-texel block prints about 5 mm wide at 1:20, so the baseline is a
+    /// Edge of the random baseline's blocks in texels at this atlas size.
+    pub fn random_block(&self) -> usize {
+        (self.tex_size / RANDOM_BLOCKS_PER_SIDE).max(1)
+    }
+
+    /// The "random" baseline: uniform random colours in `block × block` texel squares (a
     /// printable pattern, not sub-pixel noise that aliases in the render).
     pub fn random_texture(&self, block: usize, seed: u64) -> Vec<f32> {
         let n = self.tex_size;
@@ -182,7 +295,7 @@ impl Setup {
         match init {
             Init::Grey(g) => vec![g; self.tex_size * self.tex_size * 3],
             // Not seed itself: the random baselines of eval-digital and crossval draw small seeds.
-            Init::Named(InitName::Random) => self.random_texture(RANDOM_BLOCK, seed ^ 0x1417_0000),
+            Init::Named(InitName::Random) => self.random_texture(self.random_block(), seed ^ 0x1417_0000),
         }
     }
 }

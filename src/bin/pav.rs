@@ -392,8 +392,9 @@ fn optimize(
     let setup = Setup::load(&cfg, None)?;
     let wb = WhiteBox::load(&cfg.detector, cfg.views.size)?;
     eprintln!(
-        "{} training and {} held-out views at {}², texture {}² ({} optimizable values, {:.1} % of the atlas), scene {}; prepared in {:.1} s",
+        "{} training (+{} synthetic) and {} held-out views at {}², texture {}² ({} optimizable values, {:.1} % of the atlas), scene {}; prepared in {:.1} s",
         setup.train.len(),
+        setup.synthetic.len(),
         setup.test.len(),
         cfg.views.size,
         setup.tex_size,
@@ -411,13 +412,17 @@ fn optimize(
     let o = run(config, &cfg, &setup, &wb, &opts, &stop)?;
     let n = setup.tex_size;
     save_rgb(&out.join("texture.png"), n, n, &o.texture).map_err(anyhow::Error::msg)?;
-    plot_log(&out.join("loss.png"), &o.log, setup.train.len()).map_err(anyhow::Error::msg)?;
+    plot_log(&out.join("loss.png"), &o.log, setup.training_views().len()).map_err(anyhow::Error::msg)?;
     if matches!(o.finish, Finish::Stopped) {
         eprintln!("stopped: state saved in {}; run again with --resume", out.join("checkpoint.bin").display());
         return Ok(());
     }
     let views: Vec<&pav::attack::view::View> = setup.train.iter().chain(&setup.test).collect();
     preview(&out.join("preview.png"), &views, &o.texture, &eval_scene(&setup)).map_err(anyhow::Error::msg)?;
+    if !setup.synthetic.is_empty() {
+        let synthetic: Vec<&pav::attack::view::View> = setup.synthetic.iter().collect();
+        preview(&out.join("synthetic.png"), &synthetic, &o.texture, &eval_scene(&setup)).map_err(anyhow::Error::msg)?;
+    }
     let initial = setup.initial_texture(cfg.mesh.init, cfg.optimizer.seed);
     let scores = score_views(&setup, &wb, &initial, &o.texture).map_err(anyhow::Error::msg)?;
     write_csv(&out.join("scores.csv"), &scores)?;
@@ -438,7 +443,8 @@ fn optimize(
         sheet.density_spread
     );
     eprintln!(
-        "wrote region.png, texture.png, texture_print.png, loss.csv, loss.png, preview.png, scores.csv in {}",
+        "wrote region.png, texture.png, texture_print.png, loss.csv, loss.png, preview.png{}, scores.csv in {}",
+        if setup.synthetic.is_empty() { "" } else { ", synthetic.png" },
         out.display()
     );
     Ok(())
@@ -468,10 +474,8 @@ fn eval_digital(
     use pav::attack::setup::Setup;
     let cfg = OptimizeConfig::load(config)?;
     let setup = Setup::load(&cfg, None)?;
-    let mut conditions: Vec<(String, Option<Vec<f32>>)> = vec![
-        ("original".into(), None),
-        ("random".into(), Some(setup.random_texture(pav::attack::setup::RANDOM_BLOCK, 1))),
-    ];
+    let mut conditions: Vec<(String, Option<Vec<f32>>)> =
+        vec![("original".into(), None), ("random".into(), Some(setup.random_texture(setup.random_block(), 1)))];
     for t in textures {
         let tex = Texture::load(t).map_err(anyhow::Error::msg)?;
         if (tex.width, tex.height) != (setup.tex_size, setup.tex_size) {
@@ -536,7 +540,7 @@ fn crossval_cmd(
     let opts = CrossvalOptions {
         folds: k,
         random_seeds,
-        random_block: pav::attack::setup::RANDOM_BLOCK,
+        random_block: setup.random_block(),
         out: out.to_path_buf(),
         threshold,
         white_box: white_box.to_string(),
@@ -557,10 +561,11 @@ fn crossval_cmd(
     write_csv(&out.join("crossval.csv"), &rows)?;
     write_csv(&out.join("crossval_views.csv"), &records)?;
     let mut md = format!(
-        "# Cross-validation, {k} folds over {n} views ({:.0} s)\n\nEach texture is optimized on the other folds' views ({}, {} epochs) and scored on its held-out views; \"random\" pools {random_seeds} random 16-texel block textures per fold. Car detected above {threshold}; P@0.5 over boxes from score {AP_MIN_SCORE}; * = white-box.\n",
+        "# Cross-validation, {k} folds over {n} views ({:.0} s)\n\nEach texture is optimized on the other folds' views ({}, {} epochs) and scored on its held-out views; \"random\" pools {random_seeds} random textures of {}-texel blocks per fold. Car detected above {threshold}; P@0.5 over boxes from score {AP_MIN_SCORE}; * = white-box.\n",
         t.elapsed().as_secs_f64(),
         config.display(),
-        cfg.optimizer.epochs
+        cfg.optimizer.epochs,
+        setup.random_block(),
     );
     for (split, title) in
         [("held-out", "held-out views"), ("train", "training views (each view once per fold it trained in)")]
