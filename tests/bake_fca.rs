@@ -60,6 +60,12 @@ fn turned_views_are_built_from_training_photos_and_stay_cars() {
     // A held-out photo is never baked: asking for its turns is the fold's business, and works.
     assert_eq!(setup.turned_views(&["data12502"]).unwrap().len(), 4);
     assert!(setup.turned_views(&["nope"]).is_err());
+    // The turned views read texels the photos never do.
+    let photos_only = setup.with_views(setup.train.clone(), Vec::new(), setup.test.clone());
+    let (with, without) = (setup.region_views_shares(), photos_only.region_views_shares());
+    eprintln!("region texels read by 0 / 1 / 2+ training views: photos {without:.3?}, with turns {with:.3?}");
+    assert!((with.iter().sum::<f64>() - 1.0).abs() < 1e-9);
+    assert!(with[2] > without[2] && with[0] < without[0], "{with:?} vs {without:?}");
     let mut dets = pav::eval::detectors::load_detectors(&[common::detector_config("yolov3-tiny")], &[], 1).unwrap();
     let mut scores = Vec::new();
     for v in &setup.synthetic {

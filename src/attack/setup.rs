@@ -257,6 +257,23 @@ impl Setup {
         self.train.iter().chain(&self.synthetic).collect()
     }
 
+    /// Shares of the optimizable texels that 0, 1 and 2 or more training views read: a texel
+    /// only one view reads is free to fit that view alone.
+    pub fn region_views_shares(&self) -> [f64; 3] {
+        let mut count = vec![0u32; self.tex_size * self.tex_size];
+        for v in self.training_views() {
+            for t in v.texels_read() {
+                count[t as usize] += 1;
+            }
+        }
+        let mut n = [0usize; 3];
+        let texels: Vec<usize> = (0..count.len()).filter(|i| self.region[*i] > 0.5).collect();
+        for &i in &texels {
+            n[(count[i] as usize).min(2)] += 1;
+        }
+        n.map(|k| k as f64 / texels.len().max(1) as f64)
+    }
+
     /// The same problem over other views (cross-validation folds).
     pub fn with_views(&self, train: Vec<View>, synthetic: Vec<View>, test: Vec<View>) -> Setup {
         Setup {

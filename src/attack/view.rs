@@ -110,6 +110,14 @@ impl View {
         self.gather.adjoint(&g, 3, grad_tex);
     }
 
+    /// The texels this view reads (a bilinear tap with non-zero weight), each once, ascending.
+    pub fn texels_read(&self) -> Vec<u32> {
+        let mut t: Vec<u32> = self.gather.taps.iter().flatten().filter(|(_, w)| *w > 0.0).map(|(i, _)| *i).collect();
+        t.sort_unstable();
+        t.dedup();
+        t
+    }
+
     /// Share of the image that shows the texture (P = 1).
     pub fn textured_share(&self) -> f32 {
         self.active.len() as f32 / (self.size * self.size) as f32

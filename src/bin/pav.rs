@@ -403,6 +403,13 @@ fn optimize(
         setup.scene.describe(),
         t.elapsed().as_secs_f64()
     );
+    let [none, one, more] = setup.region_views_shares();
+    eprintln!(
+        "region texels read by no training view {:.1} %, by one {:.1} %, by two or more {:.1} %",
+        100.0 * none,
+        100.0 * one,
+        100.0 * more
+    );
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let region_rgb: Vec<f32> = setup.region.iter().flat_map(|v| [*v; 3]).collect();
     save_rgb(&out.join("region.png"), setup.tex_size, setup.tex_size, &region_rgb).map_err(anyhow::Error::msg)?;
