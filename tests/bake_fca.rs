@@ -52,6 +52,10 @@ fn turned_views_are_built_from_training_photos_and_stay_cars() {
     let mut cfg = OptimizeConfig::load(&common::repo().join("configs/optimize/half-turns.toml")).unwrap();
     cfg.views.train = cfg.views.train[1..4].to_vec();
     cfg.views.test = cfg.views.test[..1].to_vec();
+    let mut twice = cfg.clone();
+    twice.views.test.push(twice.views.train[0].clone());
+    let e = Setup::load(&twice, None).err().expect("a photo listed twice is refused").to_string();
+    assert!(e.contains("listed twice"), "{e}");
     let setup = Setup::load(&cfg, None).unwrap();
     let names: Vec<&str> = setup.synthetic.iter().map(|v| v.name.as_str()).collect();
     assert_eq!(names.len(), 3 * cfg.views.turns.len(), "{names:?}");
