@@ -568,8 +568,13 @@ fn crossval_cmd(
     write_csv(&out.join("crossval.csv"), &rows)?;
     write_csv(&out.join("crossval_views.csv"), &records)?;
     let mut md = format!(
-        "# Cross-validation, {k} folds over {n} views ({:.0} s)\n\nEach texture is optimized on the other folds' views ({}, {} epochs) and scored on its held-out views; \"random\" pools {random_seeds} random textures of {}-texel blocks per fold. Car detected above {threshold}; P@0.5 over boxes from score {AP_MIN_SCORE}; * = white-box.\n",
+        "# Cross-validation, {k} folds over {n} views ({:.0} s)\n\nEach texture is optimized on the other folds' views{} ({}, {} epochs) and scored on its held-out views; \"random\" pools {random_seeds} random textures of {}-texel blocks per fold. Car detected above {threshold}; P@0.5 over boxes from score {AP_MIN_SCORE}; * = white-box.\n",
         t.elapsed().as_secs_f64(),
+        if cfg.views.turns.is_empty() {
+            String::new()
+        } else {
+            format!(" and their synthetic turns by {:?}° (baked from that fold's photos; scores are photos only)", cfg.views.turns)
+        },
         config.display(),
         cfg.optimizer.epochs,
         setup.random_block(),
