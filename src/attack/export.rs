@@ -34,10 +34,8 @@ pub struct Sheet {
     pub density_spread: f64,
 }
 
-fn area3(p: [[f32; 3]; 3]) -> f64 {
-    let e1 = [p[1][0] - p[0][0], p[1][1] - p[0][1], p[1][2] - p[0][2]];
-    let e2 = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
-    let c = crate::geometry::camera::cross(e1, e2);
+fn area3(mesh: &Mesh, f: usize) -> f64 {
+    let c = mesh.face_cross(f);
     0.5 * ((c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) as f64).sqrt()
 }
 
@@ -56,9 +54,8 @@ pub fn atlas_side_m(mesh: &Mesh, region: &[f32], n: usize, car_length_m: f64) ->
     let (mut a3, mut a2) = (0.0, 0.0);
     let mut dens = Vec::new();
     for f in faces_in_mask(mesh, region, n, n) {
-        let p = mesh.faces[f].map(|i| mesh.positions[i as usize]);
         let t = mesh.face_uvs[f].map(|i| mesh.uvs[i as usize]);
-        let (x, y) = (area3(p) * m_per_unit * m_per_unit, area2(t));
+        let (x, y) = (area3(mesh, f) * m_per_unit * m_per_unit, area2(t));
         if x > 0.0 && y > 0.0 {
             dens.push((x / y).sqrt());
         }

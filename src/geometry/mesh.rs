@@ -289,6 +289,25 @@ impl Mesh {
         (lo, hi)
     }
 
+    /// Corner positions of face `f`.
+    pub fn face_positions(&self, f: usize) -> [[f32; 3]; 3] {
+        self.faces[f].map(|i| self.positions[i as usize])
+    }
+
+    /// Edge cross product of face `f`, (p1 − p0) × (p2 − p0): along the winding's normal, its
+    /// length twice the face's area (zero for a degenerate face).
+    pub fn face_cross(&self, f: usize) -> [f32; 3] {
+        let p = self.face_positions(f);
+        let e = |a: [f32; 3], b: [f32; 3]| [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+        crate::geometry::camera::cross(e(p[0], p[1]), e(p[0], p[2]))
+    }
+
+    /// Centroid of face `f`.
+    pub fn face_centroid(&self, f: usize) -> [f32; 3] {
+        let p = self.face_positions(f);
+        [0, 1, 2].map(|k| (p[0][k] + p[1][k] + p[2][k]) / 3.0)
+    }
+
     /// Longest side of the bounding box (0 for an empty mesh).
     pub fn largest_side(&self) -> f32 {
         let (lo, hi) = self.bounds();

@@ -82,14 +82,12 @@ pub fn select_faces(mesh: &Mesh, up: usize, parts: &[Part], min_cos: f32) -> Vec
     let length = (hi[len_ax] - lo[len_ax]).max(f32::MIN_POSITIVE);
     (0..mesh.faces.len())
         .filter(|&f| {
-            let p = mesh.faces[f].map(|i| mesh.positions[i as usize]);
-            let (e1, e2) = (sub(p[1], p[0]), sub(p[2], p[0]));
-            let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
+            let n = mesh.face_cross(f);
             let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
             if !(norm > 0.0 && norm.is_finite()) {
                 return false;
             }
-            let c = [0, 1, 2].map(|k| (p[0][k] + p[1][k] + p[2][k]) / 3.0);
+            let c = mesh.face_centroid(f);
             let t = (c[len_ax] - lo[len_ax]) / length;
             parts.iter().any(|part| {
                 let axis = match part.facing {
@@ -104,10 +102,6 @@ pub fn select_faces(mesh: &Mesh, up: usize, parts: &[Part], min_cos: f32) -> Vec
             })
         })
         .collect()
-}
-
-fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 #[cfg(test)]

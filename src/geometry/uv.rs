@@ -37,7 +37,7 @@ fn norm(a: [f64; 3]) -> f64 {
 pub fn distortion(mesh: &Mesh, faces: &[usize]) -> Vec<FaceDistortion> {
     let mut raw = Vec::with_capacity(faces.len());
     for &f in faces {
-        let v = mesh.faces[f].map(|i| mesh.positions[i as usize]);
+        let v = mesh.face_positions(f);
         let t = mesh.face_uvs[f].map(|i| mesh.uvs[i as usize]);
         let (e1, e2) = (sub(v[1], v[0]), sub(v[2], v[0]));
         let l1 = norm(e1);

@@ -261,10 +261,7 @@ pub fn adjust(mesh: &mut Mesh, faces: &[usize]) -> f64 {
         }
     }
     let area3 = |m: &Mesh, f: usize| {
-        let v = m.faces[f].map(|i| m.positions[i as usize]);
-        let e1 = [v[1][0] - v[0][0], v[1][1] - v[0][1], v[1][2] - v[0][2]];
-        let e2 = [v[2][0] - v[0][0], v[2][1] - v[0][1], v[2][2] - v[0][2]];
-        let c = super::camera::cross(e1, e2);
+        let c = m.face_cross(f);
         (super::camera::dot(c, c).sqrt() / 2.0) as f64
     };
     let area_uv = |uv: &HashMap<u32, [f64; 2]>, m: &Mesh, f: usize| {

@@ -47,7 +47,7 @@ fn weld(mesh: &Mesh) -> Vec<u32> {
 }
 
 fn normal(mesh: &Mesh, f: usize) -> Option<([f64; 3], f64)> {
-    let p = mesh.faces[f].map(|i| mesh.positions[i as usize].map(|x| x as f64));
+    let p = mesh.face_positions(f).map(|q| q.map(|x| x as f64));
     let (e1, e2) = ([0, 1, 2].map(|k| p[1][k] - p[0][k]), [0, 1, 2].map(|k| p[2][k] - p[0][k]));
     let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
     let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();

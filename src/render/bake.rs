@@ -10,7 +10,7 @@ use super::fill::{grow, push_pull, shrink};
 use super::raster::{GBuffer, EMPTY};
 use super::texture::Gather;
 use crate::detect::Frame;
-use crate::geometry::camera::{cross, dot, normalize, Camera};
+use crate::geometry::camera::{dot, normalize, Camera};
 use crate::geometry::mesh::Mesh;
 
 /// Side of the baked appearance atlas (a photographed car spans a few hundred pixels).
@@ -62,15 +62,7 @@ pub fn car_mask(mesh: &Mesh, cam: &Camera, n: usize) -> Vec<bool> {
 /// of the silhouette are skipped: the fitted cameras are off by a few pixels there, and those
 /// pixels would paint the background onto the car.
 pub fn bake(mesh: &Mesh, shots: &[Shot], size: usize, margin: usize) -> Result<Appearance, BakeError> {
-    let face_normals: Vec<[f32; 3]> = mesh
-        .faces
-        .iter()
-        .map(|f| {
-            let p = f.map(|i| mesh.positions[i as usize]);
-            let e = |a: [f32; 3], b: [f32; 3]| [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-            normalize(cross(e(p[0], p[1]), e(p[0], p[2])))
-        })
-        .collect();
+    let face_normals: Vec<[f32; 3]> = (0..mesh.faces.len()).map(|f| normalize(mesh.face_cross(f))).collect();
     let (mut num, mut den) = (vec![0f32; size * size * 3], vec![0f32; size * size]);
     for shot in shots {
         let n = square(shot.photo)?;
@@ -82,8 +74,7 @@ pub fn bake(mesh: &Mesh, shots: &[Shot], size: usize, margin: usize) -> Result<A
             if !inner[i] {
                 continue;
             }
-            let p = mesh.faces[f as usize].map(|k| mesh.positions[k as usize]);
-            let c = [0, 1, 2].map(|a| (p[0][a] + p[1][a] + p[2][a]) / 3.0);
+            let c = mesh.face_centroid(f as usize);
             let to_eye = normalize([shot.cam.eye[0] - c[0], shot.cam.eye[1] - c[1], shot.cam.eye[2] - c[2]]);
             // |cos|: the game meshes mix windings. Grazing views smear a texel over many pixels.
             let w = dot(face_normals[f as usize], to_eye).abs().powi(4);

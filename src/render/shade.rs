@@ -6,7 +6,7 @@
 //! stays `mul ⊙ G·T + add` and its gradient `Gᵀ(mul ⊙ ∂L/∂I)` is exact.
 
 use super::raster::{GBuffer, EMPTY};
-use crate::geometry::camera::{cross, dot, normalize, Camera};
+use crate::geometry::camera::{dot, normalize, Camera};
 use crate::geometry::mesh::Mesh;
 
 /// Light intensities (white light) and the material's shininess; a scene's `[lighting]` table.
@@ -44,11 +44,8 @@ impl Lights {
 /// own normals are not used, like the authors' pipeline).
 pub fn vertex_normals(mesh: &Mesh) -> Vec<[f32; 3]> {
     let mut n = vec![[0.0f32; 3]; mesh.positions.len()];
-    for f in &mesh.faces {
-        let p = f.map(|i| mesh.positions[i as usize]);
-        let e1 = [p[1][0] - p[0][0], p[1][1] - p[0][1], p[1][2] - p[0][2]];
-        let e2 = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
-        let fnrm = cross(e1, e2); // length = 2·area: area weighting for free
+    for (fi, f) in mesh.faces.iter().enumerate() {
+        let fnrm = mesh.face_cross(fi); // length = 2·area: area weighting for free
         for &i in f {
             for k in 0..3 {
                 n[i as usize][k] += fnrm[k];
