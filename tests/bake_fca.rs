@@ -10,7 +10,7 @@ use pav::attack::setup::Setup;
 use pav::dataset::fca::CarlaSample;
 use pav::geometry::camera::fca;
 use pav::geometry::mesh::Mesh;
-use pav::render::bake::{bake, car_mask, turned_photo, Shot, BAKE_SIZE};
+use pav::render::bake::{bake, car_mask, Plate, Shot, BAKE_SIZE};
 use pav::render::fill::shrink;
 
 #[test]
@@ -25,7 +25,7 @@ fn baked_appearance_predicts_a_photo_it_never_saw() {
         others.iter().map(|s| Shot { cam: fca(s.cam_trans, s.veh_trans), photo: &s.image }).collect();
     let app = bake(&mesh, &shots, BAKE_SIZE, 4).unwrap();
     let cam = fca(held.cam_trans, held.veh_trans);
-    let out = turned_photo(&mesh, &app, &held.image, &cam, &cam, 16).unwrap();
+    let out = Plate::new(&mesh, &held.image, &cam, 16).unwrap().with_car(&mesh, &app, &cam);
     let n = held.image.width;
     let inner = shrink(&car_mask(&mesh, &cam, n), n, n, 4);
     let px: Vec<usize> = (0..n * n).filter(|i| inner[*i]).collect();

@@ -10,12 +10,13 @@ use crate::geometry::camera::{fca, pav_camou, Camera};
 use crate::geometry::mesh::Mesh;
 use crate::geometry::parts::select_faces;
 use crate::geometry::uv::faces_mask;
-use crate::render::bake::{bake, turned_photo, Shot, BAKE_SIZE};
+use crate::render::bake::{bake, Plate, Shot, BAKE_SIZE};
 use crate::render::shade::{vertex_normals, Lights};
 use crate::render::texture::Texture;
 use crate::scene::Scene;
 use std::collections::HashMap;
 use std::path::Path;
+use std::sync::Arc;
 
 /// The random baseline has this many colour blocks across the atlas side, whatever its
 /// resolution (16 texels at 1024², about 5 mm when printed at 1:20), so baselines stay the same
@@ -48,7 +49,7 @@ pub struct Setup {
     /// Ground-truth car boxes by view name, in view pixels.
     pub boxes: HashMap<String, BBox>,
     /// The photos behind `train` and `test` by view name, for synthetic views of any subset.
-    samples: HashMap<String, CarlaSample>,
+    samples: Arc<HashMap<String, CarlaSample>>,
     maker: ViewMaker,
 }
 
@@ -120,8 +121,17 @@ pub fn read_boxes(path: &Path) -> Result<HashMap<String, BBox>, SetupError> {
 
 impl Setup {
     /// Loads the config's mesh, region, scene and views, rendering views at `size` (default:
-    /// the config's).
+    /// the config's), with the synthetic views of its training photos.
     pub fn load(cfg: &OptimizeConfig, size: Option<usize>) -> Result<Setup, SetupError> {
+        let mut setup = Self::load_photos(cfg, size)?;
+        let names: Vec<&str> = setup.train.iter().map(|v| v.name.as_str()).collect();
+        setup.synthetic = setup.turned_views(&names)?;
+        Ok(setup)
+    }
+
+    /// [`Setup::load`] without synthetic views: for scoring, which never uses them, and for
+    /// cross-validation, which builds them per fold from [`Setup::turned_views`].
+    pub fn load_photos(cfg: &OptimizeConfig, size: Option<usize>) -> Result<Setup, SetupError> {
         let e = |x: &dyn std::fmt::Display| SetupError(x.to_string());
         let scene = Scene::load(&cfg.scene).map_err(|x| e(&x))?;
         let mut mesh = Mesh::load_obj(&cfg.mesh.obj).map_err(|x| e(&x))?;
@@ -199,7 +209,7 @@ impl Setup {
         };
         let train = views(&cfg.views.train)?;
         let test = views(&cfg.views.test)?;
-        let mut setup = Setup {
+        Ok(Setup {
             mesh,
             tex_size: ts,
             region,
@@ -209,12 +219,9 @@ impl Setup {
             synthetic: Vec::new(),
             test,
             boxes,
-            samples,
+            samples: Arc::new(samples),
             maker,
-        };
-        let names: Vec<&str> = setup.train.iter().map(|v| v.name.as_str()).collect();
-        setup.synthetic = setup.turned_views(&names)?;
-        Ok(setup)
+        })
     }
 
     /// The synthetic views of `views.turns` for the photos named `names`, from an appearance
@@ -233,11 +240,12 @@ impl Setup {
         let app = bake(&self.mesh, &shots, BAKE_SIZE, (n / 200).max(2))
             .map_err(|x| SetupError(format!("baking the car's appearance: {x}")))?;
         let mut out = Vec::new();
-        for (name, s) in samples {
+        for ((name, s), shot) in samples.iter().zip(&shots) {
+            let plate = Plate::new(&self.mesh, &s.image, &shot.cam, n / 50)
+                .map_err(|x| SetupError(format!("{name}: painting the car out: {x}")))?;
             for &turn in &self.maker.turns {
                 let cam = self.maker.camera(s, turn);
-                let photo = turned_photo(&self.mesh, &app, &s.image, &self.maker.camera(s, 0.0), &cam, n / 50)
-                    .map_err(|x| SetupError(format!("{name} turned {turn}°: {x}")))?;
+                let photo = plate.with_car(&self.mesh, &app, &cam);
                 let vname = format!("{name}@{turn:+}");
                 let v = self
                     .maker

@@ -98,24 +98,32 @@ pub fn bake(mesh: &Mesh, shots: &[Shot], size: usize, margin: usize) -> Result<A
     Ok(Appearance { size, bgr, seen: seen as f32 / (size * size) as f32 })
 }
 
-/// `photo` (taken from `from`) with the car re-rendered from `to`: the car's pixels at `from`,
-/// grown by `grow_px`, are filled from the background, and the baked car is drawn on top.
-pub fn turned_photo(
-    mesh: &Mesh,
-    app: &Appearance,
-    photo: &Frame,
-    from: &Camera,
-    to: &Camera,
-    grow_px: usize,
-) -> Result<Frame, BakeError> {
-    let n = square(photo)?;
-    let hole = grow(&car_mask(mesh, from, n), n, n, grow_px);
-    let known: Vec<f32> = hole.iter().map(|h| if *h { 0.0 } else { 1.0 }).collect();
-    let mut img: Vec<f32> = photo.bgr.iter().map(|v| *v as f32).collect();
-    push_pull(&mut img, &known, n, n, 3);
-    let g = GBuffer::render(mesh, to, n);
-    Gather::new(g.uv_samples(mesh), app.size, app.size).apply(&app.bgr, 3, &mut img);
-    Ok(Frame { width: n, height: n, bgr: img.iter().map(|v| v.round().clamp(0.0, 255.0) as u8).collect() })
+/// A photo with its car painted out: the background every turned view of it is drawn on.
+pub struct Plate {
+    n: usize,
+    bgr: Vec<f32>,
+}
+
+impl Plate {
+    /// `photo` (taken from `from`) with the car's pixels, grown by `grow_px`, filled from the
+    /// surrounding background.
+    pub fn new(mesh: &Mesh, photo: &Frame, from: &Camera, grow_px: usize) -> Result<Plate, BakeError> {
+        let n = square(photo)?;
+        let hole = grow(&car_mask(mesh, from, n), n, n, grow_px);
+        let known: Vec<f32> = hole.iter().map(|h| if *h { 0.0 } else { 1.0 }).collect();
+        let mut bgr: Vec<f32> = photo.bgr.iter().map(|v| *v as f32).collect();
+        push_pull(&mut bgr, &known, n, n, 3);
+        Ok(Plate { n, bgr })
+    }
+
+    /// The plate with the baked car drawn as `to` sees it.
+    pub fn with_car(&self, mesh: &Mesh, app: &Appearance, to: &Camera) -> Frame {
+        let n = self.n;
+        let mut img = self.bgr.clone();
+        let g = GBuffer::render(mesh, to, n);
+        Gather::new(g.uv_samples(mesh), app.size, app.size).apply(&app.bgr, 3, &mut img);
+        Frame { width: n, height: n, bgr: img.iter().map(|v| v.round().clamp(0.0, 255.0) as u8).collect() }
+    }
 }
 
 #[cfg(test)]
@@ -144,7 +152,7 @@ mod tests {
         let ph = photo(&m, &cam, n);
         let app = bake(&m, &[Shot { cam, photo: &ph }], 32, 2).unwrap();
         assert!(app.seen > 0.5, "a frontal view sees most of the atlas: {}", app.seen);
-        let out = turned_photo(&m, &app, &ph, &cam, &cam, 3).unwrap();
+        let out = Plate::new(&m, &ph, &cam, 3).unwrap().with_car(&m, &app, &cam);
         let inner = shrink(&car_mask(&m, &cam, n), n, n, 3);
         let hole = grow(&car_mask(&m, &cam, n), n, n, 3);
         let mut worst = 0i32;
