@@ -55,15 +55,8 @@ enum Cmd {
         /// Texture PNGs to evaluate (named by their folder).
         #[arg(long = "texture", short = 't')]
         textures: Vec<PathBuf>,
-        /// Detector configs or folders of them.
-        #[arg(long = "detectors", short = 'd', default_value = "configs/detectors")]
-        detectors: Vec<PathBuf>,
-        /// A car counts as detected above this score (paper 0.5; the authors' code 0.6).
-        #[arg(long, default_value_t = 0.5)]
-        threshold: f32,
-        /// Name of the white-box detector (starred).
-        #[arg(long, default_value = "yolov3-tiny")]
-        white_box: String,
+        #[command(flatten)]
+        scoring: Scoring,
         /// Output folder.
         #[arg(long, short = 'o', default_value = "out/digital")]
         out: PathBuf,
@@ -82,15 +75,8 @@ enum Cmd {
         /// Random textures per fold (pooled as "random").
         #[arg(long, default_value_t = 5)]
         random_seeds: u64,
-        /// Detector configs or folders of them.
-        #[arg(long = "detectors", short = 'd', default_value = "configs/detectors")]
-        detectors: Vec<PathBuf>,
-        /// A car counts as detected above this score.
-        #[arg(long, default_value_t = 0.5)]
-        threshold: f32,
-        /// Name of the white-box detector (starred).
-        #[arg(long, default_value = "yolov3-tiny")]
-        white_box: String,
+        #[command(flatten)]
+        scoring: Scoring,
         /// Output folder; an interrupted run resumes from it.
         #[arg(long, short = 'o', default_value = "out/crossval")]
         out: PathBuf,
@@ -172,6 +158,30 @@ enum UvCmd {
         #[arg(long, short = 'o', default_value = "out/uv_adjusted")]
         out: PathBuf,
     },
+}
+
+/// How `eval-digital` and `crossval` score composites.
+#[cfg(feature = "optimize")]
+#[derive(clap::Args, Debug)]
+struct Scoring {
+    /// Detector configs or folders of them.
+    #[arg(long = "detectors", short = 'd', default_value = "configs/detectors")]
+    detectors: Vec<PathBuf>,
+    /// A car counts as detected above this score (paper 0.5; the authors' code 0.6).
+    #[arg(long, default_value_t = 0.5)]
+    threshold: f32,
+    /// Name of the white-box detector (starred).
+    #[arg(long, default_value = "yolov3-tiny")]
+    white_box: String,
+}
+
+/// Writes a Markdown report to `out/name` and prints it.
+#[cfg(feature = "optimize")]
+fn write_markdown(out: &std::path::Path, name: &str, md: &str) -> Result<()> {
+    let path = out.join(name);
+    std::fs::write(&path, md).with_context(|| format!("writing {}", path.display()))?;
+    println!("{md}");
+    Ok(())
 }
 
 /// How `pav uv adjust` re-flattens the patch.
@@ -471,16 +481,16 @@ fn stop_on_ctrl_c() -> Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
 fn eval_digital(
     config: &std::path::Path,
     textures: &[PathBuf],
-    detectors: &[PathBuf],
-    threshold: f32,
-    white_box: &str,
+    scoring: &Scoring,
     out: &std::path::Path,
 ) -> Result<()> {
+    let Scoring { detectors, threshold, white_box } = scoring;
+    let threshold = *threshold;
     use pav::attack::config::OptimizeConfig;
     use pav::attack::digital::{evaluate, markdown, AP_MIN_SCORE};
     use pav::attack::setup::Setup;
     let cfg = OptimizeConfig::load(config)?;
-    let setup = Setup::load(&cfg, None)?;
+    let setup = Setup::load_photos(&cfg, None)?;
     let mut conditions: Vec<(String, Option<Vec<f32>>)> =
         vec![("original".into(), None), ("random".into(), Some(setup.random_texture(setup.random_block(), 1)))];
     for t in textures {
@@ -514,30 +524,28 @@ fn eval_digital(
             md.push_str(&format!("\n## {title} ({n})\n\n{}", markdown(&rows, split)));
         }
     }
-    std::fs::write(out.join("digital.md"), &md).with_context(|| format!("writing {}", out.display()))?;
-    println!("{md}");
+    write_markdown(out, "digital.md", &md)?;
     eprintln!("wrote {}/digital.csv and digital.md", out.display());
     Ok(())
 }
 
 #[cfg(feature = "optimize")]
-#[allow(clippy::too_many_arguments)]
 fn crossval_cmd(
     config: &std::path::Path,
     folds: Option<usize>,
     random_seeds: u64,
-    detectors: &[PathBuf],
-    threshold: f32,
-    white_box: &str,
+    scoring: &Scoring,
     out: &std::path::Path,
 ) -> Result<()> {
+    let Scoring { detectors, threshold, white_box } = scoring;
+    let threshold = *threshold;
     use pav::attack::config::OptimizeConfig;
     use pav::attack::crossval::{crossval, CrossvalOptions};
     use pav::attack::digital::{markdown, markdown_scores, AP_MIN_SCORE};
     use pav::attack::setup::Setup;
     use pav::attack::whitebox::WhiteBox;
     let cfg = OptimizeConfig::load(config)?;
-    let setup = Setup::load(&cfg, None)?;
+    let setup = Setup::load_photos(&cfg, None)?;
     let wb = WhiteBox::load(&cfg.detector, cfg.views.size)?;
     let mut dets = pav::eval::detectors::load_detectors(detectors, &[], 1)?;
     let n = setup.train.len() + setup.test.len();
@@ -585,8 +593,7 @@ fn crossval_cmd(
         md.push_str(&format!("\n## {title}: ASR / P@0.5 (%)\n\n{}", markdown(&rows, split)));
         md.push_str(&format!("\n## {title}: mean best car score\n\n{}", markdown_scores(&rows, split)));
     }
-    std::fs::write(out.join("crossval.md"), &md).with_context(|| format!("writing {}", out.display()))?;
-    println!("{md}");
+    write_markdown(out, "crossval.md", &md)?;
     eprintln!("wrote crossval.csv, crossval_views.csv, crossval.md and a folder per fold in {}", out.display());
     Ok(())
 }
@@ -594,16 +601,14 @@ fn crossval_cmd(
 fn main() -> Result<()> {
     let (mesh, texture, pose, orbit, size, out) = match Cli::parse().cmd {
         #[cfg(feature = "optimize")]
-        Cmd::EvalDigital { config, textures, detectors, threshold, white_box, out } => {
-            return eval_digital(&config, &textures, &detectors, threshold, &white_box, &out)
-        }
+        Cmd::EvalDigital { config, textures, scoring, out } => return eval_digital(&config, &textures, &scoring, &out),
         #[cfg(feature = "optimize")]
         Cmd::Optimize { config, out, resume, epochs, size, scale, dpi } => {
             return optimize(&config, &out, resume, epochs, size, scale, dpi)
         }
         #[cfg(feature = "optimize")]
-        Cmd::Crossval { config, folds, random_seeds, detectors, threshold, white_box, out } => {
-            return crossval_cmd(&config, folds, random_seeds, &detectors, threshold, &white_box, &out)
+        Cmd::Crossval { config, folds, random_seeds, scoring, out } => {
+            return crossval_cmd(&config, folds, random_seeds, &scoring, &out)
         }
         Cmd::BenchRender { mesh, sizes, views, out } => return bench_render(&mesh, &sizes, views, &out),
         Cmd::Uv(UvCmd::Check { mesh, mask, out }) => return uv_check(&mesh, &mask, &out),
