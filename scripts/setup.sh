@@ -42,7 +42,8 @@ if [ ! -f "$ORT_DIR/libonnxruntime.so" ]; then
   wheel=$(ls "$tmp"/onnxruntime-*.whl)
   mkdir -p "$ORT_DIR"
   unzip -q -o -j "$wheel" "onnxruntime/capi/libonnxruntime.so*" -d "$ORT_DIR"
-  lib=$(ls "$ORT_DIR"/libonnxruntime.so.* | head -n1)
+  libs=("$ORT_DIR"/libonnxruntime.so.*)
+  lib=${libs[0]}
   ln -sf "$(basename "$lib")" "$ORT_DIR/libonnxruntime.so"
   rm -rf "$tmp"
 else
@@ -76,7 +77,7 @@ log "firmware targets and QEMU"
 rustup target add thumbv6m-none-eabi thumbv7m-none-eabi >/dev/null
 if ! command -v qemu-system-arm >/dev/null; then
   $SUDO apt-get update -qq
-  QV=$(apt-cache madison qemu-system-arm | head -n1 | awk '{print $3}')
+  QV=$(apt-cache madison qemu-system-arm | awk 'NR == 1 {print $3}')
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --allow-downgrades qemu-system-arm "qemu-utils=$QV"
 fi
 (cd firmware/qemu && cargo build --release)
