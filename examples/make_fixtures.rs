@@ -16,9 +16,9 @@ use opencv::core::Size;
 use opencv::prelude::*;
 use opencv::videoio::{VideoWriter, CAP_FFMPEG};
 use pav::dataset::fca::CarlaSample;
-use pav::detect::Frame;
-use pav::eval::video::frame_to_mat;
+use pav::image::Frame;
 use pav::sidecar::{self, AngleSample};
+use pav::video::frame_to_mat;
 use std::path::PathBuf;
 
 const HOLD: usize = 3;

@@ -1,16 +1,39 @@
 //! pav: physical adversarial camouflage for vehicles (PAV-Camou) and the rig that scores it.
 //!
-//! Data flows one way: video → frames → detections → metrics → report (see `eval`), and
-//! mesh → render → composite → detect → loss for texture optimization.
+//! The library is layered; a module only uses modules of its own layer or the layers below it
+//! (`tests/layers.rs` checks this):
+//!
+//! | layer | modules |
+//! |---|---|
+//! | 0 base | [`image`], [`video`], [`geometry`], [`rng`], [`sidecar`], [`table`], [`plot`], [`progress`] |
+//! | 1 method blocks | [`render`], [`scene`], [`dataset`], [`detect`] |
+//! | 2 jobs | [`attack`] (the optimizer), [`eval`] (scoring), [`rig`] (turntable and capture); no job uses another |
+//! | 3 experiments | [`experiments`]: what combines the optimizer and scoring |
+//!
+//! Data flows one way: mesh + poses → G-buffers → textured render → EoT → composite → detector
+//! → loss → texture; and video → frames → detections → metrics → reports.
+#![warn(missing_docs)]
 
-pub mod attack;
+pub mod geometry;
+pub mod image;
+#[cfg(feature = "plot")]
+pub mod plot;
+pub mod progress;
+pub mod rng;
+pub mod sidecar;
+pub mod table;
+#[cfg(feature = "video")]
+pub mod video;
+
 pub mod dataset;
 pub mod detect;
-pub mod eval;
-pub mod geometry;
 pub mod render;
+pub mod scene;
+
+pub mod attack;
+pub mod eval;
 #[cfg(feature = "rig")]
 pub mod rig;
-pub mod rng;
-pub mod scene;
-pub mod sidecar;
+
+#[cfg(feature = "optimize")]
+pub mod experiments;

@@ -6,7 +6,30 @@
 mod common;
 
 use pav::attack::config::OptimizeConfig;
-use pav::attack::crossval::{crossval, CrossvalOptions};
+use pav::experiments::crossval::{crossval, CrossvalOptions};
+use pav::progress::{Progress, Silent};
+use std::cell::RefCell;
+
+/// Records what crossval reports, in order.
+#[derive(Default)]
+struct Stages {
+    seen: RefCell<Vec<String>>,
+}
+
+impl Progress for Stages {
+    fn begin(&self, label: &str, total: u64) {
+        self.seen.borrow_mut().push(format!("{label}/{total}"));
+    }
+    fn advance(&self, n: u64) {
+        self.seen.borrow_mut().push(format!("+{n}"));
+    }
+    fn status(&self, msg: &str) {
+        self.seen.borrow_mut().push(msg.to_string());
+    }
+    fn end(&self, _kept: Option<&str>) {
+        self.seen.borrow_mut().push("end".into());
+    }
+}
 use pav::attack::setup::Setup;
 use pav::attack::whitebox::WhiteBox;
 use std::sync::atomic::AtomicBool;
@@ -22,7 +45,7 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     let setup = Setup::load(&cfg, None).unwrap();
     let wb = WhiteBox::load(&cfg.detector, cfg.views.size).unwrap();
     let mut dets =
-        pav::eval::detectors::load_detectors(&[common::repo().join("configs/detectors/yolov3-tiny.toml")], &[], 1)
+        pav::detect::load::load_detectors(&[common::repo().join("configs/detectors/yolov3-tiny.toml")], &[], 1)
             .unwrap();
     let dir = tempfile::tempdir().unwrap();
     let opts = CrossvalOptions {
@@ -34,10 +57,15 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
         white_box: "yolov3-tiny".into(),
     };
     let never = AtomicBool::new(false);
-    let mut stages = Vec::new();
-    let (rows, recs) =
-        crossval(&path, &cfg, &setup, &wb, &mut dets, &opts, &never, |f, s| stages.push(format!("{f}:{s}"))).unwrap();
-    assert_eq!(stages, ["0:optimizing", "0:scoring", "0:done", "1:optimizing", "1:scoring", "1:done"]);
+    let stages = Stages::default();
+    let (rows, recs) = crossval(&path, &cfg, &setup, &wb, &mut dets, &opts, &stages, &never).unwrap();
+    assert_eq!(
+        *stages.seen.borrow(),
+        ["folds/4", "fold 1/2: optimizing", "fold 1/2: scoring", "+1", "fold 1/2: done", "+1"]
+            .into_iter()
+            .chain(["fold 2/2: optimizing", "fold 2/2: scoring", "+1", "fold 2/2: done", "+1", "end"])
+            .collect::<Vec<_>>()
+    );
     let mut held: Vec<String> =
         recs.iter().filter(|r| r.role == "held-out" && r.texture == "original").map(|r| r.view.clone()).collect();
     held.sort();
@@ -51,7 +79,7 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
         assert!(dir.path().join(format!("fold{f}of2/texture.png")).is_file());
     }
     let t = std::time::Instant::now();
-    let (rows2, recs2) = crossval(&path, &cfg, &setup, &wb, &mut dets, &opts, &never, |_, _| {}).unwrap();
+    let (rows2, recs2) = crossval(&path, &cfg, &setup, &wb, &mut dets, &opts, &Silent, &never).unwrap();
     eprintln!("resumed in {:.1} s", t.elapsed().as_secs_f64());
     assert_eq!(recs.iter().map(|r| r.score).collect::<Vec<_>>(), recs2.iter().map(|r| r.score).collect::<Vec<_>>());
     assert_eq!(rows.len(), rows2.len());

@@ -7,10 +7,11 @@ mod common;
 
 use pav::attack::checkpoint::Checkpoint;
 use pav::attack::config::OptimizeConfig;
-use pav::attack::optimize::{run, Finish, RunOptions};
-use pav::attack::outputs::score_views;
+use pav::attack::optimize::{optimize_texture, Finish, RunOptions};
 use pav::attack::setup::Setup;
 use pav::attack::whitebox::WhiteBox;
+use pav::experiments::outputs::score_views;
+use pav::progress::Silent;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
@@ -27,7 +28,7 @@ fn problem() -> Option<(PathBuf, OptimizeConfig, Setup, WhiteBox)> {
 }
 
 fn opts(out: &std::path::Path, epochs: usize, resume: bool) -> RunOptions {
-    RunOptions { out: out.into(), resume, checkpoint_every: 1000, max_skips: 3, epochs: Some(epochs), progress: false }
+    RunOptions { out: out.into(), resume, checkpoint_every: 1000, max_skips: 3, epochs: Some(epochs) }
 }
 
 #[test]
@@ -35,7 +36,8 @@ fn optimization_lowers_the_car_score_and_resume_is_exact() {
     let Some((path, cfg, s, wb)) = problem() else { return };
     let never = AtomicBool::new(false);
     let dir = tempfile::tempdir().unwrap();
-    let straight = run(&path, &cfg, &s, &wb, &opts(&dir.path().join("a"), 3, false), &never).unwrap();
+    let straight =
+        optimize_texture(&path, &cfg, &s, &wb, &opts(&dir.path().join("a"), 3, false), &Silent, &never).unwrap();
     assert!(matches!(straight.finish, Finish::Done));
     assert_eq!(straight.log.len(), 6);
     // Only the region moved, and it stayed inside the clamp.
@@ -57,11 +59,11 @@ fn optimization_lowers_the_car_score_and_resume_is_exact() {
 
     // One epoch, then resume to three: the same texture as the straight run.
     let b = dir.path().join("b");
-    run(&path, &cfg, &s, &wb, &opts(&b, 1, false), &never).unwrap();
+    optimize_texture(&path, &cfg, &s, &wb, &opts(&b, 1, false), &Silent, &never).unwrap();
     assert_eq!(Checkpoint::load(&b.join("checkpoint.bin")).unwrap().steps_done, 2);
-    let err = run(&path, &cfg, &s, &wb, &opts(&b, 3, false), &never).err().unwrap().to_string();
+    let err = optimize_texture(&path, &cfg, &s, &wb, &opts(&b, 3, false), &Silent, &never).err().unwrap().to_string();
     assert!(err.contains("--resume"), "{err}");
-    let resumed = run(&path, &cfg, &s, &wb, &opts(&b, 3, true), &never).unwrap();
+    let resumed = optimize_texture(&path, &cfg, &s, &wb, &opts(&b, 3, true), &Silent, &never).unwrap();
     assert_eq!(resumed.log.len(), 6);
     let worst = resumed.texture.iter().zip(&straight.texture).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
     assert!(worst < 1e-5, "resumed texture differs by {worst}");
@@ -73,13 +75,13 @@ fn poisoned_state_is_skipped_then_refused_with_the_checkpoint_kept() {
     let never = AtomicBool::new(false);
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("p");
-    run(&path, &cfg, &s, &wb, &opts(&out, 1, false), &never).unwrap();
+    optimize_texture(&path, &cfg, &s, &wb, &opts(&out, 1, false), &Silent, &never).unwrap();
     let ck = out.join("checkpoint.bin");
     let mut c = Checkpoint::load(&ck).unwrap();
     // A NaN in one optimizable value: EoT clamps it out of the image, but Ls becomes NaN.
     c.texture[s.region_values[1000] as usize] = f32::NAN;
     c.save(&ck).unwrap();
-    let e = run(&path, &cfg, &s, &wb, &opts(&out, 5, true), &never).err().unwrap().to_string();
+    let e = optimize_texture(&path, &cfg, &s, &wb, &opts(&out, 5, true), &Silent, &never).err().unwrap().to_string();
     assert!(e.contains("3 consecutive steps had a non-finite loss"), "{e}");
     // Skipped steps are logged and passed over, but none may touch the texture or Adam.
     let kept = Checkpoint::load(&ck).unwrap();

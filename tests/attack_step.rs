@@ -69,7 +69,7 @@ fn texture_gradient_matches_finite_differences_through_the_detector() {
     let loss_at = |t: f64| {
         let tt: Vec<f32> = tex.iter().zip(&dir).map(|(a, d)| a + (t * *d as f64 / norm) as f32).collect();
         let (im, _) = v.render(&tt, &lit, &mut Rng::new(0));
-        let l = wb.evaluate(&im, v.size).unwrap();
+        let l = wb.loss(&im, v.size).unwrap();
         l.l1 as f64 + l.l2 as f64
     };
     // The chain has kinks (leaky ReLU, max-pool, the box sets), so the central difference

@@ -1,12 +1,13 @@
 //! `capture` over the simulated turntable and camera: one revolution yields the right frames
 //! with angles within 0.5° of the truth, and every fault ends in saved, readable files.
 
-use pav::eval::video::VideoReader;
+use pav::progress::Silent;
 use pav::rig::camera::{CameraError, FrameSource, LiveCapture, SimCamera};
 use pav::rig::capture::{capture, CaptureError, CaptureOptions};
 use pav::rig::sim::{Faults, SimOptions, SimTurntable};
 use pav::rig::turntable::Turntable;
 use pav::sidecar;
+use pav::video::VideoReader;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
@@ -42,7 +43,7 @@ fn one_revolution_has_every_frame_within_half_a_degree() {
     // 28 s per turn at 5x: 5.6 s of wall time at 30 fps.
     let (s, mut table) = rig(5.0, Faults::default());
     let mut cam = SimCamera::new(s.truth(), 320, 240, 30.0);
-    let sum = capture(&mut table, &mut cam, &opts(&video), &AtomicBool::new(false)).unwrap();
+    let sum = capture(&mut table, &mut cam, &opts(&video), &Silent, &AtomicBool::new(false)).unwrap();
     assert!((165..=176).contains(&sum.frames), "{} frames for a 5.6 s turn at 30 fps", sum.frames);
     assert_eq!(sum.interpolated, sum.frames, "every angle came from reports around its frame");
     assert!((sum.final_deg.unwrap() - 360.0).abs() < 1e-9);
@@ -80,7 +81,7 @@ fn camera_failure_saves_what_was_recorded() {
     let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
     cam.fail_at = Some(20);
     let n = expect_stopped(
-        capture(&mut table, &mut cam, &opts(&video), &AtomicBool::new(false)),
+        capture(&mut table, &mut cam, &opts(&video), &Silent, &AtomicBool::new(false)),
         "injected camera failure",
         &video,
     );
@@ -96,8 +97,11 @@ fn serial_disconnect_and_stall_save_what_was_recorded() {
     let video = tmp.path().join("disc.mp4");
     let (s, mut table) = rig(14.0, Faults { disconnect_after: Some(Duration::from_millis(1200)), ..Faults::default() });
     let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
-    let n =
-        expect_stopped(capture(&mut table, &mut cam, &opts(&video), &AtomicBool::new(false)), "disconnected", &video);
+    let n = expect_stopped(
+        capture(&mut table, &mut cam, &opts(&video), &Silent, &AtomicBool::new(false)),
+        "disconnected",
+        &video,
+    );
     assert!(n > 5, "{n}");
 
     let video = tmp.path().join("stall.mp4");
@@ -105,7 +109,11 @@ fn serial_disconnect_and_stall_save_what_was_recorded() {
     let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
     let mut o = opts(&video);
     o.home = false;
-    expect_stopped(capture(&mut table, &mut cam, &o, &AtomicBool::new(false)), "turntable alarm: motor stall", &video);
+    expect_stopped(
+        capture(&mut table, &mut cam, &o, &Silent, &AtomicBool::new(false)),
+        "turntable alarm: motor stall",
+        &video,
+    );
 }
 
 #[test]
@@ -120,7 +128,8 @@ fn ctrl_c_stops_the_table_and_saves() {
         std::thread::sleep(Duration::from_millis(800));
         flag.store(true, std::sync::atomic::Ordering::Relaxed);
     });
-    let n = expect_stopped(capture(&mut table, &mut cam, &opts(&video), &stop), "interrupted (Ctrl-C)", &video);
+    let n =
+        expect_stopped(capture(&mut table, &mut cam, &opts(&video), &Silent, &stop), "interrupted (Ctrl-C)", &video);
     assert!((15..40).contains(&n), "{n}");
 }
 

@@ -5,9 +5,9 @@
 mod common;
 
 use pav::dataset::fca::CarlaSample;
-use pav::detect::config::Interpolation;
 use pav::detect::onnx::OnnxDetector;
 use pav::detect::{Detector, DetectorConfig};
+use pav::image::resize::Interpolation;
 
 /// Max score of the target class on every sample, with the config's preprocessing optionally overridden.
 fn scores(detector: &str, interpolation: Option<Interpolation>) -> Option<Vec<(String, f32, f32)>> {

@@ -55,14 +55,13 @@ fn opts(out: &Path, stride: usize) -> EvalOptions {
         start_angle_deg: 0.0,
         angle_bins: 8,
         out_dir: out.to_path_buf(),
-        progress: false,
         plots: true,
     }
 }
 
 fn run(jobs: &[VideoJob], dets: &[&str], out: &Path, stride: usize) -> EvalOutcome {
     let mut d = detectors(dets);
-    evaluate(jobs, &mut d, &opts(out, stride), &AtomicBool::new(false)).unwrap()
+    evaluate(jobs, &mut d, &opts(out, stride), &pav::progress::Silent, &AtomicBool::new(false)).unwrap()
 }
 
 fn job(path: PathBuf, label: &str) -> VideoJob {

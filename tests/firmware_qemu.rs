@@ -112,7 +112,7 @@ fn capture_against_the_firmware_follows_the_commanded_rotation() {
         no_progress: Duration::from_secs(2),
         ..CaptureOptions::new(video.clone())
     };
-    let sum = capture(&mut t, &mut cam, &opts, &AtomicBool::new(false)).unwrap();
+    let sum = capture(&mut t, &mut cam, &opts, &pav::progress::Silent, &AtomicBool::new(false)).unwrap();
     assert!((85..=98).contains(&sum.frames), "{} frames for a 3 s turn at 30 fps", sum.frames);
     let rows = pav::sidecar::read(&pav::sidecar::sidecar_path(&video)).unwrap();
     assert_eq!(rows.len(), sum.frames);

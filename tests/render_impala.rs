@@ -7,8 +7,9 @@ mod common;
 use pav::dataset::fca::CarlaSample;
 use pav::geometry::camera::pav_camou;
 use pav::geometry::mesh::Mesh;
+use pav::image::Rgb;
 use pav::render::raster::{GBuffer, EMPTY};
-use pav::render::texture::{Gather, Texture};
+use pav::render::texture::Gather;
 
 #[test]
 fn impala_renders_with_its_textured_region() {
@@ -27,7 +28,7 @@ fn impala_renders_with_its_textured_region() {
     assert!(mean.abs() < 1e-5);
 
     // half.png: pure white = optimizable (24.8 % of the atlas per the manifest).
-    let tex = Texture::load(&body.map_kd.clone().unwrap()).unwrap();
+    let tex = Rgb::load(&body.map_kd.clone().unwrap()).unwrap();
     let white = tex.white_mask();
     let share = white.iter().sum::<f32>() / white.len() as f32;
     assert!((share - 0.248).abs() < 0.001, "{share}");
@@ -70,7 +71,7 @@ fn dark_light_mask_separates_and_strong_light_does_not() {
     let mut mesh = Mesh::load_obj(&shared.join("pav-camou/xfl_yxz.obj")).unwrap();
     mesh.normalize();
     let normals = vertex_normals(&mesh);
-    let half = Texture::load(&shared.join("pav-camou/half.png")).unwrap();
+    let half = Rgb::load(&shared.join("pav-camou/half.png")).unwrap();
     let white: Vec<bool> = half.rgb.chunks(3).map(|c| c.iter().all(|v| *v == 1.0)).collect();
     // T_m: C_t = 0.6 on the textured region, C_n = 0.45 elsewhere.
     let t_m: Vec<f32> = white.iter().map(|w| if *w { 0.6 } else { 0.45 }).collect();
@@ -124,7 +125,7 @@ fn uv_distortion_of_the_patch() {
     let Some(shared) = common::shared_data() else { return };
     let mut mesh = Mesh::load_obj(&shared.join("pav-camou/xfl_yxz.obj")).unwrap();
     mesh.normalize();
-    let half = Texture::load(&shared.join("pav-camou/half.png")).unwrap();
+    let half = Rgb::load(&shared.join("pav-camou/half.png")).unwrap();
     let patch = faces_in_mask(&mesh, &half.white_mask(), half.width, half.height);
     assert_eq!(patch.len(), 281);
     let d = distortion(&mesh, &patch);
@@ -136,7 +137,7 @@ fn uv_distortion_of_the_patch() {
             [v[1][0] - v[0][0], v[1][1] - v[0][1], v[1][2] - v[0][2]],
             [v[2][0] - v[0][0], v[2][1] - v[0][1], v[2][2] - v[0][2]],
         );
-        pav::geometry::camera::normalize(pav::geometry::camera::cross(a, b))
+        pav::geometry::vec3::normalize(pav::geometry::vec3::cross(a, b))
     };
     let mean = |pick: &dyn Fn([f32; 3]) -> bool| {
         let sel: Vec<_> = d.iter().filter(|x| pick(normal(x.face))).collect();
@@ -157,7 +158,7 @@ fn uv_adjustment_reduces_distortion_in_place() {
     let Some(shared) = common::shared_data() else { return };
     let mut mesh = Mesh::load_obj(&shared.join("pav-camou/xfl_yxz.obj")).unwrap();
     mesh.normalize();
-    let half = Texture::load(&shared.join("pav-camou/half.png")).unwrap();
+    let half = Rgb::load(&shared.join("pav-camou/half.png")).unwrap();
     let patch = faces_in_mask(&mesh, &half.white_mask(), half.width, half.height);
     let before = summary(&distortion(&mesh, &patch));
     let bbox = |m: &Mesh, isl: &[usize]| {
@@ -208,7 +209,7 @@ fn uv_charts_join_islands_and_raise_density() {
     use pav::geometry::uv_charts::adjust_charts;
     let Some(shared) = common::shared_data() else { return };
     let mut mesh = Mesh::load_obj(&shared.join("pav-camou/xfl_yxz.obj")).unwrap();
-    let half = Texture::load(&shared.join("pav-camou/half.png")).unwrap();
+    let half = Rgb::load(&shared.join("pav-camou/half.png")).unwrap();
     let patch = faces_in_mask(&mesh, &half.white_mask(), half.width, half.height);
     let before = summary(&distortion(&mesh, &patch));
     let others: Vec<usize> = (0..mesh.faces.len()).filter(|f| !patch.contains(f)).collect();

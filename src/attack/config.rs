@@ -151,20 +151,44 @@ pub struct OptimizeConfig {
 
 /// Errors reading a config.
 #[derive(Debug, thiserror::Error)]
-#[error("optimize config {path}: {msg}")]
-pub struct ConfigError {
-    /// The file.
-    pub path: String,
-    /// What is wrong.
-    pub msg: String,
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("optimize config {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The file is not a valid config (syntax, an unknown key, a wrong type).
+    #[error("optimize config {path}: {source}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// The TOML parser's error.
+        source: toml::de::Error,
+    },
+    /// A value is out of range.
+    #[error("optimize config {path}: {source}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What to change.
+        source: InvalidConfig,
+    },
 }
+
+/// A config value out of range, with what to change.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct InvalidConfig(pub String);
 
 impl OptimizeConfig {
     /// Reads, resolves relative paths against the file's folder, and checks the values.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let err = |msg: String| ConfigError { path: path.display().to_string(), msg };
-        let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
-        let mut c: OptimizeConfig = toml::from_str(&text).map_err(|e| err(e.to_string()))?;
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: path.into(), source })?;
+        let mut c: OptimizeConfig =
+            toml::from_str(&text).map_err(|source| ConfigError::Parse { path: path.into(), source })?;
         let dir = path.parent().unwrap_or(Path::new("."));
         let fix = |p: &mut PathBuf| {
             if p.is_relative() {
@@ -181,12 +205,16 @@ impl OptimizeConfig {
         }
         fix(&mut c.detector.cfg);
         fix(&mut c.detector.weights);
-        c.check().map_err(err)?;
+        c.check().map_err(|source| ConfigError::Invalid { path: path.into(), source })?;
         Ok(c)
     }
 
     /// Value checks with messages that say what to change.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), InvalidConfig> {
+        self.check_values().map_err(InvalidConfig)
+    }
+
+    fn check_values(&self) -> Result<(), String> {
         let o = &self.optimizer;
         if !(o.lr.is_finite() && o.lr > 0.0) {
             return Err(format!("optimizer.lr must be > 0, got {}", o.lr));
@@ -262,7 +290,7 @@ mod tests {
         let mut c = OptimizeConfig::load(&shipped("half-turns.toml")).unwrap();
         for bad in [0.0, 180.0, f64::NAN] {
             c.views.turns = vec![15.0, bad];
-            let e = c.check().unwrap_err();
+            let e = c.check().unwrap_err().to_string();
             assert!(e.contains("views.turns"), "{e}");
         }
         c.views.turns = vec![-179.0, 15.0];

@@ -2,12 +2,10 @@
 //! texels have the size they have on the scale model (PNG with its DPI in the pHYs chunk, and a
 //! 10 mm scale bar in the margin to check the printer did not rescale).
 
-use crate::detect::config::Interpolation;
-use crate::detect::preprocess::resize;
-use crate::detect::Frame;
 use crate::geometry::mesh::Mesh;
 use crate::geometry::uv::faces_in_mask;
-use crate::render::texture::to_u8;
+use crate::image::resize::{resize, Interpolation};
+use crate::image::{to_u8, Frame};
 use std::path::Path;
 
 /// Print settings.
@@ -17,6 +15,37 @@ pub struct PrintSpec {
     pub scale: f64,
     /// Printer resolution.
     pub dpi: f64,
+}
+
+/// Why the sheet could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum SheetError {
+    /// The sheet would be unreasonably large.
+    #[error("the sheet would be {side_px} px wide ({atlas_mm:.0} mm at {dpi} dpi): lower the DPI")]
+    TooLarge {
+        /// Its side in pixels.
+        side_px: usize,
+        /// Its side in millimetres.
+        atlas_mm: f64,
+        /// The resolution asked for.
+        dpi: f64,
+    },
+    /// The file could not be created.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: std::path::PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The PNG encoder failed.
+    #[error("{path}: {source}")]
+    Png {
+        /// The file.
+        path: std::path::PathBuf,
+        /// Why.
+        source: png::EncodingError,
+    },
 }
 
 /// What was written.
@@ -78,12 +107,12 @@ pub fn write_sheet(
     side_m: f64,
     spread: f64,
     spec: PrintSpec,
-) -> Result<Sheet, String> {
+) -> Result<Sheet, SheetError> {
     let atlas_mm = side_m * 1000.0 / spec.scale;
     let px_per_mm = spec.dpi / 25.4;
     let side = (atlas_mm * px_per_mm).round().max(1.0) as usize;
     if side > 20_000 {
-        return Err(format!("the sheet would be {side} px wide ({atlas_mm:.0} mm at {} dpi): lower the DPI", spec.dpi));
+        return Err(SheetError::TooLarge { side_px: side, atlas_mm, dpi: spec.dpi });
     }
     let frame = Frame { width: n, height: n, bgr: tex.iter().map(|v| to_u8(*v)).collect() };
     let atlas = resize(&frame, side, side, Interpolation::Bilinear);
@@ -118,15 +147,16 @@ pub fn write_sheet(
             ink(x.min(bx + len - 1), y);
         }
     }
-    let file = std::fs::File::create(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let file = std::fs::File::create(path).map_err(|source| SheetError::Io { path: path.into(), source })?;
+    let png_err = |source| SheetError::Png { path: path.into(), source };
     let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w as u32, h as u32);
     enc.set_color(png::ColorType::Rgb);
     enc.set_depth(png::BitDepth::Eight);
     let ppm = (spec.dpi / 0.0254).round() as u32;
     enc.set_pixel_dims(Some(png::PixelDimensions { xppu: ppm, yppu: ppm, unit: png::Unit::Meter }));
-    let mut wr = enc.write_header().map_err(|e| format!("{}: {e}", path.display()))?;
-    wr.write_image_data(&rgb).map_err(|e| format!("{}: {e}", path.display()))?;
-    wr.finish().map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut wr = enc.write_header().map_err(png_err)?;
+    wr.write_image_data(&rgb).map_err(png_err)?;
+    wr.finish().map_err(png_err)?;
     Ok(Sheet { atlas_side_m: side_m, atlas_mm, width_px: w as u32, height_px: h as u32, density_spread: spread })
 }
 

@@ -1,21 +1,17 @@
-//! The attack (paper Algorithm 1): views → composite → detector → loss → texture.
+//! The optimizer (paper Algorithm 1): views → composite → detector → loss → texture, with its
+//! checkpoints, the printable sheet, and the UV-map tools that make the texture printable.
 
 pub mod adam;
 pub mod checkpoint;
 pub mod config;
-#[cfg(feature = "optimize")]
-pub mod crossval;
-#[cfg(feature = "optimize")]
-pub mod digital;
 pub mod export;
 #[cfg(feature = "optimize")]
 pub mod loss;
 #[cfg(feature = "optimize")]
 pub mod optimize;
-#[cfg(feature = "optimize")]
-pub mod outputs;
 pub mod setup;
 pub mod smooth;
+pub mod uv;
 pub mod view;
 #[cfg(feature = "optimize")]
 pub mod whitebox;

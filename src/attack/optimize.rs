@@ -12,6 +12,7 @@ use super::setup::Setup;
 use super::smooth::smoothness;
 use super::view::View;
 use super::whitebox::WhiteBox;
+use crate::progress::Progress;
 use crate::rng::Rng;
 use crate::scene::eot;
 use serde::{Deserialize, Serialize};
@@ -80,8 +81,6 @@ pub struct RunOptions {
     pub max_skips: u64,
     /// Override the epochs of the config.
     pub epochs: Option<usize>,
-    /// Show a progress bar.
-    pub progress: bool,
 }
 
 /// Errors of a run.
@@ -96,12 +95,45 @@ pub enum OptimizeError {
     /// Checkpoints.
     #[error(transparent)]
     Checkpoint(#[from] super::checkpoint::CheckpointError),
-    /// Anything else, with its context.
-    #[error("{0}")]
-    Other(String),
+    /// A file or folder of the run.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// Writing `loss.csv`.
+    #[error("writing {path}: {source}")]
+    Log {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: csv::Error,
+    },
+    /// The checkpoint in the output folder belongs to another run.
+    #[error("{checkpoint}: {why}")]
+    Resume {
+        /// The checkpoint.
+        checkpoint: PathBuf,
+        /// What does not match, and what to do.
+        why: String,
+    },
+    /// Too many steps in a row had a non-finite loss or gradient.
+    #[error("{skips} consecutive steps had a non-finite loss or gradient (last at step {step}, view {view}); the last good state is in {checkpoint}")]
+    NotFinite {
+        /// Steps skipped in a row.
+        skips: u64,
+        /// The last one.
+        step: u64,
+        /// Its view.
+        view: String,
+        /// Where the last good state is.
+        checkpoint: PathBuf,
+    },
 }
 
-/// The result of a run: the texture, its log, and the prepared problem for reporting.
+/// The result of a run: the texture, its log, and how it ended.
 pub struct Outcome {
     /// Final texture (RGB interleaved, `tex_size²`).
     pub texture: Vec<f32>,
@@ -170,14 +202,14 @@ pub fn step(
 }
 
 fn write_log(path: &Path, log: &[StepLog]) -> Result<(), OptimizeError> {
-    let e = |x: &dyn std::fmt::Display| OptimizeError::Other(format!("writing {}: {x}", path.display()));
     let tmp = path.with_extension("csv.tmp");
-    let mut w = csv::Writer::from_path(&tmp).map_err(|x| e(&x))?;
+    let csv_err = |source| OptimizeError::Log { path: tmp.clone(), source };
+    let mut w = csv::Writer::from_path(&tmp).map_err(csv_err)?;
     for r in log {
-        w.serialize(r).map_err(|x| e(&x))?;
+        w.serialize(r).map_err(csv_err)?;
     }
-    w.flush().map_err(|x| e(&x))?;
-    std::fs::rename(&tmp, path).map_err(|x| e(&x))
+    w.flush().map_err(|source| OptimizeError::Io { path: tmp.clone(), source })?;
+    std::fs::rename(&tmp, path).map_err(|source| OptimizeError::Io { path: path.into(), source })
 }
 
 fn read_log(path: &Path, upto: u64) -> Vec<StepLog> {
@@ -185,44 +217,44 @@ fn read_log(path: &Path, upto: u64) -> Vec<StepLog> {
     r.deserialize::<StepLog>().filter_map(Result::ok).filter(|s| s.step < upto).collect()
 }
 
-/// Runs (or resumes) the optimization of `cfg` (loaded from `cfg_path`) on `setup`.
-pub fn run(
+/// Runs (or resumes) the optimization of `cfg` (loaded from `cfg_path`) on `setup`; `progress`
+/// counts steps, and a raised `stop` saves the state and returns [`Finish::Stopped`].
+pub fn optimize_texture(
     cfg_path: &Path,
     cfg: &OptimizeConfig,
     setup: &Setup,
     wb: &WhiteBox,
     opts: &RunOptions,
+    progress: &dyn Progress,
     stop: &AtomicBool,
 ) -> Result<Outcome, OptimizeError> {
-    std::fs::create_dir_all(&opts.out)
-        .map_err(|e| OptimizeError::Other(format!("creating {}: {e}", opts.out.display())))?;
-    let hash = fingerprint(
-        &std::fs::read(cfg_path).map_err(|e| OptimizeError::Other(format!("{}: {e}", cfg_path.display())))?,
-    );
+    std::fs::create_dir_all(&opts.out).map_err(|source| OptimizeError::Io { path: opts.out.clone(), source })?;
+    let hash =
+        fingerprint(&std::fs::read(cfg_path).map_err(|source| OptimizeError::Io { path: cfg_path.into(), source })?);
     let ckpt_path = opts.out.join("checkpoint.bin");
     let log_path = opts.out.join("loss.csv");
     let n_values = setup.tex_size * setup.tex_size * 3;
     let (mut tex, mut adam, mut rng, start, mut log) = if opts.resume && ckpt_path.exists() {
         let c = Checkpoint::load(&ckpt_path)?;
+        let refuse = |why: String| OptimizeError::Resume { checkpoint: ckpt_path.clone(), why };
         if c.config_hash != hash {
-            return Err(OptimizeError::Other(format!(
-                "{} was written for a different config than {}: resume with the same config or use another --out",
-                ckpt_path.display(),
+            return Err(refuse(format!(
+                "written for a different config than {}: resume with the same config or use another --out",
                 cfg_path.display()
             )));
         }
         if c.texture.len() != n_values {
-            return Err(OptimizeError::Other(format!("{}: texture size does not match", ckpt_path.display())));
+            return Err(refuse("its texture size does not match the config's".into()));
         }
         let log = read_log(&log_path, c.steps_done);
-        eprintln!("resuming from step {} ({})", c.steps_done, ckpt_path.display());
+        progress.note(&format!("resuming from step {} ({})", c.steps_done, ckpt_path.display()));
         (c.texture, c.adam, Rng { state: c.rng_state }, c.steps_done, log)
     } else {
         if ckpt_path.exists() {
-            return Err(OptimizeError::Other(format!(
-                "{} exists: pass --resume to continue it, or choose another --out",
-                ckpt_path.display()
-            )));
+            return Err(OptimizeError::Resume {
+                checkpoint: ckpt_path.clone(),
+                why: "exists: pass --resume to continue it, or choose another --out".into(),
+            });
         }
         let tex = setup.initial_texture(cfg.mesh.init, cfg.optimizer.seed);
         (tex, Adam::new(n_values, cfg.optimizer.lr), Rng::new(cfg.optimizer.seed), 0, Vec::new())
@@ -242,24 +274,15 @@ pub fn run(
         .save(&ckpt_path)?;
         write_log(&log_path, log)
     };
-    let bar = if opts.progress {
-        let b = indicatif::ProgressBar::new(total);
-        b.set_style(
-            indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] step {pos}/{len} (eta {eta}) {msg}")
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
-        b.set_position(start);
-        b
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
+    progress.begin("step", total);
+    progress.set_position(start);
     let mut grad = vec![0f32; n_values];
     let mut skips = 0u64;
     let mut order = epoch_order(n as usize, cfg.optimizer.seed, start / n.max(1));
     for s in start..total {
         if stop.load(Ordering::SeqCst) {
             save(&tex, &adam, &rng, s, &log)?;
-            bar.abandon_with_message("stopped; continue with --resume");
+            progress.end(Some("stopped; continue with --resume"));
             return Ok(Outcome { texture: tex, log, finish: Finish::Stopped });
         }
         let (epoch, k) = (s / n, (s % n) as usize);
@@ -279,24 +302,26 @@ pub fn run(
         } else {
             rec.skipped = true;
             skips += 1;
-            bar.println(format!("step {s} ({}): non-finite loss or gradient, step skipped", view.name));
+            progress.note(&format!("step {s} ({}): non-finite loss or gradient, step skipped", view.name));
             if skips >= opts.max_skips {
                 save(&tex, &adam, &rng, s, &log)?;
-                return Err(OptimizeError::Other(format!(
-                    "{skips} consecutive steps had a non-finite loss or gradient (last at step {s}, view {}); the last good state is in {}",
-                    view.name,
-                    ckpt_path.display()
-                )));
+                progress.end(None);
+                return Err(OptimizeError::NotFinite {
+                    skips,
+                    step: s,
+                    view: view.name.clone(),
+                    checkpoint: ckpt_path.clone(),
+                });
             }
         }
-        bar.set_message(format!("L {:.3} car {:.2}", rec.total, rec.max_score));
-        bar.inc(1);
+        progress.status(&format!("L {:.3} car {:.2}", rec.total, rec.max_score));
+        progress.advance(1);
         log.push(rec);
         let done = s + 1;
         if done % n == 0 || done % opts.checkpoint_every.max(1) == 0 || done == total {
             save(&tex, &adam, &rng, done, &log)?;
         }
     }
-    bar.finish_and_clear();
+    progress.end(None);
     Ok(Outcome { texture: tex, log, finish: Finish::Done })
 }

@@ -5,17 +5,17 @@ use super::config::{CameraConvention, Init, InitName, OptimizeConfig};
 use super::view::View;
 use crate::dataset::fca::CarlaSample;
 use crate::detect::BBox;
-use crate::detect::Frame;
 use crate::geometry::camera::{fca, pav_camou, Camera};
 use crate::geometry::mesh::Mesh;
 use crate::geometry::parts::select_faces;
 use crate::geometry::uv::faces_mask;
-use crate::render::bake::{bake, Plate, Shot, BAKE_SIZE};
+use crate::image::{Frame, Rgb};
+use crate::render::bake::{bake, BakeError, Plate, Shot, BAKE_SIZE};
+use crate::render::mask::MaskError;
 use crate::render::shade::{vertex_normals, Lights};
-use crate::render::texture::Texture;
 use crate::scene::Scene;
 use std::collections::HashMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 /// The random baseline has this many colour blocks across the atlas side, whatever its
@@ -25,8 +25,58 @@ pub const RANDOM_BLOCKS_PER_SIDE: usize = 64;
 
 /// Errors preparing an optimization.
 #[derive(Debug, thiserror::Error)]
-#[error("{0}")]
-pub struct SetupError(pub String);
+pub enum SetupError {
+    /// The scene file.
+    #[error(transparent)]
+    Scene(#[from] crate::scene::SceneError),
+    /// The mesh.
+    #[error(transparent)]
+    Mesh(#[from] crate::geometry::mesh::MeshError),
+    /// The region image.
+    #[error(transparent)]
+    Image(#[from] crate::image::ImageError),
+    /// `mesh.parts`.
+    #[error("mesh.parts: {0}")]
+    Parts(#[from] crate::geometry::parts::PartError),
+    /// A view's npz file.
+    #[error(transparent)]
+    Sample(#[from] crate::dataset::npz::NpzError),
+    /// The ground-truth box file.
+    #[error("cannot read labels {path}: {source}")]
+    Labels {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A line of the ground-truth box file.
+    #[error("{path}:{line}: expected npz and four box columns")]
+    LabelLine {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: usize,
+    },
+    /// The dual-render mask of a view.
+    #[error("{view}: {source}")]
+    Mask {
+        /// The view (file or synthetic name).
+        view: String,
+        /// Why.
+        source: MaskError,
+    },
+    /// Baking the car's appearance or painting it out of a photo, for synthetic views.
+    #[error("{what}: {source}")]
+    Bake {
+        /// What was being done.
+        what: String,
+        /// Why.
+        source: BakeError,
+    },
+    /// The views or the region do not make a problem (nothing to optimize, a view listed twice).
+    #[error("{0}")]
+    Views(String),
+}
 
 /// The prepared problem.
 pub struct Setup {
@@ -82,9 +132,8 @@ impl ViewMaker {
         photo: &Frame,
         region: &[f32],
         ts: usize,
-    ) -> Result<View, String> {
+    ) -> Result<View, MaskError> {
         View::new(name, mesh, &self.normals, cam, photo, self.size, region, (ts, ts), self.lights.as_ref())
-            .map_err(|x| x.to_string())
     }
 }
 
@@ -103,12 +152,11 @@ pub fn resample_region(mask: &[f32], w: usize, h: usize, size: usize) -> Vec<f32
 
 /// Reads FCA's derived_test_labels.tsv: npz file stem → GT box in photo pixels.
 pub fn read_boxes(path: &Path) -> Result<HashMap<String, BBox>, SetupError> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| SetupError(format!("cannot read labels {}: {e}", path.display())))?;
+    let text = std::fs::read_to_string(path).map_err(|source| SetupError::Labels { path: path.into(), source })?;
     let mut out = HashMap::new();
     for (i, line) in text.lines().enumerate().skip(1) {
         let f: Vec<&str> = line.split('\t').collect();
-        let bad = || SetupError(format!("{}:{}: expected npz and four box columns", path.display(), i + 1));
+        let bad = || SetupError::LabelLine { path: path.into(), line: i + 1 };
         if f.len() < 5 {
             return Err(bad());
         }
@@ -132,9 +180,8 @@ impl Setup {
     /// [`Setup::load`] without synthetic views: for scoring, which never uses them, and for
     /// cross-validation, which builds them per fold from [`Setup::turned_views`].
     pub fn load_photos(cfg: &OptimizeConfig, size: Option<usize>) -> Result<Setup, SetupError> {
-        let e = |x: &dyn std::fmt::Display| SetupError(x.to_string());
-        let scene = Scene::load(&cfg.scene).map_err(|x| e(&x))?;
-        let mut mesh = Mesh::load_obj(&cfg.mesh.obj).map_err(|x| e(&x))?;
+        let scene = Scene::load(&cfg.scene)?;
+        let mut mesh = Mesh::load_obj(&cfg.mesh.obj)?;
         match cfg.mesh.camera {
             CameraConvention::Fca => mesh.normalize_bbox(),
             CameraConvention::PavCamou => {
@@ -142,10 +189,10 @@ impl Setup {
             }
         }
         let normals = if scene.lighting.is_some() { vertex_normals(&mesh) } else { Vec::new() };
-        let mask = Texture::load(&cfg.mesh.region).map_err(|x| e(&x))?;
+        let mask = Rgb::load(&cfg.mesh.region)?;
         let ts = cfg.mesh.texture_size;
         let mut region = resample_region(&mask.white_mask(), mask.width, mask.height, ts);
-        let parts = cfg.parts().map_err(|x| e(&x))?;
+        let parts = cfg.parts()?;
         if !parts.is_empty() {
             let up = match cfg.mesh.camera {
                 CameraConvention::Fca => 2,
@@ -162,7 +209,7 @@ impl Setup {
         let region_values: Vec<u32> =
             (0..ts * ts).filter(|i| region[*i] > 0.5).flat_map(|i| (0..3).map(move |c| (i * 3 + c) as u32)).collect();
         if region_values.is_empty() {
-            return Err(SetupError(format!(
+            return Err(SetupError::Views(format!(
                 "{} has no pure-white texel{}: nothing to optimize",
                 cfg.mesh.region.display(),
                 if parts.is_empty() { String::new() } else { format!(" on the parts {:?}", cfg.mesh.parts) }
@@ -185,13 +232,13 @@ impl Setup {
         let mut views = |files: &[std::path::PathBuf]| -> Result<Vec<View>, SetupError> {
             let mut out = Vec::new();
             for f in files {
-                let s = CarlaSample::load(f).map_err(|x| e(&x))?;
+                let s = CarlaSample::load(f)?;
                 let name = f.file_stem().map(|x| x.to_string_lossy().into_owned()).unwrap_or_default();
                 let v = maker
                     .view(&name, &mesh, &maker.camera(&s, 0.0), &s.image, &region, ts)
-                    .map_err(|x| SetupError(format!("{}: {x}", f.display())))?;
+                    .map_err(|source| SetupError::Mask { view: f.display().to_string(), source })?;
                 if v.active.is_empty() {
-                    return Err(SetupError(format!(
+                    return Err(SetupError::Views(format!(
                         "{}: the textured region is not visible in this view",
                         f.display()
                     )));
@@ -201,7 +248,7 @@ impl Setup {
                     boxes.insert(name.clone(), [b[0] * sx, b[1] * sy, b[2] * sx, b[3] * sy]);
                 }
                 if samples.insert(name.clone(), s).is_some() {
-                    return Err(SetupError(format!("{}: a view named {name} is listed twice", f.display())));
+                    return Err(SetupError::Views(format!("{}: a view named {name} is listed twice", f.display())));
                 }
                 out.push(v);
             }
@@ -232,17 +279,19 @@ impl Setup {
         }
         let samples: Vec<(&str, &CarlaSample)> = names
             .iter()
-            .map(|n| self.samples.get(*n).map(|s| (*n, s)).ok_or_else(|| SetupError(format!("no view named {n}"))))
+            .map(|n| {
+                self.samples.get(*n).map(|s| (*n, s)).ok_or_else(|| SetupError::Views(format!("no view named {n}")))
+            })
             .collect::<Result<_, _>>()?;
         let shots: Vec<Shot> =
             samples.iter().map(|(_, s)| Shot { cam: self.maker.camera(s, 0.0), photo: &s.image }).collect();
         let n = samples[0].1.image.width;
         let app = bake(&self.mesh, &shots, BAKE_SIZE, (n / 200).max(2))
-            .map_err(|x| SetupError(format!("baking the car's appearance: {x}")))?;
+            .map_err(|source| SetupError::Bake { what: "baking the car's appearance".into(), source })?;
         let mut out = Vec::new();
         for ((name, s), shot) in samples.iter().zip(&shots) {
             let plate = Plate::new(&self.mesh, &s.image, &shot.cam, n / 50)
-                .map_err(|x| SetupError(format!("{name}: painting the car out: {x}")))?;
+                .map_err(|source| SetupError::Bake { what: format!("{name}: painting the car out"), source })?;
             for &turn in &self.maker.turns {
                 let cam = self.maker.camera(s, turn);
                 let photo = plate.with_car(&self.mesh, &app, &cam);
@@ -250,7 +299,7 @@ impl Setup {
                 let v = self
                     .maker
                     .view(&vname, &self.mesh, &cam, &photo, &self.region, self.tex_size)
-                    .map_err(|x| SetupError(format!("{vname}: {x}")))?;
+                    .map_err(|source| SetupError::Mask { view: vname.clone(), source })?;
                 // A turn can hide the region (the car end-on under a side-only region): no view.
                 if !v.active.is_empty() {
                     out.push(v);
@@ -297,6 +346,11 @@ impl Setup {
             samples: self.samples.clone(),
             maker: self.maker.clone(),
         }
+    }
+
+    /// The deterministic scene that scores use: this run's lighting, no EoT.
+    pub fn eval_scene(&self) -> Scene {
+        Scene { lighting: self.scene.lighting, effects: Vec::new() }
     }
 
     /// Edge of the random baseline's blocks in texels at this atlas size.

@@ -4,11 +4,10 @@
 //! The composite `I_o = I_d'·P + I_p·(1−P)` with a binary P takes the transformed render at the
 //! P = 1 pixels and the photo elsewhere, so only those pixels are rendered, shaded and transformed.
 
-use crate::detect::config::Interpolation;
-use crate::detect::preprocess::resize;
-use crate::detect::Frame;
 use crate::geometry::camera::Camera;
 use crate::geometry::mesh::Mesh;
+use crate::image::resize::{resize, Interpolation};
+use crate::image::Frame;
 use crate::render::mask::{dual_render_mask, MaskError};
 use crate::render::raster::GBuffer;
 use crate::render::shade::{Lights, Shading};
@@ -76,6 +75,12 @@ impl View {
         let mut img = self.render_plain(tex);
         let tape = eot::apply(scene, &mut img, 3, &self.active, rng);
         (img, tape)
+    }
+
+    /// The composite under a scene without random effects (the lit texture at P = 1, the photo
+    /// elsewhere, clamped to [0, 1]): what scores and previews show.
+    pub fn composite(&self, tex: &[f32], scene: &Scene) -> Vec<f32> {
+        self.render(tex, scene, &mut Rng::new(0)).0
     }
 
     /// The composite before EoT (lit texture at P = 1, photo elsewhere), not yet clamped.

@@ -4,10 +4,9 @@
 use super::config::DetectorSection;
 use super::loss::DetectionLoss;
 use crate::detect::candle_darknet::CandleDarknet;
-use crate::detect::config::Interpolation;
 use crate::detect::darknet::cfg::YoloHead;
 use crate::detect::darknet::{Network, Weights};
-use crate::detect::preprocess::interpolation_matrix;
+use crate::image::resize::{interpolation_matrix, Interpolation};
 use candle_core::{DType, Device, Tensor, Var};
 use std::time::Instant;
 
@@ -127,8 +126,8 @@ impl WhiteBox {
         Ok(DetectorGrad { loss, grad, forward_ms, backward_ms: t1.elapsed().as_secs_f64() * 1e3 })
     }
 
-    /// The loss terms of a composite without gradients (evaluation).
-    pub fn evaluate(&self, img: &[f32], size: usize) -> Result<DetectorLoss, WhiteBoxError> {
+    /// The loss terms of a composite, without gradients (for scoring).
+    pub fn loss(&self, img: &[f32], size: usize) -> Result<DetectorLoss, WhiteBoxError> {
         let x = Tensor::from_vec(img.to_vec(), (size, size, 3), &Device::Cpu)?;
         let t = self.loss.yolo(&self.model.forward(&self.to_input(&x)?)?, &self.heads)?;
         Ok(DetectorLoss::of(&t)?)

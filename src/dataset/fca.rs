@@ -1,7 +1,7 @@
 //! FCA/DAS CARLA samples: `img` (H×W×3 BGR), `veh_trans` and `cam_trans` (2×3 each).
 
 use super::npz::{NpyData, Npz, NpzError};
-use crate::detect::Frame;
+use crate::image::Frame;
 use std::path::{Path, PathBuf};
 
 /// One CARLA view: the photo and the CARLA poses.

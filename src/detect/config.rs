@@ -2,6 +2,7 @@
 
 use super::coco::COCO80;
 use super::DetectError;
+use crate::image::resize::Interpolation;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -23,18 +24,6 @@ pub enum Resize {
     Letterbox,
     /// Scale each axis independently to fill the input.
     Stretch,
-}
-
-/// Resampling filter used to resize frames to the model input.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default)]
-#[serde(rename_all = "kebab-case")]
-pub enum Interpolation {
-    /// 2-tap bilinear with half-pixel centres, no antialiasing (OpenCV `INTER_LINEAR`).
-    #[default]
-    Bilinear,
-    /// Triangle filter widened by the downscale factor, two passes rounded to 8 bits
-    /// (PIL `Image.resize(BILINEAR)`, torchvision on PIL images).
-    Antialias,
 }
 
 /// Where a letterboxed image sits in the input.

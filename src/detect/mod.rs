@@ -6,6 +6,8 @@ pub mod coco;
 pub mod config;
 pub mod darknet;
 pub mod decode;
+#[cfg(feature = "eval")]
+pub mod load;
 pub mod nms;
 #[cfg(feature = "eval")]
 pub mod onnx;
@@ -15,16 +17,7 @@ pub mod preprocess;
 pub use config::DetectorConfig;
 pub use decode::Proposals;
 
-/// An 8-bit BGR image, row-major, 3 bytes per pixel (OpenCV's native layout).
-#[derive(Clone, Debug)]
-pub struct Frame {
-    /// Width in pixels.
-    pub width: usize,
-    /// Height in pixels.
-    pub height: usize,
-    /// `height * width * 3` bytes, B,G,R.
-    pub bgr: Vec<u8>,
-}
+use crate::image::Frame;
 
 /// An axis-aligned box `[x1, y1, x2, y2]` in frame pixels.
 pub type BBox = [f32; 4];

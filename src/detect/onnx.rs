@@ -3,7 +3,8 @@
 use super::config::{DetectorConfig, OutputLayout};
 use super::decode::{decode, Proposals, RawOutput};
 use super::preprocess::prepare;
-use super::{DetectError, Detector, Frame};
+use super::{DetectError, Detector};
+use crate::image::Frame;
 use ort::session::builder::GraphOptimizationLevel;
 use ort::session::Session;
 use ort::value::{Tensor, TensorElementType, ValueType};

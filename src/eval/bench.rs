@@ -5,13 +5,17 @@
 //! for each stride and input size).
 
 use super::physical::Accuracy;
-use super::report::write_csv;
+use super::report::ReportError;
 use super::run::{evaluate, EvalOptions, VideoJob};
-use super::video::VideoReader;
 use crate::detect::onnx::OnnxDetector;
 use crate::detect::preprocess::prepare;
-use crate::detect::{Detector, DetectorConfig, Frame};
-use anyhow::{Context, Result};
+use crate::detect::{DetectError, Detector, DetectorConfig};
+use crate::image::Frame;
+use crate::plot::{labelled_lines, LabelledLine, PlotError};
+use crate::progress::{Progress, Silent};
+use crate::table::unique;
+use crate::table::{write_csv, TableError};
+use crate::video::{VideoError, VideoReader};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
@@ -85,6 +89,42 @@ pub struct Tradeoff {
     pub video_fps: f64,
 }
 
+/// Why a benchmark failed.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    /// The video.
+    #[error(transparent)]
+    Video(#[from] VideoError),
+    /// The video decoded to nothing.
+    #[error("{0} has no decodable frames")]
+    NoFrames(PathBuf),
+    /// A detector.
+    #[error(transparent)]
+    Detect(#[from] DetectError),
+    /// `evaluate` itself.
+    #[error(transparent)]
+    Report(#[from] ReportError),
+    /// `evaluate` ran but reported problems.
+    #[error("evaluate failed: {0}")]
+    Evaluate(String),
+    /// Writing the CSVs.
+    #[error(transparent)]
+    Table(#[from] TableError),
+    /// Drawing the plot.
+    #[error(transparent)]
+    Plot(#[from] crate::plot::PlotError),
+    /// Creating the output folder.
+    #[error("creating {path}: {source}")]
+    Io {
+        /// The folder.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+}
+
+type Result<T> = std::result::Result<T, BenchError>;
+
 fn best_of<T>(repeats: usize, mut f: impl FnMut() -> Result<T>) -> Result<(f64, T)> {
     let mut best: Option<(f64, T)> = None;
     for _ in 0..repeats.max(1) {
@@ -104,7 +144,9 @@ fn decode_all(video: &Path) -> Result<Vec<Frame>> {
     while let Some((_, f)) = r.read()? {
         frames.push(f);
     }
-    anyhow::ensure!(!frames.is_empty(), "{} has no decodable frames", video.display());
+    if frames.is_empty() {
+        return Err(BenchError::NoFrames(video.into()));
+    }
     Ok(frames)
 }
 
@@ -117,25 +159,27 @@ fn run_evaluate(opts: &BenchOptions, cfg: &DetectorConfig, stride: usize) -> Res
         start_angle_deg: 0.0,
         angle_bins: 12,
         out_dir: tmp.clone(),
-        progress: false,
         plots: false,
     };
     let job = VideoJob { path: opts.video.clone(), label: "bench".into(), sidecar: None };
     let mut dets: Vec<Box<dyn Detector>> = vec![Box::new(OnnxDetector::new(cfg.clone(), opts.threads)?)];
     let (secs, out) = best_of(opts.repeats, || {
-        Ok(evaluate(std::slice::from_ref(&job), &mut dets, &eval_opts, &AtomicBool::new(false))?)
+        Ok(evaluate(std::slice::from_ref(&job), &mut dets, &eval_opts, &Silent, &AtomicBool::new(false))?)
     })?;
     let _ = std::fs::remove_dir_all(&tmp);
-    anyhow::ensure!(out.failures.is_empty(), "evaluate failed: {}", out.failures.join("; "));
+    if !out.failures.is_empty() {
+        return Err(BenchError::Evaluate(out.failures.join("; ")));
+    }
     Ok((secs, out.rows[0].accuracy, out.timing.frames_decoded))
 }
 
-/// Runs the benchmark and writes its CSVs and plot into `opts.out_dir`.
-pub fn run(opts: &BenchOptions) -> Result<(Vec<Throughput>, Vec<Tradeoff>)> {
-    std::fs::create_dir_all(&opts.out_dir).with_context(|| format!("creating {}", opts.out_dir.display()))?;
+/// Runs the benchmark and writes its CSVs and plot into `opts.out_dir`; each measurement is a
+/// note on `progress`.
+pub fn bench_evaluate(opts: &BenchOptions, progress: &dyn Progress) -> Result<(Vec<Throughput>, Vec<Tradeoff>)> {
+    std::fs::create_dir_all(&opts.out_dir).map_err(|source| BenchError::Io { path: opts.out_dir.clone(), source })?;
     let (decode_s, frames) = best_of(opts.repeats, || decode_all(&opts.video))?;
     let n = frames.len();
-    eprintln!("decode: {n} frames in {decode_s:.3} s ({:.0} fps)", n as f64 / decode_s);
+    progress.note(&format!("decode: {n} frames in {decode_s:.3} s ({:.0} fps)", n as f64 / decode_s));
     let mut thr = Vec::new();
     let mut trade = Vec::new();
     for path in &opts.detectors {
@@ -176,14 +220,14 @@ pub fn run(opts: &BenchOptions) -> Result<(Vec<Throughput>, Vec<Tradeoff>)> {
             evaluate_fps: decoded as f64 / eval_s,
             evaluate_over_bare: (decoded as f64 / eval_s) / (n as f64 / bare_s),
         };
-        eprintln!(
+        progress.note(&format!(
             "{}: bare {:.1} fps, detector {:.1} fps, evaluate {:.1} fps ({:.0} % of bare)",
             row.detector,
             row.bare_infer_fps,
             row.detector_fps,
             row.evaluate_fps,
             100.0 * row.evaluate_over_bare
-        );
+        ));
         thr.push(row);
         let mut sizes = vec![cfg.clone()];
         if let Some(s) = opts.alt_size.filter(|&s| s != cfg.input.width || s != cfg.input.height) {
@@ -192,7 +236,7 @@ pub fn run(opts: &BenchOptions) -> Result<(Vec<Throughput>, Vec<Tradeoff>)> {
                 (c.input.width, c.input.height) = (s, s);
                 sizes.push(c);
             } else {
-                eprintln!("{}: fixed input size, skipping {s}x{s}", cfg.name);
+                progress.note(&format!("{}: fixed input size, skipping {s}x{s}", cfg.name));
             }
         }
         for c in &sizes {
@@ -208,13 +252,34 @@ pub fn run(opts: &BenchOptions) -> Result<(Vec<Throughput>, Vec<Tradeoff>)> {
                     seconds: secs,
                     video_fps: decoded as f64 / secs,
                 };
-                eprintln!("  {} stride {stride}: A = {:.3} in {secs:.2} s", t.input, t.a_physical);
+                progress.note(&format!("  {} stride {stride}: A = {:.3} in {secs:.2} s", t.input, t.a_physical));
                 trade.push(t);
             }
         }
     }
     write_csv(&opts.out_dir.join("throughput.csv"), &thr)?;
     write_csv(&opts.out_dir.join("tradeoff.csv"), &trade)?;
-    super::plot::tradeoff(&opts.out_dir.join("tradeoff.png"), &trade).map_err(|e| anyhow::anyhow!(e.to_string()))?;
+    plot_tradeoff(&opts.out_dir.join("tradeoff.png"), &trade)?;
     Ok((thr, trade))
+}
+
+/// Accuracy against time: one line per (detector, input size), one labelled point per stride.
+fn plot_tradeoff(path: &Path, rows: &[Tradeoff]) -> std::result::Result<(), PlotError> {
+    let lines: Vec<LabelledLine> = unique(rows.iter().map(|r| (r.detector.clone(), r.input.clone())))
+        .into_iter()
+        .map(|(d, inp)| LabelledLine {
+            points: rows
+                .iter()
+                .filter(|r| r.detector == d && r.input == inp)
+                .map(|r| (r.seconds, 100.0 * r.a_physical, format!("{}", r.stride)))
+                .collect(),
+            label: format!("{d} {inp}"),
+        })
+        .collect();
+    labelled_lines(
+        path,
+        "What accuracy costs in time (labels: stride)",
+        ("seconds per video", "A_physical [%]"),
+        &lines,
+    )
 }

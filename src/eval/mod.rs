@@ -1,16 +1,12 @@
-//! Scoring detectors: recorded videos (decode, detect, A_physical, reports, plots) and digital
-//! composites (ASR, P@0.5).
+//! Scoring detectors: recorded videos (decode, detect, A_physical, reports, charts), the metrics
+//! of digital composites (ASR, P@0.5), and what evaluation costs in time.
 
 #[cfg(feature = "eval")]
 pub mod bench;
 #[cfg(feature = "eval")]
-pub mod detectors;
+pub mod charts;
 pub mod digital;
 pub mod physical;
-#[cfg(feature = "eval")]
-pub mod plot;
 pub mod report;
 #[cfg(feature = "eval")]
 pub mod run;
-#[cfg(feature = "eval")]
-pub mod video;

@@ -2,31 +2,46 @@
 //! Table 4, and per-angle CSV.
 
 use super::physical::{angle_bins, Accuracy, FrameRecord, Z95};
+use crate::table::unique;
 use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 /// Errors writing report files.
 #[derive(Debug, thiserror::Error)]
-#[error("cannot write {path}: {msg}")]
-pub struct ReportError {
-    /// File that failed.
-    pub path: PathBuf,
-    /// Reason.
-    pub msg: String,
+pub enum ReportError {
+    /// The CSV writer failed.
+    #[error("cannot write {path}: {source}")]
+    Csv {
+        /// File that failed.
+        path: PathBuf,
+        /// Why.
+        source: csv::Error,
+    },
+    /// The file system failed.
+    #[error("cannot write {path}: {source}")]
+    Io {
+        /// File or folder that failed.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A whole table could not be written.
+    #[error(transparent)]
+    Table(#[from] crate::table::TableError),
+    /// A chart could not be drawn.
+    #[cfg(feature = "plot")]
+    #[error(transparent)]
+    Plot(#[from] crate::plot::PlotError),
 }
 
-fn rerr(path: &Path, e: impl std::fmt::Display) -> ReportError {
-    ReportError { path: path.into(), msg: e.to_string() }
+fn csv_err(path: &Path, source: csv::Error) -> ReportError {
+    ReportError::Csv { path: path.into(), source }
 }
 
-/// Writes serializable rows as a CSV file with a header.
-pub fn write_csv<T: serde::Serialize>(path: &Path, rows: &[T]) -> Result<(), ReportError> {
-    let mut w = csv::Writer::from_path(path).map_err(|e| rerr(path, e))?;
-    for r in rows {
-        w.serialize(r).map_err(|e| rerr(path, e))?;
-    }
-    w.flush().map_err(|e| rerr(path, e))
+/// A file-system error on `path`, as a report error.
+pub fn io_err(path: &Path, source: std::io::Error) -> ReportError {
+    ReportError::Io { path: path.into(), source }
 }
 
 /// Streams [`FrameRecord`]s to CSV, flushing each row so an interrupted run keeps every frame.
@@ -38,13 +53,13 @@ pub struct FrameCsv {
 impl FrameCsv {
     /// Creates `path` (truncating).
     pub fn create(path: &Path) -> Result<Self, ReportError> {
-        Ok(FrameCsv { w: csv::Writer::from_path(path).map_err(|e| rerr(path, e))?, path: path.into() })
+        Ok(FrameCsv { w: csv::Writer::from_path(path).map_err(|e| csv_err(path, e))?, path: path.into() })
     }
 
     /// Appends and flushes one record.
     pub fn push(&mut self, r: &FrameRecord) -> Result<(), ReportError> {
-        self.w.serialize(r).map_err(|e| rerr(&self.path, e))?;
-        self.w.flush().map_err(|e| rerr(&self.path, e))
+        self.w.serialize(r).map_err(|e| csv_err(&self.path, e))?;
+        self.w.flush().map_err(|e| io_err(&self.path, e))
     }
 }
 
@@ -86,7 +101,7 @@ fn pct(x: Option<f64>) -> String {
 
 /// Writes `summary.csv`.
 pub fn write_summary_csv(path: &Path, rows: &[SummaryRow], s: &ReportSettings) -> Result<(), ReportError> {
-    let mut w = csv::Writer::from_path(path).map_err(|e| rerr(path, e))?;
+    let mut w = csv::Writer::from_path(path).map_err(|e| csv_err(path, e))?;
     w.write_record([
         "video",
         "detector",
@@ -102,7 +117,7 @@ pub fn write_summary_csv(path: &Path, rows: &[SummaryRow], s: &ReportSettings) -
         "declared_frames",
         "status",
     ])
-    .map_err(|e| rerr(path, e))?;
+    .map_err(|e| csv_err(path, e))?;
     for r in rows {
         let ci = r.accuracy.wilson(Z95);
         let f = |x: Option<f64>| x.map(|v| format!("{v:.6}")).unwrap_or_default();
@@ -121,9 +136,9 @@ pub fn write_summary_csv(path: &Path, rows: &[SummaryRow], s: &ReportSettings) -
             r.declared_frames.to_string(),
             r.status.clone(),
         ])
-        .map_err(|e| rerr(path, e))?;
+        .map_err(|e| csv_err(path, e))?;
     }
-    w.flush().map_err(|e| rerr(path, e))
+    w.flush().map_err(|e| io_err(path, e))
 }
 
 /// Writes `angles.csv`: accuracy per (video, detector, angle sector).
@@ -133,9 +148,9 @@ pub fn write_angles_csv(
     rows: &[SummaryRow],
     bins: usize,
 ) -> Result<(), ReportError> {
-    let mut w = csv::Writer::from_path(path).map_err(|e| rerr(path, e))?;
+    let mut w = csv::Writer::from_path(path).map_err(|e| csv_err(path, e))?;
     w.write_record(["video", "detector", "bin_start_deg", "bin_end_deg", "frames", "detected", "a_physical"])
-        .map_err(|e| rerr(path, e))?;
+        .map_err(|e| csv_err(path, e))?;
     for r in rows {
         let sel = records.iter().filter(|f| f.video == r.video && f.detector == r.detector);
         for b in angle_bins(sel, bins) {
@@ -148,21 +163,10 @@ pub fn write_angles_csv(
                 b.accuracy.detected.to_string(),
                 b.accuracy.rate().map(|v| format!("{v:.6}")).unwrap_or_default(),
             ])
-            .map_err(|e| rerr(path, e))?;
+            .map_err(|e| csv_err(path, e))?;
         }
     }
-    w.flush().map_err(|e| rerr(path, e))
-}
-
-/// The distinct items of `it` in first-seen order (report rows and columns keep input order).
-pub fn unique<T: PartialEq>(it: impl IntoIterator<Item = T>) -> Vec<T> {
-    let mut v: Vec<T> = Vec::new();
-    for s in it {
-        if !v.contains(&s) {
-            v.push(s);
-        }
-    }
-    v
+    w.flush().map_err(|e| io_err(path, e))
 }
 
 /// Renders the Markdown summary: settings, a Table-4-shaped matrix, details with 95 % CIs, angles.
@@ -248,8 +252,8 @@ pub fn summary_markdown(rows: &[SummaryRow], records: &[FrameRecord], s: &Report
 
 /// Writes `text` to `path`.
 pub fn write_text(path: &Path, text: &str) -> Result<(), ReportError> {
-    let mut f = std::fs::File::create(path).map_err(|e| rerr(path, e))?;
-    f.write_all(text.as_bytes()).map_err(|e| rerr(path, e))
+    let mut f = std::fs::File::create(path).map_err(|e| io_err(path, e))?;
+    f.write_all(text.as_bytes()).map_err(|e| io_err(path, e))
 }
 
 /// A plain-text summary table for the terminal.

@@ -3,16 +3,17 @@
 //! Every frame record is flushed as soon as it exists and the summary is written from whatever
 //! was scored, so a corrupt video, a failing detector or Ctrl-C never loses finished work.
 
+use super::charts::{accuracy_bars, polar_video};
 use super::physical::{Accuracy, FrameRecord};
-use super::plot::{accuracy_bars, polar_scores, ScoreSeries};
 use super::report::{
     summary_markdown, write_angles_csv, write_summary_csv, write_text, FrameCsv, ReportError, ReportSettings,
     SummaryRow,
 };
-use super::video::{Prefetch, Step, VideoReader};
 use crate::detect::Detector;
+use crate::progress::Progress;
 use crate::sidecar::{self, AngleSample};
-use indicatif::{ProgressBar, ProgressStyle};
+use crate::table::unique;
+use crate::video::{Prefetch, Step, VideoReader};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -44,8 +45,6 @@ pub struct EvalOptions {
     pub angle_bins: usize,
     /// Output directory (created).
     pub out_dir: PathBuf,
-    /// Show progress bars.
-    pub progress: bool,
     /// Draw PNG plots.
     pub plots: bool,
 }
@@ -97,16 +96,17 @@ impl Angles {
     }
 }
 
-/// Runs every detector over every frame of every video and writes the reports into `opts.out_dir`.
+/// Runs every detector over every frame of every video and writes the reports into `opts.out_dir`;
+/// each video is one stage of `progress`, in frames.
 pub fn evaluate(
     jobs: &[VideoJob],
     detectors: &mut [Box<dyn Detector>],
     opts: &EvalOptions,
+    progress: &dyn Progress,
     stop: &AtomicBool,
 ) -> Result<EvalOutcome, ReportError> {
     let t_run = Instant::now();
-    std::fs::create_dir_all(&opts.out_dir)
-        .map_err(|e| ReportError { path: opts.out_dir.clone(), msg: e.to_string() })?;
+    std::fs::create_dir_all(&opts.out_dir).map_err(|e| super::report::io_err(&opts.out_dir, e))?;
     let frames_path = opts.out_dir.join("frames.csv");
     let mut csv = FrameCsv::create(&frames_path)?;
     let mut out = EvalOutcome {
@@ -158,18 +158,7 @@ pub fn evaluate(
         };
         let info = reader.info().clone();
         let mut frames = Prefetch::new(reader, stride, 4);
-        let bar = if opts.progress {
-            let b = ProgressBar::new(info.declared_frames as u64);
-            b.set_style(
-                ProgressStyle::with_template("{msg:>16} [{bar:40}] {pos}/{len} frames {per_sec} eta {eta}")
-                    .expect("static template")
-                    .progress_chars("=> "),
-            );
-            b.set_message(job.label.clone());
-            b
-        } else {
-            ProgressBar::hidden()
-        };
+        progress.begin(&job.label, info.declared_frames as u64);
         let mut status = "complete".to_string();
         let mut failed_det: Vec<Option<String>> = vec![None; detectors.len()];
         let mut decoded = 0usize;
@@ -193,12 +182,12 @@ pub fn evaluate(
                 }
                 Step::Skipped => {
                     decoded += 1;
-                    bar.inc(1);
+                    progress.advance(1);
                     continue;
                 }
                 Step::Frame(i, f) => {
                     decoded += 1;
-                    bar.inc(1);
+                    progress.advance(1);
                     (i, f)
                 }
             };
@@ -240,7 +229,7 @@ pub fn evaluate(
                 break;
             }
         }
-        bar.finish_and_clear();
+        progress.end(None);
         out.timing.frames_decoded += decoded;
         if decoded == 0 && status == "complete" {
             status = "no frames decoded".into();
@@ -292,29 +281,15 @@ fn write_reports(
     if !opts.plots {
         return Ok(());
     }
-    let videos = super::report::unique(out.records.iter().map(|r| r.video.clone()));
-    let plot_err = |e: super::plot::PlotError| ReportError { path: PathBuf::from(&e.path), msg: e.msg };
-    for v in videos {
-        let series: Vec<ScoreSeries> = detectors
-            .iter()
-            .map(|d| ScoreSeries {
-                label: d.name().to_string(),
-                points: out
-                    .records
-                    .iter()
-                    .filter(|r| r.video == v && r.detector == d.name())
-                    .filter_map(|r| r.angle_deg.map(|a| (a, r.max_score as f64)))
-                    .collect(),
-            })
-            .collect();
+    let names: Vec<&str> = detectors.iter().map(|d| d.name()).collect();
+    for v in unique(out.records.iter().map(|r| r.video.clone())) {
         let p = dir.join(format!("polar_{}.png", file_safe(&v)));
-        polar_scores(&p, &format!("{v}: car score vs turntable angle"), &series, opts.threshold as f64)
-            .map_err(plot_err)?;
+        polar_video(&p, &v, &names, &out.records, opts.threshold)?;
         out.files.push(p);
     }
     if !out.rows.is_empty() {
         let p = dir.join("accuracy.png");
-        accuracy_bars(&p, &out.rows, opts.threshold).map_err(plot_err)?;
+        accuracy_bars(&p, &out.rows, opts.threshold)?;
         out.files.push(p);
     }
     Ok(())

@@ -4,32 +4,13 @@
 //! View space: +X left, +Y up, +Z forward (into the image). Image pixel (0, 0) is the top-left
 //! corner, so NDC x = +1 is the left edge and y = +1 the top edge.
 
+use super::vec3::{cross, dot, normalize, sub};
+
 /// Position from spherical angles: `dist`, elevation and azimuth in degrees (PyTorch3D's
 /// `camera_position_from_spherical_angles`): `(d·cos e·sin a, d·sin e, d·cos e·cos a)`.
 pub fn spherical(dist: f32, elev_deg: f32, azim_deg: f32) -> [f32; 3] {
     let (e, a) = (elev_deg.to_radians(), azim_deg.to_radians());
     [dist * e.cos() * a.sin(), dist * e.sin(), dist * e.cos() * a.cos()]
-}
-
-fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-/// Cross product.
-pub fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-/// Dot product.
-pub fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-/// Unit vector (zero stays zero).
-pub fn normalize(a: [f32; 3]) -> [f32; 3] {
-    let n = dot(a, a).sqrt();
-    if n > 0.0 {
-        [a[0] / n, a[1] / n, a[2] / n]
-    } else {
-        a
-    }
 }
 
 /// A pinhole camera: world → view rotation rows and eye, vertical field of view.

@@ -299,7 +299,7 @@ impl Mesh {
     pub fn face_cross(&self, f: usize) -> [f32; 3] {
         let p = self.face_positions(f);
         let e = |a: [f32; 3], b: [f32; 3]| [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-        crate::geometry::camera::cross(e(p[0], p[1]), e(p[0], p[2]))
+        super::vec3::cross(e(p[0], p[1]), e(p[0], p[2]))
     }
 
     /// Centroid of face `f`.

@@ -6,3 +6,4 @@ pub mod parts;
 pub mod uv;
 pub mod uv_adjust;
 pub mod uv_charts;
+pub mod vec3;

@@ -262,7 +262,7 @@ pub fn adjust(mesh: &mut Mesh, faces: &[usize]) -> f64 {
     }
     let area3 = |m: &Mesh, f: usize| {
         let c = m.face_cross(f);
-        (super::camera::dot(c, c).sqrt() / 2.0) as f64
+        (super::vec3::dot(c, c).sqrt() / 2.0) as f64
     };
     let area_uv = |uv: &HashMap<u32, [f64; 2]>, m: &Mesh, f: usize| {
         let t = m.face_uvs[f].map(|i| uv[&i]);

@@ -9,9 +9,10 @@
 use super::fill::{grow, push_pull, shrink};
 use super::raster::{GBuffer, EMPTY};
 use super::texture::Gather;
-use crate::detect::Frame;
-use crate::geometry::camera::{dot, normalize, Camera};
+use crate::geometry::camera::Camera;
 use crate::geometry::mesh::Mesh;
+use crate::geometry::vec3::{dot, normalize};
+use crate::image::Frame;
 
 /// Side of the baked appearance atlas (a photographed car spans a few hundred pixels).
 pub const BAKE_SIZE: usize = 512;

@@ -6,8 +6,9 @@
 //! stays `mul ⊙ G·T + add` and its gradient `Gᵀ(mul ⊙ ∂L/∂I)` is exact.
 
 use super::raster::{GBuffer, EMPTY};
-use crate::geometry::camera::{dot, normalize, Camera};
+use crate::geometry::camera::Camera;
 use crate::geometry::mesh::Mesh;
+use crate::geometry::vec3::{dot, normalize};
 
 /// Light intensities (white light) and the material's shininess; a scene's `[lighting]` table.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize)]

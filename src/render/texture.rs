@@ -4,49 +4,6 @@
 //! render is `I = G·T` for a sparse matrix `G` with four taps per covered pixel. The gradient of
 //! any loss with respect to the texture is then `Gᵀ·∂L/∂I`, computed exactly by [`Gather::adjoint`].
 
-/// An RGB texture with values in [0, 1], row-major from the top-left, 3 floats per texel.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Texture {
-    /// Width in texels.
-    pub width: usize,
-    /// Height in texels.
-    pub height: usize,
-    /// `width × height × 3` values.
-    pub rgb: Vec<f32>,
-}
-
-impl Texture {
-    /// Reads a PNG (or any 8-bit image the `image` crate decodes) as RGB in [0, 1].
-    pub fn load(path: &std::path::Path) -> Result<Texture, String> {
-        let img = image::open(path).map_err(|e| format!("cannot read texture {}: {e}", path.display()))?.to_rgb8();
-        let (w, h) = img.dimensions();
-        Ok(Texture {
-            width: w as usize,
-            height: h as usize,
-            rgb: img.into_raw().into_iter().map(|v| v as f32 / 255.0).collect(),
-        })
-    }
-
-    /// The optimizable region as PAV-Camou marks it: 1 where a texel is pure white (every
-    /// channel exactly 1.0, i.e. 255), else 0.
-    pub fn white_mask(&self) -> Vec<f32> {
-        self.rgb.chunks(3).map(|c| if c.iter().all(|v| *v == 1.0) { 1.0 } else { 0.0 }).collect()
-    }
-}
-
-/// A value in [0, 1] as an 8-bit channel (clamped, rounded), as every saved image stores it.
-pub fn to_u8(v: f32) -> u8 {
-    (v.clamp(0.0, 1.0) * 255.0).round() as u8
-}
-
-/// Writes an interleaved RGB image in [0, 1] as PNG.
-pub fn save_rgb(path: &std::path::Path, w: usize, h: usize, rgb: &[f32]) -> Result<(), String> {
-    image::RgbImage::from_raw(w as u32, h as u32, rgb.iter().map(|v| to_u8(*v)).collect())
-        .ok_or_else(|| format!("{}: image buffer does not match {w}x{h}", path.display()))?
-        .save(path)
-        .map_err(|e| format!("writing {}: {e}", path.display()))
-}
-
 /// Texel convention: `align_corners = True` as in PyTorch3D's `TexturesUV`. u = 0 and u = 1 are
 /// the centres of the first and last columns; v = 1 is the top row; outside [0, 1] clamps.
 #[derive(Clone, Debug, PartialEq)]

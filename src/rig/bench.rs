@@ -3,8 +3,9 @@
 use super::camera::SimCamera;
 use super::capture::{capture, CaptureOptions};
 use super::sim::{SimOptions, SimTurntable};
-use super::turntable::Turntable;
-use anyhow::{Context, Result};
+use super::turntable::{Turntable, TurntableError};
+use crate::progress::{Progress, Silent};
+use crate::table::{write_csv, TableError};
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
@@ -40,6 +41,39 @@ pub struct AngleSync {
     pub max_deg: f64,
 }
 
+/// Why a rig benchmark failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RigBenchError {
+    /// The simulator did not start.
+    #[error("starting the simulated turntable: {0}")]
+    Simulator(#[source] std::io::Error),
+    /// The table.
+    #[error(transparent)]
+    Turntable(#[from] TurntableError),
+    /// The capture.
+    #[error(transparent)]
+    Capture(#[from] super::capture::CaptureError),
+    /// Its sidecar.
+    #[error(transparent)]
+    Sidecar(#[from] crate::sidecar::SidecarError),
+    /// Writing the CSVs.
+    #[error(transparent)]
+    Table(#[from] TableError),
+    /// A scratch or output folder.
+    #[error("{path}: {source}")]
+    Io {
+        /// The folder.
+        path: std::path::PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The capture recorded nothing.
+    #[error("the capture at time scale {0} recorded no frames")]
+    NoFrames(f64),
+}
+
+type Result<T> = std::result::Result<T, RigBenchError>;
+
 fn percentile(sorted: &[f64], q: f64) -> f64 {
     sorted[((sorted.len() - 1) as f64 * q).round() as usize]
 }
@@ -64,12 +98,13 @@ pub fn latency(table: &mut Turntable, link: &str, n: usize) -> Result<Latency> {
 
 /// Captures one simulated revolution and compares every sidecar angle with the simulator's truth.
 pub fn angle_sync(time_scale: f64, fps: f64, dir: &Path) -> Result<AngleSync> {
-    let sim = SimTurntable::spawn(SimOptions { time_scale, ..SimOptions::default() })?;
+    let sim =
+        SimTurntable::spawn(SimOptions { time_scale, ..SimOptions::default() }).map_err(RigBenchError::Simulator)?;
     let mut table = Turntable::open(&sim.path().to_string_lossy(), 115_200, Duration::from_millis(500))?;
     let mut cam = SimCamera::new(sim.truth(), 160, 120, fps);
     let video = dir.join(format!("sync_x{time_scale}.mp4"));
     let opts = CaptureOptions { fourcc: ['m', 'p', '4', 'v'], ..CaptureOptions::new(video.clone()) };
-    capture(&mut table, &mut cam, &opts, &AtomicBool::new(false))?;
+    capture(&mut table, &mut cam, &opts, &Silent, &AtomicBool::new(false))?;
     let rows = crate::sidecar::read(&crate::sidecar::sidecar_path(&video))?;
     let mut err: Vec<f64> = rows
         .iter()
@@ -82,6 +117,50 @@ pub fn angle_sync(time_scale: f64, fps: f64, dir: &Path) -> Result<AngleSync> {
         frames: err.len(),
         median_deg: percentile(&err, 0.5),
         p95_deg: percentile(&err, 0.95),
-        max_deg: *err.last().context("no frames")?,
+        max_deg: *err.last().ok_or(RigBenchError::NoFrames(time_scale))?,
     })
+}
+
+/// `pav-rig bench-rig`: PING latency over `n` round trips on the simulator and on each of `ports`,
+/// and the angle-sync error of a simulated 28 s turn at each of `time_scales`; writes
+/// `rig_latency.csv` and `rig_angle_sync.csv` into `out`. Each result is a note on `progress`.
+pub fn bench_rig(
+    ports: &[String],
+    n: usize,
+    time_scales: &[f64],
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<(Vec<Latency>, Vec<AngleSync>)> {
+    let mkdir = |d: &Path| std::fs::create_dir_all(d).map_err(|source| RigBenchError::Io { path: d.into(), source });
+    mkdir(out)?;
+    let mut lat = Vec::new();
+    let sim = SimTurntable::spawn(SimOptions::default()).map_err(RigBenchError::Simulator)?;
+    let mut t = Turntable::open(&sim.path().to_string_lossy(), 115_200, Duration::from_secs(1))?;
+    lat.push(latency(&mut t, "sim (pty)", n)?);
+    for p in ports {
+        let mut t = Turntable::open(p, 115_200, Duration::from_secs(1))?;
+        lat.push(latency(&mut t, p, n)?);
+    }
+    for l in &lat {
+        progress.note(&format!(
+            "{}: median {:.0} µs, p99 {:.0} µs, max {:.0} µs over {}",
+            l.link, l.median_us, l.p99_us, l.max_us, l.n
+        ));
+    }
+    let tmp = std::env::temp_dir().join(format!("pav-bench-rig-{}", std::process::id()));
+    mkdir(&tmp)?;
+    let mut sync = Vec::new();
+    for &s in time_scales {
+        progress.note(&format!("capturing a simulated 28 s turn at x{s} ({:.1} s)", 28.0 / s));
+        let r = angle_sync(s, 30.0, &tmp)?;
+        progress.note(&format!(
+            "  {} frames: median {:.3}°, p95 {:.3}°, max {:.3}°",
+            r.frames, r.median_deg, r.p95_deg, r.max_deg
+        ));
+        sync.push(r);
+    }
+    let _ = std::fs::remove_dir_all(&tmp);
+    write_csv(&out.join("rig_latency.csv"), &lat)?;
+    write_csv(&out.join("rig_angle_sync.csv"), &sync)?;
+    Ok((lat, sync))
 }

@@ -2,8 +2,8 @@
 //! simulated camera that films the simulated turntable.
 
 use super::sim::Truth;
-use crate::detect::Frame;
-use crate::eval::video::{frame_to_mat, mat_to_frame, VideoReader};
+use crate::image::Frame;
+use crate::video::{frame_to_mat, mat_to_frame, MatError, VideoError, VideoReader};
 use opencv::core::{Mat, Point, Scalar};
 use opencv::prelude::*;
 use opencv::{imgproc, videoio};
@@ -16,24 +16,73 @@ pub enum CameraError {
     /// No such device.
     #[error("no V4L2 camera at {0}: this machine has no such video device (see `ls /dev/video*`); use --camera file:VIDEO, gst-test or sim")]
     NoDevice(PathBuf),
+    /// A `--camera` value that names no source.
+    #[error("{0}")]
+    Spec(String),
     /// The source exists but could not be opened.
-    #[error("cannot open {source_name}: {why}")]
+    #[error("cannot open {source_name}: {source}")]
     Open {
         /// Source description.
         source_name: String,
-        /// Reason.
-        why: String,
+        /// Why.
+        source: SourceFault,
     },
     /// Reading a frame failed.
-    #[error("{source_name}: frame {frame}: {why}")]
+    #[error("{source_name}: frame {frame}: {source}")]
     Read {
         /// Source description.
         source_name: String,
         /// Frame index that failed.
         frame: usize,
-        /// Reason.
-        why: String,
+        /// Why.
+        source: SourceFault,
     },
+}
+
+/// What went wrong inside a frame source.
+#[derive(Debug, thiserror::Error)]
+pub enum SourceFault {
+    /// OpenCV failed.
+    #[error(transparent)]
+    OpenCv(#[from] opencv::Error),
+    /// A frame could not be converted.
+    #[error(transparent)]
+    Frame(#[from] MatError),
+    /// The video file failed.
+    #[error(transparent)]
+    Video(#[from] VideoError),
+    /// The stream ended or never started.
+    #[error("{0}")]
+    Stream(&'static str),
+}
+
+/// Opens the frame source that a `--camera` value names: `v4l2:/dev/videoN`, `file:VIDEO`,
+/// `gst-test`, or `sim` (needs `sim`, the simulated table to film), asking for `width × height`
+/// at `fps` where the source takes requests.
+pub fn open_source(
+    spec: &str,
+    sim: Option<Truth>,
+    (width, height): (usize, usize),
+    fps: f64,
+) -> Result<Box<dyn FrameSource>, CameraError> {
+    Ok(match spec {
+        "sim" => match sim {
+            Some(truth) => Box::new(SimCamera::new(truth, width, height, fps)),
+            None => {
+                return Err(CameraError::Spec(
+                    "--camera sim films the simulated turntable: use it with --port sim".into(),
+                ))
+            }
+        },
+        "gst-test" => Box::new(LiveCapture::gst_test(width, height, fps.round() as u32)?),
+        c if c.starts_with("v4l2:") => Box::new(LiveCapture::v4l2(Path::new(&c[5..]), width, height, fps)?),
+        c if c.starts_with("file:") => Box::new(FileSource::open(Path::new(&c[5..]))?),
+        c => {
+            return Err(CameraError::Spec(format!(
+                "unknown --camera `{c}`: use v4l2:/dev/videoN, file:VIDEO, gst-test or sim"
+            )))
+        }
+    })
 }
 
 /// A stream of frames, each stamped with the host instant it was captured.
@@ -77,7 +126,7 @@ impl LiveCapture {
         }
         let name = format!("V4L2 camera {}", device.display());
         let mut cap = videoio::VideoCapture::from_file(device.as_os_str(), videoio::CAP_V4L2)
-            .map_err(|e| CameraError::Open { source_name: name.clone(), why: e.to_string() })?;
+            .map_err(|e| CameraError::Open { source_name: name.clone(), source: e.into() })?;
         for (prop, v) in [
             (videoio::CAP_PROP_FRAME_WIDTH, width as f64),
             (videoio::CAP_PROP_FRAME_HEIGHT, height as f64),
@@ -95,13 +144,16 @@ impl LiveCapture {
         );
         let name = "GStreamer videotestsrc".to_string();
         let cap = videoio::VideoCapture::from_file(&pipeline, videoio::CAP_GSTREAMER)
-            .map_err(|e| CameraError::Open { source_name: name.clone(), why: e.to_string() })?;
+            .map_err(|e| CameraError::Open { source_name: name.clone(), source: e.into() })?;
         Self::wrap(cap, name)
     }
 
     fn wrap(cap: videoio::VideoCapture, name: String) -> Result<Self, CameraError> {
         if !cap.is_opened().unwrap_or(false) {
-            return Err(CameraError::Open { source_name: name, why: "OpenCV could not start the stream".into() });
+            return Err(CameraError::Open {
+                source_name: name,
+                source: SourceFault::Stream("OpenCV could not start the stream"),
+            });
         }
         let g = |p| cap.get(p).unwrap_or(0.0);
         let size = (g(videoio::CAP_PROP_FRAME_WIDTH) as usize, g(videoio::CAP_PROP_FRAME_HEIGHT) as usize);
@@ -121,13 +173,13 @@ impl FrameSource for LiveCapture {
         self.fps
     }
     fn grab(&mut self) -> Result<Option<(Frame, Instant)>, CameraError> {
-        let err = |why: String| CameraError::Read { source_name: self.name.clone(), frame: self.index, why };
-        let ok = self.cap.read(&mut self.mat).map_err(|e| err(e.to_string()))?;
+        let err = |source: SourceFault| CameraError::Read { source_name: self.name.clone(), frame: self.index, source };
+        let ok = self.cap.read(&mut self.mat).map_err(|e| err(e.into()))?;
         let at = Instant::now();
         if !ok || self.mat.empty() {
-            return Err(err("the camera stopped delivering frames".into()));
+            return Err(err(SourceFault::Stream("the camera stopped delivering frames")));
         }
-        let f = mat_to_frame(&self.mat).map_err(err)?;
+        let f = mat_to_frame(&self.mat).map_err(|e| err(e.into()))?;
         self.index += 1;
         Ok(Some((f, at)))
     }
@@ -145,7 +197,7 @@ impl FileSource {
     /// Opens `path`.
     pub fn open(path: &Path) -> Result<Self, CameraError> {
         let reader = VideoReader::open(path)
-            .map_err(|e| CameraError::Open { source_name: path.display().to_string(), why: e.to_string() })?;
+            .map_err(|e| CameraError::Open { source_name: path.display().to_string(), source: e.into() })?;
         let period = Duration::from_secs_f64(1.0 / reader.info().fps);
         Ok(FileSource { reader, path: path.into(), due: Instant::now(), period })
     }
@@ -166,7 +218,7 @@ impl FrameSource for FileSource {
         match self.reader.read() {
             Ok(Some((_, f))) => Ok(Some((f, at))),
             Ok(None) => Ok(None),
-            Err(e) => Err(CameraError::Read { source_name: self.describe(), frame: 0, why: e.to_string() }),
+            Err(e) => Err(CameraError::Read { source_name: self.describe(), frame: 0, source: e.into() }),
         }
     }
 }
@@ -238,14 +290,18 @@ impl FrameSource for SimCamera {
             return Err(CameraError::Read {
                 source_name: self.describe(),
                 frame: self.index,
-                why: "injected camera failure".into(),
+                source: SourceFault::Stream("injected camera failure"),
             });
         }
         let at = pace(&mut self.due, Duration::from_secs_f64(1.0 / self.fps));
         let angle = self.truth.angle_at(at);
-        let err = |why: String| CameraError::Read { source_name: "simulated camera".into(), frame: self.index, why };
-        let m = self.render(angle).map_err(|e| err(e.to_string()))?;
-        let f = mat_to_frame(&m).map_err(err)?;
+        let err = |source: SourceFault| CameraError::Read {
+            source_name: "simulated camera".into(),
+            frame: self.index,
+            source,
+        };
+        let m = self.render(angle).map_err(|e| err(e.into()))?;
+        let f = mat_to_frame(&m).map_err(|e| err(e.into()))?;
         self.true_angles.push(angle);
         self.index += 1;
         Ok(Some((f, at)))

@@ -7,13 +7,10 @@
 //! as their angle is known; on any fault both files are finalized before the error is returned.
 
 use super::camera::FrameSource;
-use super::turntable::{Event, Turntable};
-use crate::eval::video::frame_to_mat;
-use crate::sidecar::{self, AngleSample};
-use indicatif::{ProgressBar, ProgressStyle};
-use opencv::core::Size;
-use opencv::prelude::*;
-use opencv::videoio::{VideoWriter, CAP_FFMPEG};
+use super::turntable::{Event, Turntable, TurntableError};
+use crate::progress::Progress;
+use crate::sidecar::{self, AngleSample, SidecarError};
+use crate::video::{VideoError, VideoWriter};
 use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -38,12 +35,10 @@ pub struct CaptureOptions {
     pub fourcc: [char; 4],
     /// Fail when the table sends nothing for this long.
     pub no_progress: Duration,
-    /// Show a progress bar.
-    pub progress: bool,
 }
 
 impl CaptureOptions {
-    /// One 28 s revolution into `video`: homed first, 10 ms reports, H.264, no progress bar.
+    /// One 28 s revolution into `video`: homed first, 10 ms reports, H.264.
     pub fn new(video: impl Into<PathBuf>) -> Self {
         CaptureOptions {
             video: video.into(),
@@ -53,7 +48,6 @@ impl CaptureOptions {
             report_ms: 10,
             fourcc: ['a', 'v', 'c', '1'],
             no_progress: Duration::from_secs(3),
-            progress: false,
         }
     }
 }
@@ -76,9 +70,26 @@ pub struct CaptureSummary {
 /// Why a capture failed.
 #[derive(Debug, thiserror::Error)]
 pub enum CaptureError {
-    /// Failed before recording started; nothing was written.
+    /// The options cannot make a capture.
     #[error("capture could not start: {0}")]
-    Setup(String),
+    Invalid(String),
+    /// The table failed before recording started; nothing was written.
+    #[error("capture could not start: {0}")]
+    Table(#[source] TurntableError),
+    /// The output folder could not be created.
+    #[error("capture could not start: creating {path}: {source}")]
+    Folder {
+        /// The folder.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The video file could not be created.
+    #[error("capture could not start: {0}")]
+    Video(#[source] VideoError),
+    /// The sidecar could not be created.
+    #[error("capture could not start: {0}")]
+    Sidecar(#[source] SidecarError),
     /// Failed while recording; everything recorded so far was saved.
     #[error("{cause}; stopped at frame {frames} (table at {angle}); saved {video} and {sidecar}")]
     Stopped {
@@ -174,60 +185,39 @@ impl AngleTrack {
     }
 }
 
-/// Runs one capture.
+/// Runs one capture; `progress` counts frames.
 pub fn capture(
     table: &mut Turntable,
     cam: &mut dyn FrameSource,
     opts: &CaptureOptions,
+    progress: &dyn Progress,
     stop: &AtomicBool,
 ) -> Result<CaptureSummary, CaptureError> {
-    let setup = |e: &dyn std::fmt::Display| CaptureError::Setup(e.to_string());
     if !(opts.period_s.is_finite() && opts.period_s.abs() >= 0.5) || opts.turns == 0 {
-        return Err(CaptureError::Setup(format!(
+        return Err(CaptureError::Invalid(format!(
             "period {} s and {} turns: need |period| ≥ 0.5 s and at least one turn",
             opts.period_s, opts.turns
         )));
     }
     if opts.home {
-        let seq = table.command(Command::Home).map_err(|e| setup(&e))?;
-        table.wait_done(seq, opts.no_progress).map_err(|e| setup(&e))?;
+        let seq = table.command(Command::Home).map_err(CaptureError::Table)?;
+        table.wait_done(seq, opts.no_progress).map_err(CaptureError::Table)?;
     }
-    table.command_retry(Command::Report(opts.report_ms.max(1)), 3).map_err(|e| setup(&e))?;
+    table.command_retry(Command::Report(opts.report_ms.max(1)), 3).map_err(CaptureError::Table)?;
     let rev = table.usteps_per_rev() as f64;
     let (w, h) = cam.size();
     if let Some(dir) = opts.video.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(|e| setup(&format!("{}: {e}", dir.display())))?;
+        std::fs::create_dir_all(dir).map_err(|source| CaptureError::Folder { path: dir.into(), source })?;
     }
-    let [a, b, c, d] = opts.fourcc;
-    let fourcc = VideoWriter::fourcc(a, b, c, d).map_err(|e| setup(&e))?;
-    let mut writer = VideoWriter::new_with_backend(
-        &*opts.video.to_string_lossy(),
-        CAP_FFMPEG,
-        fourcc,
-        cam.fps(),
-        Size::new(w as i32, h as i32),
-        true,
-    )
-    .map_err(|e| setup(&e))?;
-    if !writer.is_opened().unwrap_or(false) {
-        return Err(CaptureError::Setup(format!(
-            "OpenCV cannot write {} with codec {}",
-            opts.video.display(),
-            opts.fourcc.iter().collect::<String>()
-        )));
-    }
+    let mut writer = VideoWriter::create(&opts.video, opts.fourcc, cam.fps(), (w, h)).map_err(CaptureError::Video)?;
     let side_path = sidecar::sidecar_path(&opts.video);
-    let mut side = sidecar::Writer::create(&side_path).map_err(|e| setup(&e))?;
+    let mut side = sidecar::Writer::create(&side_path).map_err(CaptureError::Sidecar)?;
 
     let period_ms = (opts.period_s * 1000.0).round() as i64;
-    let seq = table.command(Command::Spin { period_s: Milli(period_ms), turns: opts.turns }).map_err(|e| setup(&e))?;
+    let seq =
+        table.command(Command::Spin { period_s: Milli(period_ms), turns: opts.turns }).map_err(CaptureError::Table)?;
     let expected = (cam.fps() * opts.period_s.abs() * opts.turns as f64).round() as u64;
-    let bar = if opts.progress { ProgressBar::new(expected) } else { ProgressBar::hidden() };
-    bar.set_style(
-        ProgressStyle::with_template("recording [{bar:40}] {pos}/{len} frames {msg}")
-            .expect("static template")
-            .progress_chars("=> "),
-    );
+    progress.begin("recording", expected);
 
     let mut track = AngleTrack::default();
     let mut pending: VecDeque<(usize, Instant)> = VecDeque::new();
@@ -246,17 +236,13 @@ pub fn capture(
         }
         match cam.grab() {
             Ok(Some((f, at))) => {
-                let m = match frame_to_mat(&f) {
-                    Ok(m) => m,
-                    Err(e) => break Some(format!("frame {frames}: {e}")),
-                };
-                if let Err(e) = writer.write(&m) {
-                    break Some(format!("writing {}: {e}", opts.video.display()));
+                if let Err(e) = writer.write(&f) {
+                    break Some(format!("frame {frames}: {e}"));
                 }
                 first_at.get_or_insert(at);
                 pending.push_back((frames, at));
                 frames += 1;
-                bar.inc(1);
+                progress.advance(1);
             }
             Ok(None) => {
                 let _ = table.command(Command::Stop);
@@ -291,7 +277,7 @@ pub fn capture(
             }
             interpolated += 1;
             pending.pop_front();
-            bar.set_message(format!("{:.1}°", (pos * 360.0 / rev).rem_euclid(360.0)));
+            progress.status(&format!("{:.1}°", (pos * 360.0 / rev).rem_euclid(360.0)));
         }
         if track.finished && pending.is_empty() {
             break None;
@@ -300,7 +286,7 @@ pub fn capture(
             break Some(format!("turntable sent no angle report for {:?}", opts.no_progress));
         }
     };
-    bar.finish_and_clear();
+    progress.end(None);
     // Finalize whatever happened: remaining frames get the best estimate, files are closed.
     let mut last_angle = None;
     if let Some(first) = first_at {
@@ -311,7 +297,7 @@ pub fn capture(
             }
         }
     }
-    let released = writer.release();
+    let released = writer.finish();
     let summary = CaptureSummary {
         video: opts.video.clone(),
         sidecar: side_path.clone(),

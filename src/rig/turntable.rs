@@ -14,12 +14,12 @@ use turntable_proto::{Alarm, Command, ErrorCode, Frame, Reply, State};
 #[derive(Debug, thiserror::Error)]
 pub enum TurntableError {
     /// The port could not be opened.
-    #[error("cannot open turntable port {path}: {msg}")]
+    #[error("cannot open turntable port {path}: {source}")]
     Open {
         /// Port path.
         path: String,
-        /// Reason.
-        msg: String,
+        /// The serial library's error.
+        source: serialport::Error,
     },
     /// Something answered, but not as a pav turntable.
     #[error("{path}: no pav turntable answered within {after:?} (wrong port or baud rate, or firmware not running)")]
@@ -111,6 +111,8 @@ pub struct Turntable {
     timeout: Duration,
     /// Lines that did not parse (line noise), for diagnostics.
     pub garbage_lines: usize,
+    /// When the device last showed a motion is alive (`busy`, an angle report, `done`, an alarm).
+    last_alive: Instant,
 }
 
 /// A thread that reads the port and stamps every line with the instant it arrived, so the
@@ -181,14 +183,14 @@ fn open_port(path: &str, baud: u32) -> Result<Box<dyn SerialPort>> {
     serialport::new(path, baud)
         .timeout(Duration::from_millis(20))
         .open()
-        .map_err(|e| TurntableError::Open { path: path.into(), msg: e.to_string() })
+        .map_err(|e| TurntableError::Open { path: path.into(), source: e })
 }
 
 impl Turntable {
     /// Opens `path` and checks that a pav turntable answers; `timeout` bounds each command.
     pub fn open(path: &str, baud: u32, timeout: Duration) -> Result<Self> {
         let port = open_port(path, baud)?;
-        let reader = port.try_clone().map_err(|e| TurntableError::Open { path: path.into(), msg: e.to_string() })?;
+        let reader = port.try_clone().map_err(|e| TurntableError::Open { path: path.into(), source: e })?;
         let mut t = Turntable {
             lines: Some(Reader::spawn(reader, path.into())),
             port: Some(port),
@@ -200,6 +202,7 @@ impl Turntable {
             events: VecDeque::new(),
             timeout,
             garbage_lines: 0,
+            last_alive: Instant::now(),
         };
         t.handshake()?;
         Ok(t)
@@ -286,6 +289,9 @@ impl Turntable {
             }
             return None;
         };
+        if matches!(r, Reply::Angle { .. } | Reply::Done { .. } | Reply::Alarm(_) | Reply::Busy { .. }) {
+            self.last_alive = rx;
+        }
         match r {
             Reply::Angle { t_ms, pos } => self.events.push_back(Event::Angle { t_ms, pos, rx }),
             Reply::Done { seq, pos } => self.events.push_back(Event::Done { seq, pos }),
@@ -393,12 +399,28 @@ impl Turntable {
     /// Waits until the motion started by `seq` reports `done`; fails on an alarm or when nothing
     /// (no `busy`, no angle report) arrives for `no_progress`.
     pub fn wait_done(&mut self, seq: u32, no_progress: Duration) -> Result<i64> {
+        self.wait_done_or_stop(seq, no_progress, &AtomicBool::new(false))
+    }
+
+    /// [`Turntable::wait_done`], and when `stop` is raised (Ctrl-C) the table is told to ramp
+    /// down, once; the motion then ends with its `done` at wherever the table stopped.
+    pub fn wait_done_or_stop(&mut self, seq: u32, no_progress: Duration, stop: &AtomicBool) -> Result<i64> {
+        // Poll often enough to act on `stop` promptly.
+        const POLL: Duration = Duration::from_millis(100);
+        let start = Instant::now();
+        let mut stopping = false;
         loop {
-            match self.next_event(no_progress)? {
+            if !stopping && stop.load(Ordering::Relaxed) {
+                stopping = true;
+                self.command(Command::Stop)?;
+            }
+            match self.next_event(POLL.min(no_progress))? {
                 Some(Event::Done { seq: Some(s), pos }) if s == seq => return Ok(pos),
                 Some(Event::Alarm(a)) => return Err(TurntableError::Alarm(a)),
-                Some(_) => {}
-                None => return Err(TurntableError::NoProgress(no_progress)),
+                _ => {}
+            }
+            if self.last_alive.max(start).elapsed() >= no_progress {
+                return Err(TurntableError::NoProgress(no_progress));
             }
         }
     }
@@ -431,8 +453,7 @@ impl Turntable {
         self.port = None;
         for _ in 0..attempts.max(1) {
             match open_port(&self.path, self.baud).and_then(|p| {
-                let r =
-                    p.try_clone().map_err(|e| TurntableError::Open { path: self.path.clone(), msg: e.to_string() })?;
+                let r = p.try_clone().map_err(|e| TurntableError::Open { path: self.path.clone(), source: e })?;
                 Ok((p, r))
             }) {
                 Ok((p, r)) => {

@@ -18,6 +18,14 @@ pub enum DarknetError {
         /// Underlying error.
         source: std::io::Error,
     },
+    /// The converted model could not be written.
+    #[error("cannot write {path}: {source}")]
+    Write {
+        /// File or folder that failed.
+        path: std::path::PathBuf,
+        /// Underlying error.
+        source: std::io::Error,
+    },
     /// The cfg text is malformed.
     #[error("{path}:{line}: {msg}")]
     Cfg {

@@ -12,6 +12,41 @@ use crate::detect::onnx_proto::{Attr, InitData, Initializer, Model, Node, ValueI
 /// Name of the graph input.
 pub const INPUT_NAME: &str = "images";
 
+/// What [`convert`] wrote.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Converted {
+    /// Layers in the cfg.
+    pub layers: usize,
+    /// YOLO heads (graph outputs).
+    pub heads: usize,
+    /// Size of the ONNX file.
+    pub bytes: usize,
+}
+
+/// Converts the darknet `cfg` + `weights` files to an ONNX file at `out`, written under a
+/// temporary name and renamed, so an interrupted conversion never leaves half a model behind.
+pub fn convert(
+    cfg: &std::path::Path,
+    weights: &std::path::Path,
+    out: &std::path::Path,
+) -> Result<Converted, DarknetError> {
+    let net = Network::from_file(cfg)?;
+    let w = Weights::from_file(weights, &net)?;
+    let model = export(&net, &w)?;
+    let bytes = model.to_bytes();
+    let io = |path: &std::path::Path| {
+        let path = path.to_path_buf();
+        move |source| DarknetError::Write { path, source }
+    };
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(io(dir))?;
+    }
+    let tmp = out.with_extension("onnx.part");
+    std::fs::write(&tmp, &bytes).map_err(io(&tmp))?;
+    std::fs::rename(&tmp, out).map_err(io(out))?;
+    Ok(Converted { layers: net.layers.len(), heads: model.outputs.len(), bytes: bytes.len() })
+}
+
 /// Builds the ONNX model for `net` with `weights`.
 pub fn export(net: &Network, weights: &Weights) -> Result<Model, DarknetError> {
     let mut nodes = Vec::new();

@@ -1,13 +1,18 @@
-//! `pav eval-digital`: the paper's Table 2 on composites. Every view is composited with each
+//! The paper's Table 2 on composites (`pav eval-digital`). Every view is composited with each
 //! texture (lit, no EoT), quantized to 8 bits as a saved image would be, and scored by every
 //! ONNX detector; the white-box model is marked.
 
-use super::outputs::{composite, eval_scene};
-use super::setup::Setup;
-use super::view::View;
-use crate::detect::{Detector, Frame};
+use super::{create_dir, write_markdown, ExperimentError, Scoring};
+use crate::attack::config::OptimizeConfig;
+use crate::attack::setup::Setup;
+use crate::attack::view::View;
+use crate::detect::load::load_detectors;
+use crate::detect::Detector;
 use crate::eval::digital::{ap50, asr, ImageDetections};
-use crate::render::texture::to_u8;
+use crate::image::{to_u8, Frame, Rgb};
+use crate::progress::Progress;
+use crate::table::{unique, write_csv};
+use std::path::{Path, PathBuf};
 
 /// Lowest car score kept for P@0.5 (COCO evaluations keep low-scoring boxes for the PR curve).
 pub const AP_MIN_SCORE: f32 = 0.05;
@@ -40,7 +45,7 @@ pub struct DigitalRow {
 /// The composite of `view` with `tex` (or the photo itself) as an 8-bit BGR frame.
 fn frame(view: &View, tex: Option<&[f32]>, setup: &Setup) -> Frame {
     let img = match tex {
-        Some(t) => composite(view, t, &eval_scene(setup)),
+        Some(t) => view.composite(t, &setup.eval_scene()),
         None => view.photo.clone(),
     };
     Frame {
@@ -95,15 +100,16 @@ pub fn aggregate(
 }
 
 /// Scores every (detector, texture, split) of `setup`; `textures` pairs a name with a texture
-/// (`None` = the unmodified photo).
-pub fn evaluate(
+/// (`None` = the unmodified photo); `progress` counts composites.
+pub fn score_textures(
     setup: &Setup,
     detectors: &mut [Box<dyn Detector>],
     textures: &[(String, Option<Vec<f32>>)],
     threshold: f32,
     white_box: &str,
-    mut progress: impl FnMut(),
+    progress: &dyn Progress,
 ) -> Result<Vec<DigitalRow>, crate::detect::DetectError> {
+    progress.begin("composites", (textures.len() * (setup.train.len() + setup.test.len())) as u64);
     let mut rows = Vec::new();
     for (tname, tex) in textures {
         let mut per: Vec<Vec<(&'static str, ImageDetections)>> = vec![Vec::new(); detectors.len()];
@@ -112,7 +118,7 @@ pub fn evaluate(
                 for (d, im) in detect_view(v, tex.as_deref(), setup, detectors)?.into_iter().enumerate() {
                     per[d].push((split, im));
                 }
-                progress();
+                progress.advance(1);
             }
         }
         for (d, det) in detectors.iter().enumerate() {
@@ -123,7 +129,61 @@ pub fn evaluate(
             }
         }
     }
+    progress.end(None);
     Ok(rows)
+}
+
+/// `pav eval-digital`: the original paint, one random texture and each texture file in
+/// `textures` (named by its folder) on the views of `config`; writes `digital.csv` and
+/// `digital.md` into `out` and returns the Markdown.
+pub fn eval_digital(
+    config: &Path,
+    textures: &[PathBuf],
+    scoring: &Scoring,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<String, ExperimentError> {
+    let threshold = scoring.threshold;
+    let cfg = OptimizeConfig::load(config)?;
+    let setup = Setup::load_photos(&cfg, None)?;
+    let mut conditions: Vec<(String, Option<Vec<f32>>)> =
+        vec![("original".into(), None), ("random".into(), Some(setup.random_texture(setup.random_block(), 1)))];
+    for t in textures {
+        let tex = Rgb::load(t)?;
+        if (tex.width, tex.height) != (setup.tex_size, setup.tex_size) {
+            return Err(ExperimentError::Invalid(format!(
+                "{} is {}x{}, the config's texture is {}²",
+                t.display(),
+                tex.width,
+                tex.height,
+                setup.tex_size
+            )));
+        }
+        let name = t
+            .parent()
+            .and_then(|p| p.file_name())
+            .or(t.file_stem())
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| t.display().to_string());
+        conditions.push((name, Some(tex.rgb)));
+    }
+    let mut dets = load_detectors(&scoring.detectors, &[], 1)?;
+    let rows = score_textures(&setup, &mut dets, &conditions, threshold, &scoring.white_box, progress)?;
+    create_dir(out)?;
+    write_csv(&out.join("digital.csv"), &rows)?;
+    let mut md = format!(
+        "# Digital evaluation (ASR / P@0.5 in %, * = white-box)\n\nCar = COCO `car`; detected above score {threshold}; P@0.5 is car AP at IoU 0.5 over boxes from score {AP_MIN_SCORE}. Views composited at {}² (lit, no EoT), 8-bit. Config: {}.\n",
+        cfg.views.size,
+        config.display()
+    );
+    for (split, title) in [("train", "training views"), ("test", "held-out views"), ("all", "all views")] {
+        if rows.iter().any(|r| r.split == split) {
+            let n = rows.iter().find(|r| r.split == split).map(|r| r.images).unwrap_or(0);
+            md.push_str(&format!("\n## {title} ({n})\n\n{}", markdown(&rows, split)));
+        }
+    }
+    write_markdown(out, "digital.md", &md)?;
+    Ok(md)
 }
 
 /// The table in the paper's shape: detectors down, textures across, "ASR / P@0.5" in percent,
@@ -138,8 +198,8 @@ pub fn markdown_scores(rows: &[DigitalRow], split: &str) -> String {
 }
 
 fn table(rows: &[DigitalRow], split: &str, cell: impl Fn(&DigitalRow, &str) -> String) -> String {
-    let textures = crate::eval::report::unique(rows.iter().map(|r| r.texture.clone()));
-    let detectors = crate::eval::report::unique(rows.iter().map(|r| (r.detector.clone(), r.white_box)));
+    let textures = unique(rows.iter().map(|r| r.texture.clone()));
+    let detectors = unique(rows.iter().map(|r| (r.detector.clone(), r.white_box)));
     let mut s = format!("| detector | {} |\n|---|{}\n", textures.join(" | "), "---|".repeat(textures.len()));
     for (d, wb) in &detectors {
         s.push_str(&format!("| {d}{} |", if *wb { " (white-box)" } else { "" }));

@@ -1,6 +1,6 @@
-//! PNG plots: detector score vs turntable angle (polar) and A_physical bars per detector.
+//! PNG charts from plain data: scores on a polar dial, grouped bars with whiskers, labelled
+//! lines, and optimization curves. Callers turn their records into these shapes.
 
-use super::report::{unique, SummaryRow};
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -10,15 +10,15 @@ use std::sync::Once;
 
 /// Errors drawing a plot.
 #[derive(Debug, thiserror::Error)]
-#[error("plot {path}: {msg}")]
+#[error("plot {path}: {source}")]
 pub struct PlotError {
     /// Output file.
-    pub path: String,
-    /// Reason.
-    pub msg: String,
+    pub path: std::path::PathBuf,
+    /// The drawing backend's error.
+    pub source: Box<dyn std::error::Error + Send + Sync>,
 }
 
-type R<T> = Result<T, Box<dyn std::error::Error>>;
+type R<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
 
 const PALETTE: [RGBColor; 8] = [
     RGBColor(31, 119, 180),
@@ -31,8 +31,8 @@ const PALETTE: [RGBColor; 8] = [
     RGBColor(127, 127, 127),
 ];
 
-/// Colour `i` of the report palette.
-pub fn colour(i: usize) -> RGBColor {
+/// Colour `i` of the palette.
+fn colour(i: usize) -> RGBColor {
     PALETTE[i % PALETTE.len()]
 }
 
@@ -45,7 +45,7 @@ fn fonts() {
 }
 
 fn wrap(path: &Path, r: R<()>) -> Result<(), PlotError> {
-    r.map_err(|e| PlotError { path: path.display().to_string(), msg: e.to_string() })
+    r.map_err(|source| PlotError { path: path.into(), source })
 }
 
 type Chart<'a> = ChartContext<'a, BitMapBackend<'a>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
@@ -57,7 +57,7 @@ fn finish(ch: &mut Chart<'_>, root: &DrawingArea<BitMapBackend<'_>, Shift>, pos:
     Ok(())
 }
 
-/// One detector's scores by angle.
+/// One series of scores by angle.
 pub struct ScoreSeries {
     /// Legend label.
     pub label: String,
@@ -113,59 +113,72 @@ pub fn polar_scores(path: &Path, title: &str, series: &[ScoreSeries], threshold:
     )
 }
 
-/// Grouped bars: A_physical (%) per detector, one bar per video, with 95 % Wilson whiskers.
-pub fn accuracy_bars(path: &Path, rows: &[SummaryRow], threshold: f32) -> Result<(), PlotError> {
+/// One bar of a [`BarSeries`].
+pub struct Bar {
+    /// Index of its group (a tick on the x axis).
+    pub group: usize,
+    /// Height.
+    pub value: f64,
+    /// Whisker (low, high), e.g. a confidence interval.
+    pub whisker: Option<(f64, f64)>,
+}
+
+/// One colour of grouped bars.
+pub struct BarSeries {
+    /// Legend label.
+    pub label: String,
+    /// Its bars, drawn in this order.
+    pub bars: Vec<Bar>,
+}
+
+/// Grouped bars on a 0–105 axis: one tick per group, one colour per series, with whiskers.
+pub fn grouped_bars(
+    path: &Path,
+    caption: &str,
+    y_desc: &str,
+    groups: &[String],
+    series: &[BarSeries],
+) -> Result<(), PlotError> {
     fonts();
-    let dets = unique(rows.iter().map(|r| r.detector.as_str()));
-    let vids = unique(rows.iter().map(|r| r.video.as_str()));
     wrap(
         path,
         (|| -> R<()> {
-            let w = (220 * dets.len().max(1) + 200).max(700) as u32;
+            let w = (220 * groups.len().max(1) + 200).max(700) as u32;
             let root = BitMapBackend::new(path, (w, 520)).into_drawing_area();
             root.fill(&WHITE)?;
-            let n = dets.len() as f64;
+            let n = groups.len() as f64;
             let mut ch = ChartBuilder::on(&root)
-                .caption(format!("A_physical per detector (threshold {threshold})"), ("sans-serif", 22))
+                .caption(caption, ("sans-serif", 22))
                 .margin(15)
                 .x_label_area_size(40)
                 .y_label_area_size(55)
                 .build_cartesian_2d(0f64..n, 0f64..105f64)?;
-            let labels = dets.clone();
             ch.configure_mesh()
                 .disable_x_mesh()
-                .x_labels(dets.len() * 2 + 1)
+                .x_labels(groups.len() * 2 + 1)
                 .x_label_formatter(&|x| {
                     let k = x.floor() as usize;
-                    if (x - k as f64 - 0.5).abs() < 0.26 && k < labels.len() {
-                        labels[k].to_string()
+                    if (x - k as f64 - 0.5).abs() < 0.26 && k < groups.len() {
+                        groups[k].to_string()
                     } else {
                         String::new()
                     }
                 })
-                .y_desc("A_physical [%]")
+                .y_desc(y_desc)
                 .draw()?;
-            let gw = 0.8 / vids.len().max(1) as f64;
-            for (vi, v) in vids.iter().enumerate() {
-                let c = colour(vi);
-                let bars: Vec<_> = rows
-                    .iter()
-                    .filter(|r| r.video == *v)
-                    .filter_map(|r| {
-                        let di = dets.iter().position(|d| *d == r.detector)?;
-                        let x0 = di as f64 + 0.1 + vi as f64 * gw;
-                        Some((x0, r))
-                    })
-                    .collect();
-                ch.draw_series(bars.iter().map(|(x0, r)| {
-                    Rectangle::new([(*x0, 0.0), (x0 + gw * 0.9, 100.0 * r.accuracy.rate().unwrap_or(0.0))], c.filled())
-                }))?
-                .label(v.to_string())
+            let gw = 0.8 / series.len().max(1) as f64;
+            for (si, s) in series.iter().enumerate() {
+                let c = colour(si);
+                let x0 = |b: &Bar| b.group as f64 + 0.1 + si as f64 * gw;
+                ch.draw_series(
+                    s.bars.iter().map(|b| Rectangle::new([(x0(b), 0.0), (x0(b) + gw * 0.9, b.value)], c.filled())),
+                )?
+                .label(s.label.clone())
                 .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], c.filled()));
-                for (x0, r) in &bars {
-                    if let Some((lo, hi)) = r.accuracy.wilson(super::physical::Z95) {
-                        let xm = x0 + gw * 0.45;
-                        ch.draw_series(LineSeries::new([(xm, 100.0 * lo), (xm, 100.0 * hi)], BLACK.stroke_width(2)))?;
+                for b in &s.bars {
+                    if let Some((lo, hi)) = b.whisker {
+                        let xm = x0(b) + gw * 0.45;
+                        ch.draw_series(LineSeries::new([(xm, lo), (xm, hi)], BLACK.stroke_width(2)))?;
                     }
                 }
             }
@@ -174,37 +187,45 @@ pub fn accuracy_bars(path: &Path, rows: &[SummaryRow], threshold: f32) -> Result
     )
 }
 
-/// Accuracy-vs-time scatter: one series per (detector, input size), one point per stride.
-pub fn tradeoff(path: &Path, rows: &[super::bench::Tradeoff]) -> Result<(), PlotError> {
+/// One line of [`labelled_lines`]: points (x, y, label).
+pub struct LabelledLine {
+    /// Legend label.
+    pub label: String,
+    /// Points in drawing order, each with a text label.
+    pub points: Vec<(f64, f64, String)>,
+}
+
+/// Lines with a labelled dot at every point, on a 0–105 y axis and an x axis from 0 to 1.1 × the
+/// largest x.
+pub fn labelled_lines(
+    path: &Path,
+    caption: &str,
+    (x_desc, y_desc): (&str, &str),
+    lines: &[LabelledLine],
+) -> Result<(), PlotError> {
     fonts();
-    let keys = unique(rows.iter().map(|r| (r.detector.clone(), r.input.clone())));
-    let tmax = rows.iter().map(|r| r.seconds).fold(0.0, f64::max) * 1.1 + 1e-3;
+    let xmax = lines.iter().flat_map(|l| l.points.iter().map(|p| p.0)).fold(0.0, f64::max) * 1.1 + 1e-3;
     wrap(
         path,
         (|| -> R<()> {
             let root = BitMapBackend::new(path, (900, 560)).into_drawing_area();
             root.fill(&WHITE)?;
             let mut ch = ChartBuilder::on(&root)
-                .caption("What accuracy costs in time (labels: stride)", ("sans-serif", 22))
+                .caption(caption, ("sans-serif", 22))
                 .margin(15)
                 .x_label_area_size(45)
                 .y_label_area_size(60)
-                .build_cartesian_2d(0f64..tmax, 0f64..105f64)?;
-            ch.configure_mesh().x_desc("seconds per video").y_desc("A_physical [%]").draw()?;
-            for (i, (d, inp)) in keys.iter().enumerate() {
+                .build_cartesian_2d(0f64..xmax, 0f64..105f64)?;
+            ch.configure_mesh().x_desc(x_desc).y_desc(y_desc).draw()?;
+            for (i, l) in lines.iter().enumerate() {
                 let c = colour(i);
-                let pts: Vec<&super::bench::Tradeoff> =
-                    rows.iter().filter(|r| &r.detector == d && &r.input == inp).collect();
-                ch.draw_series(LineSeries::new(
-                    pts.iter().map(|r| (r.seconds, 100.0 * r.a_physical)),
-                    c.stroke_width(2),
-                ))?
-                .label(format!("{d} {inp}"))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-                for r in pts {
-                    let p = (r.seconds, 100.0 * r.a_physical);
+                ch.draw_series(LineSeries::new(l.points.iter().map(|p| (p.0, p.1)), c.stroke_width(2)))?
+                    .label(l.label.clone())
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+                for (x, y, text) in &l.points {
+                    let p = (*x, *y);
                     ch.draw_series(std::iter::once(Circle::new(p, 4, c.filled())))?;
-                    ch.draw_series(std::iter::once(Text::new(format!("{}", r.stride), p, ("sans-serif", 14))))?;
+                    ch.draw_series(std::iter::once(Text::new(text.clone(), p, ("sans-serif", 14))))?;
                 }
             }
             finish(&mut ch, &root, SeriesLabelPosition::LowerRight)

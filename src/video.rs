@@ -1,35 +1,71 @@
-//! Video decoding (OpenCV) into BGR frames, with clear errors for missing or unreadable files.
+//! Video files through OpenCV: decoding into BGR frames (with a prefetching decoder thread) and
+//! encoding frames, with errors that name the file and keep OpenCV's cause.
 
-use crate::detect::Frame;
-use opencv::core::Mat;
+use crate::image::Frame;
+use opencv::core::{Mat, Size};
 use opencv::prelude::*;
-use opencv::videoio::{self, VideoCapture};
+use opencv::videoio::{self, VideoCapture, CAP_FFMPEG};
 use std::path::{Path, PathBuf};
 
-/// Errors opening or decoding a video.
+/// Errors opening, decoding or encoding a video.
 #[derive(Debug, thiserror::Error)]
 pub enum VideoError {
     /// The file does not exist.
     #[error("video {0} does not exist")]
     Missing(PathBuf),
-    /// OpenCV could not open it (corrupt, truncated before the index, or unsupported).
-    #[error("video {path} cannot be opened: {why}")]
+    /// OpenCV failed while opening the file.
+    #[error("video {path} cannot be opened: {source}")]
+    Open {
+        /// Video path.
+        path: PathBuf,
+        /// OpenCV's error.
+        source: opencv::Error,
+    },
+    /// OpenCV opened nothing (corrupt, truncated before the index, or unsupported).
+    #[error("video {path} cannot be opened: not a readable video (corrupt, truncated or unsupported format)")]
     Unreadable {
         /// Video path.
         path: PathBuf,
-        /// Reason.
-        why: String,
     },
     /// Decoding failed mid-stream.
-    #[error("video {path}: decoding failed at frame {frame}: {why}")]
+    #[error("video {path}: decoding failed at frame {frame}: {source}")]
     Decode {
         /// Video path.
         path: PathBuf,
         /// Frame index that failed.
         frame: usize,
-        /// Reason.
-        why: String,
+        /// Why.
+        source: MatError,
     },
+    /// The encoder could not be created for this file and codec.
+    #[error("OpenCV cannot write {path} with codec {codec}")]
+    Encoder {
+        /// Video path.
+        path: PathBuf,
+        /// FourCC.
+        codec: String,
+        /// OpenCV's error, when it gave one.
+        source: Option<opencv::Error>,
+    },
+    /// Writing or closing the file failed.
+    #[error("writing {path}: {source}")]
+    Write {
+        /// Video path.
+        path: PathBuf,
+        /// Why.
+        source: MatError,
+    },
+}
+
+/// Errors converting between OpenCV matrices and [`Frame`]s.
+#[derive(Debug, thiserror::Error)]
+pub enum MatError {
+    /// OpenCV itself failed.
+    #[error(transparent)]
+    OpenCv(#[from] opencv::Error),
+    /// A pixel type other than 8-bit BGR or grey.
+    #[error("unsupported pixel type {0} (need 8-bit BGR)")]
+    PixelType(i32),
 }
 
 /// Stream properties as the container declares them.
@@ -60,11 +96,10 @@ impl VideoReader {
         if !path.exists() {
             return Err(VideoError::Missing(path.into()));
         }
-        let unreadable = |why: String| VideoError::Unreadable { path: path.into(), why };
-        let cap =
-            VideoCapture::from_file(path.as_os_str(), videoio::CAP_FFMPEG).map_err(|e| unreadable(e.to_string()))?;
+        let cap = VideoCapture::from_file(path.as_os_str(), videoio::CAP_FFMPEG)
+            .map_err(|source| VideoError::Open { path: path.into(), source })?;
         if !cap.is_opened().unwrap_or(false) {
-            return Err(unreadable("not a readable video (corrupt, truncated or unsupported format)".into()));
+            return Err(VideoError::Unreadable { path: path.into() });
         }
         let prop = |p| cap.get(p).unwrap_or(0.0);
         let fps = prop(videoio::CAP_PROP_FPS);
@@ -84,7 +119,7 @@ impl VideoReader {
 
     /// Skips one frame without converting it; `false` at end of stream.
     pub fn skip(&mut self) -> Result<bool, VideoError> {
-        let ok = self.cap.grab().map_err(|e| self.decode_err(e.to_string()))?;
+        let ok = self.cap.grab().map_err(|e| self.decode_err(e.into()))?;
         if ok {
             self.next += 1;
         }
@@ -93,37 +128,37 @@ impl VideoReader {
 
     /// Decodes the next frame; `None` at end of stream.
     pub fn read(&mut self) -> Result<Option<(usize, Frame)>, VideoError> {
-        if !self.cap.read(&mut self.mat).map_err(|e| self.decode_err(e.to_string()))? || self.mat.empty() {
+        if !self.cap.read(&mut self.mat).map_err(|e| self.decode_err(e.into()))? || self.mat.empty() {
             return Ok(None);
         }
         let idx = self.next;
         self.next += 1;
-        let frame = mat_to_frame(&self.mat).map_err(|why| self.decode_err(why))?;
+        let frame = mat_to_frame(&self.mat).map_err(|e| self.decode_err(e))?;
         Ok(Some((idx, frame)))
     }
 
-    fn decode_err(&self, why: String) -> VideoError {
-        VideoError::Decode { path: self.path.clone(), frame: self.next, why }
+    fn decode_err(&self, source: MatError) -> VideoError {
+        VideoError::Decode { path: self.path.clone(), frame: self.next, source }
     }
 }
 
 /// Copies an 8-bit BGR (or grey) OpenCV matrix into a [`Frame`].
-pub fn mat_to_frame(m: &Mat) -> Result<Frame, String> {
+pub fn mat_to_frame(m: &Mat) -> Result<Frame, MatError> {
     let (w, h) = (m.cols() as usize, m.rows() as usize);
     let bgr = match m.typ() {
         t if t == opencv::core::CV_8UC3 => contiguous(m)?.to_vec(),
         t if t == opencv::core::CV_8UC1 => contiguous(m)?.iter().flat_map(|&g| [g, g, g]).collect(),
-        t => return Err(format!("unsupported pixel type {t} (need 8-bit BGR)")),
+        t => return Err(MatError::PixelType(t)),
     };
     Ok(Frame { width: w, height: h, bgr })
 }
 
-fn contiguous(m: &Mat) -> Result<std::borrow::Cow<'_, [u8]>, String> {
+fn contiguous(m: &Mat) -> opencv::Result<std::borrow::Cow<'_, [u8]>> {
     if m.is_continuous() {
-        Ok(std::borrow::Cow::Borrowed(m.data_bytes().map_err(|e| e.to_string())?))
+        Ok(std::borrow::Cow::Borrowed(m.data_bytes()?))
     } else {
-        let owned = m.try_clone().map_err(|e| e.to_string())?;
-        Ok(std::borrow::Cow::Owned(owned.data_bytes().map_err(|e| e.to_string())?.to_vec()))
+        let owned = m.try_clone()?;
+        Ok(std::borrow::Cow::Owned(owned.data_bytes()?.to_vec()))
     }
 }
 
@@ -132,6 +167,45 @@ pub fn frame_to_mat(f: &Frame) -> opencv::Result<Mat> {
     let flat = Mat::from_slice(&f.bgr)?;
     let m = flat.reshape(3, f.height as i32)?;
     m.try_clone()
+}
+
+/// Encodes frames into a video file as they come (OpenCV's FFmpeg backend).
+pub struct VideoWriter {
+    inner: videoio::VideoWriter,
+    path: PathBuf,
+}
+
+impl VideoWriter {
+    /// Creates `path` for `width × height` frames at `fps` with codec `fourcc` (e.g. `avc1`).
+    pub fn create(
+        path: &Path,
+        fourcc: [char; 4],
+        fps: f64,
+        (width, height): (usize, usize),
+    ) -> Result<Self, VideoError> {
+        let encoder = |source| VideoError::Encoder { path: path.into(), codec: fourcc.iter().collect(), source };
+        let [a, b, c, d] = fourcc;
+        let code = videoio::VideoWriter::fourcc(a, b, c, d).map_err(|e| encoder(Some(e)))?;
+        let size = Size::new(width as i32, height as i32);
+        let inner = videoio::VideoWriter::new_with_backend(&*path.to_string_lossy(), CAP_FFMPEG, code, fps, size, true)
+            .map_err(|e| encoder(Some(e)))?;
+        if !inner.is_opened().unwrap_or(false) {
+            return Err(encoder(None));
+        }
+        Ok(VideoWriter { inner, path: path.into() })
+    }
+
+    /// Appends one frame.
+    pub fn write(&mut self, f: &Frame) -> Result<(), VideoError> {
+        let write_err = |source: MatError| VideoError::Write { path: self.path.clone(), source };
+        let m = frame_to_mat(f).map_err(|e| write_err(e.into()))?;
+        self.inner.write(&m).map_err(|e| write_err(e.into()))
+    }
+
+    /// Finalizes the file (the container's index is written here).
+    pub fn finish(mut self) -> Result<(), VideoError> {
+        self.inner.release().map_err(|e| VideoError::Write { path: self.path.clone(), source: e.into() })
+    }
 }
 
 /// What the prefetching decoder hands over next.

@@ -1,7 +1,7 @@
-//! Loading detectors from config files and folders of them.
+//! Loading ONNX detectors from config files and folders of them.
 
-use crate::detect::onnx::OnnxDetector;
-use crate::detect::{DetectError, Detector, DetectorConfig};
+use super::onnx::OnnxDetector;
+use super::{DetectError, Detector, DetectorConfig};
 use std::path::PathBuf;
 
 fn config_error(path: &std::path::Path, msg: String) -> DetectError {

@@ -4,17 +4,23 @@
 //! other folds and scored on the held-out views by every detector, next to the photo and
 //! several random textures.
 
-use super::config::OptimizeConfig;
-use super::digital::{aggregate, detect_view, DigitalRow};
-use super::optimize::{run, Finish, OptimizeError, RunOptions};
-use super::setup::Setup;
-use super::view::View;
-use super::whitebox::WhiteBox;
+use super::table2::{aggregate, detect_view, markdown, markdown_scores, DigitalRow, AP_MIN_SCORE};
+use super::{create_dir, write_markdown, ExperimentError, Scoring};
+use crate::attack::config::OptimizeConfig;
+use crate::attack::optimize::{optimize_texture, Finish, RunOptions};
+use crate::attack::setup::Setup;
+use crate::attack::view::View;
+use crate::attack::whitebox::WhiteBox;
+use crate::detect::load::load_detectors;
 use crate::detect::Detector;
 use crate::eval::digital::ImageDetections;
+use crate::image::save_rgb;
+use crate::progress::{Progress, Silent};
+use crate::table::write_csv;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
+use std::time::Instant;
 
 /// Options of a cross-validation.
 #[derive(Clone, Debug)]
@@ -58,7 +64,7 @@ pub fn fold_split(n: usize, k: usize, f: usize) -> (Vec<usize>, Vec<usize>) {
 }
 
 /// Runs every fold; returns the pooled table rows (splits "held-out" and "train") and the
-/// per-view records. `progress(fold, stage)` reports "optimizing", "scoring" and "done".
+/// per-view records. `progress` counts two units per fold (scored, done) and shows the stage.
 #[allow(clippy::too_many_arguments)]
 pub fn crossval(
     cfg_path: &Path,
@@ -67,14 +73,19 @@ pub fn crossval(
     wb: &WhiteBox,
     detectors: &mut [Box<dyn Detector>],
     opts: &CrossvalOptions,
+    progress: &dyn Progress,
     stop: &AtomicBool,
-    mut progress: impl FnMut(usize, &str),
-) -> Result<(Vec<DigitalRow>, Vec<ViewRecord>), OptimizeError> {
+) -> Result<(Vec<DigitalRow>, Vec<ViewRecord>), ExperimentError> {
     let all: Vec<&View> = setup.train.iter().chain(&setup.test).collect();
     let k = opts.folds;
     if k < 2 || k > all.len() {
-        return Err(OptimizeError::Other(format!("folds must be in 2..={} (the number of views), got {k}", all.len())));
+        return Err(ExperimentError::Invalid(format!(
+            "folds must be in 2..={} (the number of views), got {k}",
+            all.len()
+        )));
     }
+    progress.begin("folds", 2 * k as u64);
+    let stage = |f: usize, s: &str| progress.status(&format!("fold {}/{k}: {s}", f + 1));
     // (role, texture, detector index) → detections, pooled over folds and seeds.
     let mut pooled: HashMap<(&'static str, &'static str, usize), Vec<ImageDetections>> = HashMap::new();
     let mut records = Vec::new();
@@ -88,25 +99,22 @@ pub fn crossval(
             synthetic,
             te.iter().map(|&i| all[i].clone()).collect(),
         );
-        progress(f, "optimizing");
+        stage(f, "optimizing");
         let ro = RunOptions {
             out: opts.out.join(format!("fold{f}of{k}")),
             resume: true,
             checkpoint_every: 20,
             max_skips: 5,
             epochs: None,
-            progress: false,
         };
-        let o = run(cfg_path, cfg, &fs, wb, &ro, stop)?;
+        let o = optimize_texture(cfg_path, cfg, &fs, wb, &ro, &Silent, stop)?;
         if matches!(o.finish, Finish::Stopped) {
-            return Err(OptimizeError::Other(format!(
-                "stopped in fold {f}; run again to resume from {}",
-                ro.out.display()
-            )));
+            progress.end(Some("stopped"));
+            return Err(ExperimentError::Stopped(ro.out));
         }
-        crate::render::texture::save_rgb(&ro.out.join("texture.png"), fs.tex_size, fs.tex_size, &o.texture)
-            .map_err(OptimizeError::Other)?;
-        progress(f, "scoring");
+        save_rgb(&ro.out.join("texture.png"), fs.tex_size, fs.tex_size, &o.texture)?;
+        stage(f, "scoring");
+        progress.advance(1);
         let mut textures: Vec<(&'static str, u64, Option<Vec<f32>>)> =
             vec![("original", 0, None), ("optimized", 0, Some(o.texture))];
         for s in 0..opts.random_seeds {
@@ -116,8 +124,7 @@ pub fn crossval(
         for (role, views) in [("train", &fs.train), ("held-out", &fs.test)] {
             for v in views.iter() {
                 for (tname, seed, tex) in &textures {
-                    let dets = detect_view(v, tex.as_deref(), &fs, detectors)
-                        .map_err(|e| OptimizeError::Other(format!("fold {f}, view {}: {e}", v.name)))?;
+                    let dets = detect_view(v, tex.as_deref(), &fs, detectors)?;
                     for (d, im) in dets.into_iter().enumerate() {
                         records.push(ViewRecord {
                             fold: f,
@@ -133,8 +140,10 @@ pub fn crossval(
                 }
             }
         }
-        progress(f, "done");
+        stage(f, "done");
+        progress.advance(1);
     }
+    progress.end(None);
     let mut rows = Vec::new();
     for tname in ["original", "random", "optimized"] {
         for (d, det) in detectors.iter().enumerate() {
@@ -145,6 +154,61 @@ pub fn crossval(
         }
     }
     Ok((rows, records))
+}
+
+/// `pav crossval`: cross-validates `config` with `folds` folds (default: leave-one-out) and
+/// `random_seeds` random textures per fold; writes `crossval.csv`, `crossval_views.csv`,
+/// `crossval.md` and a folder per fold into `out` (finished folds resume), and returns the
+/// Markdown.
+pub fn crossval_report(
+    config: &Path,
+    folds: Option<usize>,
+    random_seeds: u64,
+    scoring: &Scoring,
+    out: &Path,
+    progress: &dyn Progress,
+    stop: &AtomicBool,
+) -> Result<String, ExperimentError> {
+    let threshold = scoring.threshold;
+    let cfg = OptimizeConfig::load(config)?;
+    let setup = Setup::load_photos(&cfg, None)?;
+    let wb = WhiteBox::load(&cfg.detector, cfg.views.size)?;
+    let mut dets = load_detectors(&scoring.detectors, &[], 1)?;
+    let n = setup.train.len() + setup.test.len();
+    let k = folds.unwrap_or(n);
+    create_dir(out)?;
+    let opts = CrossvalOptions {
+        folds: k,
+        random_seeds,
+        random_block: setup.random_block(),
+        out: out.to_path_buf(),
+        threshold,
+        white_box: scoring.white_box.clone(),
+    };
+    let t = Instant::now();
+    let (rows, records) = crossval(config, &cfg, &setup, &wb, &mut dets, &opts, progress, stop)?;
+    write_csv(&out.join("crossval.csv"), &rows)?;
+    write_csv(&out.join("crossval_views.csv"), &records)?;
+    let mut md = format!(
+        "# Cross-validation, {k} folds over {n} views ({:.0} s)\n\nEach texture is optimized on the other folds' views{} ({}, {} epochs) and scored on its held-out views; \"random\" pools {random_seeds} random textures of {}-texel blocks per fold. Car detected above {threshold}; P@0.5 over boxes from score {AP_MIN_SCORE}; * = white-box.\n",
+        t.elapsed().as_secs_f64(),
+        if cfg.views.turns.is_empty() {
+            String::new()
+        } else {
+            format!(" and their synthetic turns by {:?}° (baked from that fold's photos; scores are photos only)", cfg.views.turns)
+        },
+        config.display(),
+        cfg.optimizer.epochs,
+        setup.random_block(),
+    );
+    for (split, title) in
+        [("held-out", "held-out views"), ("train", "training views (each view once per fold it trained in)")]
+    {
+        md.push_str(&format!("\n## {title}: ASR / P@0.5 (%)\n\n{}", markdown(&rows, split)));
+        md.push_str(&format!("\n## {title}: mean best car score\n\n{}", markdown_scores(&rows, split)));
+    }
+    write_markdown(out, "crossval.md", &md)?;
+    Ok(md)
 }
 
 #[cfg(test)]

@@ -1,0 +1,57 @@
+//! `pav-rig bench`.
+
+use crate::common::Bar;
+use anyhow::{bail, Result};
+use pav::detect::load::expand_configs;
+use pav::eval::bench::{bench_evaluate, BenchOptions};
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Video to score.
+    #[arg(long, default_value = "fixtures/carla_orbit.mp4")]
+    video: PathBuf,
+    /// Detector configs or directories of them (default: configs/detectors).
+    #[arg(long = "detector", short = 'd')]
+    detectors: Vec<PathBuf>,
+    /// Strides for the trade-off.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,4,8")]
+    strides: Vec<usize>,
+    /// Second input size, for models that accept any input size.
+    #[arg(long, default_value_t = 320)]
+    alt_size: usize,
+    /// ONNX Runtime intra-op threads (0 = runtime default).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Timed repetitions; the fastest is kept.
+    #[arg(long, default_value_t = 3)]
+    repeats: usize,
+    /// Score threshold.
+    #[arg(long, default_value_t = 0.5)]
+    threshold: f32,
+    /// Output directory.
+    #[arg(long, short = 'o', default_value = "bench")]
+    out: PathBuf,
+}
+
+pub fn run(b: &Args) -> Result<()> {
+    let given = if b.detectors.is_empty() { vec![PathBuf::from("configs/detectors")] } else { b.detectors.clone() };
+    if b.strides.is_empty() || b.strides.contains(&0) {
+        bail!("--strides must be positive, got {:?}", b.strides);
+    }
+    let opts = BenchOptions {
+        video: b.video.clone(),
+        detectors: expand_configs(&given)?,
+        strides: b.strides.clone(),
+        alt_size: Some(b.alt_size),
+        threads: b.threads,
+        repeats: b.repeats,
+        threshold: b.threshold,
+        out_dir: b.out.clone(),
+    };
+    bench_evaluate(&opts, &Bar::default())?;
+    for f in ["throughput.csv", "tradeoff.csv", "tradeoff.png"] {
+        eprintln!("wrote {}", b.out.join(f).display());
+    }
+    Ok(())
+}

@@ -1,0 +1,72 @@
+//! `pav-rig capture`.
+
+use crate::common::{ctrl_c_flag, Bar};
+use crate::port::{connect, parse_signed_seconds, PortArgs};
+use anyhow::{bail, Result};
+use pav::rig::camera::open_source;
+use pav::rig::capture::{capture, CaptureOptions};
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(flatten)]
+    port: PortArgs,
+    /// Frame source: `v4l2:/dev/video0`, `file:VIDEO`, `gst-test` or `sim` (needs --port sim).
+    #[arg(long, default_value = "v4l2:/dev/video0")]
+    camera: String,
+    /// Output video; the sidecar goes beside it as NAME.angles.csv.
+    #[arg(long, short = 'o')]
+    out: PathBuf,
+    /// Seconds per revolution.
+    #[arg(long, default_value = "28s", value_parser = parse_signed_seconds, allow_hyphen_values = true)]
+    period: f64,
+    /// Revolutions to record.
+    #[arg(long, default_value_t = 1)]
+    turns: u32,
+    /// Do not home before recording.
+    #[arg(long)]
+    no_home: bool,
+    /// Requested camera width.
+    #[arg(long, default_value_t = 1280)]
+    width: usize,
+    /// Requested camera height.
+    #[arg(long, default_value_t = 720)]
+    height: usize,
+    /// Requested camera frame rate.
+    #[arg(long, default_value_t = 30.0)]
+    fps: f64,
+    /// Video codec FourCC (avc1 = H.264, mp4v = MPEG-4 part 2).
+    #[arg(long, default_value = "avc1")]
+    codec: String,
+}
+
+pub fn run(a: &Args) -> Result<()> {
+    let codec: Vec<char> = a.codec.chars().collect();
+    let [c0, c1, c2, c3] = codec[..] else {
+        bail!("--codec must be a 4-character FourCC like avc1, got `{}`", a.codec)
+    };
+    if a.camera == "sim" && a.port.port != "sim" {
+        bail!("--camera sim films the simulated turntable: use it with --port sim");
+    }
+    let (sim, mut table) = connect(&a.port)?;
+    let mut cam = open_source(&a.camera, sim.as_ref().map(|s| s.truth()), (a.width, a.height), a.fps)?;
+    let (w, h) = cam.size();
+    eprintln!("camera: {} {w}x{h} at {:.1} fps", cam.describe(), cam.fps());
+    let opts = CaptureOptions {
+        period_s: a.period,
+        turns: a.turns,
+        home: !a.no_home,
+        fourcc: [c0, c1, c2, c3],
+        ..CaptureOptions::new(&a.out)
+    };
+    let stop = ctrl_c_flag()?;
+    let sum = capture(&mut table, cam.as_mut(), &opts, &Bar::default(), &stop)?;
+    println!(
+        "recorded {} frames ({} with angles between reports), table ended at {:.3}°",
+        sum.frames,
+        sum.interpolated,
+        sum.final_deg.unwrap_or(f64::NAN)
+    );
+    println!("video   {}\nsidecar {}", sum.video.display(), sum.sidecar.display());
+    Ok(())
+}

@@ -1,0 +1,112 @@
+//! `pav-rig evaluate`.
+
+use crate::common::{ctrl_c_flag, Bar};
+use crate::port::parse_seconds;
+use anyhow::{bail, Result};
+use pav::detect::load::load_detectors;
+use pav::eval::report::summary_table;
+use pav::eval::run::{default_label, evaluate, EvalOptions, VideoJob};
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Video files (mp4, avi, mkv, ...). Each may have a `<name>.angles.csv` sidecar beside it.
+    #[arg(required = true)]
+    videos: Vec<PathBuf>,
+    /// Detector config TOML, or a directory of them; repeat for several detectors.
+    #[arg(long = "detector", short = 'd', required = true)]
+    detectors: Vec<PathBuf>,
+    /// Label per video, in order (default: file stem), e.g. `--label original --label camouflaged`.
+    #[arg(long = "label")]
+    labels: Vec<String>,
+    /// Angle sidecar CSV (frame,timestamp_s,angle_deg), only with a single video.
+    #[arg(long)]
+    sidecar: Option<PathBuf>,
+    /// Score every N-th frame.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+    stride: u64,
+    /// A frame counts as "car detected" when a target-class score is at least this.
+    #[arg(long, default_value_t = 0.5)]
+    threshold: f32,
+    /// Target classes overriding the configs, comma-separated (e.g. `car,truck`).
+    #[arg(long, value_delimiter = ',')]
+    classes: Vec<String>,
+    /// Turntable period for videos without a sidecar, e.g. `28s` or `28`.
+    #[arg(long, default_value = "28s", value_parser = parse_seconds)]
+    rotation_period: f64,
+    /// Turntable angle at the first frame for videos without a sidecar (degrees).
+    #[arg(long, default_value_t = 0.0)]
+    start_angle: f64,
+    /// Angle sectors in the per-angle breakdown.
+    #[arg(long, default_value_t = 12, value_parser = clap::value_parser!(u64).range(1..=360))]
+    angle_bins: u64,
+    /// Output directory for CSV, Markdown and PNG reports.
+    #[arg(long, short = 'o', default_value = "out/evaluate")]
+    out: PathBuf,
+    /// ONNX Runtime intra-op threads per detector (0 = runtime default).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Skip the PNG plots.
+    #[arg(long)]
+    no_plots: bool,
+}
+
+fn jobs(a: &Args) -> Result<Vec<VideoJob>> {
+    if !a.labels.is_empty() && a.labels.len() != a.videos.len() {
+        bail!("{} labels given for {} videos: give one --label per video or none", a.labels.len(), a.videos.len());
+    }
+    if a.sidecar.is_some() && a.videos.len() != 1 {
+        bail!("--sidecar applies to a single video; with several, put <name>.angles.csv beside each");
+    }
+    let mut out: Vec<VideoJob> = Vec::new();
+    for (i, v) in a.videos.iter().enumerate() {
+        let label = a.labels.get(i).cloned().unwrap_or_else(|| default_label(v));
+        if out.iter().any(|j| j.label == label) {
+            bail!("two videos share the label `{label}`: use --label to tell them apart");
+        }
+        out.push(VideoJob { path: v.clone(), label, sidecar: a.sidecar.clone() });
+    }
+    Ok(out)
+}
+
+pub fn run(a: &Args) -> Result<()> {
+    if !(0.0..=1.0).contains(&a.threshold) {
+        bail!("--threshold {} must be within [0, 1]", a.threshold);
+    }
+    let jobs = jobs(a)?;
+    let mut detectors = load_detectors(&a.detectors, &a.classes, a.threads)?;
+    let stop = ctrl_c_flag()?;
+    let opts = EvalOptions {
+        threshold: a.threshold,
+        stride: a.stride as usize,
+        rotation_period_s: a.rotation_period,
+        start_angle_deg: a.start_angle,
+        angle_bins: a.angle_bins as usize,
+        out_dir: a.out.clone(),
+        plots: !a.no_plots,
+    };
+    eprintln!(
+        "scoring {} video(s) with {} detector(s); threshold {}, classes {}, stride {}",
+        jobs.len(),
+        detectors.len(),
+        a.threshold,
+        detectors.iter().map(|d| format!("{}={}", d.name(), d.target_label())).collect::<Vec<_>>().join(", "),
+        a.stride
+    );
+    let out = evaluate(&jobs, &mut detectors, &opts, &Bar::default(), &stop)?;
+    println!("{}", summary_table(&out.rows, a.threshold));
+    for f in &out.files {
+        eprintln!("wrote {}", f.display());
+    }
+    if out.interrupted {
+        bail!("interrupted: reports above cover the frames scored before Ctrl-C");
+    }
+    if !out.failures.is_empty() {
+        bail!(
+            "{} problem(s); results above cover what could be scored:\n  {}",
+            out.failures.len(),
+            out.failures.join("\n  ")
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,33 @@
+//! `pav crossval`.
+
+use crate::common::{ctrl_c_flag, Bar};
+use crate::Scoring;
+use anyhow::Result;
+use pav::experiments::crossval::crossval_report;
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Optimization config; its training and held-out views are pooled and re-split.
+    #[arg(long, default_value = "configs/optimize/half.toml")]
+    config: PathBuf,
+    /// Number of folds (default: one per view, leave-one-out).
+    #[arg(long)]
+    folds: Option<usize>,
+    /// Random textures per fold (pooled as "random").
+    #[arg(long, default_value_t = 5)]
+    random_seeds: u64,
+    #[command(flatten)]
+    scoring: Scoring,
+    /// Output folder; an interrupted run resumes from it.
+    #[arg(long, short = 'o', default_value = "out/crossval")]
+    out: PathBuf,
+}
+
+pub fn run(a: &Args) -> Result<()> {
+    let stop = ctrl_c_flag()?;
+    let md = crossval_report(&a.config, a.folds, a.random_seeds, &a.scoring.to_lib(), &a.out, &Bar::default(), &stop)?;
+    println!("{md}");
+    eprintln!("wrote crossval.csv, crossval_views.csv, crossval.md and a folder per fold in {}", a.out.display());
+    Ok(())
+}

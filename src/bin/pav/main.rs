@@ -1,0 +1,92 @@
+//! `pav`: the texture side of PAV-Camou: optimize a texture, score it on composites,
+//! cross-validate it, render the textured car, and check or adjust its UV map.
+
+// Only the optimizer's commands take Ctrl-C.
+#[cfg_attr(not(feature = "optimize"), allow(dead_code))]
+#[path = "../common/mod.rs"]
+mod common;
+
+mod bench_render;
+#[cfg(feature = "optimize")]
+mod crossval;
+#[cfg(feature = "optimize")]
+mod eval_digital;
+#[cfg(feature = "optimize")]
+mod optimize;
+mod render;
+mod uv;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(name = "pav", version, about = "PAV-Camou texture tools: optimize, score, render and print the texture")]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Optimize an adversarial texture (PAV-Camou, paper Algorithm 1) against the white-box
+    /// YOLOv3-tiny; writes the texture, a printable sheet, loss curves, previews and scores.
+    #[cfg(feature = "optimize")]
+    Optimize(optimize::Args),
+    /// Digital evaluation in the shape of the paper's Table 2: ASR and P@0.5 of every detector on
+    /// the views composited with the original paint, a random texture and each given texture.
+    #[cfg(feature = "optimize")]
+    EvalDigital(eval_digital::Args),
+    /// k-fold cross-validation of the attack: every view is held out once, the texture is
+    /// optimized on the rest, and the held-out views are scored by every detector against the
+    /// photo and several random textures (a Table 2 in which no texture has seen its test views).
+    #[cfg(feature = "optimize")]
+    Crossval(crossval::Args),
+    /// UV map tools.
+    #[command(subcommand)]
+    Uv(uv::Cmd),
+    /// Time the render stages on a mesh (G-buffer per view, texture gather and its adjoint,
+    /// shading) at several image sizes; writes CSV.
+    BenchRender(bench_render::Args),
+    /// Render the mesh with its UV texture (flat, unlit) and the textured-region mask as PNGs.
+    Render(render::Args),
+}
+
+/// How `eval-digital` and `crossval` score composites.
+#[cfg(feature = "optimize")]
+#[derive(clap::Args, Debug)]
+struct Scoring {
+    /// Detector configs or folders of them.
+    #[arg(long = "detectors", short = 'd', default_value = "configs/detectors")]
+    detectors: Vec<std::path::PathBuf>,
+    /// A car counts as detected above this score (paper 0.5; the authors' code 0.6).
+    #[arg(long, default_value_t = 0.5)]
+    threshold: f32,
+    /// Name of the white-box detector (starred).
+    #[arg(long, default_value = "yolov3-tiny")]
+    white_box: String,
+}
+
+#[cfg(feature = "optimize")]
+impl Scoring {
+    fn to_lib(&self) -> pav::experiments::Scoring {
+        pav::experiments::Scoring {
+            detectors: self.detectors.clone(),
+            threshold: self.threshold,
+            white_box: self.white_box.clone(),
+        }
+    }
+}
+
+fn main() -> Result<()> {
+    match Cli::parse().cmd {
+        #[cfg(feature = "optimize")]
+        Cmd::Optimize(a) => optimize::run(&a),
+        #[cfg(feature = "optimize")]
+        Cmd::EvalDigital(a) => eval_digital::run(&a),
+        #[cfg(feature = "optimize")]
+        Cmd::Crossval(a) => crossval::run(&a),
+        Cmd::Uv(c) => uv::run(&c),
+        Cmd::BenchRender(a) => bench_render::run(&a),
+        Cmd::Render(a) => render::run(&a),
+    }
+}

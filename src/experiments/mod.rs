@@ -1,0 +1,76 @@
+//! Experiments that combine the optimizer with scoring: a `pav optimize` run and what it leaves
+//! behind, the paper's Table 2 on composites, and cross-validation of the whole attack.
+
+pub mod crossval;
+pub mod outputs;
+pub mod table2;
+
+use std::path::{Path, PathBuf};
+
+/// Why an experiment failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ExperimentError {
+    /// The optimization config.
+    #[error(transparent)]
+    Config(#[from] crate::attack::config::ConfigError),
+    /// Preparing the views.
+    #[error(transparent)]
+    Setup(#[from] crate::attack::setup::SetupError),
+    /// The white-box detector.
+    #[error(transparent)]
+    WhiteBox(#[from] crate::attack::whitebox::WhiteBoxError),
+    /// The optimization.
+    #[error(transparent)]
+    Optimize(#[from] crate::attack::optimize::OptimizeError),
+    /// The printable sheet.
+    #[error(transparent)]
+    Sheet(#[from] crate::attack::export::SheetError),
+    /// A scoring detector.
+    #[error(transparent)]
+    Detect(#[from] crate::detect::DetectError),
+    /// An image file.
+    #[error(transparent)]
+    Image(#[from] crate::image::ImageError),
+    /// A chart.
+    #[error(transparent)]
+    Plot(#[from] crate::plot::PlotError),
+    /// A CSV table.
+    #[error(transparent)]
+    Table(#[from] crate::table::TableError),
+    /// A file or folder.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// An input that cannot be used as given.
+    #[error("{0}")]
+    Invalid(String),
+    /// Ctrl-C stopped the experiment; its finished work is kept.
+    #[error("stopped; run again to resume from {0}")]
+    Stopped(PathBuf),
+}
+
+/// How composites are scored: which detectors, at which threshold, and which one is white-box.
+#[derive(Clone, Debug)]
+pub struct Scoring {
+    /// Detector configs or folders of them.
+    pub detectors: Vec<PathBuf>,
+    /// A car counts as detected above this score.
+    pub threshold: f32,
+    /// Name of the white-box detector (starred in tables).
+    pub white_box: String,
+}
+
+/// Creates `dir` and its parents.
+fn create_dir(dir: &Path) -> Result<(), ExperimentError> {
+    std::fs::create_dir_all(dir).map_err(|source| ExperimentError::Io { path: dir.into(), source })
+}
+
+/// Writes a Markdown report to `out/name`.
+fn write_markdown(out: &Path, name: &str, md: &str) -> Result<(), ExperimentError> {
+    let path = out.join(name);
+    std::fs::write(&path, md).map_err(|source| ExperimentError::Io { path, source })
+}

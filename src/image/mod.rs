@@ -1,0 +1,164 @@
+//! Images: the 8-bit BGR [`Frame`] that cameras, videos and detectors exchange, the float RGB
+//! image that textures, masks and renders use, PNG I/O, and resampling ([`resize`]).
+
+pub mod resize;
+
+use std::path::{Path, PathBuf};
+
+/// An 8-bit BGR image, row-major, 3 bytes per pixel (OpenCV's native layout).
+#[derive(Clone, Debug)]
+pub struct Frame {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// `height * width * 3` bytes, B,G,R.
+    pub bgr: Vec<u8>,
+}
+
+/// An RGB image with values in [0, 1], row-major from the top-left, 3 floats per pixel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rgb {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// `width × height × 3` values.
+    pub rgb: Vec<f32>,
+}
+
+/// Errors reading or writing an image file.
+#[derive(Debug, thiserror::Error)]
+pub enum ImageError {
+    /// The file could not be read or decoded.
+    #[error("cannot read image {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The decoder's error.
+        source: image::ImageError,
+    },
+    /// The file could not be encoded or written.
+    #[error("cannot write image {path}: {source}")]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// The encoder's error.
+        source: image::ImageError,
+    },
+    /// The pixel buffer does not hold `width × height` pixels.
+    #[error("image {path}: {len} values do not make a {width}x{height} RGB image")]
+    Size {
+        /// The file.
+        path: PathBuf,
+        /// Width asked for.
+        width: usize,
+        /// Height asked for.
+        height: usize,
+        /// Values given.
+        len: usize,
+    },
+}
+
+impl Rgb {
+    /// Reads a PNG (or any 8-bit image the `image` crate decodes) as RGB in [0, 1].
+    pub fn load(path: &Path) -> Result<Rgb, ImageError> {
+        let img = image::open(path).map_err(|source| ImageError::Read { path: path.into(), source })?.to_rgb8();
+        let (w, h) = img.dimensions();
+        Ok(Rgb {
+            width: w as usize,
+            height: h as usize,
+            rgb: img.into_raw().into_iter().map(|v| v as f32 / 255.0).collect(),
+        })
+    }
+
+    /// The optimizable region as PAV-Camou marks it: 1 where a pixel is pure white (every
+    /// channel exactly 1.0, i.e. 255), else 0.
+    pub fn white_mask(&self) -> Vec<f32> {
+        self.rgb.chunks(3).map(|c| if c.iter().all(|v| *v == 1.0) { 1.0 } else { 0.0 }).collect()
+    }
+}
+
+/// A value in [0, 1] as an 8-bit channel (clamped, rounded), as every saved image stores it.
+pub fn to_u8(v: f32) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+/// Writes an interleaved 8-bit RGB image as PNG.
+pub fn save_rgb8(path: &Path, w: usize, h: usize, rgb: Vec<u8>) -> Result<(), ImageError> {
+    let len = rgb.len();
+    image::RgbImage::from_raw(w as u32, h as u32, rgb)
+        .ok_or_else(|| ImageError::Size { path: path.into(), width: w, height: h, len })?
+        .save(path)
+        .map_err(|source| ImageError::Write { path: path.into(), source })
+}
+
+/// Writes an interleaved RGB image in [0, 1] as PNG.
+pub fn save_rgb(path: &Path, w: usize, h: usize, rgb: &[f32]) -> Result<(), ImageError> {
+    save_rgb8(path, w, h, rgb.iter().map(|v| to_u8(*v)).collect())
+}
+
+/// Half the size of an interleaved RGB image by averaging each 2×2 block (odd edges dropped).
+pub fn halve(src: &[f32], w: usize, h: usize) -> Vec<f32> {
+    let (hw, hh) = (w / 2, h / 2);
+    let mut out = vec![0f32; hw * hh * 3];
+    for y in 0..hh {
+        for x in 0..hw {
+            for c in 0..3 {
+                let at = |dy: usize, dx: usize| src[((2 * y + dy) * w + 2 * x + dx) * 3 + c];
+                out[(y * hw + x) * 3 + c] = (at(0, 0) + at(0, 1) + at(1, 0) + at(1, 1)) / 4.0;
+            }
+        }
+    }
+    out
+}
+
+/// Lays interleaved RGB tiles of `tw × th` pixels out in rows of `cols`, left to right, on
+/// `background`; returns the width, height and pixels of the sheet.
+pub fn tile<T: Copy>(tiles: &[Vec<T>], tw: usize, th: usize, cols: usize, background: T) -> (usize, usize, Vec<T>) {
+    let cols = cols.clamp(1, tiles.len().max(1));
+    let rows = tiles.len().div_ceil(cols);
+    let (w, h) = (cols * tw, rows * th);
+    let mut out = vec![background; w * h * 3];
+    for (k, t) in tiles.iter().enumerate() {
+        let (ox, oy) = ((k % cols) * tw, (k / cols) * th);
+        for y in 0..th {
+            let dst = ((oy + y) * w + ox) * 3;
+            out[dst..dst + tw * 3].copy_from_slice(&t[y * tw * 3..(y + 1) * tw * 3]);
+        }
+    }
+    (w, h, out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tiles_land_in_rows_and_halving_averages_blocks() {
+        let a = vec![1u8; 2 * 2 * 3];
+        let b = vec![2u8; 2 * 2 * 3];
+        let c = vec![3u8; 2 * 2 * 3];
+        let (w, h, s) = tile(&[a, b, c], 2, 2, 2, 0);
+        assert_eq!((w, h), (4, 4));
+        assert_eq!(s[0], 1);
+        assert_eq!(s[2 * 3], 2);
+        assert_eq!(s[(2 * 4) * 3], 3);
+        assert_eq!(s[(2 * 4 + 2) * 3], 0);
+        let img: Vec<f32> = (0..4 * 2 * 3).map(|i| (i / 3) as f32).collect();
+        assert_eq!(halve(&img, 4, 2), vec![2.5, 2.5, 2.5, 4.5, 4.5, 4.5]);
+    }
+
+    #[test]
+    fn a_png_round_trips_and_a_short_buffer_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("x.png");
+        save_rgb(&p, 2, 1, &[0.0, 0.5, 1.0, 1.0, 1.0, 1.0]).unwrap();
+        let back = Rgb::load(&p).unwrap();
+        assert_eq!(back.rgb, vec![0.0, 128.0 / 255.0, 1.0, 1.0, 1.0, 1.0]);
+        assert_eq!(back.white_mask(), vec![0.0, 1.0]);
+        let e = save_rgb(&p, 3, 1, &[0.0; 6]).unwrap_err().to_string();
+        assert!(e.contains("3x1"), "{e}");
+        assert!(matches!(Rgb::load(&dir.path().join("none.png")), Err(ImageError::Read { .. })));
+    }
+}

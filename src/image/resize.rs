@@ -1,0 +1,199 @@
+//! Resampling an 8-bit BGR [`Frame`]: OpenCV's bilinear and PIL's antialiased bilinear, bit for
+//! bit, and the same filters as dense matrices for differentiable pipelines.
+
+use super::Frame;
+use serde::Deserialize;
+
+/// Resampling filter.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Interpolation {
+    /// 2-tap bilinear with half-pixel centres, no antialiasing (OpenCV `INTER_LINEAR`).
+    #[default]
+    Bilinear,
+    /// Triangle filter widened by the downscale factor, two passes rounded to 8 bits
+    /// (PIL `Image.resize(BILINEAR)`, torchvision on PIL images).
+    Antialias,
+}
+
+/// Source taps of one output sample: first source index and normalized weights.
+struct Taps {
+    start: usize,
+    weights: Vec<f64>,
+}
+
+/// Per-axis resampling table from `src` to `dst` samples.
+fn axis_taps(src: usize, dst: usize, filter: Interpolation) -> Vec<Taps> {
+    let scale = src as f64 / dst as f64;
+    match filter {
+        Interpolation::Bilinear => (0..dst)
+            .map(|d| {
+                // OpenCV: half-pixel centres, coordinates clamped to the edge.
+                let f = ((d as f64 + 0.5) * scale - 0.5).max(0.0);
+                let i0 = (f.floor() as usize).min(src - 1);
+                let a = f - i0 as f64;
+                if i0 + 1 < src {
+                    Taps { start: i0, weights: vec![1.0 - a, a] }
+                } else {
+                    Taps { start: i0, weights: vec![1.0] }
+                }
+            })
+            .collect(),
+        Interpolation::Antialias => {
+            // PIL: triangle filter of support `max(scale, 1)`, window truncated at the edges and renormalized.
+            let fscale = scale.max(1.0);
+            let support = fscale;
+            (0..dst)
+                .map(|d| {
+                    let centre = (d as f64 + 0.5) * scale;
+                    let lo = ((centre - support + 0.5) as i64).max(0) as usize;
+                    let hi = ((centre + support + 0.5) as i64).min(src as i64) as usize;
+                    let w: Vec<f64> =
+                        (lo..hi).map(|x| (1.0 - ((x as f64 - centre + 0.5) / fscale).abs()).max(0.0)).collect();
+                    let total: f64 = w.iter().sum();
+                    Taps { start: lo, weights: w.iter().map(|v| v / total).collect() }
+                })
+                .collect()
+        }
+    }
+}
+
+/// Resizes an interleaved 3-channel u8 image to `nw × nh`, returning values on the 0–255 scale.
+pub fn resize(frame: &Frame, nw: usize, nh: usize, filter: Interpolation) -> Vec<f32> {
+    match filter {
+        Interpolation::Bilinear => resize_float(frame, nw, nh),
+        Interpolation::Antialias => resize_pil(frame, nw, nh),
+    }
+}
+
+/// Separable bilinear in f32 with one final rounding (OpenCV's result to within 1 LSB).
+fn resize_float(frame: &Frame, nw: usize, nh: usize) -> Vec<f32> {
+    let (w, h) = (frame.width, frame.height);
+    let xs = axis_taps(w, nw, Interpolation::Bilinear);
+    let ys = axis_taps(h, nh, Interpolation::Bilinear);
+    let mut mid = vec![0f32; h * nw * 3];
+    for y in 0..h {
+        let row = &frame.bgr[y * w * 3..(y + 1) * w * 3];
+        for (dx, t) in xs.iter().enumerate() {
+            for (k, &wt) in t.weights.iter().enumerate() {
+                let p = &row[(t.start + k) * 3..(t.start + k) * 3 + 3];
+                for c in 0..3 {
+                    mid[(y * nw + dx) * 3 + c] += p[c] as f32 * wt as f32;
+                }
+            }
+        }
+    }
+    let mut out = vec![0f32; nh * nw * 3];
+    for (dy, t) in ys.iter().enumerate() {
+        for (k, &wt) in t.weights.iter().enumerate() {
+            let src = &mid[(t.start + k) * nw * 3..(t.start + k + 1) * nw * 3];
+            for (o, s) in out[dy * nw * 3..(dy + 1) * nw * 3].iter_mut().zip(src) {
+                *o += s * wt as f32;
+            }
+        }
+    }
+    out.iter_mut().for_each(|v| *v = v.round().clamp(0.0, 255.0));
+    out
+}
+
+/// PIL's 8-bit resampler: 22-bit fixed-point weights, horizontal pass rounded to 8 bits, then vertical.
+fn resize_pil(frame: &Frame, nw: usize, nh: usize) -> Vec<f32> {
+    const BITS: u32 = 22;
+    let fixed = |taps: Vec<Taps>| -> Vec<(usize, Vec<i64>)> {
+        taps.into_iter()
+            .map(|t| (t.start, t.weights.iter().map(|&w| (w * (1u64 << BITS) as f64 + 0.5).floor() as i64).collect()))
+            .collect()
+    };
+    let (w, h) = (frame.width, frame.height);
+    let xs = fixed(axis_taps(w, nw, Interpolation::Antialias));
+    let ys = fixed(axis_taps(h, nh, Interpolation::Antialias));
+    let round = |acc: i64| ((acc + (1 << (BITS - 1))) >> BITS).clamp(0, 255) as u8;
+    let mut mid = vec![0u8; h * nw * 3];
+    for y in 0..h {
+        let row = &frame.bgr[y * w * 3..(y + 1) * w * 3];
+        for (dx, (start, ks)) in xs.iter().enumerate() {
+            for c in 0..3 {
+                let acc: i64 = ks.iter().enumerate().map(|(k, &wt)| row[(start + k) * 3 + c] as i64 * wt).sum();
+                mid[(y * nw + dx) * 3 + c] = round(acc);
+            }
+        }
+    }
+    let mut out = vec![0f32; nh * nw * 3];
+    for (dy, (start, ks)) in ys.iter().enumerate() {
+        for i in 0..nw * 3 {
+            let acc: i64 = ks.iter().enumerate().map(|(k, &wt)| mid[(start + k) * nw * 3 + i] as i64 * wt).sum();
+            out[dy * nw * 3 + i] = round(acc) as f32;
+        }
+    }
+    out
+}
+
+/// The resampling of `src` samples to `dst` as a dense row-major `dst × src` matrix, so a
+/// differentiable pipeline can resize with two matrix products (`A_h · X · A_wᵀ`).
+pub fn interpolation_matrix(src: usize, dst: usize, filter: Interpolation) -> Vec<f32> {
+    let mut m = vec![0f32; dst * src];
+    for (d, t) in axis_taps(src, dst, filter).into_iter().enumerate() {
+        for (k, w) in t.weights.iter().enumerate() {
+            m[d * src + t.start + k] += *w as f32;
+        }
+    }
+    m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bilinear_matches_opencv_half_pixel_convention() {
+        // A 2-pixel ramp upsampled to 4: OpenCV gives 0, 64, 191, 255 for [0, 255].
+        let f = Frame { width: 2, height: 1, bgr: vec![0, 0, 0, 255, 255, 255] };
+        let t = resize(&f, 4, 1, Interpolation::Bilinear);
+        let first: Vec<f32> = t.iter().step_by(3).copied().collect();
+        assert_eq!(first, [0.0, 64.0, 191.0, 255.0]);
+    }
+
+    #[test]
+    fn antialias_reproduces_pil_bilinear_downscale() {
+        // 23x9 image (rows 4.. inverted) resized to 5x3; expected values from PIL 11 Image.resize(BILINEAR).
+        let row: Vec<u8> = (0..23u32).map(|x| ((x * x * 7 + 13) % 256) as u8).collect();
+        let bgr: Vec<u8> =
+            (0..9).flat_map(|y| row.iter().flat_map(move |&v| [if y >= 4 { 255 - v } else { v }; 3])).collect();
+        let f = Frame { width: 23, height: 9, bgr };
+        let t: Vec<f32> = resize(&f, 5, 3, Interpolation::Antialias).into_iter().step_by(3).collect();
+        let pil =
+            [60.0, 113.0, 153.0, 133.0, 168.0, 150.0, 132.0, 119.0, 126.0, 114.0, 195.0, 142.0, 102.0, 122.0, 87.0];
+        let worst = t.iter().zip(pil).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+        assert_eq!(worst, 0.0, "got {t:?}");
+        // Weights sum to one, so a flat image stays flat.
+        let flat = Frame { width: 37, height: 11, bgr: vec![200; 37 * 11 * 3] };
+        assert!(resize(&flat, 5, 3, Interpolation::Antialias).iter().all(|&v| v == 200.0));
+    }
+    #[test]
+    fn interpolation_matrices_reproduce_the_resize() {
+        let (w, h, nw, nh) = (13, 7, 5, 4);
+        let bgr: Vec<u8> = (0..w * h * 3).map(|i| ((i * 37) % 256) as u8).collect();
+        let f = Frame { width: w, height: h, bgr };
+        let direct = resize(&f, nw, nh, Interpolation::Bilinear);
+        let (ax, ay) = (
+            interpolation_matrix(w, nw, Interpolation::Bilinear),
+            interpolation_matrix(h, nh, Interpolation::Bilinear),
+        );
+        for r in 0..nw {
+            assert!((ax[r * w..(r + 1) * w].iter().sum::<f32>() - 1.0).abs() < 1e-6);
+        }
+        for y in 0..nh {
+            for x in 0..nw {
+                for c in 0..3 {
+                    let mut v = 0.0;
+                    for sy in 0..h {
+                        for sx in 0..w {
+                            v += ay[y * h + sy] * ax[x * w + sx] * f.bgr[(sy * w + sx) * 3 + c] as f32;
+                        }
+                    }
+                    assert!((v.round() - direct[(y * nw + x) * 3 + c]).abs() <= 1.0, "({x},{y},{c})");
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,290 @@
+//! The library's layers (see `src/lib.rs`): every `crate::` and `super::` path in `src/` (the
+//! binaries aside) is an edge from one module to another. An edge may not go up a layer, one job
+//! may not use another, no module re-exports another top-level module's items, and neither the
+//! top-level modules nor the files form a cycle.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+
+const LAYERS: [&[&str]; 4] = [
+    &["image", "video", "geometry", "rng", "sidecar", "table", "plot", "progress"],
+    &["render", "scene", "dataset", "detect"],
+    &["attack", "eval", "rig"],
+    &["experiments"],
+];
+/// Layer whose modules must not use each other.
+const JOBS: usize = 2;
+
+type Module = Vec<String>;
+
+/// One reference from the file of module `from` to the path `to`.
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord)]
+struct Edge {
+    from: Module,
+    to: Module,
+    reexport: bool,
+}
+
+fn layer(top: &str) -> Option<usize> {
+    LAYERS.iter().position(|l| l.contains(&top))
+}
+
+/// The module a file under `src/` defines.
+fn module_of(rel: &Path) -> Module {
+    let mut m: Module = rel.with_extension("").iter().map(|s| s.to_string_lossy().into_owned()).collect();
+    if m.last().is_some_and(|l| l == "mod" || l == "lib") {
+        m.pop();
+    }
+    m
+}
+
+/// Drops `//` comments (doc comments included) so paths named in prose are not edges.
+fn strip_comments(text: &str) -> String {
+    text.lines().map(|l| l.find("//").map_or(l, |i| &l[..i])).collect::<Vec<_>>().join("\n")
+}
+
+/// Expands a use tree such as `crate::a::{b, c::{d, e}}` into its leaf paths.
+fn expand(tree: &str) -> Vec<String> {
+    let tree = tree.trim();
+    let Some(open) = tree.find('{') else { return vec![tree.to_string()] };
+    let prefix = &tree[..open];
+    let inner = &tree[open + 1..tree.rfind('}').unwrap_or(tree.len())];
+    let (mut parts, mut depth, mut start) = (Vec::new(), 0, 0);
+    for (i, c) in inner.char_indices() {
+        match c {
+            '{' => depth += 1,
+            '}' => depth -= 1,
+            ',' if depth == 0 => {
+                parts.push(&inner[start..i]);
+                start = i + 1;
+            }
+            _ => {}
+        }
+    }
+    parts.push(&inner[start..]);
+    parts.iter().filter(|p| !p.trim().is_empty()).flat_map(|p| expand(&format!("{prefix}{}", p.trim()))).collect()
+}
+
+/// Resolves `crate::…` / `super::…` written in `module` to an absolute path; `in_tests` when it
+/// sits inside the file's inline `mod tests`, where `super` is the file's own module.
+fn resolve(path: &str, module: &Module, in_tests: bool) -> Option<Module> {
+    let segs: Vec<&str> = path.split("::").map(str::trim).collect();
+    let (mut base, rest) = match segs[0] {
+        "crate" => (Vec::new(), &segs[1..]),
+        "super" => {
+            let mut b = module.clone();
+            if !in_tests {
+                b.pop();
+            }
+            let mut r = &segs[1..];
+            while r.first() == Some(&"super") {
+                b.pop();
+                r = &r[1..];
+            }
+            (b, r)
+        }
+        _ => return None,
+    };
+    for s in rest {
+        let s = s.split(" as ").next().unwrap_or(s).trim();
+        if s == "self" || s == "*" || s.is_empty() {
+            continue;
+        }
+        base.push(s.to_string());
+    }
+    Some(base)
+}
+
+/// Every edge in the files under `src`, with the set of modules that have a file.
+fn edges(src: &Path) -> (Vec<Edge>, BTreeSet<Module>) {
+    let mut files = Vec::new();
+    let mut stack = vec![src.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                if p != src.join("bin") {
+                    stack.push(p);
+                }
+            } else if p.extension().is_some_and(|x| x == "rs") {
+                files.push(p);
+            }
+        }
+    }
+    let modules: BTreeSet<Module> = files.iter().map(|f| module_of(f.strip_prefix(src).unwrap())).collect();
+    let path_re = |text: &str| -> Vec<(usize, String)> {
+        // Inline paths: `crate::a::b` or `super::x` outside `use` statements.
+        let mut out = Vec::new();
+        let b = text.as_bytes();
+        for key in ["crate::", "super::"] {
+            let mut at = 0;
+            while let Some(i) = text[at..].find(key) {
+                let s = at + i;
+                at = s + key.len();
+                if s > 0 && (b[s - 1].is_ascii_alphanumeric() || b[s - 1] == b'_' || b[s - 1] == b':') {
+                    continue;
+                }
+                let end = text[s..]
+                    .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_' || c == ':'))
+                    .map_or(text.len(), |e| s + e);
+                out.push((s, text[s..end].trim_end_matches(':').to_string()));
+            }
+        }
+        out
+    };
+    let mut out = Vec::new();
+    for f in &files {
+        let module = module_of(f.strip_prefix(src).unwrap());
+        let text = strip_comments(&std::fs::read_to_string(f).unwrap());
+        let tests_at = text.find("mod tests {").unwrap_or(usize::MAX);
+        let mut in_use = Vec::new();
+        let mut at = 0;
+        while let Some(i) = text[at..].find("use ") {
+            let s = at + i;
+            let end = s + text[s..].find(';').unwrap_or(text.len() - s);
+            at = end;
+            let word_start = s == 0 || !text.as_bytes()[s - 1].is_ascii_alphanumeric();
+            let tree = text[s + 4..end].trim();
+            if !word_start || !(tree.starts_with("crate") || tree.starts_with("super")) {
+                continue;
+            }
+            in_use.push(s..end);
+            let reexport = text[..s].trim_end().ends_with("pub") || text[..s].trim_end().ends_with(')');
+            for p in expand(tree) {
+                if let Some(to) = resolve(&p, &module, s > tests_at) {
+                    out.push(Edge { from: module.clone(), to, reexport });
+                }
+            }
+        }
+        for (pos, p) in path_re(&text) {
+            if in_use.iter().any(|r| r.contains(&pos)) {
+                continue;
+            }
+            if let Some(to) = resolve(&p, &module, pos > tests_at) {
+                out.push(Edge { from: module.clone(), to, reexport: false });
+            }
+        }
+    }
+    (out, modules)
+}
+
+/// The longest prefix of `path` that is a module with a file.
+fn file_module(path: &Module, modules: &BTreeSet<Module>) -> Module {
+    (0..=path.len()).rev().map(|n| path[..n].to_vec()).find(|p| modules.contains(p)).unwrap_or_default()
+}
+
+fn cycle<N: Ord + Clone + std::fmt::Debug>(graph: &BTreeMap<N, BTreeSet<N>>) -> Option<Vec<N>> {
+    fn visit<N: Ord + Clone>(
+        n: &N,
+        g: &BTreeMap<N, BTreeSet<N>>,
+        state: &mut BTreeMap<N, u8>,
+        path: &mut Vec<N>,
+    ) -> Option<Vec<N>> {
+        match state.get(n) {
+            Some(2) => return None,
+            Some(1) => {
+                let i = path.iter().position(|p| p == n).unwrap();
+                return Some(path[i..].to_vec());
+            }
+            _ => {}
+        }
+        state.insert(n.clone(), 1);
+        path.push(n.clone());
+        for m in g.get(n).into_iter().flatten() {
+            if let Some(c) = visit(m, g, state, path) {
+                return Some(c);
+            }
+        }
+        path.pop();
+        state.insert(n.clone(), 2);
+        None
+    }
+    let mut state = BTreeMap::new();
+    graph.keys().find_map(|n| visit(n, graph, &mut state, &mut Vec::new()))
+}
+
+/// Every broken rule, as a sentence.
+fn violations(edges: &[Edge], modules: &BTreeSet<Module>) -> Vec<String> {
+    let mut bad = BTreeSet::new();
+    let mut tops: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    let mut files: BTreeMap<Module, BTreeSet<Module>> = BTreeMap::new();
+    for e in edges {
+        let (Some(a), Some(b)) = (e.from.first(), e.to.first()) else { continue };
+        let (from, to) = (e.from.join("::"), e.to.join("::"));
+        match (layer(a), layer(b)) {
+            (None, _) => {
+                bad.insert(format!("`{a}` is in no layer: add it to src/lib.rs's table and tests/layers.rs"));
+            }
+            (_, None) => {
+                bad.insert(format!("{from} uses `{b}`, which is in no layer"));
+            }
+            (Some(la), Some(lb)) if lb > la => {
+                bad.insert(format!("{from} (layer {la}) uses {to} (layer {lb}): an edge up"));
+            }
+            (Some(la), Some(lb)) if la == JOBS && lb == JOBS && a != b => {
+                bad.insert(format!("{from} uses {to}: one job uses another; combine them in experiments"));
+            }
+            _ => {}
+        }
+        if a != b {
+            if e.reexport {
+                bad.insert(format!("{from} re-exports {to} from another module: use it from where it lives"));
+            }
+            tops.entry(a.clone()).or_default().insert(b.clone());
+        }
+        let (fa, fb) = (file_module(&e.from, modules), file_module(&e.to, modules));
+        let related = fa.starts_with(&fb) || fb.starts_with(&fa);
+        if !related {
+            files.entry(fa).or_default().insert(fb);
+        }
+    }
+    if let Some(c) = cycle(&tops) {
+        bad.insert(format!("top-level modules form a cycle: {}", c.join(" → ")));
+    }
+    if let Some(c) = cycle(&files) {
+        let names: Vec<String> = c.iter().map(|m| m.join("::")).collect();
+        bad.insert(format!("files form a cycle: {}", names.join(" → ")));
+    }
+    bad.into_iter().collect()
+}
+
+#[test]
+fn the_library_keeps_its_layers() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let (edges, modules) = edges(&src);
+    // The parser sees the edges that must exist, so an empty result means something.
+    let has = |a: &str, b: &str| edges.iter().any(|e| e.from.first().is_some_and(|x| x == a) && e.to[0] == b);
+    for (a, b) in [("attack", "render"), ("experiments", "attack"), ("experiments", "eval"), ("rig", "video")] {
+        assert!(has(a, b), "no edge {a} → {b} found: the parser is broken");
+    }
+    assert!(edges.len() > 300, "only {} edges found", edges.len());
+    let bad = violations(&edges, &modules);
+    assert!(bad.is_empty(), "layer rules broken:\n  {}", bad.join("\n  "));
+}
+
+#[test]
+fn each_rule_catches_its_breach() {
+    let m = |s: &str| s.split("::").map(String::from).collect::<Module>();
+    let modules: BTreeSet<Module> =
+        ["render", "render::a", "attack", "attack::x", "eval", "eval::y", "image", "image::p", "image::q"]
+            .iter()
+            .map(|s| m(s))
+            .collect();
+    let e = |from: &str, to: &str, reexport| Edge { from: m(from), to: m(to), reexport };
+    let rules = [
+        (e("render::a", "attack::x::f", false), "an edge up"),
+        (e("attack::x", "eval::y::g", false), "one job uses another"),
+        (e("attack::x", "render::a::T", true), "re-exports"),
+        (e("nowhere::z", "image::p", false), "in no layer"),
+    ];
+    for (edge, want) in rules {
+        let v = violations(std::slice::from_ref(&edge), &modules);
+        assert!(v.iter().any(|s| s.contains(want)), "{edge:?} gave {v:?}");
+    }
+    let ring = [e("image::p", "image::q::f", false), e("image::q", "image::p::g", false)];
+    assert!(violations(&ring, &modules).iter().any(|s| s.contains("files form a cycle")));
+    // A child using its parent's items, and a parent declaring its children, are not cycles.
+    let family = [e("image::p", "image::Frame", false), e("image", "image::p::f", false)];
+    assert!(violations(&family, &modules).is_empty());
+    assert_eq!(expand("crate::a::{b, c::{d, e as f}}"), ["crate::a::b", "crate::a::c::d", "crate::a::c::e as f"]);
+}
