@@ -2,9 +2,9 @@
 //! with angles within 0.5° of the truth, and every fault ends in saved, readable files.
 
 use pav::progress::Silent;
-use pav::rig::camera::{CameraError, FrameSource, LiveCapture, SimCamera};
 use pav::rig::capture::{capture, CaptureError, CaptureOptions};
 use pav::rig::sim::{Faults, SimOptions, SimTurntable};
+use pav::rig::source::{CameraError, FrameSource, LiveCapture, SimCamera};
 use pav::rig::turntable::Turntable;
 use pav::sidecar;
 use pav::video::VideoReader;

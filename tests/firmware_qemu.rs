@@ -4,8 +4,8 @@
 
 mod common;
 
-use pav::rig::camera::LiveCapture;
 use pav::rig::capture::{capture, CaptureOptions};
+use pav::rig::source::LiveCapture;
 use pav::rig::turntable::{Event, Turntable};
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};

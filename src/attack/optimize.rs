@@ -145,7 +145,7 @@ pub struct Outcome {
 
 /// View order of `epoch`: a permutation from the seed, independent of the EoT draws so a resumed
 /// run visits the same views.
-pub fn epoch_order(n: usize, seed: u64, epoch: u64) -> Vec<usize> {
+fn epoch_order(n: usize, seed: u64, epoch: u64) -> Vec<usize> {
     let mut r = Rng::new(seed ^ epoch.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0x5eed);
     let mut p: Vec<usize> = (0..n).collect();
     for i in (1..n).rev() {

@@ -138,7 +138,7 @@ impl ViewMaker {
 }
 
 /// Nearest-neighbour resampling of a region mask to `size × size` texels.
-pub fn resample_region(mask: &[f32], w: usize, h: usize, size: usize) -> Vec<f32> {
+fn resample_region(mask: &[f32], w: usize, h: usize, size: usize) -> Vec<f32> {
     let mut out = vec![0f32; size * size];
     for y in 0..size {
         let sy = ((y as f64 + 0.5) * h as f64 / size as f64) as usize;
@@ -151,7 +151,7 @@ pub fn resample_region(mask: &[f32], w: usize, h: usize, size: usize) -> Vec<f32
 }
 
 /// Reads FCA's derived_test_labels.tsv: npz file stem → GT box in photo pixels.
-pub fn read_boxes(path: &Path) -> Result<HashMap<String, BBox>, SetupError> {
+fn read_boxes(path: &Path) -> Result<HashMap<String, BBox>, SetupError> {
     let text = std::fs::read_to_string(path).map_err(|source| SetupError::Labels { path: path.into(), source })?;
     let mut out = HashMap::new();
     for (i, line) in text.lines().enumerate().skip(1) {

@@ -6,13 +6,21 @@ use std::path::{Path, PathBuf};
 /// Errors reading an npz archive.
 #[derive(Debug, thiserror::Error)]
 pub enum NpzError {
-    /// The file could not be opened or is not a zip archive.
-    #[error("{path}: {msg}")]
+    /// The file could not be opened.
+    #[error("{path}: {source}")]
+    Open {
+        /// Archive path.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The file is not a zip archive.
+    #[error("{path}: not an npz (zip) archive: {source}")]
     Archive {
         /// Archive path.
         path: PathBuf,
-        /// Reason.
-        msg: String,
+        /// The zip reader's error.
+        source: zip::result::ZipError,
     },
     /// An array is missing.
     #[error("{path}: no array `{name}` (has: {have})")]
@@ -79,9 +87,8 @@ pub struct Npz {
 impl Npz {
     /// Opens `path`.
     pub fn open(path: &Path) -> Result<Self, NpzError> {
-        let err = |msg: String| NpzError::Archive { path: path.into(), msg };
-        let f = std::fs::File::open(path).map_err(|e| err(e.to_string()))?;
-        let zip = zip::ZipArchive::new(f).map_err(|e| err(format!("not an npz (zip) archive: {e}")))?;
+        let f = std::fs::File::open(path).map_err(|source| NpzError::Open { path: path.into(), source })?;
+        let zip = zip::ZipArchive::new(f).map_err(|source| NpzError::Archive { path: path.into(), source })?;
         Ok(Npz { path: path.into(), zip })
     }
 
@@ -110,7 +117,7 @@ impl Npz {
 }
 
 /// Parses one `.npy` file's bytes.
-pub fn parse_npy(b: &[u8]) -> Result<NpyArray, String> {
+fn parse_npy(b: &[u8]) -> Result<NpyArray, String> {
     if b.len() < 10 || &b[..6] != b"\x93NUMPY" {
         return Err("not an .npy payload (bad magic)".into());
     }

@@ -173,6 +173,22 @@ fn nms_default() -> f32 {
     0.45
 }
 
+/// Target classes that cannot be set.
+#[derive(Debug, thiserror::Error)]
+pub enum TargetError {
+    /// No class was named.
+    #[error("at least one target class is needed")]
+    None,
+    /// A name the model does not have.
+    #[error("target class `{name}` is not among the model's {classes} classes")]
+    Unknown {
+        /// The name given.
+        name: String,
+        /// How many classes the model has.
+        classes: usize,
+    },
+}
+
 /// A validated detector config with resolved paths and class indices.
 #[derive(Clone, Debug)]
 pub struct DetectorConfig {
@@ -200,15 +216,25 @@ impl DetectorConfig {
     /// Reads and validates a TOML config; relative paths in it are relative to its directory.
     pub fn load(path: &Path) -> Result<Self, DetectError> {
         let cfg_err = |msg: String| DetectError::Config { path: path.display().to_string(), msg };
-        let text = std::fs::read_to_string(path).map_err(|e| cfg_err(format!("cannot read: {e}")))?;
-        let raw: RawConfig = toml::from_str(&text).map_err(|e| cfg_err(e.to_string()))?;
+        let shown = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| DetectError::ConfigRead {
+            path: shown.clone(),
+            what: "the file".into(),
+            source,
+        })?;
+        let raw: RawConfig =
+            toml::from_str(&text).map_err(|source| DetectError::ConfigParse { path: shown.clone(), source })?;
         let dir = path.parent().unwrap_or(Path::new("."));
         let class_names: Vec<String> = if raw.classes.names == "coco80" {
             COCO80.iter().map(|s| s.to_string()).collect()
         } else {
             let p = dir.join(&raw.classes.names);
             std::fs::read_to_string(&p)
-                .map_err(|e| cfg_err(format!("class names file {}: {e}", p.display())))?
+                .map_err(|source| DetectError::ConfigRead {
+                    path: shown.clone(),
+                    what: format!("the class names file {}", p.display()),
+                    source,
+                })?
                 .lines()
                 .map(|l| l.trim().to_string())
                 .filter(|l| !l.is_empty())
@@ -225,22 +251,23 @@ impl DetectorConfig {
             nms_iou: raw.nms_iou,
             source: path.to_path_buf(),
         };
-        cfg.set_targets(&raw.classes.target).map_err(cfg_err)?;
+        cfg.set_targets(&raw.classes.target).map_err(|e| cfg_err(e.to_string()))?;
         cfg.validate().map_err(cfg_err)?;
         Ok(cfg)
     }
 
     /// Replaces the target classes by name (e.g. from `--classes car,truck`).
-    pub fn set_targets(&mut self, names: &[String]) -> Result<(), String> {
+    pub fn set_targets(&mut self, names: &[String]) -> Result<(), TargetError> {
         if names.is_empty() {
-            return Err("at least one target class is needed".into());
+            return Err(TargetError::None);
         }
         self.target_classes = names
             .iter()
             .map(|n| {
-                self.class_names.iter().position(|c| c == n).ok_or_else(|| {
-                    format!("target class `{n}` is not among the model's {} classes", self.class_names.len())
-                })
+                self.class_names
+                    .iter()
+                    .position(|c| c == n)
+                    .ok_or_else(|| TargetError::Unknown { name: n.clone(), classes: self.class_names.len() })
             })
             .collect::<Result<_, _>>()?;
         Ok(())

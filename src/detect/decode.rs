@@ -93,33 +93,38 @@ impl Proposals {
     }
 }
 
+/// Raw outputs that do not fit the configured layout (a missing output, a wrong shape).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct LayoutError(pub String);
+
 fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + (-x).exp())
 }
 
-fn find<'a>(outs: &'a [RawOutput], name: Option<&str>) -> Result<&'a RawOutput, String> {
+fn find<'a>(outs: &'a [RawOutput], name: Option<&str>) -> Result<&'a RawOutput, LayoutError> {
     match name {
         Some(n) => outs.iter().find(|o| o.name == n).ok_or_else(|| {
-            format!(
+            LayoutError(format!(
                 "model has no output `{n}` (outputs: {})",
                 outs.iter().map(|o| o.name.as_str()).collect::<Vec<_>>().join(", ")
-            )
+            ))
         }),
-        None => outs.first().ok_or_else(|| "model produced no outputs".to_string()),
+        None => outs.first().ok_or_else(|| LayoutError("model produced no outputs".into())),
     }
 }
 
 /// Drops leading size-1 dimensions beyond `rank` (batch 1) and checks the rank.
-fn squeeze<'a>(o: &'a RawOutput, rank: usize, what: &str) -> Result<&'a [usize], String> {
+fn squeeze<'a>(o: &'a RawOutput, rank: usize, what: &str) -> Result<&'a [usize], LayoutError> {
     let mut s = o.shape.as_slice();
     while s.len() > rank && s[0] == 1 {
         s = &s[1..];
     }
     if s.len() != rank {
-        return Err(format!(
+        return Err(LayoutError(format!(
             "output `{}` has shape {:?}, the {what} layout needs rank {rank} (batch 1)",
             o.name, o.shape
-        ));
+        )));
     }
     Ok(s)
 }
@@ -132,7 +137,7 @@ pub fn decode(
     input_h: usize,
     num_classes: usize,
     map: &InputMap,
-) -> Result<Proposals, String> {
+) -> Result<Proposals, LayoutError> {
     let mut p;
     match layout {
         OutputLayout::Darknet { heads } => {
@@ -143,11 +148,11 @@ pub fn decode(
                 let (ch, gh, gw) = (s[0], s[1], s[2]);
                 let na = head.anchors.len();
                 if ch != na * (5 + num_classes) {
-                    return Err(format!(
+                    return Err(LayoutError(format!(
                         "output `{}` has {ch} channels; {na} anchors × (5 + {num_classes} classes) = {} expected",
                         o.name,
                         na * (5 + num_classes)
-                    ));
+                    )));
                 }
                 let (sx, sy) = (input_w as f32 / gw as f32, input_h as f32 / gh as f32);
                 let plane = gh * gw;
@@ -174,11 +179,11 @@ pub fn decode(
             let (rows, cols) = (s[0], s[1]);
             let expect_rows: usize = strides.iter().map(|st| (input_h / st) * (input_w / st)).sum();
             if cols != 5 + num_classes || rows != expect_rows {
-                return Err(format!(
+                return Err(LayoutError(format!(
                     "output `{}` is {rows}×{cols}; yolox with strides {strides:?} at {input_w}×{input_h} and {num_classes} classes needs {expect_rows}×{}",
                     o.name,
                     5 + num_classes
-                ));
+                )));
             }
             p = Proposals::with_capacity(num_classes, rows);
             let mut r = 0;
@@ -201,11 +206,11 @@ pub fn decode(
             let s = squeeze(o, 2, "ultralytics")?;
             let (feat, n) = (s[0], s[1]);
             if feat != 4 + num_classes {
-                return Err(format!(
+                return Err(LayoutError(format!(
                     "output `{}` is {feat}×{n}; ultralytics with {num_classes} classes needs {}×N (cx, cy, w, h, classes)",
                     o.name,
                     4 + num_classes
-                ));
+                )));
             }
             p = Proposals::with_capacity(num_classes, n);
             let at = |f: usize, i: usize| o.data[f * n + i];
@@ -221,10 +226,10 @@ pub fn decode(
             let bs = squeeze(b, 2, "detr")?;
             let ss = squeeze(sc, 1, "detr")?;
             if bs != [q, 4] || ss != [q] {
-                return Err(format!(
+                return Err(LayoutError(format!(
                     "detr outputs disagree: labels {:?}, boxes {:?}, scores {:?} (need [Q], [Q,4], [Q])",
                     l.shape, b.shape, sc.shape
-                ));
+                )));
             }
             p = Proposals::with_capacity(num_classes, q);
             for i in 0..q {
@@ -240,11 +245,11 @@ pub fn decode(
         }
     }
     if let Some(bad) = p.scores.iter().position(|s| !s.is_finite()) {
-        return Err(format!(
+        return Err(LayoutError(format!(
             "non-finite score at proposal {} class {}",
             bad / num_classes.max(1),
             bad % num_classes.max(1)
-        ));
+        )));
     }
     Ok(p)
 }
@@ -295,7 +300,7 @@ mod tests {
         assert!((t.score - 0.45).abs() < 1e-6);
         assert_eq!(t.bbox, [4.0, 4.0, 8.0, 8.0]);
         let wrong = decode(&OutputLayout::Yolox { output: None, strides: vec![8] }, &outs, 8, 8, 1, &ID).unwrap_err();
-        assert!(wrong.contains("needs 1×6"), "{wrong}");
+        assert!(wrong.to_string().contains("needs 1×6"), "{wrong}");
     }
 
     #[test]

@@ -14,7 +14,11 @@ pub fn expand_configs(paths: &[PathBuf]) -> Result<Vec<PathBuf>, DetectError> {
     for p in paths {
         if p.is_dir() {
             let mut found: Vec<PathBuf> = std::fs::read_dir(p)
-                .map_err(|e| config_error(p, format!("cannot list the folder: {e}")))?
+                .map_err(|source| DetectError::ConfigRead {
+                    path: p.display().to_string(),
+                    what: "the folder".into(),
+                    source,
+                })?
                 .filter_map(|e| e.ok().map(|e| e.path()))
                 .filter(|f| f.extension().is_some_and(|x| x == "toml"))
                 .collect();
@@ -54,12 +58,12 @@ pub fn load_detectors(
         }
     }
     if !errors.is_empty() {
-        return Err(DetectError::Runtime(format!("invalid detector config:\n  {}", errors.join("\n  "))));
+        return Err(DetectError::Configs(errors));
     }
     let mut names: Vec<&str> = cfgs.iter().map(|c| c.name.as_str()).collect();
     names.sort();
     if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
-        return Err(DetectError::Runtime(format!("two detector configs are both named `{}`", w[0])));
+        return Err(DetectError::Configs(vec![format!("two detector configs are both named `{}`", w[0])]));
     }
     cfgs.into_iter().map(|c| OnnxDetector::new(c, threads).map(|d| Box::new(d) as Box<dyn Detector>)).collect()
 }

@@ -67,7 +67,28 @@ pub enum DetectError {
         /// What is wrong.
         msg: String,
     },
-    /// The model file is missing or unreadable.
+    /// A config file, its class-names file or a folder of configs could not be read.
+    #[error("detector config {path}: cannot read {what}: {source}")]
+    ConfigRead {
+        /// Config file or folder.
+        path: String,
+        /// What was being read.
+        what: String,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A config file is not valid TOML for a detector.
+    #[error("detector config {path}: {source}")]
+    ConfigParse {
+        /// Config file.
+        path: String,
+        /// The parser's error.
+        source: toml::de::Error,
+    },
+    /// Several configs are invalid; each line names one.
+    #[error("invalid detector config:\n  {}", .0.join("\n  "))]
+    Configs(Vec<String>),
+    /// The model file is missing or does not fit its config.
     #[error("detector `{detector}`: model file {path} {msg}")]
     Model {
         /// Detector name.
@@ -80,20 +101,23 @@ pub enum DetectError {
     /// The inference runtime is unavailable.
     #[error("{0}")]
     Runtime(String),
+    /// The runtime refused to load a model or run it.
+    #[cfg(feature = "eval")]
+    #[error("detector `{detector}`: {what}: {source}")]
+    Session {
+        /// Detector name.
+        detector: String,
+        /// What was being done.
+        what: &'static str,
+        /// ONNX Runtime's error.
+        source: ort::Error,
+    },
     /// The model's outputs do not fit the configured layout.
-    #[error("detector `{detector}`: {msg}")]
+    #[error("detector `{detector}`: {source}")]
     Output {
         /// Detector name.
         detector: String,
         /// What does not fit.
-        msg: String,
-    },
-    /// Inference failed.
-    #[error("detector `{detector}`: inference failed: {msg}")]
-    Inference {
-        /// Detector name.
-        detector: String,
-        /// The runtime's message.
-        msg: String,
+        source: decode::LayoutError,
     },
 }

@@ -1,7 +1,7 @@
 //! ONNX Runtime backend: any ONNX detector described by a [`DetectorConfig`].
 
 use super::config::{DetectorConfig, OutputLayout};
-use super::decode::{decode, Proposals, RawOutput};
+use super::decode::{decode, LayoutError, Proposals, RawOutput};
 use super::preprocess::prepare;
 use super::{DetectError, Detector};
 use crate::image::Frame;
@@ -13,7 +13,7 @@ use std::sync::OnceLock;
 
 /// Where ONNX Runtime's shared library is looked for, in order: `ORT_DYLIB_PATH` alone when set,
 /// else `.deps/onnxruntime/libonnxruntime.so` above the executable or the working directory.
-pub fn library_candidates() -> Vec<PathBuf> {
+fn library_candidates() -> Vec<PathBuf> {
     if let Some(p) = std::env::var_os("ORT_DYLIB_PATH") {
         return vec![PathBuf::from(p)];
     }
@@ -54,6 +54,11 @@ pub fn runtime() -> Result<&'static ort::environment::Environment, DetectError> 
     .map_err(|e| DetectError::Runtime(e.clone()))
 }
 
+/// Wraps an ONNX Runtime error of detector `name` while doing `what`.
+fn session_err<'a, E: Into<ort::Error>>(name: &'a str, what: &'static str) -> impl Fn(E) -> DetectError + 'a {
+    move |e| DetectError::Session { detector: name.to_string(), what, source: e.into() }
+}
+
 /// A detector running an ONNX model through ONNX Runtime.
 pub struct OnnxDetector {
     cfg: DetectorConfig,
@@ -76,15 +81,14 @@ impl OnnxDetector {
         }
         let env = runtime()?;
         let mut builder = Session::builder(env)
-            .map_err(|e| DetectError::Runtime(e.to_string()))?
+            .map_err(session_err(&cfg.name, "creating a session"))?
             .with_optimization_level(GraphOptimizationLevel::All)
-            .map_err(|e| DetectError::Runtime(e.to_string()))?;
+            .map_err(session_err(&cfg.name, "setting the optimization level"))?;
         if threads > 0 {
-            builder = builder.with_intra_threads(threads).map_err(|e| DetectError::Runtime(e.to_string()))?;
+            builder =
+                builder.with_intra_threads(threads).map_err(session_err(&cfg.name, "setting the thread count"))?;
         }
-        let session = builder
-            .commit_from_file(&cfg.model)
-            .map_err(|e| model_err(format!("is not a loadable ONNX model: {e}")))?;
+        let session = builder.commit_from_file(&cfg.model).map_err(session_err(&cfg.name, "loading the ONNX model"))?;
         let names: Vec<String> = session.inputs().iter().map(|i| i.name().to_string()).collect();
         let size_input = match &cfg.output {
             OutputLayout::Detr { size_input, .. } => size_input.clone(),
@@ -131,30 +135,26 @@ impl OnnxDetector {
     /// Runs the model on an already prepared NCHW input and returns its raw outputs.
     pub fn infer(&mut self, input: Vec<f32>) -> Result<Vec<RawOutput>, DetectError> {
         let (w, h) = (self.cfg.input.width, self.cfg.input.height);
-        let inf_err = |msg: String| DetectError::Inference { detector: self.cfg.name.clone(), msg };
-        let image = Tensor::from_array(([1usize, 3, h, w], input)).map_err(|e| inf_err(e.to_string()))?;
+        let name = self.cfg.name.clone();
+        let inf_err = |source| DetectError::Session { detector: name.clone(), what: "inference", source };
+        let image = Tensor::from_array(([1usize, 3, h, w], input)).map_err(inf_err)?;
         let mut feed: Vec<(String, ort::session::SessionInputValue<'_>)> =
             vec![(self.input_name.clone(), image.into())];
         if let Some(s) = &self.size_input {
-            let size =
-                Tensor::from_array(([1usize, 2], vec![w as i64, h as i64])).map_err(|e| inf_err(e.to_string()))?;
+            let size = Tensor::from_array(([1usize, 2], vec![w as i64, h as i64])).map_err(inf_err)?;
             feed.push((s.clone(), size.into()));
         }
-        let name = self.cfg.name.clone();
-        let outputs = self
-            .session
-            .run(feed)
-            .map_err(|e| DetectError::Inference { detector: name.clone(), msg: e.to_string() })?;
+        let outputs = self.session.run(feed).map_err(inf_err)?;
         let mut raw = Vec::with_capacity(outputs.len());
         for (oname, value) in outputs.iter() {
             let shape_of = |s: &[i64]| s.iter().map(|&d| d.max(0) as usize).collect::<Vec<_>>();
             let out = match value.dtype() {
                 ValueType::Tensor { ty: TensorElementType::Float32, .. } => {
-                    let (s, d) = value.try_extract_tensor::<f32>().map_err(|e| inf_err(e.to_string()))?;
+                    let (s, d) = value.try_extract_tensor::<f32>().map_err(inf_err)?;
                     RawOutput { name: oname.to_string(), shape: shape_of(s), data: d.to_vec() }
                 }
                 ValueType::Tensor { ty: TensorElementType::Int64, .. } => {
-                    let (s, d) = value.try_extract_tensor::<i64>().map_err(|e| inf_err(e.to_string()))?;
+                    let (s, d) = value.try_extract_tensor::<i64>().map_err(inf_err)?;
                     RawOutput {
                         name: oname.to_string(),
                         shape: shape_of(s),
@@ -164,7 +164,9 @@ impl OnnxDetector {
                 other => {
                     return Err(DetectError::Output {
                         detector: name,
-                        msg: format!("output `{oname}` has type {other:?}; only float32 and int64 tensors are read"),
+                        source: LayoutError(format!(
+                            "output `{oname}` has type {other:?}; only float32 and int64 tensors are read"
+                        )),
                     })
                 }
             };
@@ -192,6 +194,6 @@ impl Detector for OnnxDetector {
         let raw = self.infer(input)?;
         let c = &self.cfg;
         decode(&c.output, &raw, c.input.width, c.input.height, c.class_names.len(), &map)
-            .map_err(|msg| DetectError::Output { detector: c.name.clone(), msg })
+            .map_err(|source| DetectError::Output { detector: c.name.clone(), source })
     }
 }

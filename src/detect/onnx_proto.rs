@@ -98,8 +98,17 @@ pub struct ValueInfo {
     pub name: String,
     /// Element type code (`FLOAT`, `INT64`).
     pub elem_type: i32,
-    /// Dimensions; `Err(sym)` names a symbolic one.
-    pub dims: Vec<Result<i64, String>>,
+    /// Dimensions.
+    pub dims: Vec<Dim>,
+}
+
+/// One dimension of a value's shape.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Dim {
+    /// A fixed size.
+    Fixed(i64),
+    /// A named size that the runtime fixes (batch, height, width).
+    Symbolic(String),
 }
 
 /// A whole model: one graph with opset imports.
@@ -188,8 +197,8 @@ fn encode_value_info(v: &ValueInfo) -> Buf {
     for d in &v.dims {
         let mut dim = Buf::default();
         match d {
-            Ok(n) => dim.int(1, *n),
-            Err(s) => dim.str(2, s),
+            Dim::Fixed(n) => dim.int(1, *n),
+            Dim::Symbolic(s) => dim.str(2, s),
         }
         shape.msg(1, dim);
     }

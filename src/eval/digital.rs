@@ -4,6 +4,7 @@
 //! authors compute it. P@0.5 is the car class's average precision at IoU 0.5 (COCO's
 //! 101-point interpolation), which is what the authors report under that name.
 
+use crate::detect::nms::iou;
 use crate::detect::BBox;
 
 /// Car detections on one image and its ground-truth box.
@@ -19,20 +20,6 @@ impl ImageDetections {
     /// The best car score (0 without a car detection).
     pub fn best_score(&self) -> f32 {
         self.cars.iter().map(|c| c.0).fold(0.0, f32::max)
-    }
-}
-
-/// Intersection over union of two boxes.
-pub fn iou(a: BBox, b: BBox) -> f32 {
-    let iw = (a[2].min(b[2]) - a[0].max(b[0])).max(0.0);
-    let ih = (a[3].min(b[3]) - a[1].max(b[1])).max(0.0);
-    let inter = iw * ih;
-    let union =
-        (a[2] - a[0]).max(0.0) * (a[3] - a[1]).max(0.0) + (b[2] - b[0]).max(0.0) * (b[3] - b[1]).max(0.0) - inter;
-    if union > 0.0 {
-        inter / union
-    } else {
-        0.0
     }
 }
 
@@ -59,7 +46,7 @@ pub fn ap50(images: &[ImageDetections]) -> Option<f64> {
     let mut pr = Vec::with_capacity(dets.len());
     for (_, k, b) in dets {
         let gt = with_gt[k].gt.unwrap_or_default();
-        if !matched[k] && iou(b, gt) >= 0.5 {
+        if !matched[k] && iou(&b, &gt) >= 0.5 {
             matched[k] = true;
             tp += 1;
         } else {
@@ -108,6 +95,6 @@ mod tests {
         // A duplicate of a matched box is a false positive.
         let ap = ap50(&[im(g, &[(0.9, g), (0.8, g)])]).unwrap();
         assert!((ap - 1.0).abs() < 1e-9);
-        assert!((iou(g, [5.0, 0.0, 15.0, 10.0]) - 1.0 / 3.0).abs() < 1e-6);
+        assert!((iou(&g, &[5.0, 0.0, 15.0, 10.0]) - 1.0 / 3.0).abs() < 1e-6);
     }
 }

@@ -4,9 +4,10 @@
 #[cfg(feature = "eval")]
 pub mod bench;
 #[cfg(feature = "eval")]
-pub mod charts;
+mod charts;
 pub mod digital;
 pub mod physical;
+#[cfg(feature = "eval")]
 pub mod report;
 #[cfg(feature = "eval")]
 pub mod run;

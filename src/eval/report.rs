@@ -40,12 +40,12 @@ fn csv_err(path: &Path, source: csv::Error) -> ReportError {
 }
 
 /// A file-system error on `path`, as a report error.
-pub fn io_err(path: &Path, source: std::io::Error) -> ReportError {
+pub(crate) fn io_err(path: &Path, source: std::io::Error) -> ReportError {
     ReportError::Io { path: path.into(), source }
 }
 
 /// Streams [`FrameRecord`]s to CSV, flushing each row so an interrupted run keeps every frame.
-pub struct FrameCsv {
+pub(crate) struct FrameCsv {
     w: csv::Writer<std::fs::File>,
     path: PathBuf,
 }
@@ -84,7 +84,7 @@ pub struct SummaryRow {
 
 /// Settings printed with every report.
 #[derive(Clone, Debug, PartialEq)]
-pub struct ReportSettings {
+pub(crate) struct ReportSettings {
     /// Score threshold for "detected".
     pub threshold: f32,
     /// Every N-th frame scored.
@@ -100,7 +100,7 @@ fn pct(x: Option<f64>) -> String {
 }
 
 /// Writes `summary.csv`.
-pub fn write_summary_csv(path: &Path, rows: &[SummaryRow], s: &ReportSettings) -> Result<(), ReportError> {
+pub(crate) fn write_summary_csv(path: &Path, rows: &[SummaryRow], s: &ReportSettings) -> Result<(), ReportError> {
     let mut w = csv::Writer::from_path(path).map_err(|e| csv_err(path, e))?;
     w.write_record([
         "video",
@@ -142,7 +142,7 @@ pub fn write_summary_csv(path: &Path, rows: &[SummaryRow], s: &ReportSettings) -
 }
 
 /// Writes `angles.csv`: accuracy per (video, detector, angle sector).
-pub fn write_angles_csv(
+pub(crate) fn write_angles_csv(
     path: &Path,
     records: &[FrameRecord],
     rows: &[SummaryRow],
@@ -170,7 +170,7 @@ pub fn write_angles_csv(
 }
 
 /// Renders the Markdown summary: settings, a Table-4-shaped matrix, details with 95 % CIs, angles.
-pub fn summary_markdown(rows: &[SummaryRow], records: &[FrameRecord], s: &ReportSettings) -> String {
+pub(crate) fn summary_markdown(rows: &[SummaryRow], records: &[FrameRecord], s: &ReportSettings) -> String {
     let mut md = String::new();
     let videos = unique(rows.iter().map(|r| &r.video));
     let dets = unique(rows.iter().map(|r| &r.detector));
@@ -251,7 +251,7 @@ pub fn summary_markdown(rows: &[SummaryRow], records: &[FrameRecord], s: &Report
 }
 
 /// Writes `text` to `path`.
-pub fn write_text(path: &Path, text: &str) -> Result<(), ReportError> {
+pub(crate) fn write_text(path: &Path, text: &str) -> Result<(), ReportError> {
     let mut f = std::fs::File::create(path).map_err(|e| io_err(path, e))?;
     f.write_all(text.as_bytes()).map_err(|e| io_err(path, e))
 }

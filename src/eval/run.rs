@@ -296,7 +296,7 @@ fn write_reports(
 }
 
 /// Makes a label usable as part of a file name.
-pub fn file_safe(s: &str) -> String {
+fn file_safe(s: &str) -> String {
     s.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect()
 }
 

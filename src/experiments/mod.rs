@@ -15,13 +15,13 @@ pub enum ExperimentError {
     Config(#[from] crate::attack::config::ConfigError),
     /// Preparing the views.
     #[error(transparent)]
-    Setup(#[from] crate::attack::setup::SetupError),
+    Setup(Box<crate::attack::setup::SetupError>),
     /// The white-box detector.
     #[error(transparent)]
     WhiteBox(#[from] crate::attack::whitebox::WhiteBoxError),
     /// The optimization.
     #[error(transparent)]
-    Optimize(#[from] crate::attack::optimize::OptimizeError),
+    Optimize(Box<crate::attack::optimize::OptimizeError>),
     /// The printable sheet.
     #[error(transparent)]
     Sheet(#[from] crate::attack::export::SheetError),
@@ -51,6 +51,19 @@ pub enum ExperimentError {
     /// Ctrl-C stopped the experiment; its finished work is kept.
     #[error("stopped; run again to resume from {0}")]
     Stopped(PathBuf),
+}
+
+// Boxed: these two are large, and every experiment returns this error.
+impl From<crate::attack::setup::SetupError> for ExperimentError {
+    fn from(e: crate::attack::setup::SetupError) -> Self {
+        ExperimentError::Setup(Box::new(e))
+    }
+}
+
+impl From<crate::attack::optimize::OptimizeError> for ExperimentError {
+    fn from(e: crate::attack::optimize::OptimizeError) -> Self {
+        ExperimentError::Optimize(Box::new(e))
+    }
 }
 
 /// How composites are scored: which detectors, at which threshold, and which one is white-box.

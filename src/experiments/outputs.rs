@@ -70,7 +70,7 @@ pub fn preview(path: &Path, views: &[&View], tex: &[f32], scene: &Scene) -> Resu
 }
 
 /// Loss terms and the car score over steps; the running mean spans `window` steps.
-pub fn plot_log(path: &Path, log: &[StepLog], window: usize) -> Result<(), PlotError> {
+fn plot_log(path: &Path, log: &[StepLog], window: usize) -> Result<(), PlotError> {
     let pts = |f: &dyn Fn(&StepLog) -> f64| log.iter().map(|r| (r.step as f64, f(r))).collect::<Vec<_>>();
     let series = vec![
         ("L = L1 + β·L2 + γ·Ls".to_string(), pts(&|r| r.total)),

@@ -1,8 +1,8 @@
 //! `pav-rig bench-rig`: command round-trip latency and capture angle-sync error, as CSV.
 
-use super::camera::SimCamera;
 use super::capture::{capture, CaptureOptions};
 use super::sim::{SimOptions, SimTurntable};
+use super::source::SimCamera;
 use super::turntable::{Turntable, TurntableError};
 use crate::progress::{Progress, Silent};
 use crate::table::{write_csv, TableError};

@@ -6,7 +6,7 @@
 //! interpolated between the reports around its capture instant. Video frames are written as they arrive and sidecar rows as soon
 //! as their angle is known; on any fault both files are finalized before the error is returned.
 
-use super::camera::FrameSource;
+use super::source::FrameSource;
 use super::turntable::{Event, Turntable, TurntableError};
 use crate::progress::Progress;
 use crate::sidecar::{self, AngleSample, SidecarError};

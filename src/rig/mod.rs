@@ -1,7 +1,7 @@
 //! The physical rig: turntable client, simulated turntable, frame sources and capture sessions.
 
 pub mod bench;
-pub mod camera;
 pub mod capture;
 pub mod sim;
+pub mod source;
 pub mod turntable;

@@ -341,7 +341,7 @@ impl Turntable {
 
     /// Drops everything buffered and confirms a fresh round trip, so late replies to a timed-out
     /// command cannot be taken for answers to the next one.
-    pub fn resync(&mut self) -> Result<()> {
+    fn resync(&mut self) -> Result<()> {
         self.discard_input()?;
         self.seq = self.seq.wrapping_add(1) % 1_000_000_000;
         let seq = self.seq;

@@ -85,7 +85,15 @@ pub enum SceneError {
         /// Why.
         source: std::io::Error,
     },
-    /// Not a valid scene.
+    /// Not valid TOML for a scene.
+    #[error("scene {path}: {source}")]
+    Parse {
+        /// The file.
+        path: String,
+        /// The parser's error.
+        source: toml::de::Error,
+    },
+    /// A value is out of range.
     #[error("scene {path}: {msg}")]
     Invalid {
         /// The file.
@@ -106,7 +114,7 @@ impl Scene {
     /// Parses and checks a scene from TOML text; `origin` names it in errors.
     pub fn parse(text: &str, origin: &str) -> Result<Scene, SceneError> {
         let bad = |msg: String| SceneError::Invalid { path: origin.into(), msg };
-        let s: Scene = toml::from_str(text).map_err(|e| bad(e.to_string()))?;
+        let s: Scene = toml::from_str(text).map_err(|source| SceneError::Parse { path: origin.into(), source })?;
         for (i, e) in s.effects.iter().enumerate() {
             let ok = match *e {
                 Effect::Contrast { min, max, .. } => min.is_finite() && max.is_finite() && 0.0 <= min && min <= max,

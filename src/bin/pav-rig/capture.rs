@@ -3,8 +3,8 @@
 use crate::common::{ctrl_c_flag, Bar};
 use crate::port::{connect, parse_signed_seconds, PortArgs};
 use anyhow::{bail, Result};
-use pav::rig::camera::open_source;
 use pav::rig::capture::{capture, CaptureOptions};
+use pav::rig::source::open_source;
 use std::path::PathBuf;
 
 #[derive(clap::Args)]

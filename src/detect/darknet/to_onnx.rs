@@ -7,7 +7,7 @@
 use super::cfg::{Activation, Layer, Network};
 use super::weights::Weights;
 use super::DarknetError;
-use crate::detect::onnx_proto::{Attr, InitData, Initializer, Model, Node, ValueInfo, FLOAT};
+use crate::detect::onnx_proto::{Attr, Dim, InitData, Initializer, Model, Node, ValueInfo, FLOAT};
 
 /// Name of the graph input.
 pub const INPUT_NAME: &str = "images";
@@ -195,10 +195,10 @@ pub fn export(net: &Network, weights: &Weights) -> Result<Model, DarknetError> {
                     name: out_name,
                     elem_type: FLOAT,
                     dims: vec![
-                        Err("N".into()),
-                        Ok(expect as i64),
-                        Err(format!("H/{}", net.height / h)),
-                        Err(format!("W/{}", net.width / w)),
+                        Dim::Symbolic("N".into()),
+                        Dim::Fixed(expect as i64),
+                        Dim::Symbolic(format!("H/{}", net.height / h)),
+                        Dim::Symbolic(format!("W/{}", net.width / w)),
                     ],
                 });
                 prev
@@ -225,7 +225,12 @@ pub fn export(net: &Network, weights: &Weights) -> Result<Model, DarknetError> {
             elem_type: FLOAT,
             // Spatial size is symbolic: the network is fully convolutional with anchors in pixels,
             // so any multiple of its total stride works (320, 416, 608, ...).
-            dims: vec![Err("N".into()), Ok(net.channels as i64), Err("H".into()), Err("W".into())],
+            dims: vec![
+                Dim::Symbolic("N".into()),
+                Dim::Fixed(net.channels as i64),
+                Dim::Symbolic("H".into()),
+                Dim::Symbolic("W".into()),
+            ],
         }],
         outputs,
     })
