@@ -1,5 +1,6 @@
 //! Object detectors: configs, preprocessing, output decoding, NMS and backends.
 
+pub mod autodiff;
 #[cfg(feature = "optimize")]
 pub mod candle_darknet;
 pub mod coco;
@@ -12,6 +13,8 @@ pub mod nms;
 #[cfg(feature = "eval")]
 pub mod onnx;
 pub mod onnx_proto;
+#[cfg(feature = "eval")]
+pub mod ortgrad;
 pub mod preprocess;
 
 pub use config::DetectorConfig;
