@@ -99,8 +99,11 @@ fn string(n: &Node, key: &str) -> Option<String> {
     })
 }
 
-/// Kernel, strides and pads `[top, left, bottom, right]` of a 2-D Conv or MaxPool.
-fn window(n: &Node, kernel: Option<[i64; 2]>) -> Result<([i64; 2], [i64; 2], [i64; 4]), AutodiffError> {
+/// Kernel, strides and pads `[top, left, bottom, right]` of a 2-D window.
+type Window = ([i64; 2], [i64; 2], [i64; 4]);
+
+/// The [`Window`] of a 2-D Conv or MaxPool.
+fn window(n: &Node, kernel: Option<[i64; 2]>) -> Result<Window, AutodiffError> {
     let bad = |msg: String| AutodiffError::Settings { node: n.name.clone(), op: n.op_type.clone(), msg };
     let k = match (ints(n, "kernel_shape"), kernel) {
         (Some(k), _) if k.len() == 2 => [k[0], k[1]],
@@ -488,7 +491,7 @@ pub fn differentiate(model: &Model, input_shape: &[i64]) -> Result<Differentiate
         elem_type: FLOAT,
         dims: s.iter().map(|&d| Dim::Fixed(d)).collect(),
     };
-    let saves_input = saved.iter().any(|s| *s == input);
+    let saves_input = saved.contains(&input);
     saved.retain(|s| *s != input);
     // A saved value that is also an original output is output once.
     let extra: Vec<&String> = saved.iter().filter(|s| !outputs.iter().any(|o| &o.0 == *s)).collect();

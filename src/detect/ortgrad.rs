@@ -33,7 +33,7 @@ fn fail<'a>(name: &'a str, what: &'static str) -> impl Fn(ort::Error) -> DetectE
 fn session(name: &str, bytes: &[u8], threads: usize, what: &'static str) -> Result<Session, DetectError> {
     let err = |source: ort::Error| DetectError::Session { detector: name.to_string(), what, source };
     let mut b = Session::builder(runtime()?)
-        .map_err(|e| err(e.into()))?
+        .map_err(err)?
         .with_optimization_level(GraphOptimizationLevel::All)
         .map_err(|e| err(e.into()))?
         // Two sessions take turns on the same cores: a spinning idle pool would steal them (measured:
