@@ -1,5 +1,5 @@
 //! One optimization step on real data: FCA's CARLA photos, the UV-mapped e-tron and
-//! YOLOv3-tiny. The texture gradient (candle backward + the renderer's exact adjoint) must match
+//! YOLOv3-tiny. The texture gradient (the differentiated ONNX graph + the renderer's exact adjoint) must match
 //! finite differences of the whole composite → detector → loss chain, and be zero off the region.
 #![cfg(feature = "optimize")]
 

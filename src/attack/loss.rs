@@ -1,17 +1,18 @@
 //! The paper's detector losses on YOLO head maps: L1 = mean objectness over the boxes, L2 = mean
-//! target-class confidence over the proposals of the target class.
+//! target-class confidence over the proposals of the target class, with their exact gradient with
+//! respect to the head logits.
 //!
 //! "Boxes" are the predictions whose objectness reaches `box_threshold`; "proposals" are those
 //! boxes whose most likely class is a target class. The sets are chosen on the values (no
-//! gradient through the choice); an empty set gives 0, not 0/0.
+//! gradient through the choice); an empty set gives 0 and a zero gradient, not 0/0.
 
 use crate::detect::darknet::cfg::YoloHead;
-use candle_core::{Result, Tensor};
 
-/// Sigmoid as `(1 + tanh(x/2))/2`: finite with a finite gradient for every finite logit, where
-/// `1/(1 + exp(−x))` overflows to a NaN gradient below x ≈ −88 in f32.
-pub fn sigmoid(x: &Tensor) -> Result<Tensor> {
-    (x * 0.5)?.tanh()?.affine(0.5, 0.5)
+/// Sigmoid as `(1 + tanh(x/2))/2`, and its derivative `(1 − tanh²(x/2))/4`: both finite for every
+/// finite logit, where `1/(1 + exp(−x))` makes a NaN gradient below x ≈ −88 in f32.
+pub fn sigmoid(x: f32) -> (f32, f32) {
+    let t = (0.5 * x).tanh();
+    (0.5 + 0.5 * t, 0.25 * (1.0 - t * t))
 }
 
 /// The detector-loss settings.
@@ -24,12 +25,12 @@ pub struct DetectionLoss {
 }
 
 /// L1 and L2 with the set sizes and the strongest target detection, for logs.
-#[derive(Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct LossTerms {
-    /// Mean objectness over the boxes (scalar tensor).
-    pub l1: Tensor,
-    /// Mean target-class confidence over the target proposals (scalar tensor).
-    pub l2: Tensor,
+    /// Mean objectness over the boxes.
+    pub l1: f32,
+    /// Mean target-class confidence over the target proposals.
+    pub l2: f32,
     /// Number of boxes (n_o).
     pub boxes: usize,
     /// Number of target proposals (n_c).
@@ -38,88 +39,84 @@ pub struct LossTerms {
     pub max_score: f32,
 }
 
+/// Why head maps cannot be scored.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct HeadShapeError(String);
+
 impl DetectionLoss {
-    /// L1 and L2 for batch-1 head maps `[1, A·(5+C), H, W]` of `heads`.
-    pub fn yolo(&self, maps: &[Tensor], heads: &[YoloHead]) -> Result<LossTerms> {
+    /// L1 and L2 of batch-1 head maps `[A·(5+C), H, W]` (flattened, with their `(H, W)`), and the
+    /// gradient of `L1 + beta·L2` with respect to each map.
+    pub fn yolo(
+        &self,
+        maps: &[(Vec<f32>, (usize, usize))],
+        heads: &[YoloHead],
+        beta: f32,
+    ) -> Result<(LossTerms, Vec<Vec<f32>>), HeadShapeError> {
         if maps.len() != heads.len() {
-            candle_core::bail!("{} head maps for {} [yolo] heads", maps.len(), heads.len());
+            return Err(HeadShapeError(format!("{} head maps for {} [yolo] heads", maps.len(), heads.len())));
         }
-        let (mut s1, mut s2): (Option<Tensor>, Option<Tensor>) = (None, None);
+        // First pass: the sets; second: the means and their gradient.
         let (mut boxes, mut proposals, mut max_score) = (0usize, 0usize, 0f32);
-        let add = |acc: &mut Option<Tensor>, t: Tensor| -> Result<()> {
-            *acc = Some(match acc.take() {
-                None => t,
-                Some(a) => (a + t)?,
-            });
-            Ok(())
-        };
-        for (map, head) in maps.iter().zip(heads) {
-            let (b, ch, h, w) = map.dims4()?;
-            let (a, c) = (head.anchors.len(), head.classes);
-            if b != 1 || ch != a * (5 + c) {
-                candle_core::bail!("head map {:?} does not fit {a} anchors × (5 + {c}) with batch 1", map.dims());
+        let mut picked: Vec<Vec<(usize, Option<usize>)>> = Vec::new(); // per map: (objectness index, proposal class index)
+        for ((map, (h, w)), head) in maps.iter().zip(heads) {
+            let (a, c, hw) = (head.anchors.len(), head.classes, h * w);
+            if map.len() != a * (5 + c) * hw {
+                return Err(HeadShapeError(format!(
+                    "a head map of {} values does not fit {a} anchors × (5 + {c}) × {h}×{w}",
+                    map.len()
+                )));
             }
-            let t = map.reshape((a, 5 + c, h * w))?;
-            let obj = sigmoid(&t.narrow(1, 4, 1)?)?.squeeze(1)?; // [A, HW]
-            let cls = sigmoid(&t.narrow(1, 5, c)?)?; // [A, C, HW]
-            let obj_v: Vec<Vec<f32>> = obj.to_dtype(candle_core::DType::F32)?.to_vec2()?;
-            let cls_v: Vec<Vec<Vec<f32>>> = cls.to_dtype(candle_core::DType::F32)?.to_vec3()?;
-            let (mut box_mask, mut prop_mask) = (vec![0f32; a * h * w], vec![0f32; a * c * h * w]);
+            let mut here = Vec::new();
             for ai in 0..a {
-                for p in 0..h * w {
-                    let o = obj_v[ai][p];
-                    let (best, _) = (0..c).fold((0, f32::NEG_INFINITY), |m, k| {
-                        if cls_v[ai][k][p] > m.1 {
-                            (k, cls_v[ai][k][p])
-                        } else {
-                            m
-                        }
-                    });
-                    for &k in &self.target {
-                        if k < c {
-                            max_score = max_score.max(o * cls_v[ai][k][p]);
-                        }
+                let base = ai * (5 + c) * hw;
+                for p in 0..hw {
+                    let o = sigmoid(map[base + 4 * hw + p]).0;
+                    let cls = |k: usize| sigmoid(map[base + (5 + k) * hw + p]).0;
+                    let (best, _) =
+                        (0..c).fold((0, f32::NEG_INFINITY), |m, k| if cls(k) > m.1 { (k, cls(k)) } else { m });
+                    for &k in self.target.iter().filter(|&&k| k < c) {
+                        max_score = max_score.max(o * cls(k));
                     }
                     if o >= self.box_threshold && o.is_finite() {
-                        box_mask[ai * h * w + p] = 1.0;
                         boxes += 1;
-                        if self.target.contains(&best) {
-                            proposals += 1;
-                            prop_mask[(ai * c + best) * h * w + p] = 1.0;
-                        }
+                        let prop = self.target.contains(&best).then(|| base + (5 + best) * hw + p);
+                        proposals += prop.is_some() as usize;
+                        here.push((base + 4 * hw + p, prop));
                     }
                 }
             }
-            let dev = map.device();
-            let bm = Tensor::from_vec(box_mask, (a, h * w), dev)?.to_dtype(map.dtype())?;
-            let pm = Tensor::from_vec(prop_mask, (a, c, h * w), dev)?.to_dtype(map.dtype())?;
-            add(&mut s1, (obj * bm)?.sum_all()?)?;
-            add(&mut s2, (cls * pm)?.sum_all()?)?;
+            picked.push(here);
         }
-        let zero = || Tensor::new(0f32, &candle_core::Device::Cpu);
-        let l1 = match s1 {
-            Some(s) => (s / boxes.max(1) as f64)?,
-            None => zero()?,
-        };
-        let l2 = match s2 {
-            Some(s) => (s / proposals.max(1) as f64)?,
-            None => zero()?,
-        };
-        Ok(LossTerms { l1, l2, boxes, proposals, max_score })
+        let (n1, n2) = (boxes.max(1) as f32, proposals.max(1) as f32);
+        let (mut s1, mut s2) = (0f32, 0f32);
+        let mut grads: Vec<Vec<f32>> = maps.iter().map(|(m, _)| vec![0f32; m.len()]).collect();
+        for ((map, _), (here, g)) in maps.iter().zip(picked.iter().zip(&mut grads)) {
+            for &(oi, prop) in here {
+                let (o, d) = sigmoid(map[oi]);
+                s1 += o;
+                g[oi] += d / n1;
+                if let Some(ci) = prop {
+                    let (v, d) = sigmoid(map[ci]);
+                    s2 += v;
+                    g[ci] += beta * d / n2;
+                }
+            }
+        }
+        Ok((LossTerms { l1: s1 / n1, l2: s2 / n2, boxes, proposals, max_score }, grads))
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use candle_core::{Device, Var};
 
     fn head() -> YoloHead {
         YoloHead { anchors: vec![(10.0, 14.0), (23.0, 27.0)], classes: 3 }
     }
 
     /// A 2-anchor, 3-class, 2×2 head with chosen logits.
-    fn map(obj: [f32; 8], cls_top: [usize; 8]) -> Tensor {
+    fn map(obj: [f32; 8], cls_top: [usize; 8]) -> (Vec<f32>, (usize, usize)) {
         let (a, c, hw) = (2, 3, 4);
         let mut v = vec![0f32; a * (5 + c) * hw];
         for i in 0..a * hw {
@@ -129,20 +126,15 @@ mod tests {
                 v[(ai * (5 + c) + 5 + k) * hw + p] = if k == cls_top[i] { 3.0 } else { -3.0 };
             }
         }
-        Tensor::from_vec(v, (1, a * (5 + c), 2, 2), &Device::Cpu).unwrap()
+        (v, (2, 2))
     }
 
     #[test]
     fn sigmoid_is_finite_with_finite_gradient_at_extreme_logits() {
-        let x = Var::from_vec(vec![-1e4f32, -100.0, 0.0, 100.0, 1e4], 5, &Device::Cpu).unwrap();
-        let y = sigmoid(x.as_tensor()).unwrap();
-        let v: Vec<f32> = y.to_vec1().unwrap();
-        assert_eq!(v[0], 0.0);
-        assert_eq!(v[2], 0.5);
-        assert_eq!(v[4], 1.0);
-        let g: Vec<f32> = y.sum_all().unwrap().backward().unwrap().get(x.as_tensor()).unwrap().to_vec1().unwrap();
-        assert!(g.iter().all(|v| v.is_finite()), "{g:?}");
-        assert!((g[2] - 0.25).abs() < 1e-6);
+        let v: Vec<(f32, f32)> = [-1e4f32, -100.0, 0.0, 100.0, 1e4].iter().map(|x| sigmoid(*x)).collect();
+        assert_eq!((v[0].0, v[2].0, v[4].0), (0.0, 0.5, 1.0));
+        assert!(v.iter().all(|(y, d)| y.is_finite() && d.is_finite() && *d >= 0.0), "{v:?}");
+        assert!((v[2].1 - 0.25).abs() < 1e-6);
     }
 
     #[test]
@@ -150,26 +142,45 @@ mod tests {
         let loss = DetectionLoss { box_threshold: 0.5, target: vec![2] };
         // Objectness logits: 0 → 0.5 (a box, exactly on the threshold), 2 → 0.88, −5 → no box.
         let m = map([0.0, 2.0, -5.0, -5.0, 2.0, -5.0, -5.0, -5.0], [2, 1, 2, 0, 2, 0, 0, 0]);
-        let t = loss.yolo(&[m], &[head()]).unwrap();
+        let (t, _) = loss.yolo(&[m], &[head()], 1.0).unwrap();
         assert_eq!((t.boxes, t.proposals), (3, 2));
         let s = |x: f32| 1.0 / (1.0 + (-x).exp());
-        let l1: f32 = t.l1.to_scalar().unwrap();
-        assert!((l1 - (s(0.0) + 2.0 * s(2.0)) / 3.0).abs() < 1e-6, "{l1}");
-        let l2: f32 = t.l2.to_scalar().unwrap();
-        assert!((l2 - s(3.0)).abs() < 1e-6, "{l2}");
+        assert!((t.l1 - (s(0.0) + 2.0 * s(2.0)) / 3.0).abs() < 1e-6, "{}", t.l1);
+        assert!((t.l2 - s(3.0)).abs() < 1e-6, "{}", t.l2);
         assert!((t.max_score - s(2.0) * s(3.0)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn gradient_matches_central_differences() {
+        let loss = DetectionLoss { box_threshold: 0.5, target: vec![2] };
+        let (mut m, hw) = map([0.3, 2.0, -5.0, -5.0, 1.5, -5.0, -5.0, -5.0], [2, 1, 2, 0, 2, 0, 0, 0]);
+        // Distinct logits so the sets do not change under the small steps below.
+        for (i, v) in m.iter_mut().enumerate() {
+            *v += 0.01 * (i % 7) as f32;
+        }
+        let beta = 0.7;
+        let (_, g) = loss.yolo(&[(m.clone(), hw)], &[head()], beta).unwrap();
+        let total = |m: &[f32]| {
+            let (t, _) = loss.yolo(&[(m.to_vec(), hw)], &[head()], beta).unwrap();
+            t.l1 as f64 + beta as f64 * t.l2 as f64
+        };
+        let eps = 1e-2;
+        for i in 0..m.len() {
+            let (mut p, mut q) = (m.clone(), m.clone());
+            p[i] += eps;
+            q[i] -= eps;
+            let fd = (total(&p) - total(&q)) / (2.0 * eps as f64);
+            assert!((fd - g[0][i] as f64).abs() < 1e-4, "logit {i}: {} vs {fd}", g[0][i]);
+        }
+        assert!(g[0].iter().filter(|v| **v != 0.0).count() == 5, "3 boxes and 2 proposals carry gradient");
     }
 
     #[test]
     fn no_boxes_gives_zero_loss_and_zero_gradient() {
         let loss = DetectionLoss { box_threshold: 0.5, target: vec![2] };
-        let v = Var::from_tensor(&map([-9.0; 8], [2; 8])).unwrap();
-        let t = loss.yolo(&[v.as_tensor().clone()], &[head()]).unwrap();
-        assert_eq!((t.boxes, t.proposals), (0, 0));
-        let total = (&t.l1 + &t.l2).unwrap();
-        assert_eq!(total.to_scalar::<f32>().unwrap(), 0.0);
-        let g = total.backward().unwrap();
-        let g: Vec<f32> = g.get(v.as_tensor()).unwrap().flatten_all().unwrap().to_vec1().unwrap();
-        assert!(g.iter().all(|x| *x == 0.0));
+        let (t, g) = loss.yolo(&[map([-9.0; 8], [2; 8])], &[head()], 1.0).unwrap();
+        assert_eq!((t.boxes, t.proposals, t.l1 + t.l2), (0, 0, 0.0));
+        assert!(g[0].iter().all(|x| *x == 0.0));
+        assert!(loss.yolo(&[(vec![0.0; 5], (1, 1))], &[head()], 1.0).is_err());
     }
 }

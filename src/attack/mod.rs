@@ -2,6 +2,8 @@
 //! checkpoints, the printable sheet, and the UV-map tools that make the texture printable.
 
 pub mod adam;
+#[cfg(feature = "optimize")]
+pub mod bench;
 pub mod checkpoint;
 pub mod config;
 pub mod export;

@@ -1,41 +1,23 @@
-//! The white-box detector side of a step: composite image → YOLOv3-tiny (candle) → L1 + β·L2,
-//! and the exact gradient back to the composite's pixels.
+//! The white-box detector side of a step: composite image → YOLOv3-tiny → L1 + β·L2, and the
+//! exact gradient back to the composite's pixels.
+//!
+//! The network is the ONNX graph that `evaluate` runs (exported from the same darknet files), and
+//! its input gradient is that graph differentiated (`detect::autodiff`), both run by ONNX Runtime
+//! (`detect::ortgrad`). The resize from the composite to the network input is a fixed linear map
+//! with its exact adjoint.
 
 use super::config::DetectorSection;
-use super::loss::DetectionLoss;
-use crate::detect::candle_darknet::CandleDarknet;
+use super::loss::{DetectionLoss, HeadShapeError};
+use crate::detect::autodiff::{differentiate, AutodiffError};
 use crate::detect::darknet::cfg::YoloHead;
-use crate::detect::darknet::{Network, Weights};
-use crate::image::resize::{interpolation_matrix, Interpolation};
-use candle_core::{DType, Device, Tensor, Var};
+use crate::detect::darknet::{to_onnx, DarknetError, Network, Weights};
+use crate::detect::ortgrad::GradSession;
+use crate::detect::DetectError;
+use crate::image::resize::{Interpolation, Resampler};
+use std::sync::Mutex;
 use std::time::Instant;
 
-/// Loss values of one forward pass.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct DetectorLoss {
-    /// L1.
-    pub l1: f32,
-    /// L2.
-    pub l2: f32,
-    /// Number of boxes.
-    pub boxes: usize,
-    /// Number of target proposals.
-    pub proposals: usize,
-    /// Highest car score (objectness × class) of any prediction.
-    pub max_score: f32,
-}
-
-impl DetectorLoss {
-    fn of(t: &super::loss::LossTerms) -> candle_core::Result<Self> {
-        Ok(DetectorLoss {
-            l1: t.l1.to_scalar()?,
-            l2: t.l2.to_scalar()?,
-            boxes: t.boxes,
-            proposals: t.proposals,
-            max_score: t.max_score,
-        })
-    }
-}
+pub use super::loss::LossTerms as DetectorLoss;
 
 /// Gradient of `L1 + β·L2` with respect to the composite, with the two timings.
 pub struct DetectorGrad {
@@ -43,20 +25,20 @@ pub struct DetectorGrad {
     pub loss: DetectorLoss,
     /// ∂(L1 + β·L2)/∂image, interleaved RGB like the image.
     pub grad: Vec<f32>,
-    /// Forward time (ms).
+    /// Forward time: resize, network, loss (ms).
     pub forward_ms: f64,
-    /// Backward time (ms).
+    /// Backward time: network gradient, resize adjoint (ms).
     pub backward_ms: f64,
 }
 
-/// YOLOv3-tiny on candle with the paper's loss.
+/// YOLOv3-tiny with the paper's loss and its input gradient.
 pub struct WhiteBox {
-    model: CandleDarknet,
+    session: Mutex<GradSession>,
     heads: Vec<YoloHead>,
+    head_sizes: Vec<(usize, usize)>,
     loss: DetectionLoss,
     input: usize,
-    /// Bilinear resize matrices (rows `input × size`, and its transpose) when size ≠ input.
-    resize: Option<(usize, Tensor, Tensor)>,
+    resample: Resampler,
 }
 
 /// Errors of the white-box detector.
@@ -64,33 +46,55 @@ pub struct WhiteBox {
 pub enum WhiteBoxError {
     /// Model files.
     #[error("white-box detector: {0}")]
-    Model(#[from] crate::detect::darknet::DarknetError),
-    /// Tensor maths.
+    Model(#[from] DarknetError),
+    /// A graph without a gradient.
     #[error("white-box detector: {0}")]
-    Candle(#[from] candle_core::Error),
+    Autodiff(#[from] AutodiffError),
+    /// ONNX Runtime.
+    #[error("white-box detector: {0}")]
+    Runtime(#[from] DetectError),
+    /// Head maps that do not fit the cfg's heads.
+    #[error("white-box detector: {0}")]
+    Heads(#[from] HeadShapeError),
+    /// A network whose input is not square.
+    #[error("white-box detector: non-square network input {0}x{1}")]
+    NotSquare(usize, usize),
+}
+
+/// How a [`WhiteBox`] runs, beyond its config.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct WhiteBoxOptions {
+    /// Side of the composites it scores.
+    pub composite: usize,
+    /// Network input side (default: the cfg's).
+    pub input: Option<usize>,
+    /// ONNX Runtime threads per pass (0 = the runtime's default, the physical cores).
+    pub threads: usize,
 }
 
 impl WhiteBox {
     /// Loads the darknet model for composites of `size × size` pixels.
     pub fn load(cfg: &DetectorSection, size: usize) -> Result<Self, WhiteBoxError> {
+        Self::with_options(cfg, WhiteBoxOptions { composite: size, input: None, threads: 0 })
+    }
+
+    /// Loads the darknet model as `o` says.
+    pub fn with_options(cfg: &DetectorSection, o: WhiteBoxOptions) -> Result<Self, WhiteBoxError> {
+        let size = o.composite;
         let net = Network::from_file(&cfg.cfg)?;
         let w = Weights::from_file(&cfg.weights, &net)?;
-        let model = CandleDarknet::new(net, &w, &Device::Cpu, DType::F32)?;
-        let heads = model.heads();
-        let (iw, ih) = model.input_size();
-        if iw != ih {
-            return Err(candle_core::Error::Msg(format!("non-square network input {iw}x{ih}")).into());
+        if net.width != net.height {
+            return Err(WhiteBoxError::NotSquare(net.width, net.height));
         }
-        let resize = if size != iw {
-            let a =
-                Tensor::from_vec(interpolation_matrix(size, iw, Interpolation::Bilinear), (iw, size), &Device::Cpu)?;
-            let at = a.t()?.contiguous()?;
-            Some((size, a, at))
-        } else {
-            None
-        };
+        let (iw, ih) = (o.input.unwrap_or(net.width), o.input.unwrap_or(net.height));
+        let heads: Vec<YoloHead> = net.heads().into_iter().map(|(_, h)| h.clone()).collect();
+        let model = to_onnx::export(&net, &w)?;
+        let d = differentiate(&model, &[1, 3, ih as i64, iw as i64])?;
+        let head_sizes = d.outputs.iter().map(|(_, s)| (s[2] as usize, s[3] as usize)).collect();
+        let session = GradSession::new("yolov3-tiny (white-box)", d, o.threads)?;
         let loss = DetectionLoss { box_threshold: cfg.box_threshold, target: cfg.target.clone() };
-        Ok(WhiteBox { model, heads, loss, input: iw, resize })
+        let resample = Resampler::new(size, iw, Interpolation::Bilinear);
+        Ok(WhiteBox { session: Mutex::new(session), heads, head_sizes, loss, input: iw, resample })
     }
 
     /// Network input side.
@@ -98,38 +102,30 @@ impl WhiteBox {
         self.input
     }
 
-    /// HWC image tensor → `[1, 3, input, input]`.
-    fn to_input(&self, hwc: &Tensor) -> candle_core::Result<Tensor> {
-        let x = hwc.permute((2, 0, 1))?;
-        let x = match &self.resize {
-            Some((_, a, at)) => a.broadcast_matmul(&x)?.broadcast_matmul(at)?,
-            None => x.contiguous()?,
-        };
-        x.unsqueeze(0)
+    fn session(&self) -> std::sync::MutexGuard<'_, GradSession> {
+        self.session.lock().unwrap_or_else(|e| e.into_inner())
     }
 
     /// Loss of the `size × size` RGB composite `img` and its gradient for weight `beta` on L2.
     pub fn loss_and_grad(&self, img: &[f32], size: usize, beta: f32) -> Result<DetectorGrad, WhiteBoxError> {
+        debug_assert_eq!(img.len(), size * size * 3);
         let t0 = Instant::now();
-        let x = Var::from_vec(img.to_vec(), (size, size, 3), &Device::Cpu)?;
-        let maps = self.model.forward(&self.to_input(x.as_tensor())?)?;
-        let t = self.loss.yolo(&maps, &self.heads)?;
-        let total = (&t.l1 + (&t.l2 * beta as f64)?)?;
-        let loss = DetectorLoss::of(&t)?;
+        let mut s = self.session();
+        let (maps, pass) = s.forward(self.resample.apply(img, 3))?;
+        let maps: Vec<(Vec<f32>, (usize, usize))> = maps.into_iter().zip(self.head_sizes.iter().copied()).collect();
+        let (loss, head_grads) = self.loss.yolo(&maps, &self.heads, beta)?;
         let forward_ms = t0.elapsed().as_secs_f64() * 1e3;
         let t1 = Instant::now();
-        let grads = total.backward()?;
-        let grad = match grads.get(x.as_tensor()) {
-            Some(g) => g.flatten_all()?.to_vec1()?,
-            None => vec![0.0; img.len()],
-        };
+        let g = s.backward(&pass, head_grads)?;
+        let grad = self.resample.adjoint(&g, 3);
         Ok(DetectorGrad { loss, grad, forward_ms, backward_ms: t1.elapsed().as_secs_f64() * 1e3 })
     }
 
     /// The loss terms of a composite, without gradients (for scoring).
     pub fn loss(&self, img: &[f32], size: usize) -> Result<DetectorLoss, WhiteBoxError> {
-        let x = Tensor::from_vec(img.to_vec(), (size, size, 3), &Device::Cpu)?;
-        let t = self.loss.yolo(&self.model.forward(&self.to_input(&x)?)?, &self.heads)?;
-        Ok(DetectorLoss::of(&t)?)
+        debug_assert_eq!(img.len(), size * size * 3);
+        let (maps, _) = self.session().forward(self.resample.apply(img, 3))?;
+        let maps: Vec<(Vec<f32>, (usize, usize))> = maps.into_iter().zip(self.head_sizes.iter().copied()).collect();
+        Ok(self.loss.yolo(&maps, &self.heads, 1.0)?.0)
     }
 }

@@ -246,6 +246,30 @@ fn resize_factor(n: &Node, consts: &HashMap<&str, &Initializer>, x: &[i64]) -> R
     Ok(k)
 }
 
+/// The gradient of a max-pool whose windows tile the input (kernel = stride `b`):
+/// SpaceToDepth lays every window position out at once, a cumulative count keeps the first
+/// position equal to the maximum, and DepthToSpace puts the routed gradient back. Measured on
+/// YOLOv3-tiny at 416² (2 threads): the backward graph 191 → 93 ms against per-position slices and
+/// pads (ONNX Runtime's Pad alone took 94 ms).
+fn tiled_pool_grad(tape: &mut Tape, x: &str, y: &str, g: &str, b: i64, ys: &[i64]) -> String {
+    let windows = tape.node("SpaceToDepth", vec![x.into()], vec![("blocksize", Attr::Int(b))]);
+    // [b², C, Ho, Wo]: position (dy, dx) of every window, in row-major order.
+    let split = tape.i64s(vec![b * b, ys[1], ys[2], ys[3]]);
+    let windows = tape.node("Reshape", vec![windows, split], vec![]);
+    let eq = tape.node("Equal", vec![windows, y.into()], vec![]);
+    let count = tape.node("Cast", vec![eq.clone()], vec![("to", Attr::Int(FLOAT as i64))]);
+    let axis = tape.i64s(vec![0]);
+    let seen = tape.node("CumSum", vec![count, axis], vec![]);
+    let one = tape.scalar(1.0);
+    let first_seen = tape.node("Equal", vec![seen, one], vec![]);
+    let first = tape.node("And", vec![eq, first_seen], vec![]);
+    let zero = tape.scalar(0.0);
+    let routed = tape.node("Where", vec![first, g.into(), zero], vec![]);
+    let joined = tape.i64s(vec![1, b * b * ys[1], ys[2], ys[3]]);
+    let routed = tape.node("Reshape", vec![routed, joined], vec![]);
+    tape.node("DepthToSpace", vec![routed], vec![("blocksize", Attr::Int(b)), ("mode", Attr::Str("DCR".into()))])
+}
+
 /// Differentiates `model` (batch 1, input of `input_shape`) with respect to its first input.
 pub fn differentiate(model: &Model, input_shape: &[i64]) -> Result<Differentiated, AutodiffError> {
     let input = model.inputs.first().ok_or_else(|| AutodiffError::Graph("no input".into()))?.name.clone();
@@ -327,6 +351,13 @@ pub fn differentiate(model: &Model, input_shape: &[i64]) -> Result<Differentiate
                         let other = n.inputs[1 - i].clone();
                         if live.contains(&other) {
                             save(&other, &mut saved);
+                        } else if let Some(c) = consts.get(other.as_str()) {
+                            // The backward graph has its own constants.
+                            if !tape.inits.iter().any(|i| i.name == other) {
+                                tape.inits.push((*c).clone());
+                            }
+                        } else {
+                            return Err(bad("a factor computed from constants alone; fold it into an initializer"));
                         }
                         let gx = tape.node("Mul", vec![g.clone(), other], vec![]);
                         add_grad(&mut grad, &mut tape, v, gx);
@@ -416,6 +447,14 @@ pub fn differentiate(model: &Model, input_shape: &[i64]) -> Result<Differentiate
                 save(&y, &mut saved);
                 let (k, s, p) = window(n, None)?;
                 let (xs, ys) = (shape[&x].clone(), shape[&y].clone());
+                // Windows that tile the input exactly never read the end padding (darknet pads
+                // every pool by k − 1 at the end, which stride-2 pools on even sizes never reach).
+                let tiles = k == s && k[0] == k[1] && p[0] == 0 && p[1] == 0;
+                if tiles && ys[2] * s[0] == xs[2] && ys[3] * s[1] == xs[3] {
+                    let gx = tiled_pool_grad(&mut tape, &x, &y, &g, k[0], &ys);
+                    add_grad(&mut grad, &mut tape, &x, gx);
+                    continue;
+                }
                 let (hp, wp) = (xs[2] + p[0] + p[2], xs[3] + p[1] + p[3]);
                 // Padding never wins: it is the lowest float.
                 let xp = if p.iter().any(|&q| q != 0) {

@@ -1,8 +1,6 @@
 //! Object detectors: configs, preprocessing, output decoding, NMS and backends.
 
 pub mod autodiff;
-#[cfg(feature = "optimize")]
-pub mod candle_darknet;
 pub mod coco;
 pub mod config;
 pub mod darknet;

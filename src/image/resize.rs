@@ -17,6 +17,7 @@ pub enum Interpolation {
 }
 
 /// Source taps of one output sample: first source index and normalized weights.
+#[derive(Clone)]
 struct Taps {
     start: usize,
     weights: Vec<f64>,
@@ -140,6 +141,77 @@ pub fn interpolation_matrix(src: usize, dst: usize, filter: Interpolation) -> Ve
     m
 }
 
+/// Resampling of square `src × src` images to `dst × dst` as a linear map with its exact adjoint,
+/// from interleaved HWC (as images are stored) to planar CHW (as networks read them).
+#[derive(Clone)]
+pub struct Resampler {
+    src: usize,
+    dst: usize,
+    taps: Vec<Taps>,
+}
+
+impl Resampler {
+    /// The map for `filter`.
+    pub fn new(src: usize, dst: usize, filter: Interpolation) -> Self {
+        Resampler { src, dst, taps: axis_taps(src, dst, filter) }
+    }
+
+    /// Interleaved `src² × c` → planar `c × dst²`.
+    pub fn apply(&self, img: &[f32], c: usize) -> Vec<f32> {
+        let (s, d) = (self.src, self.dst);
+        let mut rows = vec![0f32; s * d]; // one channel, resampled along x
+        let mut out = vec![0f32; c * d * d];
+        for ch in 0..c {
+            rows.fill(0.0);
+            for y in 0..s {
+                for (dx, t) in self.taps.iter().enumerate() {
+                    for (k, &w) in t.weights.iter().enumerate() {
+                        rows[y * d + dx] += w as f32 * img[(y * s + t.start + k) * c + ch];
+                    }
+                }
+            }
+            let plane = &mut out[ch * d * d..(ch + 1) * d * d];
+            for (dy, t) in self.taps.iter().enumerate() {
+                for (k, &w) in t.weights.iter().enumerate() {
+                    let src = &rows[(t.start + k) * d..(t.start + k + 1) * d];
+                    for (o, v) in plane[dy * d..(dy + 1) * d].iter_mut().zip(src) {
+                        *o += w as f32 * v;
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// The adjoint of [`Resampler::apply`]: planar `c × dst²` → interleaved `src² × c`.
+    pub fn adjoint(&self, grad: &[f32], c: usize) -> Vec<f32> {
+        let (s, d) = (self.src, self.dst);
+        let mut rows = vec![0f32; s * d];
+        let mut out = vec![0f32; s * s * c];
+        for ch in 0..c {
+            rows.fill(0.0);
+            let plane = &grad[ch * d * d..(ch + 1) * d * d];
+            for (dy, t) in self.taps.iter().enumerate() {
+                for (k, &w) in t.weights.iter().enumerate() {
+                    let dst = &mut rows[(t.start + k) * d..(t.start + k + 1) * d];
+                    for (o, v) in dst.iter_mut().zip(&plane[dy * d..(dy + 1) * d]) {
+                        *o += w as f32 * v;
+                    }
+                }
+            }
+            for y in 0..s {
+                for (dx, t) in self.taps.iter().enumerate() {
+                    let g = rows[y * d + dx];
+                    for (k, &w) in t.weights.iter().enumerate() {
+                        out[(y * s + t.start + k) * c + ch] += w as f32 * g;
+                    }
+                }
+            }
+        }
+        out
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -195,5 +267,21 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn resampler_is_a_permutation_at_equal_size_and_its_adjoint_is_exact() {
+        let img: Vec<f32> = (0..5 * 5 * 3).map(|i| ((i * 37) % 11) as f32).collect();
+        let same = Resampler::new(5, 5, Interpolation::Bilinear).apply(&img, 3);
+        for (i, v) in same.iter().enumerate() {
+            let (ch, p) = (i / 25, i % 25);
+            assert_eq!(*v, img[p * 3 + ch]);
+        }
+        let r = Resampler::new(13, 6, Interpolation::Bilinear);
+        let x: Vec<f32> = (0..13 * 13 * 3).map(|i| ((i * 7919) % 101) as f32 / 50.0 - 1.0).collect();
+        let y: Vec<f32> = (0..6 * 6 * 3).map(|i| ((i * 104729) % 97) as f32 / 48.0 - 1.0).collect();
+        let lhs: f64 = r.apply(&x, 3).iter().zip(&y).map(|(a, b)| *a as f64 * *b as f64).sum();
+        let rhs: f64 = x.iter().zip(r.adjoint(&y, 3)).map(|(a, b)| *a as f64 * b as f64).sum();
+        assert!((lhs - rhs).abs() < 1e-4 * lhs.abs().max(1.0), "{lhs} vs {rhs}");
     }
 }

@@ -8,6 +8,8 @@ mod common;
 
 mod bench_render;
 #[cfg(feature = "optimize")]
+mod bench_step;
+#[cfg(feature = "optimize")]
 mod crossval;
 #[cfg(feature = "optimize")]
 mod eval_digital;
@@ -47,6 +49,10 @@ enum Cmd {
     /// Time the render stages on a mesh (G-buffer per view, texture gather and its adjoint,
     /// shading) at several image sizes; writes CSV.
     BenchRender(bench_render::Args),
+    /// Time the white-box step (detector forward, and forward + input gradient) at several
+    /// composite sizes; writes CSV.
+    #[cfg(feature = "optimize")]
+    BenchStep(bench_step::Args),
     /// Render the mesh with its UV texture (flat, unlit) and the textured-region mask as PNGs.
     Render(render::Args),
 }
@@ -87,6 +93,8 @@ fn main() -> Result<()> {
         Cmd::Crossval(a) => crossval::run(&a),
         Cmd::Uv(c) => uv::run(&c),
         Cmd::BenchRender(a) => bench_render::run(&a),
+        #[cfg(feature = "optimize")]
+        Cmd::BenchStep(a) => bench_step::run(&a),
         Cmd::Render(a) => render::run(&a),
     }
 }

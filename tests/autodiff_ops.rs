@@ -1,0 +1,181 @@
+//! Every backward rule of `detect::autodiff` on a small graph of its own, against central
+//! differences of the forward graph run by ONNX Runtime; and max-pool ties routed to the first
+//! maximum of each window, as PyTorch routes them.
+#![cfg(feature = "eval")]
+
+mod common;
+
+use pav::detect::autodiff::differentiate;
+use pav::detect::onnx_proto::{Attr, Dim, InitData, Initializer, Model, Node, ValueInfo, FLOAT};
+use pav::detect::ortgrad::GradSession;
+
+fn node(op: &str, inputs: &[&str], out: &str, attrs: Vec<(&str, Attr)>) -> Node {
+    Node {
+        op_type: op.into(),
+        name: out.into(),
+        inputs: inputs.iter().map(|s| s.to_string()).collect(),
+        outputs: vec![out.into()],
+        attrs: attrs.into_iter().map(|(k, a)| (k.into(), a)).collect(),
+    }
+}
+
+fn init(name: &str, dims: Vec<i64>, data: InitData) -> Initializer {
+    Initializer { name: name.into(), dims, data }
+}
+
+fn value(name: &str) -> ValueInfo {
+    ValueInfo { name: name.into(), elem_type: FLOAT, dims: vec![Dim::Symbolic("?".into()); 4] }
+}
+
+fn model(nodes: Vec<Node>, inits: Vec<Initializer>, outputs: &[&str]) -> Model {
+    Model {
+        graph_name: "t".into(),
+        producer: "test".into(),
+        opset: 13,
+        nodes,
+        initializers: inits,
+        inputs: vec![value("x")],
+        outputs: outputs.iter().map(|o| value(o)).collect(),
+    }
+}
+
+/// Values in [−1, 1], spread so that no two are closer than 1e-3 apart (no kink within a step).
+fn spread(n: usize, seed: usize) -> Vec<f32> {
+    let mut v: Vec<f32> = (0..n).map(|i| ((i * 7919 + seed * 104729) % n) as f32).collect();
+    let m = n as f32;
+    v.iter_mut().for_each(|x| *x = 2.0 * (*x + 0.5) / m - 1.0);
+    v
+}
+
+/// The gradient of Σ w·outputs from the graphs against central differences of the forward.
+fn check(m: Model, shape: [i64; 4], tol: f32) {
+    common::require_setup();
+    let d = differentiate(&m, &shape).unwrap_or_else(|e| panic!("{e}"));
+    let mut g = GradSession::new("test", d, 1).unwrap();
+    let n = shape.iter().product::<i64>() as usize;
+    let x = spread(n, 1);
+    let (outs, pass) = g.forward(x.clone()).unwrap();
+    let w: Vec<Vec<f32>> = outs.iter().enumerate().map(|(k, o)| spread(o.len(), k + 2)).collect();
+    let grad = g.backward(&pass, w.clone()).unwrap();
+    let loss = |g: &mut GradSession, x: Vec<f32>| -> f64 {
+        let (o, _) = g.forward(x).unwrap();
+        o.iter().zip(&w).map(|(o, w)| o.iter().zip(w).map(|(a, b)| *a as f64 * *b as f64).sum::<f64>()).sum()
+    };
+    let eps = 2e-4;
+    for i in 0..n {
+        let (mut p, mut q) = (x.clone(), x.clone());
+        p[i] += eps;
+        q[i] -= eps;
+        let fd = ((loss(&mut g, p) - loss(&mut g, q)) / (2.0 * eps as f64)) as f32;
+        assert!((fd - grad[i]).abs() <= tol * (1.0 + fd.abs()), "input {i}: graph {} vs differences {fd}", grad[i]);
+    }
+}
+
+fn conv_weights(m: usize, c: usize, k: usize) -> Initializer {
+    init("w", vec![m as i64, c as i64, k as i64, k as i64], InitData::F32(spread(m * c * k * k, 9)))
+}
+
+#[test]
+fn conv_stride_one_two_and_grouped() {
+    for (stride, group, pads) in
+        [(1, 1, [1, 1, 1, 1]), (2, 1, [1, 1, 1, 1]), (2, 1, [0, 0, 1, 1]), (1, 2, [1, 0, 1, 0])]
+    {
+        let (c, m) = (2, 4);
+        let attrs = vec![
+            ("kernel_shape", Attr::Ints(vec![3, 3])),
+            ("strides", Attr::Ints(vec![stride, stride])),
+            ("pads", Attr::Ints(pads.to_vec())),
+            ("group", Attr::Int(group)),
+        ];
+        let w = conv_weights(m, c / group as usize, 3);
+        check(model(vec![node("Conv", &["x", "w"], "y", attrs)], vec![w], &["y"]), [1, c as i64, 7, 6], 2e-3);
+    }
+}
+
+#[test]
+fn max_pools_tiled_padded_and_overlapping() {
+    for (k, s, p) in
+        [(2, 2, [0, 0, 0, 0]), (2, 2, [0, 0, 1, 1]), (2, 1, [0, 0, 1, 1]), (3, 2, [1, 1, 1, 1]), (5, 1, [2, 2, 2, 2])]
+    {
+        let attrs = vec![
+            ("kernel_shape", Attr::Ints(vec![k, k])),
+            ("strides", Attr::Ints(vec![s, s])),
+            ("pads", Attr::Ints(p.to_vec())),
+        ];
+        check(model(vec![node("MaxPool", &["x"], "y", attrs)], vec![], &["y"]), [1, 2, 6, 6], 2e-3);
+    }
+}
+
+#[test]
+fn activations_products_sums_concat_and_resize() {
+    let scalar = |n: &str, v: f32| init(n, vec![], InitData::F32(vec![v]));
+    let scales = init("sc", vec![4], InitData::F32(vec![1.0, 1.0, 2.0, 2.0]));
+    let resize = node(
+        "Resize",
+        &["x", "", "sc"],
+        "r",
+        vec![
+            ("mode", Attr::Str("nearest".into())),
+            ("coordinate_transformation_mode", Attr::Str("asymmetric".into())),
+            ("nearest_mode", Attr::Str("floor".into())),
+        ],
+    );
+    let graphs = vec![
+        model(vec![node("LeakyRelu", &["x"], "y", vec![("alpha", Attr::Float(0.1))])], vec![], &["y"]),
+        model(vec![node("Relu", &["x"], "y", vec![])], vec![], &["y"]),
+        model(vec![node("Sigmoid", &["x"], "y", vec![])], vec![], &["y"]),
+        // SiLU as YOLOX writes it: x · sigmoid(x), one value used twice.
+        model(vec![node("Sigmoid", &["x"], "s", vec![]), node("Mul", &["x", "s"], "y", vec![])], vec![], &["y"]),
+        model(
+            vec![node("Mul", &["x", "k"], "a", vec![]), node("Add", &["a", "x"], "y", vec![])],
+            vec![scalar("k", 1.5)],
+            &["y"],
+        ),
+        model(
+            vec![
+                node("Sigmoid", &["x"], "s", vec![]),
+                node("Concat", &["x", "s", "x"], "y", vec![("axis", Attr::Int(1))]),
+            ],
+            vec![],
+            &["y"],
+        ),
+        model(vec![resize], vec![scales], &["r"]),
+        // Two outputs, and an Identity between them.
+        model(vec![node("Relu", &["x"], "a", vec![]), node("Identity", &["a"], "b", vec![])], vec![], &["a", "b"]),
+    ];
+    for m in graphs {
+        check(m, [1, 2, 4, 4], 2e-3);
+    }
+}
+
+#[test]
+fn max_pool_ties_go_to_the_first_maximum() {
+    common::require_setup();
+    // Every window of a constant image ties: only its first (top-left) position gets gradient.
+    for (k, s, p) in [(2, 2, vec![0, 0, 0, 0]), (2, 1, vec![0, 0, 1, 1])] {
+        let attrs = vec![
+            ("kernel_shape", Attr::Ints(vec![k, k])),
+            ("strides", Attr::Ints(vec![s, s])),
+            ("pads", Attr::Ints(p)),
+        ];
+        let d =
+            differentiate(&model(vec![node("MaxPool", &["x"], "y", attrs)], vec![], &["y"]), &[1, 1, 4, 4]).unwrap();
+        let mut g = GradSession::new("ties", d, 1).unwrap();
+        let (y, pass) = g.forward(vec![0.5; 16]).unwrap();
+        let grad = g.backward(&pass, vec![vec![1.0; y[0].len()]]).unwrap();
+        let expect: Vec<f32> = if s == 2 {
+            (0..16).map(|i| if (i / 4) % 2 == 0 && (i % 4) % 2 == 0 { 1.0 } else { 0.0 }).collect()
+        } else {
+            // Stride 1 with end padding: output (i, j) reads (i, j) first, so each input gets one.
+            vec![1.0; 16]
+        };
+        assert_eq!(grad, expect, "k{k} s{s}");
+    }
+}
+
+#[test]
+fn unsupported_operators_are_named() {
+    let m = model(vec![node("Softmax", &["x"], "y", vec![])], vec![], &["y"]);
+    let e = differentiate(&m, &[1, 1, 2, 2]).unwrap_err().to_string();
+    assert!(e.contains("Softmax") && e.contains("no backward rule"), "{e}");
+}
