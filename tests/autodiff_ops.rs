@@ -5,7 +5,7 @@
 
 mod common;
 
-use pav::detect::autodiff::differentiate;
+use pav::detect::autodiff::{differentiate, differentiate_with, Kernels};
 use pav::detect::onnx_proto::{Attr, Dim, InitData, Initializer, Model, Node, ValueInfo, FLOAT};
 use pav::detect::ortgrad::GradSession;
 
@@ -16,6 +16,7 @@ fn node(op: &str, inputs: &[&str], out: &str, attrs: Vec<(&str, Attr)>) -> Node 
         inputs: inputs.iter().map(|s| s.to_string()).collect(),
         outputs: vec![out.into()],
         attrs: attrs.into_iter().map(|(k, a)| (k.into(), a)).collect(),
+        domain: String::new(),
     }
 }
 
@@ -32,6 +33,7 @@ fn model(nodes: Vec<Node>, inits: Vec<Initializer>, outputs: &[&str]) -> Model {
         graph_name: "t".into(),
         producer: "test".into(),
         opset: 13,
+        domains: vec![],
         nodes,
         initializers: inits,
         inputs: vec![value("x")],
@@ -47,10 +49,17 @@ fn spread(n: usize, seed: usize) -> Vec<f32> {
     v
 }
 
-/// The gradient of Σ w·outputs from the graphs against central differences of the forward.
+/// The gradient of Σ w·outputs from the graphs, with either kind of kernels, against central
+/// differences of the forward.
 fn check(m: Model, shape: [i64; 4], tol: f32) {
+    for kernels in [Kernels::Onnx, Kernels::Fused] {
+        check_with(m.clone(), shape, tol, kernels);
+    }
+}
+
+fn check_with(m: Model, shape: [i64; 4], tol: f32, kernels: Kernels) {
     common::require_setup();
-    let d = differentiate(&m, &shape).unwrap_or_else(|e| panic!("{e}"));
+    let d = differentiate_with(&m, &shape, kernels).unwrap_or_else(|e| panic!("{e}"));
     let mut g = GradSession::new("test", d, 1).unwrap();
     let n = shape.iter().product::<i64>() as usize;
     let x = spread(n, 1);
@@ -67,7 +76,11 @@ fn check(m: Model, shape: [i64; 4], tol: f32) {
         p[i] += eps;
         q[i] -= eps;
         let fd = ((loss(&mut g, p) - loss(&mut g, q)) / (2.0 * eps as f64)) as f32;
-        assert!((fd - grad[i]).abs() <= tol * (1.0 + fd.abs()), "input {i}: graph {} vs differences {fd}", grad[i]);
+        assert!(
+            (fd - grad[i]).abs() <= tol * (1.0 + fd.abs()),
+            "{kernels:?}, input {i}: graph {} vs differences {fd}",
+            grad[i]
+        );
     }
 }
 
@@ -152,14 +165,15 @@ fn activations_products_sums_concat_and_resize() {
 fn max_pool_ties_go_to_the_first_maximum() {
     common::require_setup();
     // Every window of a constant image ties: only its first (top-left) position gets gradient.
-    for (k, s, p) in [(2, 2, vec![0, 0, 0, 0]), (2, 1, vec![0, 0, 1, 1])] {
+    let cases = [(2, 2, vec![0, 0, 0, 0]), (2, 1, vec![0, 0, 1, 1])];
+    for ((k, s, p), kernels) in cases.into_iter().flat_map(|c| [(c.clone(), Kernels::Onnx), (c, Kernels::Fused)]) {
         let attrs = vec![
             ("kernel_shape", Attr::Ints(vec![k, k])),
             ("strides", Attr::Ints(vec![s, s])),
             ("pads", Attr::Ints(p)),
         ];
-        let d =
-            differentiate(&model(vec![node("MaxPool", &["x"], "y", attrs)], vec![], &["y"]), &[1, 1, 4, 4]).unwrap();
+        let m = model(vec![node("MaxPool", &["x"], "y", attrs)], vec![], &["y"]);
+        let d = differentiate_with(&m, &[1, 1, 4, 4], kernels).unwrap();
         let mut g = GradSession::new("ties", d, 1).unwrap();
         let (y, pass) = g.forward(vec![0.5; 16]).unwrap();
         let grad = g.backward(&pass, vec![vec![1.0; y[0].len()]]).unwrap();
@@ -169,7 +183,7 @@ fn max_pool_ties_go_to_the_first_maximum() {
             // Stride 1 with end padding: output (i, j) reads (i, j) first, so each input gets one.
             vec![1.0; 16]
         };
-        assert_eq!(grad, expect, "k{k} s{s}");
+        assert_eq!(grad, expect, "k{k} s{s} {kernels:?}");
     }
 }
 

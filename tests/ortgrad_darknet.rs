@@ -7,7 +7,7 @@
 mod common;
 
 use pav::dataset::fca::CarlaSample;
-use pav::detect::autodiff::differentiate;
+use pav::detect::autodiff::{differentiate_with, Kernels};
 use pav::detect::darknet::cfg::Activation;
 use pav::detect::darknet::{to_onnx, Layer, Network, Weights};
 use pav::detect::onnx::OnnxDetector;
@@ -16,12 +16,16 @@ use pav::detect::preprocess::prepare;
 use pav::detect::DetectorConfig;
 
 fn session(size: usize) -> GradSession {
+    session_with(size, Kernels::Fused)
+}
+
+fn session_with(size: usize, kernels: Kernels) -> GradSession {
     common::require_setup();
     let dir = common::repo().join(".deps/models/yolov3-tiny");
     let net = Network::from_file(&dir.join("yolov3-tiny.cfg")).unwrap();
     let w = Weights::from_file(&dir.join("yolov3-tiny.weights"), &net).unwrap();
     let model = to_onnx::export(&net, &w).unwrap();
-    let d = differentiate(&model, &[1, 3, size as i64, size as i64]).unwrap();
+    let d = differentiate_with(&model, &[1, 3, size as i64, size as i64], kernels).unwrap();
     GradSession::new("yolov3-tiny", d, 1).unwrap()
 }
 
@@ -158,12 +162,18 @@ fn input_gradient_matches_central_differences_of_an_f64_reference() {
     let dir = common::repo().join(".deps/models/yolov3-tiny");
     let net = Network::from_file(&dir.join("yolov3-tiny.cfg")).unwrap();
     let wts = Weights::from_file(&dir.join("yolov3-tiny.weights"), &net).unwrap();
-    let mut g = session(n);
+    for kernels in [Kernels::Onnx, Kernels::Fused] {
+        check_against_reference(n, &net, &wts, kernels);
+    }
+}
+
+fn check_against_reference(n: usize, net: &Network, wts: &Weights, kernels: Kernels) {
+    let mut g = session_with(n, kernels);
     let x = smooth(n);
     let xd: Vec<f64> = x.iter().map(|v| *v as f64).collect();
     let (heads, pass) = g.forward(x.clone()).unwrap();
     // The reference is the same network: its heads agree with the graph's to f32 precision.
-    let refs = reference_heads(&net, &wts, &xd, n);
+    let refs = reference_heads(net, wts, &xd, n);
     for (a, b) in heads.iter().zip(&refs) {
         let worst = a.iter().zip(b).map(|(a, b)| (*a as f64 - b).abs()).fold(0f64, f64::max);
         assert!(worst < 1e-3, "reference heads differ by {worst}");
@@ -171,7 +181,7 @@ fn input_gradient_matches_central_differences_of_an_f64_reference() {
     let w: Vec<Vec<f32>> = heads.iter().enumerate().map(|(k, h)| weights(h.len(), k)).collect();
     let grad = g.backward(&pass, w.clone()).unwrap();
     let loss = |x: &[f64]| -> f64 {
-        reference_heads(&net, &wts, x, n)
+        reference_heads(net, wts, x, n)
             .iter()
             .zip(&w)
             .map(|(h, w)| h.iter().zip(w).map(|(a, b)| a * *b as f64).sum::<f64>())
@@ -185,7 +195,7 @@ fn input_gradient_matches_central_differences_of_an_f64_reference() {
             loss(&v)
         };
         let fd = (at(eps) - at(-eps)) / (2.0 * eps);
-        eprintln!("pixel {i}: gradient graph {:.6e}, central difference {fd:.6e}", grad[i]);
-        assert!((fd - grad[i] as f64).abs() <= 1e-4 * (1.0 + fd.abs()), "pixel {i}: {} vs {fd}", grad[i]);
+        eprintln!("{kernels:?}, pixel {i}: gradient graph {:.6e}, central difference {fd:.6e}", grad[i]);
+        assert!((fd - grad[i] as f64).abs() <= 1e-4 * (1.0 + fd.abs()), "{kernels:?}, pixel {i}: {} vs {fd}", grad[i]);
     }
 }

@@ -8,7 +8,7 @@
 
 use super::config::DetectorSection;
 use super::loss::{DetectionLoss, HeadShapeError};
-use crate::detect::autodiff::{differentiate, AutodiffError};
+use crate::detect::autodiff::{differentiate_with, AutodiffError, Kernels};
 use crate::detect::darknet::cfg::YoloHead;
 use crate::detect::darknet::{to_onnx, DarknetError, Network, Weights};
 use crate::detect::ortgrad::GradSession;
@@ -89,7 +89,7 @@ impl WhiteBox {
         let (iw, ih) = (o.input.unwrap_or(net.width), o.input.unwrap_or(net.height));
         let heads: Vec<YoloHead> = net.heads().into_iter().map(|(_, h)| h.clone()).collect();
         let model = to_onnx::export(&net, &w)?;
-        let d = differentiate(&model, &[1, 3, ih as i64, iw as i64])?;
+        let d = differentiate_with(&model, &[1, 3, ih as i64, iw as i64], Kernels::Fused)?;
         let head_sizes = d.outputs.iter().map(|(_, s)| (s[2] as usize, s[3] as usize)).collect();
         let session = GradSession::new("yolov3-tiny (white-box)", d, o.threads)?;
         let loss = DetectionLoss { box_threshold: cfg.box_threshold, target: cfg.target.clone() };

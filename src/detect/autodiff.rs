@@ -43,6 +43,20 @@ pub enum AutodiffError {
     Graph(String),
 }
 
+/// The custom operator domain of [`Kernels::Fused`] gradient graphs.
+pub const PAV_DOMAIN: &str = "pav";
+
+/// How the backward of element-wise-heavy operators is written.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Kernels {
+    /// Standard ONNX operators only: runs on any ONNX runtime and execution provider.
+    #[default]
+    Onnx,
+    /// pav's fused operators (domain `pav`: `LeakyReluGrad`, `MaxPoolGrad`, one pass each instead of
+    /// several), which the session must register (`detect::gradops`); CPU only.
+    Fused,
+}
+
 /// The operators with a backward rule.
 pub const SUPPORTED: &str = "Conv, MaxPool, LeakyRelu, Relu, Sigmoid, Add, Mul, Concat, Resize (nearest), Identity";
 
@@ -144,7 +158,15 @@ impl Tape {
             inputs,
             outputs: vec![out.clone()],
             attrs: attrs.into_iter().map(|(k, a)| (k.to_string(), a)).collect(),
+            domain: String::new(),
         });
+        out
+    }
+    fn fused(&mut self, op: &str, inputs: Vec<String>, attrs: Vec<(&str, Attr)>) -> String {
+        let out = self.node(op, inputs, attrs);
+        if let Some(n) = self.nodes.last_mut() {
+            n.domain = PAV_DOMAIN.into();
+        }
         out
     }
     fn f32s(&mut self, dims: Vec<i64>, v: Vec<f32>) -> String {
@@ -270,8 +292,18 @@ fn tiled_pool_grad(tape: &mut Tape, x: &str, y: &str, g: &str, b: i64, ys: &[i64
     tape.node("DepthToSpace", vec![routed], vec![("blocksize", Attr::Int(b)), ("mode", Attr::Str("DCR".into()))])
 }
 
-/// Differentiates `model` (batch 1, input of `input_shape`) with respect to its first input.
+/// Differentiates `model` (batch 1, input of `input_shape`) with respect to its first input, with
+/// standard ONNX operators.
 pub fn differentiate(model: &Model, input_shape: &[i64]) -> Result<Differentiated, AutodiffError> {
+    differentiate_with(model, input_shape, Kernels::Onnx)
+}
+
+/// [`differentiate`] with the backward written by `kernels`.
+pub fn differentiate_with(
+    model: &Model,
+    input_shape: &[i64],
+    kernels: Kernels,
+) -> Result<Differentiated, AutodiffError> {
     let input = model.inputs.first().ok_or_else(|| AutodiffError::Graph("no input".into()))?.name.clone();
     let consts: HashMap<&str, &Initializer> = model.initializers.iter().map(|i| (i.name.as_str(), i)).collect();
     let mut shape: HashMap<String, Vec<i64>> = HashMap::from([(input.clone(), input_shape.to_vec())]);
@@ -317,13 +349,22 @@ pub fn differentiate(model: &Model, input_shape: &[i64]) -> Result<Differentiate
         match n.op_type.as_str() {
             "Identity" => add_grad(&mut grad, &mut tape, &x, g),
             "Relu" | "LeakyRelu" => {
-                save(&x, &mut saved);
+                let alpha = if n.op_type == "Relu" { 0.0 } else { float(n, "alpha").unwrap_or(0.01) };
+                // For alpha ≥ 0 the output has the input's sign, and saving the output leaves the
+                // convolution before it free to fuse with the activation.
+                let sign = if alpha >= 0.0 { n.outputs[0].clone() } else { x.clone() };
+                save(&sign, &mut saved);
+                if kernels == Kernels::Fused {
+                    let gx = tape.fused("LeakyReluGrad", vec![sign, g], vec![("alpha", Attr::Float(alpha))]);
+                    add_grad(&mut grad, &mut tape, &x, gx);
+                    continue;
+                }
                 let zero = tape.scalar(0.0);
-                let pos = tape.node("Greater", vec![x.clone(), zero.clone()], vec![]);
+                let pos = tape.node("Greater", vec![sign, zero.clone()], vec![]);
                 let neg = if n.op_type == "Relu" {
                     zero
                 } else {
-                    let a = tape.scalar(float(n, "alpha").unwrap_or(0.01));
+                    let a = tape.scalar(alpha);
                     tape.node("Mul", vec![g.clone(), a], vec![])
                 };
                 let gx = tape.node("Where", vec![pos, g, neg], vec![]);
@@ -441,6 +482,19 @@ pub fn differentiate(model: &Model, input_shape: &[i64]) -> Result<Differentiate
                 };
                 add_grad(&mut grad, &mut tape, &x, gx);
             }
+            "MaxPool" if kernels == Kernels::Fused => {
+                let y = n.outputs[0].clone();
+                save(&x, &mut saved);
+                save(&y, &mut saved);
+                let (k, s, p) = window(n, None)?;
+                let attrs = vec![
+                    ("kernel_shape", Attr::Ints(k.to_vec())),
+                    ("strides", Attr::Ints(s.to_vec())),
+                    ("pads", Attr::Ints(p.to_vec())),
+                ];
+                let gx = tape.fused("MaxPoolGrad", vec![x.clone(), y, g], attrs);
+                add_grad(&mut grad, &mut tape, &x, gx);
+            }
             "MaxPool" => {
                 let y = n.outputs[0].clone();
                 save(&x, &mut saved);
@@ -550,11 +604,13 @@ pub fn differentiate(model: &Model, input_shape: &[i64]) -> Result<Differentiate
         inputs: vec![gx],
         outputs: vec![out_name.clone()],
         attrs: vec![],
+        domain: String::new(),
     });
     let backward = Model {
         graph_name: format!("{}_input_gradient", model.graph_name),
         producer: "pav autodiff".into(),
         opset: model.opset.max(13),
+        domains: if kernels == Kernels::Fused { vec![(PAV_DOMAIN.into(), 1)] } else { vec![] },
         nodes: tape.nodes,
         initializers: tape.inits,
         inputs: b_inputs,

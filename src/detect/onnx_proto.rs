@@ -69,6 +69,8 @@ pub struct Node {
     pub outputs: Vec<String>,
     /// Attributes in declaration order.
     pub attrs: Vec<(String, Attr)>,
+    /// Operator set domain; empty for the default ONNX operators.
+    pub domain: String,
 }
 
 /// A constant tensor stored in the graph.
@@ -120,6 +122,8 @@ pub struct Model {
     pub producer: String,
     /// Default-domain opset version.
     pub opset: i64,
+    /// Further operator sets the nodes use: (domain, version).
+    pub domains: Vec<(String, i64)>,
     /// Nodes in topological order.
     pub nodes: Vec<Node>,
     /// Constant tensors.
@@ -170,6 +174,9 @@ fn encode_node(n: &Node) -> Buf {
     b.str(4, &n.op_type);
     for (k, a) in &n.attrs {
         b.msg(5, encode_attr(k, a));
+    }
+    if !n.domain.is_empty() {
+        b.str(7, &n.domain);
     }
     b
 }
@@ -240,6 +247,12 @@ impl Model {
         op.str(1, "");
         op.int(2, self.opset);
         m.msg(8, op);
+        for (domain, version) in &self.domains {
+            let mut op = Buf::default();
+            op.str(1, domain);
+            op.int(2, *version);
+            m.msg(8, op);
+        }
         m.0
     }
 }

@@ -30,7 +30,13 @@ fn fail<'a>(name: &'a str, what: &'static str) -> impl Fn(ort::Error) -> DetectE
     move |source| DetectError::Session { detector: name.to_string(), what, source }
 }
 
-fn session(name: &str, bytes: &[u8], threads: usize, what: &'static str) -> Result<Session, DetectError> {
+fn session(
+    name: &str,
+    bytes: &[u8],
+    threads: usize,
+    pav_ops: bool,
+    what: &'static str,
+) -> Result<Session, DetectError> {
     let err = |source: ort::Error| DetectError::Session { detector: name.to_string(), what, source };
     let mut b = Session::builder(runtime()?)
         .map_err(err)?
@@ -43,6 +49,9 @@ fn session(name: &str, bytes: &[u8], threads: usize, what: &'static str) -> Resu
     if threads > 0 {
         b = b.with_intra_threads(threads).map_err(|e| err(e.into()))?;
     }
+    if pav_ops {
+        b = b.with_operators(super::gradops::domain().map_err(err)?).map_err(|e| err(e.into()))?;
+    }
     b.commit_from_memory(bytes).map_err(err)
 }
 
@@ -50,8 +59,9 @@ impl GradSession {
     /// Loads both graphs of `d` for the detector `name` with `threads` intra-op threads each (0 = the
     /// runtime's default).
     pub fn new(name: &str, d: Differentiated, threads: usize) -> Result<Self, DetectError> {
-        let forward = session(name, &d.forward.to_bytes(), threads, "loading the forward graph")?;
-        let backward = session(name, &d.backward.to_bytes(), threads, "loading the gradient graph")?;
+        let forward = session(name, &d.forward.to_bytes(), threads, false, "loading the forward graph")?;
+        let fused = !d.backward.domains.is_empty();
+        let backward = session(name, &d.backward.to_bytes(), threads, fused, "loading the gradient graph")?;
         Ok(GradSession { name: name.into(), d, forward, backward })
     }
 

@@ -64,6 +64,7 @@ pub fn export(net: &Network, weights: &Weights) -> Result<Model, DarknetError> {
         inputs,
         outputs: vec![out],
         attrs,
+        domain: String::new(),
     };
     for (i, layer) in net.layers.iter().enumerate() {
         let prev = names.last().cloned().unwrap_or_else(|| INPUT_NAME.to_string());
@@ -218,6 +219,7 @@ pub fn export(net: &Network, weights: &Weights) -> Result<Model, DarknetError> {
         graph_name: "darknet".into(),
         producer: format!("pav {}", env!("CARGO_PKG_VERSION")),
         opset: 13,
+        domains: vec![],
         nodes,
         initializers: inits,
         inputs: vec![ValueInfo {
