@@ -39,6 +39,7 @@ pub struct WhiteBox {
     loss: DetectionLoss,
     input: usize,
     resample: Resampler,
+    composite: usize,
 }
 
 /// Errors of the white-box detector.
@@ -56,6 +57,14 @@ pub enum WhiteBoxError {
     /// Head maps that do not fit the cfg's heads.
     #[error("white-box detector: {0}")]
     Heads(#[from] HeadShapeError),
+    /// A composite of another size than the one the detector was loaded for.
+    #[error("white-box detector: a {got}-value composite, expected {expected}² RGB")]
+    Size {
+        /// Values given.
+        got: usize,
+        /// The composite side it was loaded for.
+        expected: usize,
+    },
     /// A network whose input is not square.
     #[error("white-box detector: non-square network input {0}x{1}")]
     NotSquare(usize, usize),
@@ -94,7 +103,7 @@ impl WhiteBox {
         let session = GradSession::new("yolov3-tiny (white-box)", d, o.threads)?;
         let loss = DetectionLoss { box_threshold: cfg.box_threshold, target: cfg.target.clone() };
         let resample = Resampler::new(size, iw, Interpolation::Bilinear);
-        Ok(WhiteBox { session: Mutex::new(session), heads, head_sizes, loss, input: iw, resample })
+        Ok(WhiteBox { session: Mutex::new(session), heads, head_sizes, loss, input: iw, resample, composite: size })
     }
 
     /// Network input side.
@@ -106,9 +115,16 @@ impl WhiteBox {
         self.session.lock().unwrap_or_else(|e| e.into_inner())
     }
 
+    fn check_size(&self, img: &[f32], size: usize) -> Result<(), WhiteBoxError> {
+        if size != self.composite || img.len() != size * size * 3 {
+            return Err(WhiteBoxError::Size { got: img.len(), expected: self.composite });
+        }
+        Ok(())
+    }
+
     /// Loss of the `size × size` RGB composite `img` and its gradient for weight `beta` on L2.
     pub fn loss_and_grad(&self, img: &[f32], size: usize, beta: f32) -> Result<DetectorGrad, WhiteBoxError> {
-        debug_assert_eq!(img.len(), size * size * 3);
+        self.check_size(img, size)?;
         let t0 = Instant::now();
         let mut s = self.session();
         let (maps, pass) = s.forward(self.resample.apply(img, 3))?;
@@ -123,7 +139,7 @@ impl WhiteBox {
 
     /// The loss terms of a composite, without gradients (for scoring).
     pub fn loss(&self, img: &[f32], size: usize) -> Result<DetectorLoss, WhiteBoxError> {
-        debug_assert_eq!(img.len(), size * size * 3);
+        self.check_size(img, size)?;
         let (maps, _) = self.session().forward(self.resample.apply(img, 3))?;
         let maps: Vec<(Vec<f32>, (usize, usize))> = maps.into_iter().zip(self.head_sizes.iter().copied()).collect();
         Ok(self.loss.yolo(&maps, &self.heads, 1.0)?.0)
