@@ -15,6 +15,9 @@ pub fn sigmoid(x: f32) -> (f32, f32) {
     (0.5 + 0.5 * t, 0.25 * (1.0 - t * t))
 }
 
+/// One batch-1 head map `[A·(5+C), H, W]`, flattened, with its `(H, W)`.
+pub type HeadMap = (Vec<f32>, (usize, usize));
+
 /// The detector-loss settings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DetectionLoss {
@@ -45,11 +48,10 @@ pub struct LossTerms {
 pub struct HeadShapeError(String);
 
 impl DetectionLoss {
-    /// L1 and L2 of batch-1 head maps `[A·(5+C), H, W]` (flattened, with their `(H, W)`), and the
-    /// gradient of `L1 + beta·L2` with respect to each map.
+    /// L1 and L2 of the head maps, and the gradient of `L1 + beta·L2` with respect to each map.
     pub fn yolo(
         &self,
-        maps: &[(Vec<f32>, (usize, usize))],
+        maps: &[HeadMap],
         heads: &[YoloHead],
         beta: f32,
     ) -> Result<(LossTerms, Vec<Vec<f32>>), HeadShapeError> {

@@ -7,11 +7,11 @@
 //! with its exact adjoint.
 
 use super::config::DetectorSection;
-use super::loss::{DetectionLoss, HeadShapeError};
+use super::loss::{DetectionLoss, HeadMap, HeadShapeError};
 use crate::detect::autodiff::{differentiate_with, AutodiffError, Kernels};
 use crate::detect::darknet::cfg::YoloHead;
 use crate::detect::darknet::{to_onnx, DarknetError, Network, Weights};
-use crate::detect::ortgrad::GradSession;
+use crate::detect::ortgrad::{GradSession, Pass};
 use crate::detect::DetectError;
 use crate::image::resize::{Interpolation, Resampler};
 use std::sync::Mutex;
@@ -115,20 +115,21 @@ impl WhiteBox {
         self.session.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    fn check_size(&self, img: &[f32], size: usize) -> Result<(), WhiteBoxError> {
+    /// The head maps of the `size × size` composite `img`, each with its `(H, W)`, and what the
+    /// backward needs.
+    fn heads_of(&self, s: &mut GradSession, img: &[f32], size: usize) -> Result<(Vec<HeadMap>, Pass), WhiteBoxError> {
         if size != self.composite || img.len() != size * size * 3 {
             return Err(WhiteBoxError::Size { got: img.len(), expected: self.composite });
         }
-        Ok(())
+        let (maps, pass) = s.forward(self.resample.apply(img, 3))?;
+        Ok((maps.into_iter().zip(self.head_sizes.iter().copied()).collect(), pass))
     }
 
     /// Loss of the `size × size` RGB composite `img` and its gradient for weight `beta` on L2.
     pub fn loss_and_grad(&self, img: &[f32], size: usize, beta: f32) -> Result<DetectorGrad, WhiteBoxError> {
-        self.check_size(img, size)?;
         let t0 = Instant::now();
         let mut s = self.session();
-        let (maps, pass) = s.forward(self.resample.apply(img, 3))?;
-        let maps: Vec<(Vec<f32>, (usize, usize))> = maps.into_iter().zip(self.head_sizes.iter().copied()).collect();
+        let (maps, pass) = self.heads_of(&mut s, img, size)?;
         let (loss, head_grads) = self.loss.yolo(&maps, &self.heads, beta)?;
         let forward_ms = t0.elapsed().as_secs_f64() * 1e3;
         let t1 = Instant::now();
@@ -139,9 +140,7 @@ impl WhiteBox {
 
     /// The loss terms of a composite, without gradients (for scoring).
     pub fn loss(&self, img: &[f32], size: usize) -> Result<DetectorLoss, WhiteBoxError> {
-        self.check_size(img, size)?;
-        let (maps, _) = self.session().forward(self.resample.apply(img, 3))?;
-        let maps: Vec<(Vec<f32>, (usize, usize))> = maps.into_iter().zip(self.head_sizes.iter().copied()).collect();
+        let (maps, _) = self.heads_of(&mut self.session(), img, size)?;
         Ok(self.loss.yolo(&maps, &self.heads, 1.0)?.0)
     }
 }

@@ -5,7 +5,7 @@ use super::decode::{decode, LayoutError, Proposals, RawOutput};
 use super::preprocess::prepare;
 use super::{DetectError, Detector};
 use crate::image::Frame;
-use ort::session::builder::GraphOptimizationLevel;
+use ort::session::builder::{GraphOptimizationLevel, SessionBuilder};
 use ort::session::Session;
 use ort::value::{Tensor, TensorElementType, ValueType};
 use std::path::{Path, PathBuf};
@@ -55,8 +55,24 @@ pub fn runtime() -> Result<&'static ort::environment::Environment, DetectError> 
 }
 
 /// Wraps an ONNX Runtime error of detector `name` while doing `what`.
-fn session_err<'a, E: Into<ort::Error>>(name: &'a str, what: &'static str) -> impl Fn(E) -> DetectError + 'a {
+pub(crate) fn session_err<'a, E: Into<ort::Error>>(
+    name: &'a str,
+    what: &'static str,
+) -> impl Fn(E) -> DetectError + 'a {
     move |e| DetectError::Session { detector: name.to_string(), what, source: e.into() }
+}
+
+/// A session builder for detector `name`: every graph optimization, `threads` intra-op threads
+/// (0 = the runtime's default).
+pub(crate) fn session_builder(name: &str, threads: usize) -> Result<SessionBuilder, DetectError> {
+    let mut builder = Session::builder(runtime()?)
+        .map_err(session_err(name, "creating a session"))?
+        .with_optimization_level(GraphOptimizationLevel::All)
+        .map_err(session_err(name, "setting the optimization level"))?;
+    if threads > 0 {
+        builder = builder.with_intra_threads(threads).map_err(session_err(name, "setting the thread count"))?;
+    }
+    Ok(builder)
 }
 
 /// A detector running an ONNX model through ONNX Runtime.
@@ -79,16 +95,9 @@ impl OnnxDetector {
                 if cfg.model.to_string_lossy().contains(".deps") { "; run scripts/setup.sh" } else { "" }
             )));
         }
-        let env = runtime()?;
-        let mut builder = Session::builder(env)
-            .map_err(session_err(&cfg.name, "creating a session"))?
-            .with_optimization_level(GraphOptimizationLevel::All)
-            .map_err(session_err(&cfg.name, "setting the optimization level"))?;
-        if threads > 0 {
-            builder =
-                builder.with_intra_threads(threads).map_err(session_err(&cfg.name, "setting the thread count"))?;
-        }
-        let session = builder.commit_from_file(&cfg.model).map_err(session_err(&cfg.name, "loading the ONNX model"))?;
+        let session = session_builder(&cfg.name, threads)?
+            .commit_from_file(&cfg.model)
+            .map_err(session_err(&cfg.name, "loading the ONNX model"))?;
         let names: Vec<String> = session.inputs().iter().map(|i| i.name().to_string()).collect();
         let size_input = match &cfg.output {
             OutputLayout::Detr { size_input, .. } => size_input.clone(),

@@ -2,9 +2,8 @@
 //! forward's saved tensors stay in ONNX Runtime's memory and feed the backward by reference.
 
 use super::autodiff::{grad_name, Differentiated};
-use super::onnx::runtime;
+use super::onnx::{session_builder, session_err};
 use super::DetectError;
-use ort::session::builder::GraphOptimizationLevel;
 use ort::session::Session;
 use ort::value::{DynValue, Tensor};
 
@@ -25,11 +24,6 @@ pub struct Pass {
     input: Option<DynValue>,
 }
 
-/// An ONNX Runtime error of detector `name` while doing `what`.
-fn fail<'a>(name: &'a str, what: &'static str) -> impl Fn(ort::Error) -> DetectError + 'a {
-    move |source| DetectError::Session { detector: name.to_string(), what, source }
-}
-
 fn session(
     name: &str,
     bytes: &[u8],
@@ -37,22 +31,16 @@ fn session(
     pav_ops: bool,
     what: &'static str,
 ) -> Result<Session, DetectError> {
-    let err = |source: ort::Error| DetectError::Session { detector: name.to_string(), what, source };
-    let mut b = Session::builder(runtime()?)
-        .map_err(err)?
-        .with_optimization_level(GraphOptimizationLevel::All)
-        .map_err(|e| err(e.into()))?
+    let mut b = session_builder(name, threads)?
         // Two sessions take turns on the same cores: a spinning idle pool would steal them (measured:
         // a 416² YOLOv3-tiny step 190 → 117 ms on 2 cores).
         .with_intra_op_spinning(false)
-        .map_err(|e| err(e.into()))?;
-    if threads > 0 {
-        b = b.with_intra_threads(threads).map_err(|e| err(e.into()))?;
-    }
+        .map_err(session_err(name, "turning spinning off"))?;
     if pav_ops {
-        b = b.with_operators(super::gradops::domain().map_err(err)?).map_err(|e| err(e.into()))?;
+        let domain = super::gradops::domain().map_err(session_err(name, "creating pav's operators"))?;
+        b = b.with_operators(domain).map_err(session_err(name, "registering pav's operators"))?;
     }
-    b.commit_from_memory(bytes).map_err(err)
+    b.commit_from_memory(bytes).map_err(session_err(name, what))
 }
 
 impl GradSession {
@@ -65,17 +53,12 @@ impl GradSession {
         Ok(GradSession { name: name.into(), d, forward, backward })
     }
 
-    /// The graphs.
-    pub fn graphs(&self) -> &Differentiated {
-        &self.d
-    }
-
     /// Runs the model on `input` (of the graphs' input shape); returns each output's values in the
     /// graph's order and what the backward needs.
     pub fn forward(&mut self, input: Vec<f32>) -> Result<(Vec<Vec<f32>>, Pass), DetectError> {
         let shape: Vec<usize> = self.d.input_shape.iter().map(|&v| v as usize).collect();
         let name = self.name.clone();
-        let err = |what| fail(&name, what);
+        let err = |what| session_err(&name, what);
         let x = Tensor::from_array((shape, input)).map_err(err("preparing the input"))?.into_dyn();
         let mut outs = self.forward.run(vec![(self.d.input.clone(), &x)]).map_err(err("the forward pass"))?;
         let mut values = Vec::with_capacity(self.d.outputs.len());
@@ -108,7 +91,7 @@ impl GradSession {
             let shape: Vec<usize> = s.iter().map(|&v| v as usize).collect();
             seeds.push((
                 grad_name(o),
-                Tensor::from_array((shape, g)).map_err(fail(&self.name, "preparing a gradient"))?.into_dyn(),
+                Tensor::from_array((shape, g)).map_err(session_err(&self.name, "preparing a gradient"))?.into_dyn(),
             ));
         }
         let mut feed: Vec<(String, ort::session::SessionInputValue<'_>)> = Vec::new();
@@ -122,7 +105,7 @@ impl GradSession {
             feed.push((n.clone(), v.into()));
         }
         let name = self.name.clone();
-        let err = |what| fail(&name, what);
+        let err = |what| session_err(&name, what);
         let outs = self.backward.run(feed).map_err(err("the backward pass"))?;
         let g = &outs[0];
         Ok(g.try_extract_tensor::<f32>().map_err(err("reading the input gradient"))?.1.to_vec())
