@@ -1,5 +1,5 @@
 //! Resampling an 8-bit BGR [`Frame`]: OpenCV's bilinear and PIL's antialiased bilinear, bit for
-//! bit, and the same filters as dense matrices for differentiable pipelines.
+//! bit, and the same filters as a linear map with its exact adjoint for differentiable pipelines.
 
 use super::Frame;
 use serde::Deserialize;
@@ -129,18 +129,6 @@ fn resize_pil(frame: &Frame, nw: usize, nh: usize) -> Vec<f32> {
     out
 }
 
-/// The resampling of `src` samples to `dst` as a dense row-major `dst × src` matrix, so a
-/// differentiable pipeline can resize with two matrix products (`A_h · X · A_wᵀ`).
-pub fn interpolation_matrix(src: usize, dst: usize, filter: Interpolation) -> Vec<f32> {
-    let mut m = vec![0f32; dst * src];
-    for (d, t) in axis_taps(src, dst, filter).into_iter().enumerate() {
-        for (k, w) in t.weights.iter().enumerate() {
-            m[d * src + t.start + k] += *w as f32;
-        }
-    }
-    m
-}
-
 /// Resampling of square `src × src` images to `dst × dst` as a linear map with its exact adjoint,
 /// from interleaved HWC (as images are stored) to planar CHW (as networks read them).
 #[derive(Clone)]
@@ -242,28 +230,20 @@ mod tests {
         assert!(resize(&flat, 5, 3, Interpolation::Antialias).iter().all(|&v| v == 200.0));
     }
     #[test]
-    fn interpolation_matrices_reproduce_the_resize() {
-        let (w, h, nw, nh) = (13, 7, 5, 4);
-        let bgr: Vec<u8> = (0..w * h * 3).map(|i| ((i * 37) % 256) as u8).collect();
-        let f = Frame { width: w, height: h, bgr };
-        let direct = resize(&f, nw, nh, Interpolation::Bilinear);
-        let (ax, ay) = (
-            interpolation_matrix(w, nw, Interpolation::Bilinear),
-            interpolation_matrix(h, nh, Interpolation::Bilinear),
-        );
-        for r in 0..nw {
-            assert!((ax[r * w..(r + 1) * w].iter().sum::<f32>() - 1.0).abs() < 1e-6);
-        }
-        for y in 0..nh {
-            for x in 0..nw {
+    fn resampler_reproduces_the_resize() {
+        let (n, m) = (13, 5);
+        let bgr: Vec<u8> = (0..n * n * 3).map(|i| ((i * 37) % 256) as u8).collect();
+        let f = Frame { width: n, height: n, bgr };
+        let direct = resize(&f, m, m, Interpolation::Bilinear);
+        let r = Resampler::new(n, m, Interpolation::Bilinear);
+        // Weights sum to one: a constant image stays constant.
+        assert!(r.apply(&vec![1.0; n * n * 3], 3).iter().all(|v| (v - 1.0).abs() < 1e-6));
+        let planar = r.apply(&f.bgr.iter().map(|v| *v as f32).collect::<Vec<_>>(), 3);
+        for y in 0..m {
+            for x in 0..m {
                 for c in 0..3 {
-                    let mut v = 0.0;
-                    for sy in 0..h {
-                        for sx in 0..w {
-                            v += ay[y * h + sy] * ax[x * w + sx] * f.bgr[(sy * w + sx) * 3 + c] as f32;
-                        }
-                    }
-                    assert!((v.round() - direct[(y * nw + x) * 3 + c]).abs() <= 1.0, "({x},{y},{c})");
+                    let v = planar[(c * m + y) * m + x];
+                    assert!((v.round() - direct[(y * m + x) * 3 + c]).abs() <= 1.0, "({x},{y},{c})");
                 }
             }
         }
