@@ -15,8 +15,8 @@ use pav::progress::Silent;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
-fn problem() -> Option<(PathBuf, OptimizeConfig, Setup, WhiteBox)> {
-    common::real_data()?;
+fn problem() -> (PathBuf, OptimizeConfig, Setup, WhiteBox) {
+    common::real_data();
     let path = common::repo().join("configs/optimize/paper.toml");
     let mut cfg = OptimizeConfig::load(&path).unwrap();
     // data12501 and data12503: both sides of the car, each detected at 0.93+ on the photo.
@@ -24,7 +24,7 @@ fn problem() -> Option<(PathBuf, OptimizeConfig, Setup, WhiteBox)> {
     cfg.views.test.clear();
     let s = Setup::load(&cfg, None).unwrap();
     let wb = WhiteBox::load(&cfg.detector, cfg.views.size).unwrap();
-    Some((path, cfg, s, wb))
+    (path, cfg, s, wb)
 }
 
 fn opts(out: &std::path::Path, epochs: usize, resume: bool) -> RunOptions {
@@ -33,7 +33,7 @@ fn opts(out: &std::path::Path, epochs: usize, resume: bool) -> RunOptions {
 
 #[test]
 fn optimization_lowers_the_car_score_and_resume_is_exact() {
-    let Some((path, cfg, s, wb)) = problem() else { return };
+    let (path, cfg, s, wb) = problem();
     let never = AtomicBool::new(false);
     let dir = tempfile::tempdir().unwrap();
     let straight =
@@ -71,7 +71,7 @@ fn optimization_lowers_the_car_score_and_resume_is_exact() {
 
 #[test]
 fn poisoned_state_is_skipped_then_refused_with_the_checkpoint_kept() {
-    let Some((path, cfg, s, wb)) = problem() else { return };
+    let (path, cfg, s, wb) = problem();
     let never = AtomicBool::new(false);
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("p");

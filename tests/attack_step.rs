@@ -11,19 +11,19 @@ use pav::attack::whitebox::WhiteBox;
 use pav::rng::Rng;
 use pav::scene::Scene;
 
-fn setup(size: usize) -> Option<(OptimizeConfig, Setup, WhiteBox)> {
-    common::real_data()?;
+fn setup(size: usize) -> (OptimizeConfig, Setup, WhiteBox) {
+    common::real_data();
     let mut cfg = OptimizeConfig::load(&common::repo().join("configs/optimize/paper.toml")).unwrap();
     cfg.views.train.truncate(2);
     cfg.views.test.clear();
     let s = Setup::load(&cfg, Some(size)).unwrap();
     let wb = WhiteBox::load(&cfg.detector, size).unwrap();
-    Some((cfg, s, wb))
+    (cfg, s, wb)
 }
 
 #[test]
 fn texture_gradient_matches_finite_differences_through_the_detector() {
-    let Some((_, s, wb)) = setup(416) else { return };
+    let (_, s, wb) = setup(416);
     let v = &s.train[1];
     eprintln!(
         "{}: car {:.1} % of the image, textured {:.1} %, c_mid {}",

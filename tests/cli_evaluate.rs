@@ -31,9 +31,7 @@ fn assert_clean_failure(o: &Output, needle: &str) {
 
 #[test]
 fn evaluate_prints_table_and_writes_reports() {
-    if common::real_data().is_none() {
-        return;
-    }
+    common::real_data();
     let tmp = tempfile::tempdir().unwrap();
     let o = pav_rig()
         .args(["evaluate", &fixture(), "-d", &cfg("yolox_nano"), "--stride", "3", "-o"])
@@ -101,9 +99,7 @@ fn bad_configs_name_the_problem() {
 
 #[test]
 fn a_missing_video_fails_the_run_but_keeps_the_others() {
-    if common::real_data().is_none() {
-        return;
-    }
+    common::real_data();
     let tmp = tempfile::tempdir().unwrap();
     let o = pav_rig()
         .args([
@@ -127,9 +123,7 @@ fn a_missing_video_fails_the_run_but_keeps_the_others() {
 
 #[test]
 fn ctrl_c_keeps_every_scored_frame_and_a_summary() {
-    if common::real_data().is_none() {
-        return;
-    }
+    common::real_data();
     let tmp = tempfile::tempdir().unwrap();
     let fx = fixture();
     let child = pav_rig()

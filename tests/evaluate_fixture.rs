@@ -72,9 +72,7 @@ const DETS: [&str; 2] = ["yolox_nano", "yolov8n_int8"];
 
 #[test]
 fn a_physical_matches_truth_frame_by_frame() {
-    if common::real_data().is_none() {
-        return;
-    }
+    common::real_data();
     let tmp = tempfile::tempdir().unwrap();
     let out = run(&[job(fixture(), "orbit")], &DETS, tmp.path(), 1);
     let truth = truth();
@@ -109,9 +107,7 @@ fn a_physical_matches_truth_frame_by_frame() {
 
 #[test]
 fn stride_scores_every_nth_frame() {
-    if common::real_data().is_none() {
-        return;
-    }
+    common::real_data();
     let tmp = tempfile::tempdir().unwrap();
     let out = run(&[job(fixture(), "orbit")], &["yolox_nano"], tmp.path(), 4);
     let truth = truth();
@@ -124,9 +120,7 @@ fn stride_scores_every_nth_frame() {
 
 #[test]
 fn several_videos_make_a_table_and_bad_ones_keep_the_rest() {
-    if common::real_data().is_none() {
-        return;
-    }
+    common::real_data();
     let tmp = tempfile::tempdir().unwrap();
     let corrupt = tmp.path().join("corrupt.mp4");
     std::fs::write(&corrupt, b"this is not a video at all, just text that claims to be one").unwrap();

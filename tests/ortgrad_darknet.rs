@@ -47,7 +47,7 @@ fn weights(n: usize, seed: usize) -> Vec<f32> {
 
 #[test]
 fn forward_heads_equal_plain_inference() {
-    let Some(shared) = common::real_data() else { return };
+    let shared = common::real_data();
     let cfg = DetectorConfig::load(&common::detector_config("yolov3-tiny")).unwrap();
     let sample = CarlaSample::load(&shared.join("fca/carla_dataset/test/data12503.npz")).unwrap();
     let (input, _) = prepare(&sample.image, &cfg.input);

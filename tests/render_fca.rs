@@ -29,9 +29,7 @@ fn silhouette_ious(shared: &std::path::Path, mut mesh: Mesh) -> Vec<f32> {
 
 #[test]
 fn audi_silhouettes_overlap_the_fca_masks() {
-    let Some(shared) = common::shared_data() else {
-        return;
-    };
+    let shared = common::shared_data();
     let mesh = Mesh::load_obj(&shared.join("fca/audi_et_te.obj")).unwrap();
     assert_eq!((mesh.positions.len(), mesh.faces.len()), (13449, 23145));
     let ious = silhouette_ious(&shared, mesh);
@@ -45,9 +43,7 @@ fn audi_silhouettes_overlap_the_fca_masks() {
 /// neural_renderer's normalization it must be the very same shape as FCA's mesh.
 #[test]
 fn uv_mapped_etron_is_the_fca_audi() {
-    let Some(shared) = common::shared_data() else {
-        return;
-    };
+    let shared = common::shared_data();
     let fca_mesh = Mesh::load_obj(&shared.join("fca/audi_et_te.obj")).unwrap();
     let etron = Mesh::load_obj(&shared.join("rauca-e2e/pytorch3d_Etron.obj")).unwrap();
     assert_eq!(etron.faces.len(), fca_mesh.faces.len());
@@ -63,7 +59,7 @@ fn uv_mapped_etron_is_the_fca_audi() {
 fn a_parts_region_is_a_visible_subset_of_the_body() {
     use pav::attack::config::OptimizeConfig;
     use pav::attack::setup::Setup;
-    let Some(_) = common::shared_data() else { return };
+    common::shared_data();
     let load = |name: &str| {
         let cfg = OptimizeConfig::load(&common::repo().join("configs/optimize").join(name)).unwrap();
         Setup::load(&cfg, Some(128)).unwrap_or_else(|e| panic!("{name}: {e}"))

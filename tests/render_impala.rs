@@ -13,9 +13,7 @@ use pav::render::texture::Gather;
 
 #[test]
 fn impala_renders_with_its_textured_region() {
-    let Some(shared) = common::shared_data() else {
-        return;
-    };
+    let shared = common::shared_data();
     let mut mesh = Mesh::load_obj(&shared.join("pav-camou/xfl_yxz.obj")).unwrap();
     assert_eq!((mesh.positions.len(), mesh.uvs.len(), mesh.normals.len(), mesh.faces.len()), (5409, 5409, 14577, 4859));
     assert_eq!(mesh.materials.len(), 11);
@@ -65,9 +63,7 @@ fn impala_renders_with_its_textured_region() {
 fn dark_light_mask_separates_and_strong_light_does_not() {
     use pav::render::mask::{binarize, c_mid, measure, MaskError};
     use pav::render::shade::{vertex_normals, Lights, Shading};
-    let Some(shared) = common::shared_data() else {
-        return;
-    };
+    let shared = common::shared_data();
     let mut mesh = Mesh::load_obj(&shared.join("pav-camou/xfl_yxz.obj")).unwrap();
     mesh.normalize();
     let normals = vertex_normals(&mesh);
@@ -122,7 +118,7 @@ fn dark_light_mask_separates_and_strong_light_does_not() {
 #[test]
 fn uv_distortion_of_the_patch() {
     use pav::geometry::uv::{distortion, faces_in_mask, summary};
-    let Some(shared) = common::shared_data() else { return };
+    let shared = common::shared_data();
     let mut mesh = Mesh::load_obj(&shared.join("pav-camou/xfl_yxz.obj")).unwrap();
     mesh.normalize();
     let half = Rgb::load(&shared.join("pav-camou/half.png")).unwrap();
@@ -155,7 +151,7 @@ fn uv_distortion_of_the_patch() {
 fn uv_adjustment_reduces_distortion_in_place() {
     use pav::geometry::uv::{distortion, faces_in_mask, summary};
     use pav::geometry::uv_adjust::{adjust, islands};
-    let Some(shared) = common::shared_data() else { return };
+    let shared = common::shared_data();
     let mut mesh = Mesh::load_obj(&shared.join("pav-camou/xfl_yxz.obj")).unwrap();
     mesh.normalize();
     let half = Rgb::load(&shared.join("pav-camou/half.png")).unwrap();
@@ -207,7 +203,7 @@ fn uv_adjustment_reduces_distortion_in_place() {
 fn uv_charts_join_islands_and_raise_density() {
     use pav::geometry::uv::{distortion, faces_in_mask, paint_uv, summary};
     use pav::geometry::uv_charts::adjust_charts;
-    let Some(shared) = common::shared_data() else { return };
+    let shared = common::shared_data();
     let mut mesh = Mesh::load_obj(&shared.join("pav-camou/xfl_yxz.obj")).unwrap();
     let half = Rgb::load(&shared.join("pav-camou/half.png")).unwrap();
     let patch = faces_in_mask(&mesh, &half.white_mask(), half.width, half.height);

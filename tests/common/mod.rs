@@ -8,15 +8,17 @@ pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// `../shared/data`, or `None` (the caller skips, printing why) when the shared data is absent.
-pub fn shared_data() -> Option<PathBuf> {
+/// `../shared/data`; a test that needs it fails, saying where it must be, when it is absent (a
+/// test that skipped would pass without having checked anything).
+pub fn shared_data() -> PathBuf {
     let p = repo().join("../shared/data");
-    if p.join("MANIFEST.tsv").is_file() {
-        Some(p)
-    } else {
-        eprintln!("SKIP: ../shared/data is absent next to the repository; this test needs the real data there");
-        None
-    }
+    assert!(
+        p.join("MANIFEST.tsv").is_file(),
+        "../shared/data (with its MANIFEST.tsv) is absent next to the repository at {}: this test needs the real \
+         data there",
+        p.display()
+    );
+    p
 }
 
 /// Panics with the fix when scripts/setup.sh has not installed ONNX Runtime and the models.
@@ -30,12 +32,11 @@ pub fn require_setup() {
     }
 }
 
-/// The shared data with the installed models, or `None` (skip) when ../shared is absent;
-/// panics with the fix when scripts/setup.sh has not run.
-pub fn real_data() -> Option<PathBuf> {
-    let s = shared_data()?;
+/// The shared data with the installed models; fails with the fix when either is missing.
+pub fn real_data() -> PathBuf {
+    let s = shared_data();
     require_setup();
-    Some(s)
+    s
 }
 
 /// A detector config from configs/detectors.
