@@ -193,3 +193,54 @@ fn unsupported_operators_are_named() {
     let e = differentiate(&m, &[1, 1, 2, 2]).unwrap_err().to_string();
     assert!(e.contains("Softmax") && e.contains("no backward rule"), "{e}");
 }
+
+#[test]
+fn slices_reshapes_and_transposes() {
+    let ints = |n: &str, v: Vec<i64>| init(n, vec![v.len() as i64], InitData::I64(v));
+    // YOLOX's Focus: four step-2 slices (every other row and column, from 0 and 1) concatenated.
+    let c = |n: &str, v: i64| ints(n, vec![v]);
+    let focus = model(
+        vec![
+            node("Slice", &["x", "s0", "big", "ax2", "two"], "r0", vec![]),
+            node("Slice", &["x", "s1", "big", "ax2", "two"], "r1", vec![]),
+            node("Slice", &["r0", "s0", "big", "ax3", "two"], "a", vec![]),
+            node("Slice", &["r1", "s0", "big", "ax3", "two"], "b", vec![]),
+            node("Slice", &["r0", "s1", "big", "ax3", "two"], "c", vec![]),
+            node("Slice", &["r1", "s1", "big", "ax3", "two"], "d", vec![]),
+            node("Concat", &["a", "b", "c", "d"], "y", vec![("axis", Attr::Int(1))]),
+        ],
+        vec![c("s0", 0), c("s1", 1), c("big", i64::MAX), c("ax2", 2), c("ax3", 3), c("two", 2)],
+        &["y"],
+    );
+    check(focus, [1, 2, 6, 4], 2e-3);
+    // Negative bounds and axis, two axes in one node; the last step of 3 runs past the end.
+    let multi = model(
+        vec![node("Slice", &["x", "st", "en", "ax", "sp"], "y", vec![])],
+        vec![ints("st", vec![-5, 1]), ints("en", vec![-1, 100]), ints("ax", vec![-1, 2]), ints("sp", vec![3, 2])],
+        &["y"],
+    );
+    check(multi, [1, 2, 5, 7], 2e-3);
+    // YOLOX's head: [1, C, H, W] → [1, C, H·W] → [1, H·W, C].
+    let head = model(
+        vec![
+            node("Sigmoid", &["x"], "s", vec![]),
+            node("Reshape", &["s", "shape"], "r", vec![]),
+            node("Transpose", &["r"], "y", vec![("perm", Attr::Ints(vec![0, 2, 1]))]),
+        ],
+        vec![ints("shape", vec![0, 3, -1])],
+        &["y"],
+    );
+    check(head, [1, 3, 4, 5], 2e-3);
+}
+
+#[test]
+fn a_negative_slice_step_is_refused_by_name() {
+    let ints = |n: &str, v: Vec<i64>| init(n, vec![v.len() as i64], InitData::I64(v));
+    let m = model(
+        vec![node("Slice", &["x", "st", "en", "ax", "sp"], "y", vec![])],
+        vec![ints("st", vec![3]), ints("en", vec![0]), ints("ax", vec![3]), ints("sp", vec![-1])],
+        &["y"],
+    );
+    let e = differentiate(&m, &[1, 1, 4, 4]).unwrap_err().to_string();
+    assert!(e.contains("Slice") && e.contains("positive steps"), "{e}");
+}

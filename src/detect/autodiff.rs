@@ -11,6 +11,9 @@
 //!   window's maximum, as PyTorch routes it; padded positions never win.
 //! - `LeakyRelu`, `Relu`, `Sigmoid`, `Add`, `Mul`, `Concat`, nearest `Resize` by an integer factor,
 //!   `Identity`: their derivatives, element by element.
+//! - `Slice` (constant bounds, positive steps): the gradient spread back to the positions read and
+//!   zero elsewhere; `Reshape` (constant shape) and `Transpose`: the inverse reshape and
+//!   permutation.
 //!
 //! Shapes are fixed at differentiation time (batch 1, the given input size).
 
@@ -58,7 +61,8 @@ pub enum Kernels {
 }
 
 /// The operators with a backward rule.
-pub const SUPPORTED: &str = "Conv, MaxPool, LeakyRelu, Relu, Sigmoid, Add, Mul, Concat, Resize (nearest), Identity";
+pub const SUPPORTED: &str =
+    "Conv, MaxPool, LeakyRelu, Relu, Sigmoid, Add, Mul, Concat, Resize (nearest), Slice, Reshape, Transpose, Identity";
 
 /// A graph and its gradient graphs.
 #[derive(Clone, Debug)]
@@ -136,6 +140,81 @@ fn window(n: &Node, kernel: Option<[i64; 2]>) -> Result<Window, AutodiffError> {
         return Err(bad("auto_pad and ceil_mode are not covered; give explicit pads".into()));
     }
     Ok((k, [s[0], s[1]], [p[0], p[1], p[2], p[3]]))
+}
+
+/// The constant int64 tensor a node reads as input `i`, if it is one.
+fn const_ints(n: &Node, consts: &HashMap<&str, &Initializer>, i: usize) -> Option<Vec<i64>> {
+    n.inputs.get(i).filter(|s| !s.is_empty()).and_then(|s| consts.get(s.as_str())).and_then(|c| match &c.data {
+        InitData::I64(v) => Some(v.clone()),
+        InitData::F32(_) => None,
+    })
+}
+
+/// What a `Slice` reads along each axis it cuts: `(axis, start, step, count)`, normalized
+/// against the input shape `x`.
+fn slice_ranges(
+    n: &Node,
+    consts: &HashMap<&str, &Initializer>,
+    x: &[i64],
+) -> Result<Vec<(usize, i64, i64, i64)>, AutodiffError> {
+    let bad = |msg: &str| AutodiffError::Settings { node: n.name.clone(), op: "Slice".into(), msg: msg.into() };
+    let (starts, ends) = match (const_ints(n, consts, 1), const_ints(n, consts, 2)) {
+        (Some(s), Some(e)) => (s, e),
+        // Opset < 10 keeps the bounds in attributes.
+        _ => match (ints(n, "starts"), ints(n, "ends")) {
+            (Some(s), Some(e)) => (s, e),
+            _ => return Err(bad("starts and ends must be constants")),
+        },
+    };
+    let axes =
+        const_ints(n, consts, 3).or_else(|| ints(n, "axes")).unwrap_or_else(|| (0..starts.len() as i64).collect());
+    let steps = const_ints(n, consts, 4).unwrap_or(vec![1; starts.len()]);
+    if axes.len() != starts.len() || ends.len() != starts.len() || steps.len() != starts.len() {
+        return Err(bad("starts, ends, axes and steps differ in length"));
+    }
+    let mut out = Vec::new();
+    for i in 0..starts.len() {
+        let a = if axes[i] < 0 { axes[i] + x.len() as i64 } else { axes[i] };
+        if a < 0 || a as usize >= x.len() {
+            return Err(bad("an axis outside the input's rank"));
+        }
+        if steps[i] <= 0 {
+            return Err(bad("only positive steps"));
+        }
+        let len = x[a as usize];
+        let norm = |v: i64| if v < 0 { (v + len).max(0) } else { v.min(len) };
+        let (b, e, st) = (norm(starts[i]), norm(ends[i]), steps[i]);
+        out.push((a as usize, b, st, if e > b { (e - b + st - 1) / st } else { 0 }));
+    }
+    Ok(out)
+}
+
+/// The target shape of a `Reshape` with a constant shape (0 copies, −1 takes the rest).
+fn reshape_target(n: &Node, consts: &HashMap<&str, &Initializer>, x: &[i64]) -> Result<Vec<i64>, AutodiffError> {
+    let bad = |msg: String| AutodiffError::Settings { node: n.name.clone(), op: "Reshape".into(), msg };
+    let t = const_ints(n, consts, 1).ok_or_else(|| bad("the shape must be a constant".into()))?;
+    let mut out: Vec<i64> =
+        t.iter().enumerate().map(|(i, &d)| if d == 0 { x.get(i).copied().unwrap_or(0) } else { d }).collect();
+    let total: i64 = x.iter().product();
+    let known: i64 = out.iter().filter(|&&d| d != -1).product();
+    match out.iter().filter(|&&d| d == -1).count() {
+        0 => {}
+        1 if known > 0 && total % known == 0 => {
+            if let Some(d) = out.iter_mut().find(|d| **d == -1) {
+                *d = total / known;
+            }
+        }
+        _ => return Err(bad(format!("cannot reshape {x:?} to {t:?}"))),
+    }
+    if out.iter().product::<i64>() != total {
+        return Err(bad(format!("cannot reshape {x:?} to {t:?}")));
+    }
+    Ok(out)
+}
+
+/// A `Transpose`'s permutation (default: reversed axes).
+fn transpose_perm(n: &Node, rank: usize) -> Vec<i64> {
+    ints(n, "perm").unwrap_or_else(|| (0..rank as i64).rev().collect())
 }
 
 /// Builds the backward graph node by node, with unique names and its own constants.
@@ -231,6 +310,21 @@ fn infer(
         "Resize" => {
             let f = resize_factor(n, consts, &x)?;
             vec![x[0], x[1], x[2] * f, x[3] * f]
+        }
+        "Slice" => {
+            let mut out = x.clone();
+            for (a, _, _, count) in slice_ranges(n, consts, &x)? {
+                out[a] = count;
+            }
+            out
+        }
+        "Reshape" => reshape_target(n, consts, &x)?,
+        "Transpose" => {
+            let perm = transpose_perm(n, x.len());
+            if perm.len() != x.len() {
+                return Err(bad(format!("perm {perm:?} for rank {}", x.len())));
+            }
+            perm.iter().map(|&p| x[p as usize]).collect()
         }
         "Concat" => {
             let axis = int(n, "axis").ok_or_else(|| bad("needs an axis".into()))?;
@@ -418,6 +512,58 @@ pub fn differentiate_with(
                     }
                     off += len;
                 }
+            }
+            "Slice" => {
+                // Axis by axis: spread each read position to its step's slot, then pad to the
+                // input's extent (or cut where the last step runs past it).
+                let xs = shape[&x].clone();
+                let mut cur = shape[&n.outputs[0]].clone();
+                let mut gx = g;
+                for (a, start, step, count) in slice_ranges(n, &consts, &xs)? {
+                    let rank = cur.len();
+                    if step > 1 {
+                        let mut six = cur.clone();
+                        six.insert(a + 1, 1);
+                        let six_c = tape.i64s(six.clone());
+                        let r = tape.node("Reshape", vec![gx, six_c], vec![]);
+                        let mut pads = vec![0; 2 * (rank + 1)];
+                        pads[rank + 1 + a + 1] = step - 1;
+                        let p = tape.pad(&r, pads, 0.0);
+                        cur[a] = count * step;
+                        let back = tape.i64s(cur.clone());
+                        gx = tape.node("Reshape", vec![p, back], vec![]);
+                    }
+                    let room = xs[a] - start;
+                    if cur[a] > room {
+                        let (b, mut e) = (vec![0; rank], cur.clone());
+                        e[a] = room;
+                        let axes: Vec<i64> = (0..rank as i64).collect();
+                        gx = tape.slice(&gx, b, e, axes, vec![1; rank]);
+                        cur[a] = room;
+                    }
+                    let mut pads = vec![0; 2 * rank];
+                    pads[a] = start;
+                    pads[rank + a] = xs[a] - start - cur[a];
+                    if pads.iter().any(|&q| q != 0) {
+                        gx = tape.pad(&gx, pads, 0.0);
+                    }
+                    cur[a] = xs[a];
+                }
+                add_grad(&mut grad, &mut tape, &x, gx);
+            }
+            "Reshape" => {
+                let back = tape.i64s(shape[&x].clone());
+                let gx = tape.node("Reshape", vec![g, back], vec![]);
+                add_grad(&mut grad, &mut tape, &x, gx);
+            }
+            "Transpose" => {
+                let perm = transpose_perm(n, shape[&x].len());
+                let mut inv = vec![0i64; perm.len()];
+                for (i, &p) in perm.iter().enumerate() {
+                    inv[p as usize] = i as i64;
+                }
+                let gx = tape.node("Transpose", vec![g], vec![("perm", Attr::Ints(inv))]);
+                add_grad(&mut grad, &mut tape, &x, gx);
             }
             "Resize" => {
                 let f = resize_factor(n, &consts, &shape[&x])?;

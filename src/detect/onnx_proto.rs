@@ -1,7 +1,8 @@
-//! Minimal ONNX protobuf writer: just the messages needed to emit an inference graph.
+//! Minimal ONNX protobuf reader and writer: the messages of an inference graph (nodes,
+//! attributes, initializers, typed inputs and outputs, opset imports).
 //!
-//! Writing the wire format by hand keeps `protoc` and a generated-code dependency out of the
-//! build; field numbers follow onnx/onnx.proto3.
+//! Reading and writing the wire format by hand keeps `protoc` and a generated-code dependency out
+//! of the build; field numbers follow onnx/onnx.proto3.
 
 /// ONNX tensor element type codes (TensorProto.DataType).
 pub const FLOAT: i32 = 1;
@@ -54,6 +55,8 @@ pub enum Attr {
     Str(String),
     /// A list of integers.
     Ints(Vec<i64>),
+    /// A list of floats.
+    Floats(Vec<f32>),
 }
 
 /// A graph node: `op_type(inputs) -> outputs` with attributes.
@@ -157,6 +160,12 @@ fn encode_attr(name: &str, a: &Attr) -> Buf {
             }
             b.int(20, 7);
         }
+        Attr::Floats(v) => {
+            for f in v {
+                b.float(7, *f);
+            }
+            b.int(20, 6);
+        }
     }
     b
 }
@@ -257,6 +266,306 @@ impl Model {
     }
 }
 
+/// Why bytes are not an ONNX model pav can read.
+#[derive(Debug, thiserror::Error)]
+pub enum ProtoError {
+    /// The protobuf wire format is broken (truncated, a bad varint or wire type).
+    #[error("not a valid ONNX protobuf: {0}")]
+    Wire(&'static str),
+    /// Valid protobuf with content pav does not read (named).
+    #[error("ONNX model: {0}")]
+    Unsupported(String),
+}
+
+/// One protobuf field: number and value.
+enum Field<'a> {
+    Varint(u64),
+    Fixed32([u8; 4]),
+    Fixed64,
+    Bytes(&'a [u8]),
+}
+
+/// Iterates over the fields of one message.
+struct Fields<'a>(&'a [u8]);
+
+impl<'a> Fields<'a> {
+    fn varint(&mut self) -> Result<u64, ProtoError> {
+        let mut v = 0u64;
+        for shift in (0..64).step_by(7) {
+            let (&b, rest) = self.0.split_first().ok_or(ProtoError::Wire("truncated varint"))?;
+            self.0 = rest;
+            v |= ((b & 0x7f) as u64) << shift;
+            if b & 0x80 == 0 {
+                return Ok(v);
+            }
+        }
+        Err(ProtoError::Wire("varint longer than 10 bytes"))
+    }
+    fn take(&mut self, n: usize) -> Result<&'a [u8], ProtoError> {
+        if self.0.len() < n {
+            return Err(ProtoError::Wire("truncated field"));
+        }
+        let (a, b) = self.0.split_at(n);
+        self.0 = b;
+        Ok(a)
+    }
+    fn next_field(&mut self) -> Result<Option<(u32, Field<'a>)>, ProtoError> {
+        if self.0.is_empty() {
+            return Ok(None);
+        }
+        let key = self.varint()?;
+        let f = match key & 7 {
+            0 => Field::Varint(self.varint()?),
+            1 => {
+                self.take(8)?;
+                Field::Fixed64
+            }
+            2 => {
+                let n = self.varint()? as usize;
+                Field::Bytes(self.take(n)?)
+            }
+            5 => Field::Fixed32(self.take(4)?.try_into().map_err(|_| ProtoError::Wire("fixed32"))?),
+            _ => return Err(ProtoError::Wire("unsupported wire type (groups)")),
+        };
+        Ok(Some(((key >> 3) as u32, f)))
+    }
+}
+
+/// Calls `f` on every field of `bytes`.
+fn each<'a>(bytes: &'a [u8], mut f: impl FnMut(u32, Field<'a>) -> Result<(), ProtoError>) -> Result<(), ProtoError> {
+    let mut it = Fields(bytes);
+    while let Some((n, v)) = it.next_field()? {
+        f(n, v)?;
+    }
+    Ok(())
+}
+
+fn utf8(b: &[u8]) -> Result<String, ProtoError> {
+    String::from_utf8(b.to_vec()).map_err(|_| ProtoError::Wire("a string that is not UTF-8"))
+}
+
+/// A repeated int64 field, packed or not.
+fn push_ints(out: &mut Vec<i64>, f: Field) -> Result<(), ProtoError> {
+    match f {
+        Field::Varint(v) => out.push(v as i64),
+        Field::Bytes(b) => {
+            let mut p = Fields(b);
+            while !p.0.is_empty() {
+                out.push(p.varint()? as i64);
+            }
+        }
+        _ => return Err(ProtoError::Wire("an integer list of the wrong wire type")),
+    }
+    Ok(())
+}
+
+/// A repeated float field, packed or not.
+fn push_floats(out: &mut Vec<f32>, f: Field) -> Result<(), ProtoError> {
+    match f {
+        Field::Fixed32(b) => out.push(f32::from_le_bytes(b)),
+        Field::Bytes(b) if b.len() % 4 == 0 => {
+            out.extend(b.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])))
+        }
+        _ => return Err(ProtoError::Wire("a float list of the wrong wire type")),
+    }
+    Ok(())
+}
+
+fn decode_attr(b: &[u8]) -> Result<(String, Attr), ProtoError> {
+    let (mut name, mut ty) = (String::new(), 0u64);
+    let (mut f, mut i, mut s) = (None, None, None);
+    let (mut ints, mut floats) = (Vec::new(), Vec::new());
+    each(b, |n, v| {
+        match (n, v) {
+            (1, Field::Bytes(x)) => name = utf8(x)?,
+            (2, Field::Fixed32(x)) => f = Some(f32::from_le_bytes(x)),
+            (3, Field::Varint(x)) => i = Some(x as i64),
+            (4, Field::Bytes(x)) => s = Some(utf8(x)?),
+            (7, v) => push_floats(&mut floats, v)?,
+            (8, v) => push_ints(&mut ints, v)?,
+            (20, Field::Varint(x)) => ty = x,
+            _ => {}
+        }
+        Ok(())
+    })?;
+    // AttributeType: FLOAT=1, INT=2, STRING=3, FLOATS=6, INTS=7.
+    let a = match ty {
+        1 => Attr::Float(f.unwrap_or(0.0)),
+        2 => Attr::Int(i.unwrap_or(0)),
+        3 => Attr::Str(s.unwrap_or_default()),
+        6 => Attr::Floats(floats),
+        7 => Attr::Ints(ints),
+        t => return Err(ProtoError::Unsupported(format!("attribute `{name}` of type {t} (tensors, graphs)"))),
+    };
+    Ok((name, a))
+}
+
+fn decode_node(b: &[u8]) -> Result<Node, ProtoError> {
+    let mut n = Node {
+        op_type: String::new(),
+        name: String::new(),
+        inputs: vec![],
+        outputs: vec![],
+        attrs: vec![],
+        domain: String::new(),
+    };
+    each(b, |k, v| {
+        if let Field::Bytes(x) = v {
+            match k {
+                1 => n.inputs.push(utf8(x)?),
+                2 => n.outputs.push(utf8(x)?),
+                3 => n.name = utf8(x)?,
+                4 => n.op_type = utf8(x)?,
+                5 => n.attrs.push(decode_attr(x)?),
+                7 => n.domain = utf8(x)?,
+                _ => {}
+            }
+        }
+        Ok(())
+    })?;
+    if n.name.is_empty() {
+        n.name = n.outputs.first().cloned().unwrap_or_default();
+    }
+    Ok(n)
+}
+
+fn decode_init(b: &[u8]) -> Result<Initializer, ProtoError> {
+    let (mut dims, mut ty, mut name) = (Vec::new(), 0u64, String::new());
+    let (mut floats, mut ints, mut raw) = (Vec::new(), Vec::new(), None);
+    each(b, |k, v| {
+        match (k, v) {
+            (1, v) => push_ints(&mut dims, v)?,
+            (2, Field::Varint(x)) => ty = x,
+            (4, v) => push_floats(&mut floats, v)?,
+            (7, v) => push_ints(&mut ints, v)?,
+            (8, Field::Bytes(x)) => name = utf8(x)?,
+            (9, Field::Bytes(x)) => raw = Some(x),
+            (13 | 14, _) => return Err(ProtoError::Unsupported("tensors stored outside the file".into())),
+            _ => {}
+        }
+        Ok(())
+    })?;
+    let data = match (ty as i32, raw) {
+        (FLOAT, Some(r)) if r.len() % 4 == 0 => {
+            InitData::F32(r.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
+        }
+        (FLOAT, None) => InitData::F32(floats),
+        (INT64, Some(r)) if r.len() % 8 == 0 => {
+            InitData::I64(r.chunks_exact(8).map(|c| i64::from_le_bytes(c.try_into().unwrap_or([0; 8]))).collect())
+        }
+        (INT64, None) => InitData::I64(ints),
+        (t, _) => return Err(ProtoError::Unsupported(format!("initializer `{name}` of element type {t}"))),
+    };
+    let n = match &data {
+        InitData::F32(v) => v.len(),
+        InitData::I64(v) => v.len(),
+    };
+    if dims.iter().product::<i64>() != n as i64 {
+        return Err(ProtoError::Unsupported(format!("initializer `{name}`: {n} values for dims {dims:?}")));
+    }
+    Ok(Initializer { name, dims, data })
+}
+
+fn decode_value_info(b: &[u8]) -> Result<ValueInfo, ProtoError> {
+    let mut v = ValueInfo { name: String::new(), elem_type: 0, dims: vec![] };
+    each(b, |k, f| {
+        match (k, f) {
+            (1, Field::Bytes(x)) => v.name = utf8(x)?,
+            (2, Field::Bytes(ty)) => each(ty, |k, f| match (k, f) {
+                (1, Field::Bytes(tensor)) => each(tensor, |k, f| {
+                    match (k, f) {
+                        (1, Field::Varint(e)) => v.elem_type = e as i32,
+                        (2, Field::Bytes(shape)) => each(shape, |k, f| {
+                            if let (1, Field::Bytes(dim)) = (k, f) {
+                                let mut d = Dim::Symbolic(String::new());
+                                each(dim, |k, f| {
+                                    match (k, f) {
+                                        (1, Field::Varint(n)) => d = Dim::Fixed(n as i64),
+                                        (2, Field::Bytes(s)) => d = Dim::Symbolic(utf8(s)?),
+                                        _ => {}
+                                    }
+                                    Ok(())
+                                })?;
+                                v.dims.push(d);
+                            }
+                            Ok(())
+                        })?,
+                        _ => {}
+                    }
+                    Ok(())
+                }),
+                _ => Ok(()),
+            })?,
+            _ => {}
+        }
+        Ok(())
+    })?;
+    Ok(v)
+}
+
+impl Model {
+    /// Parses ONNX protobuf bytes (one graph, tensors stored in the file).
+    pub fn from_bytes(bytes: &[u8]) -> Result<Model, ProtoError> {
+        let mut m = Model {
+            graph_name: String::new(),
+            producer: String::new(),
+            opset: 0,
+            domains: vec![],
+            nodes: vec![],
+            initializers: vec![],
+            inputs: vec![],
+            outputs: vec![],
+        };
+        let mut graph = None;
+        each(bytes, |k, f| {
+            match (k, f) {
+                (2, Field::Bytes(x)) => m.producer = utf8(x)?,
+                (7, Field::Bytes(x)) => graph = Some(x),
+                (8, Field::Bytes(x)) => {
+                    let (mut domain, mut version) = (String::new(), 0i64);
+                    each(x, |k, f| {
+                        match (k, f) {
+                            (1, Field::Bytes(d)) => domain = utf8(d)?,
+                            (2, Field::Varint(v)) => version = v as i64,
+                            _ => {}
+                        }
+                        Ok(())
+                    })?;
+                    if domain.is_empty() || domain == "ai.onnx" {
+                        m.opset = version;
+                    } else {
+                        m.domains.push((domain, version));
+                    }
+                }
+                _ => {}
+            }
+            Ok(())
+        })?;
+        let graph = graph.ok_or(ProtoError::Unsupported("no graph".into()))?;
+        each(graph, |k, f| {
+            if let Field::Bytes(x) = f {
+                match k {
+                    1 => m.nodes.push(decode_node(x)?),
+                    2 => m.graph_name = utf8(x)?,
+                    5 => m.initializers.push(decode_init(x)?),
+                    11 => m.inputs.push(decode_value_info(x)?),
+                    12 => m.outputs.push(decode_value_info(x)?),
+                    _ => {}
+                }
+            }
+            Ok(())
+        })?;
+        // Before IR version 4 the initializers were also listed as graph inputs.
+        let consts: std::collections::HashSet<&str> = m.initializers.iter().map(|i| i.name.as_str()).collect();
+        let inputs = std::mem::take(&mut m.inputs);
+        m.inputs = inputs.into_iter().filter(|v| !consts.contains(v.name.as_str())).collect();
+        if m.opset == 0 {
+            return Err(ProtoError::Unsupported("no default-domain opset import".into()));
+        }
+        Ok(m)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -278,5 +587,63 @@ mod tests {
         assert_eq!(b.0.len(), 11);
         assert_eq!(b.0[0], 0x08);
         assert_eq!(b.0[10], 0x01);
+    }
+
+    #[test]
+    fn a_written_model_reads_back_unchanged() {
+        let node = |op: &str, i: &[&str], o: &str, attrs: Vec<(String, Attr)>| Node {
+            op_type: op.into(),
+            name: format!("n_{o}"),
+            inputs: i.iter().map(|s| s.to_string()).collect(),
+            outputs: vec![o.into()],
+            attrs,
+            domain: String::new(),
+        };
+        let m = Model {
+            graph_name: "g".into(),
+            producer: "test".into(),
+            opset: 13,
+            domains: vec![("pav".into(), 1)],
+            nodes: vec![
+                node("Conv", &["x", "w"], "y", vec![("pads".into(), Attr::Ints(vec![1, 1, -1, 1]))]),
+                node("LeakyRelu", &["y"], "z", vec![("alpha".into(), Attr::Float(0.1))]),
+                node("Resize", &["z", "", "s"], "r", vec![("mode".into(), Attr::Str("nearest".into()))]),
+                node(
+                    "Foo",
+                    &["r"],
+                    "out",
+                    vec![("f".into(), Attr::Floats(vec![0.5, -2.0])), ("k".into(), Attr::Int(-3))],
+                ),
+            ],
+            initializers: vec![
+                Initializer { name: "w".into(), dims: vec![1, 3, 1, 1], data: InitData::F32(vec![1.0, -2.5, 3.0]) },
+                Initializer { name: "s".into(), dims: vec![2], data: InitData::I64(vec![-1, 1 << 40]) },
+            ],
+            inputs: vec![ValueInfo {
+                name: "x".into(),
+                elem_type: FLOAT,
+                dims: vec![Dim::Fixed(1), Dim::Fixed(3), Dim::Symbolic("h".into()), Dim::Fixed(8)],
+            }],
+            outputs: vec![ValueInfo { name: "out".into(), elem_type: FLOAT, dims: vec![] }],
+        };
+        let back = Model::from_bytes(&m.to_bytes()).unwrap();
+        assert_eq!(format!("{back:?}"), format!("{m:?}"));
+    }
+
+    #[test]
+    fn broken_bytes_are_refused() {
+        let m = Model {
+            graph_name: "g".into(),
+            producer: "p".into(),
+            opset: 13,
+            domains: vec![],
+            nodes: vec![],
+            initializers: vec![],
+            inputs: vec![],
+            outputs: vec![],
+        };
+        let b = m.to_bytes();
+        assert!(matches!(Model::from_bytes(&b[..b.len() - 1]), Err(ProtoError::Wire(_))));
+        assert!(matches!(Model::from_bytes(&[0x0f]), Err(ProtoError::Wire(_))));
     }
 }
