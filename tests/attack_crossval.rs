@@ -6,7 +6,7 @@
 mod common;
 
 use pav::attack::config::OptimizeConfig;
-use pav::experiments::crossval::{crossval, CrossvalOptions};
+use pav::experiments::crossval::{crossval, paired, CrossvalOptions};
 use pav::progress::{Progress, Silent};
 use std::cell::RefCell;
 
@@ -31,7 +31,7 @@ impl Progress for Stages {
     }
 }
 use pav::attack::setup::Setup;
-use pav::attack::whitebox::WhiteBox;
+use pav::attack::whitebox::Ensemble;
 use std::sync::atomic::AtomicBool;
 
 #[test]
@@ -43,7 +43,7 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     cfg.views.test = cfg.views.test[..1].to_vec();
     cfg.optimizer.epochs = 1;
     let setup = Setup::load(&cfg, None).unwrap();
-    let wb = WhiteBox::load(&cfg.detector, cfg.views.size).unwrap();
+    let wb = Ensemble::load(&cfg, cfg.views.size).unwrap();
     let mut dets =
         pav::detect::load::load_detectors(&[common::repo().join("configs/detectors/yolov3-tiny.toml")], &[], 1)
             .unwrap();
@@ -54,7 +54,12 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
         random_block: 16,
         out: dir.path().into(),
         threshold: 0.5,
-        white_box: "yolov3-tiny".into(),
+        white_box: vec!["yolov3-tiny".into()],
+        // A peer's texture at its own size (2048²), resampled to the atlas.
+        references: vec![(
+            "RAUCA_E2E".into(),
+            setup.load_texture(&common::shared_data().join("rauca-e2e/RAUCA_E2E.png")).unwrap(),
+        )],
     };
     let never = AtomicBool::new(false);
     let stages = Stages::default();
@@ -72,6 +77,12 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     assert_eq!(held, ["data12501", "data12502", "data12503"]);
     let cell = |t: &str, split: &str| rows.iter().find(|r| r.texture == t && r.split == split).unwrap().images;
     assert_eq!((cell("original", "held-out"), cell("optimized", "held-out"), cell("random", "held-out")), (3, 3, 6));
+    assert_eq!(cell("RAUCA_E2E", "held-out"), 3);
+    // Optimized against each other texture, paired by view: three held-out views each.
+    let pairs = paired(&recs, &opts.white_box);
+    let against: Vec<(&str, usize)> = pairs.iter().map(|p| (p.against.as_str(), p.views)).collect();
+    assert_eq!(against, [("original", 3), ("random", 3), ("RAUCA_E2E", 3)], "{pairs:?}");
+    assert!(pairs.iter().all(|p| p.lo <= p.mean && p.mean <= p.hi && p.white_box));
     assert_eq!(cell("optimized", "train"), 3, "each view trains in the one fold that does not hold it out");
     assert!(recs.iter().all(|r| r.score.is_finite() && (0.0..=1.0).contains(&r.score)));
     // Both folds wrote their texture; a second call finds them finished and scores the same.

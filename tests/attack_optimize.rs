@@ -9,13 +9,13 @@ use pav::attack::checkpoint::Checkpoint;
 use pav::attack::config::OptimizeConfig;
 use pav::attack::optimize::{optimize_texture, Finish, RunOptions};
 use pav::attack::setup::Setup;
-use pav::attack::whitebox::WhiteBox;
+use pav::attack::whitebox::Ensemble;
 use pav::experiments::outputs::score_views;
 use pav::progress::Silent;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
-fn problem() -> (PathBuf, OptimizeConfig, Setup, WhiteBox) {
+fn problem() -> (PathBuf, OptimizeConfig, Setup, Ensemble) {
     common::real_data();
     let path = common::repo().join("configs/optimize/paper.toml");
     let mut cfg = OptimizeConfig::load(&path).unwrap();
@@ -23,7 +23,7 @@ fn problem() -> (PathBuf, OptimizeConfig, Setup, WhiteBox) {
     cfg.views.train = cfg.views.train[1..3].to_vec();
     cfg.views.test.clear();
     let s = Setup::load(&cfg, None).unwrap();
-    let wb = WhiteBox::load(&cfg.detector, cfg.views.size).unwrap();
+    let wb = Ensemble::load(&cfg, cfg.views.size).unwrap();
     (path, cfg, s, wb)
 }
 
@@ -41,7 +41,7 @@ fn optimization_lowers_the_car_score_and_resume_is_exact() {
     assert!(matches!(straight.finish, Finish::Done));
     assert_eq!(straight.log.len(), 6);
     // Only the region moved, and it stayed inside the clamp.
-    let init = s.initial_texture(cfg.mesh.init, cfg.optimizer.seed);
+    let init = s.initial_texture(&cfg.mesh.init, cfg.optimizer.seed).unwrap();
     let region: std::collections::HashSet<u32> = s.region_values.iter().copied().collect();
     for (i, (a, b)) in straight.texture.iter().zip(&init).enumerate() {
         if region.contains(&(i as u32)) {
@@ -50,7 +50,7 @@ fn optimization_lowers_the_car_score_and_resume_is_exact() {
             assert_eq!(a, b, "value {i} outside the region changed");
         }
     }
-    let scores = score_views(&s, &wb, &init, &straight.texture).unwrap();
+    let scores = score_views(&s, wb.first(), &init, &straight.texture).unwrap();
     for v in &scores {
         eprintln!("{}: photo {:.3}, initial {:.3}, optimized {:.3}", v.view, v.original, v.initial, v.optimized);
     }

@@ -1,29 +1,43 @@
-//! One optimization step on real data: FCA's CARLA photos, the UV-mapped e-tron and
-//! YOLOv3-tiny. The texture gradient (the differentiated ONNX graph + the renderer's exact adjoint) must match
-//! finite differences of the whole composite → detector → loss chain, and be zero off the region.
+//! One optimization step on real data: FCA's CARLA photos, the UV-mapped e-tron and each white-box
+//! detector (YOLOv3-tiny, YOLOX-Nano). The texture gradient (the differentiated ONNX graph, the
+//! input transform's and the renderer's exact adjoints) must match finite differences of the
+//! whole composite → detector → loss chain, and be zero off the region.
 #![cfg(feature = "optimize")]
 
 mod common;
 
 use pav::attack::config::OptimizeConfig;
+use pav::attack::loss::{DetectionLoss, Reduce};
 use pav::attack::setup::Setup;
 use pav::attack::whitebox::WhiteBox;
+use pav::detect::DetectorConfig;
 use pav::rng::Rng;
 use pav::scene::Scene;
 
-fn setup(size: usize) -> (OptimizeConfig, Setup, WhiteBox) {
+fn setup(size: usize, detector: &str) -> (OptimizeConfig, Setup, WhiteBox) {
     common::real_data();
     let mut cfg = OptimizeConfig::load(&common::repo().join("configs/optimize/paper.toml")).unwrap();
     cfg.views.train.truncate(2);
     cfg.views.test.clear();
     let s = Setup::load(&cfg, Some(size)).unwrap();
-    let wb = WhiteBox::load(&cfg.detector, size).unwrap();
+    let d = DetectorConfig::load(&common::detector_config(detector)).unwrap();
+    let loss = DetectionLoss { box_threshold: 0.05, target: d.target_classes.clone(), reduce: Reduce::Mean };
+    let wb = WhiteBox::load(&d, loss, size).unwrap();
     (cfg, s, wb)
 }
 
 #[test]
-fn texture_gradient_matches_finite_differences_through_the_detector() {
-    let (_, s, wb) = setup(416);
+fn texture_gradient_matches_finite_differences_through_yolov3_tiny() {
+    check_chain("yolov3-tiny");
+}
+
+#[test]
+fn texture_gradient_matches_finite_differences_through_yolox_nano() {
+    check_chain("yolox_nano");
+}
+
+fn check_chain(detector: &str) {
+    let (_, s, wb) = setup(416, detector);
     let v = &s.train[1];
     eprintln!(
         "{}: car {:.1} % of the image, textured {:.1} %, c_mid {}",

@@ -1,8 +1,9 @@
 //! What the white-box step costs in time (`pav bench-step`): the detector's forward with the loss,
 //! and forward + backward to its input, at several network input sizes.
 
-use super::config::DetectorSection;
+use super::loss::{DetectionLoss, Reduce};
 use super::whitebox::{WhiteBox, WhiteBoxError, WhiteBoxOptions};
+use crate::detect::config::DetectorConfig;
 use crate::progress::Progress;
 use std::time::Instant;
 
@@ -46,7 +47,7 @@ fn composite(size: usize) -> Vec<f32> {
 /// threads (0 = the runtime's default), `repeats` times after 3 warm-up runs; each size's result
 /// is a note on `progress`.
 pub fn time_step(
-    detector: &DetectorSection,
+    detector: &DetectorConfig,
     sizes: &[usize],
     threads: usize,
     repeats: usize,
@@ -54,7 +55,9 @@ pub fn time_step(
 ) -> Result<Vec<StepTiming>, WhiteBoxError> {
     let mut rows = Vec::new();
     for &size in sizes {
-        let wb = WhiteBox::with_options(detector, WhiteBoxOptions { composite: size, input: Some(size), threads })?;
+        let loss = DetectionLoss { box_threshold: 0.05, target: detector.target_classes.clone(), reduce: Reduce::Mean };
+        let o = WhiteBoxOptions { composite: size, input: Some(size), threads };
+        let wb = WhiteBox::with_options(detector, loss, o)?;
         let img = composite(size);
         for _ in 0..3 {
             wb.loss_and_grad(&img, size, 1.0)?;

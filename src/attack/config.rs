@@ -1,5 +1,6 @@
 //! `pav optimize` configs (TOML). Relative paths are resolved against the config's folder.
 
+use super::loss::Reduce;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -25,7 +26,8 @@ pub struct MeshConfig {
     pub camera: CameraConvention,
     /// Texture side in texels (the region image is resampled to it).
     pub texture_size: usize,
-    /// Initial texture: a grey value (the authors use 0.5) or "random" (colour blocks, 1/64 of the atlas side).
+    /// Initial texture: a grey value (the authors use 0.5), "random" (colour blocks, 1/64 of the
+    /// atlas side) or a texture image's path.
     #[serde(default)]
     pub init: Init,
     /// Real-world car length in metres, for the printable sheet (mesh units are not trusted).
@@ -44,13 +46,15 @@ fn parts_min_cos() -> f32 {
 }
 
 /// The texture an optimization starts from.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(untagged)]
 pub enum Init {
     /// Every value this grey.
     Grey(f32),
     /// Named start: only "random" (uniform colour blocks 1/64 of the atlas side, seeded by optimizer.seed).
     Named(InitName),
+    /// A texture image (any size; resampled to the atlas): fine-tune a texture, a peer's included.
+    File(PathBuf),
 }
 
 /// Named initial textures.
@@ -87,21 +91,23 @@ pub struct ViewsConfig {
     pub turns: Vec<f64>,
 }
 
-/// The white-box detector.
+/// One white-box detector of the ensemble.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
-pub struct DetectorSection {
-    /// Darknet cfg.
-    pub cfg: PathBuf,
-    /// Darknet weights.
-    pub weights: PathBuf,
-    /// Target class indices (COCO car = 2).
-    pub target: Vec<usize>,
-    /// Objectness from which a prediction counts as a box in L1/L2.
-    pub box_threshold: f32,
+pub struct WhiteBoxEntry {
+    /// Its detector config (configs/detectors/*.toml, as `evaluate` reads them); the target
+    /// classes are the config's.
+    pub detector: PathBuf,
+    /// Weight of its L1 + β·L2 in the sum.
+    #[serde(default = "one")]
+    pub weight: f32,
 }
 
-/// Loss weights: L = L1 + β·L2 + γ·Ls.
+fn one() -> f32 {
+    1.0
+}
+
+/// Loss weights and shape: L = Σ_d w_d (L1 + β·L2) + γ·Ls.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct LossConfig {
@@ -109,6 +115,15 @@ pub struct LossConfig {
     pub beta: f32,
     /// γ.
     pub gamma: f32,
+    /// Objectness from which a prediction counts as a box in L1/L2.
+    pub box_threshold: f32,
+    /// `"mean"` (the paper), `{ top_k = k }` or `{ softmax = τ }`.
+    #[serde(default = "mean")]
+    pub reduce: Reduce,
+}
+
+fn mean() -> Reduce {
+    Reduce::Mean
 }
 
 /// Adam and the schedule.
@@ -141,8 +156,8 @@ pub struct OptimizeConfig {
     pub mesh: MeshConfig,
     /// Views.
     pub views: ViewsConfig,
-    /// White-box detector.
-    pub detector: DetectorSection,
+    /// White-box detectors.
+    pub white_box: Vec<WhiteBoxEntry>,
     /// Loss weights.
     pub loss: LossConfig,
     /// Optimizer.
@@ -203,8 +218,10 @@ impl OptimizeConfig {
         if let Some(l) = c.views.labels.as_mut() {
             fix(l);
         }
-        fix(&mut c.detector.cfg);
-        fix(&mut c.detector.weights);
+        c.white_box.iter_mut().for_each(|w| fix(&mut w.detector));
+        if let Init::File(p) = &mut c.mesh.init {
+            fix(p);
+        }
         c.check().map_err(|source| ConfigError::Invalid { path: path.into(), source })?;
         Ok(c)
     }
@@ -249,14 +266,32 @@ impl OptimizeConfig {
         if !(l.beta.is_finite() && l.beta >= 0.0 && l.gamma.is_finite() && l.gamma >= 0.0) {
             return Err(format!("loss.beta and loss.gamma must be ≥ 0, got {} and {}", l.beta, l.gamma));
         }
-        if self.detector.target.is_empty() {
-            return Err("detector.target lists no class".into());
+        if self.white_box.is_empty() {
+            return Err("no [[white_box]] detector".into());
+        }
+        if let Some(w) = self.white_box.iter().find(|w| !(w.weight.is_finite() && w.weight > 0.0)) {
+            return Err(format!("white_box weights must be > 0, got {} for {}", w.weight, w.detector.display()));
+        }
+        match l.reduce {
+            Reduce::TopK(0) => return Err("loss.reduce top_k must be at least 1".into()),
+            Reduce::Softmax(t) if !(t.is_finite() && t > 0.0) => {
+                return Err(format!("loss.reduce softmax temperature must be > 0, got {t}"))
+            }
+            _ => {}
+        }
+        if !(0.0..=1.0).contains(&l.box_threshold) {
+            return Err(format!("loss.box_threshold must be in [0, 1], got {}", l.box_threshold));
         }
         self.parts().map_err(|e| format!("mesh.parts: {e}"))?;
         if !(self.mesh.parts_min_cos > 0.0 && self.mesh.parts_min_cos <= 1.0) {
             return Err(format!("mesh.parts_min_cos must be in (0, 1], got {}", self.mesh.parts_min_cos));
         }
         Ok(())
+    }
+
+    /// Names of the `[[white_box]]` detectors (read from their configs).
+    pub fn white_box_names(&self) -> Result<Vec<String>, crate::detect::DetectError> {
+        self.white_box.iter().map(|w| crate::detect::DetectorConfig::load(&w.detector).map(|d| d.name)).collect()
     }
 
     /// The parsed `mesh.parts`.
@@ -295,6 +330,38 @@ mod tests {
         }
         c.views.turns = vec![-179.0, 15.0];
         c.check().unwrap();
+    }
+
+    #[test]
+    fn white_boxes_loss_shapes_and_an_initial_texture_file_load() {
+        let c = OptimizeConfig::load(&shipped("half-turns-ensemble.toml")).unwrap();
+        let names: Vec<&str> = c.white_box.iter().filter_map(|w| w.detector.file_stem()?.to_str()).collect();
+        assert_eq!(names, ["yolov3-tiny", "yolox_nano"]);
+        assert!(c.white_box.iter().all(|w| w.detector.is_absolute() || w.detector.starts_with(shipped(""))));
+        let text = std::fs::read_to_string(shipped("half-turns.toml")).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let variant = |from: &str, to: &str| {
+            let p = dir.path().join("v.toml");
+            // Loading checks values, not whether the files exist.
+            let t = text.replace(from, to);
+            std::fs::write(&p, t).unwrap();
+            OptimizeConfig::load(&p)
+        };
+        let c = variant("reduce = \"mean\"", "reduce = { top_k = 3 }").unwrap();
+        assert_eq!(c.loss.reduce, Reduce::TopK(3));
+        let c = variant("reduce = \"mean\"", "reduce = { softmax = 0.1 }").unwrap();
+        assert_eq!(c.loss.reduce, Reduce::Softmax(0.1));
+        for (bad, key) in
+            [("{ top_k = 0 }", "top_k"), ("{ softmax = -1.0 }", "softmax"), ("\"max\"", "unknown variant")]
+        {
+            let e = variant("reduce = \"mean\"", &format!("reduce = {bad}")).unwrap_err().to_string();
+            assert!(e.contains(key), "{bad}: {e}");
+        }
+        let c = variant("init = 0.5", "init = \"peer.png\"").unwrap();
+        assert_eq!(c.mesh.init, Init::File(dir.path().join("peer.png")));
+        assert_eq!(variant("init = 0.5", "init = \"random\"").unwrap().mesh.init, Init::Named(InitName::Random));
+        let e = variant("weight = 1.0", "weight = 0.0").unwrap_err().to_string();
+        assert!(e.contains("white_box weights"), "{e}");
     }
 
     #[test]

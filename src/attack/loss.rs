@@ -1,12 +1,18 @@
-//! The paper's detector losses on YOLO head maps: L1 = mean objectness over the boxes, L2 = mean
-//! target-class confidence over the proposals of the target class, with their exact gradient with
-//! respect to the head logits.
+//! The paper's detector losses and the alternatives that decide detection: L1 over objectness,
+//! L2 over target-class confidence, each with its exact gradient with respect to the detector's
+//! raw outputs.
 //!
-//! "Boxes" are the predictions whose objectness reaches `box_threshold`; "proposals" are those
-//! boxes whose most likely class is a target class. The sets are chosen on the values (no
-//! gradient through the choice); an empty set gives 0 and a zero gradient, not 0/0.
-
-use crate::detect::darknet::cfg::YoloHead;
+//! A detector's outputs are first read as [`Predictions`] (objectness and class probabilities per
+//! predicted box, and where each came from), so one loss serves every YOLO-style layout:
+//! darknet heads (logits; the sigmoid is applied here) and YOLOX rows (probabilities already).
+//!
+//! [`Reduce::Mean`] is the paper's: "boxes" are the predictions whose objectness reaches
+//! `box_threshold`, "proposals" are those boxes whose most likely class is a target class; L1 is
+//! the mean objectness over the boxes, L2 the mean target confidence over the proposals. The sets
+//! are chosen on the values (no gradient through the choice); an empty set gives 0 and a zero
+//! gradient, not 0/0. [`Reduce::TopK`] and [`Reduce::Softmax`] instead weight the strongest
+//! predictions, since a detector reports a car when its single best box scores high: L1 over the
+//! objectness values, L2 over the detection scores `objectness × target confidence`.
 
 /// Sigmoid as `(1 + tanh(x/2))/2`, and its derivative `(1 − tanh²(x/2))/4`: both finite for every
 /// finite logit, where `1/(1 + exp(−x))` makes a NaN gradient below x ≈ −88 in f32.
@@ -15,8 +21,20 @@ pub fn sigmoid(x: f32) -> (f32, f32) {
     (0.5 + 0.5 * t, 0.25 * (1.0 - t * t))
 }
 
-/// One batch-1 head map `[A·(5+C), H, W]`, flattened, with its `(H, W)`.
+/// One batch-1 darknet head map `[A·(5+C), H, W]`, flattened, with its `(H, W)`.
 pub type HeadMap = (Vec<f32>, (usize, usize));
+
+/// How the set of predictions becomes one number per term.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum Reduce {
+    /// The paper's means over thresholded sets.
+    Mean,
+    /// The mean of the k largest values (k = 1: the maximum).
+    TopK(usize),
+    /// `Σ softmax(v/τ)·v`: a smooth maximum with temperature τ.
+    Softmax(f32),
+}
 
 /// The detector-loss settings.
 #[derive(Clone, Debug, PartialEq)]
@@ -25,97 +43,242 @@ pub struct DetectionLoss {
     pub box_threshold: f32,
     /// Target class indices (COCO car = 2).
     pub target: Vec<usize>,
+    /// How the predictions are reduced.
+    pub reduce: Reduce,
 }
 
 /// L1 and L2 with the set sizes and the strongest target detection, for logs.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LossTerms {
-    /// Mean objectness over the boxes.
+    /// The objectness term.
     pub l1: f32,
-    /// Mean target-class confidence over the target proposals.
+    /// The target-confidence term.
     pub l2: f32,
-    /// Number of boxes (n_o).
+    /// Number of boxes (n_o: objectness ≥ the box threshold).
     pub boxes: usize,
-    /// Number of target proposals (n_c).
+    /// Number of target proposals (n_c: boxes whose best class is a target).
     pub proposals: usize,
     /// Highest objectness × target confidence over all predictions (the detection score).
     pub max_score: f32,
 }
 
-/// Why head maps cannot be scored.
+/// Why outputs cannot be scored.
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
-pub struct HeadShapeError(String);
+pub struct HeadShapeError(pub String);
 
-impl DetectionLoss {
-    /// L1 and L2 of the head maps, and the gradient of `L1 + beta·L2` with respect to each map.
-    pub fn yolo(
-        &self,
-        maps: &[HeadMap],
-        heads: &[YoloHead],
-        beta: f32,
-    ) -> Result<(LossTerms, Vec<Vec<f32>>), HeadShapeError> {
-        if maps.len() != heads.len() {
-            return Err(HeadShapeError(format!("{} head maps for {} [yolo] heads", maps.len(), heads.len())));
+/// Whether raw values are logits (sigmoid applied here) or probabilities.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Raw {
+    Logit,
+    Probability,
+}
+
+/// Where one prediction's values sit in the raw outputs.
+#[derive(Clone, Copy, Debug)]
+struct At {
+    output: usize,
+    obj: usize,
+    cls0: usize,
+    stride: usize,
+}
+
+/// Objectness and class probabilities of every predicted box, with the way back to the raw outputs.
+#[derive(Clone, Debug)]
+pub struct Predictions {
+    classes: usize,
+    raw: Raw,
+    obj: Vec<f32>,
+    cls: Vec<f32>,
+    at: Vec<At>,
+}
+
+impl Predictions {
+    /// Darknet heads (`anchors[i]` anchors each, `classes` classes), logits.
+    pub fn darknet(maps: &[HeadMap], anchors: &[usize], classes: usize) -> Result<Self, HeadShapeError> {
+        if maps.len() != anchors.len() {
+            return Err(HeadShapeError(format!("{} head maps for {} heads", maps.len(), anchors.len())));
         }
-        // First pass: the sets; second: the means and their gradient.
-        let (mut boxes, mut proposals, mut max_score) = (0usize, 0usize, 0f32);
-        let mut picked: Vec<Vec<(usize, Option<usize>)>> = Vec::new(); // per map: (objectness index, proposal class index)
-        for ((map, (h, w)), head) in maps.iter().zip(heads) {
-            let (a, c, hw) = (head.anchors.len(), head.classes, h * w);
-            if map.len() != a * (5 + c) * hw {
+        let mut p = Predictions { classes, raw: Raw::Logit, obj: vec![], cls: vec![], at: vec![] };
+        for (output, ((map, (h, w)), &a)) in maps.iter().zip(anchors).enumerate() {
+            let hw = h * w;
+            if map.len() != a * (5 + classes) * hw {
                 return Err(HeadShapeError(format!(
-                    "a head map of {} values does not fit {a} anchors × (5 + {c}) × {h}×{w}",
+                    "a head map of {} values does not fit {a} anchors × (5 + {classes}) × {h}×{w}",
                     map.len()
                 )));
             }
-            let mut here = Vec::new();
             for ai in 0..a {
-                let base = ai * (5 + c) * hw;
-                for p in 0..hw {
-                    let o = sigmoid(map[base + 4 * hw + p]).0;
-                    let cls = |k: usize| sigmoid(map[base + (5 + k) * hw + p]).0;
-                    let (best, _) =
-                        (0..c).fold((0, f32::NEG_INFINITY), |m, k| if cls(k) > m.1 { (k, cls(k)) } else { m });
-                    for &k in self.target.iter().filter(|&&k| k < c) {
-                        max_score = max_score.max(o * cls(k));
-                    }
-                    if o >= self.box_threshold && o.is_finite() {
-                        boxes += 1;
-                        let prop = self.target.contains(&best).then(|| base + (5 + best) * hw + p);
-                        proposals += prop.is_some() as usize;
-                        here.push((base + 4 * hw + p, prop));
-                    }
-                }
-            }
-            picked.push(here);
-        }
-        let (n1, n2) = (boxes.max(1) as f32, proposals.max(1) as f32);
-        let (mut s1, mut s2) = (0f32, 0f32);
-        let mut grads: Vec<Vec<f32>> = maps.iter().map(|(m, _)| vec![0f32; m.len()]).collect();
-        for ((map, _), (here, g)) in maps.iter().zip(picked.iter().zip(&mut grads)) {
-            for &(oi, prop) in here {
-                let (o, d) = sigmoid(map[oi]);
-                s1 += o;
-                g[oi] += d / n1;
-                if let Some(ci) = prop {
-                    let (v, d) = sigmoid(map[ci]);
-                    s2 += v;
-                    g[ci] += beta * d / n2;
+                let base = ai * (5 + classes) * hw;
+                for q in 0..hw {
+                    let at = At { output, obj: base + 4 * hw + q, cls0: base + 5 * hw + q, stride: hw };
+                    p.push(map, at);
                 }
             }
         }
-        Ok((LossTerms { l1: s1 / n1, l2: s2 / n2, boxes, proposals, max_score }, grads))
+        Ok(p)
+    }
+
+    /// YOLOX rows `[R, 5 + C]` (box, objectness, classes), probabilities.
+    pub fn yolox(out: &[f32], classes: usize) -> Result<Self, HeadShapeError> {
+        let cols = 5 + classes;
+        if out.len() % cols != 0 {
+            return Err(HeadShapeError(format!("{} values are not rows of 5 + {classes}", out.len())));
+        }
+        let mut p = Predictions { classes, raw: Raw::Probability, obj: vec![], cls: vec![], at: vec![] };
+        for r in 0..out.len() / cols {
+            p.push(out, At { output: 0, obj: r * cols + 4, cls0: r * cols + 5, stride: 1 });
+        }
+        Ok(p)
+    }
+
+    fn push(&mut self, raw: &[f32], at: At) {
+        let prob = |x: f32| if self.raw == Raw::Logit { sigmoid(x).0 } else { x };
+        self.obj.push(prob(raw[at.obj]));
+        for k in 0..self.classes {
+            let v = prob(raw[at.cls0 + k * at.stride]);
+            self.cls.push(v);
+        }
+        self.at.push(at);
+    }
+
+    /// Number of predicted boxes.
+    pub fn len(&self) -> usize {
+        self.obj.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.obj.is_empty()
+    }
+
+    /// The gradient with respect to the raw outputs (`sizes` values each) of a loss whose
+    /// gradients with respect to the probabilities are `dobj` (per box) and `dcls` (box, class, value).
+    fn backprop(&self, raw: &[&[f32]], dobj: &[f32], dcls: &[(usize, usize, f32)]) -> Vec<Vec<f32>> {
+        let mut g: Vec<Vec<f32>> = raw.iter().map(|r| vec![0f32; r.len()]).collect();
+        let chain = |x: f32| if self.raw == Raw::Logit { sigmoid(x).1 } else { 1.0 };
+        for (i, &d) in dobj.iter().enumerate() {
+            if d != 0.0 {
+                let at = self.at[i];
+                g[at.output][at.obj] += d * chain(raw[at.output][at.obj]);
+            }
+        }
+        for &(i, k, d) in dcls {
+            let at = self.at[i];
+            let j = at.cls0 + k * at.stride;
+            g[at.output][j] += d * chain(raw[at.output][j]);
+        }
+        g
+    }
+}
+
+/// Weights of a reduction over `v`: the value and `∂value/∂v` (dense).
+fn reduce(v: &[f32], how: Reduce) -> (f32, Vec<f32>) {
+    let mut w = vec![0f32; v.len()];
+    if v.is_empty() {
+        return (0.0, w);
+    }
+    match how {
+        Reduce::Mean => {
+            let n = v.len() as f32;
+            w.fill(1.0 / n);
+            (v.iter().sum::<f32>() / n, w)
+        }
+        Reduce::TopK(k) => {
+            let mut idx: Vec<usize> = (0..v.len()).collect();
+            idx.sort_by(|&a, &b| v[b].total_cmp(&v[a]).then(a.cmp(&b)));
+            let top = &idx[..k.clamp(1, v.len())];
+            let n = top.len() as f32;
+            top.iter().for_each(|&i| w[i] = 1.0 / n);
+            (top.iter().map(|&i| v[i]).sum::<f32>() / n, w)
+        }
+        Reduce::Softmax(tau) => {
+            // Shifted by the maximum: exp never overflows, and the largest weight is exp(0) = 1.
+            let m = v.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+            let e: Vec<f64> = v.iter().map(|&x| (((x - m) / tau) as f64).exp()).collect();
+            let z: f64 = e.iter().sum();
+            let s: f64 = e.iter().zip(v).map(|(e, &x)| e / z * x as f64).sum();
+            // ∂/∂v_i Σ p_j v_j = p_i (1 + (v_i − s)/τ).
+            for (i, &x) in v.iter().enumerate() {
+                w[i] = (e[i] / z * (1.0 + (x as f64 - s) / tau as f64)) as f32;
+            }
+            (s as f32, w)
+        }
+    }
+}
+
+impl DetectionLoss {
+    /// The terms for `p` (read from `raw`), and the gradient of `L1 + beta·L2` with respect to each
+    /// raw output.
+    pub fn terms(
+        &self,
+        p: &Predictions,
+        raw: &[&[f32]],
+        beta: f32,
+    ) -> Result<(LossTerms, Vec<Vec<f32>>), HeadShapeError> {
+        let c = p.classes;
+        let targets: Vec<usize> = self.target.iter().copied().filter(|&k| k < c).collect();
+        if targets.is_empty() {
+            return Err(HeadShapeError(format!("no target class among the model's {c} classes")));
+        }
+        let cls = |i: usize, k: usize| p.cls[i * c + k];
+        // Per box: its best class, and its best target class with that class's confidence.
+        let best =
+            |i: usize| (0..c).fold((0, f32::NEG_INFINITY), |m, k| if cls(i, k) > m.1 { (k, cls(i, k)) } else { m });
+        let best_target = |i: usize| {
+            targets
+                .iter()
+                .map(|&k| (k, cls(i, k)))
+                .fold((targets[0], f32::NEG_INFINITY), |m, t| if t.1 > m.1 { t } else { m })
+        };
+        let n = p.len();
+        let mut max_score = 0f32;
+        let (mut boxes, mut proposals) = (Vec::new(), Vec::new());
+        for i in 0..n {
+            let o = p.obj[i];
+            max_score = max_score.max(o * best_target(i).1);
+            if o >= self.box_threshold && o.is_finite() {
+                boxes.push(i);
+                let b = best(i).0;
+                if targets.contains(&b) {
+                    proposals.push((i, b));
+                }
+            }
+        }
+        let mut dobj = vec![0f32; n];
+        let mut dcls = Vec::new();
+        let (l1, l2) = match self.reduce {
+            Reduce::Mean => {
+                let (l1, w1) = reduce(&boxes.iter().map(|&i| p.obj[i]).collect::<Vec<_>>(), Reduce::Mean);
+                boxes.iter().zip(&w1).for_each(|(&i, &w)| dobj[i] += w);
+                let (l2, w2) = reduce(&proposals.iter().map(|&(i, k)| cls(i, k)).collect::<Vec<_>>(), Reduce::Mean);
+                proposals.iter().zip(&w2).for_each(|(&(i, k), &w)| dcls.push((i, k, beta * w)));
+                (l1, l2)
+            }
+            how => {
+                let (l1, w1) = reduce(&p.obj, how);
+                w1.iter().enumerate().for_each(|(i, &w)| dobj[i] += w);
+                let tk: Vec<(usize, f32)> = (0..n).map(best_target).collect();
+                let scores: Vec<f32> = (0..n).map(|i| p.obj[i] * tk[i].1).collect();
+                let (l2, w2) = reduce(&scores, how);
+                for (i, &w) in w2.iter().enumerate() {
+                    if w != 0.0 {
+                        dobj[i] += beta * w * tk[i].1;
+                        dcls.push((i, tk[i].0, beta * w * p.obj[i]));
+                    }
+                }
+                (l1, l2)
+            }
+        };
+        let grads = p.backprop(raw, &dobj, &dcls);
+        let terms = LossTerms { l1, l2, boxes: boxes.len(), proposals: proposals.len(), max_score };
+        Ok((terms, grads))
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn head() -> YoloHead {
-        YoloHead { anchors: vec![(10.0, 14.0), (23.0, 27.0)], classes: 3 }
-    }
 
     /// A 2-anchor, 3-class, 2×2 head with chosen logits.
     fn map(obj: [f32; 8], cls_top: [usize; 8]) -> (Vec<f32>, (usize, usize)) {
@@ -131,6 +294,15 @@ mod tests {
         (v, (2, 2))
     }
 
+    fn loss(reduce: Reduce) -> DetectionLoss {
+        DetectionLoss { box_threshold: 0.5, target: vec![2], reduce }
+    }
+
+    fn eval(l: &DetectionLoss, m: &HeadMap, beta: f32) -> (LossTerms, Vec<Vec<f32>>) {
+        let p = Predictions::darknet(std::slice::from_ref(m), &[2], 3).unwrap();
+        l.terms(&p, &[&m.0], beta).unwrap()
+    }
+
     #[test]
     fn sigmoid_is_finite_with_finite_gradient_at_extreme_logits() {
         let v: Vec<(f32, f32)> = [-1e4f32, -100.0, 0.0, 100.0, 1e4].iter().map(|x| sigmoid(*x)).collect();
@@ -141,48 +313,91 @@ mod tests {
 
     #[test]
     fn means_over_boxes_and_target_proposals() {
-        let loss = DetectionLoss { box_threshold: 0.5, target: vec![2] };
         // Objectness logits: 0 → 0.5 (a box, exactly on the threshold), 2 → 0.88, −5 → no box.
         let m = map([0.0, 2.0, -5.0, -5.0, 2.0, -5.0, -5.0, -5.0], [2, 1, 2, 0, 2, 0, 0, 0]);
-        let (t, _) = loss.yolo(&[m], &[head()], 1.0).unwrap();
+        let (t, _) = eval(&loss(Reduce::Mean), &m, 1.0);
         assert_eq!((t.boxes, t.proposals), (3, 2));
         let s = |x: f32| 1.0 / (1.0 + (-x).exp());
         assert!((t.l1 - (s(0.0) + 2.0 * s(2.0)) / 3.0).abs() < 1e-6, "{}", t.l1);
         assert!((t.l2 - s(3.0)).abs() < 1e-6, "{}", t.l2);
         assert!((t.max_score - s(2.0) * s(3.0)).abs() < 1e-6);
+        // Top-1: the largest objectness, and the largest objectness × car confidence.
+        let (t, _) = eval(&loss(Reduce::TopK(1)), &m, 1.0);
+        assert!((t.l1 - s(2.0)).abs() < 1e-6 && (t.l2 - t.max_score).abs() < 1e-6, "{t:?}");
+        // A cold softmax is the maximum, a hot one the plain mean.
+        let (t, _) = eval(&loss(Reduce::Softmax(1e-4)), &m, 1.0);
+        assert!((t.l1 - s(2.0)).abs() < 1e-5 && (t.l2 - t.max_score).abs() < 1e-5, "{t:?}");
+        let (t, _) = eval(&loss(Reduce::Softmax(1e6)), &m, 1.0);
+        let mean_obj = [0.0, 2.0, -5.0, -5.0, 2.0, -5.0, -5.0, -5.0].iter().map(|&x| s(x)).sum::<f32>() / 8.0;
+        assert!((t.l1 - mean_obj).abs() < 1e-5, "{t:?}");
     }
 
     #[test]
-    fn gradient_matches_central_differences() {
-        let loss = DetectionLoss { box_threshold: 0.5, target: vec![2] };
+    fn gradient_matches_central_differences_for_every_reduction() {
         let (mut m, hw) = map([0.3, 2.0, -5.0, -5.0, 1.5, -5.0, -5.0, -5.0], [2, 1, 2, 0, 2, 0, 0, 0]);
-        // Distinct logits so the sets do not change under the small steps below.
+        // Distinct logits so the sets and rankings do not change under the small steps below.
         for (i, v) in m.iter_mut().enumerate() {
             *v += 0.01 * (i % 7) as f32;
         }
         let beta = 0.7;
-        let (_, g) = loss.yolo(&[(m.clone(), hw)], &[head()], beta).unwrap();
-        let total = |m: &[f32]| {
-            let (t, _) = loss.yolo(&[(m.to_vec(), hw)], &[head()], beta).unwrap();
-            t.l1 as f64 + beta as f64 * t.l2 as f64
-        };
-        let eps = 1e-2;
-        for i in 0..m.len() {
-            let (mut p, mut q) = (m.clone(), m.clone());
-            p[i] += eps;
-            q[i] -= eps;
-            let fd = (total(&p) - total(&q)) / (2.0 * eps as f64);
-            assert!((fd - g[0][i] as f64).abs() < 1e-4, "logit {i}: {} vs {fd}", g[0][i]);
+        for how in [Reduce::Mean, Reduce::TopK(2), Reduce::Softmax(0.2)] {
+            let l = loss(how);
+            let (_, g) = eval(&l, &(m.clone(), hw), beta);
+            let total = |m: &[f32]| {
+                let (t, _) = eval(&l, &(m.to_vec(), hw), beta);
+                t.l1 as f64 + beta as f64 * t.l2 as f64
+            };
+            let eps = 1e-2;
+            for i in 0..m.len() {
+                let (mut p, mut q) = (m.clone(), m.clone());
+                p[i] += eps;
+                q[i] -= eps;
+                let fd = (total(&p) - total(&q)) / (2.0 * eps as f64);
+                assert!((fd - g[0][i] as f64).abs() < 1e-4, "{how:?} logit {i}: {} vs {fd}", g[0][i]);
+            }
+            if how == Reduce::Mean {
+                assert!(g[0].iter().filter(|v| **v != 0.0).count() == 5, "3 boxes and 2 proposals carry gradient");
+            }
         }
-        assert!(g[0].iter().filter(|v| **v != 0.0).count() == 5, "3 boxes and 2 proposals carry gradient");
     }
 
     #[test]
     fn no_boxes_gives_zero_loss_and_zero_gradient() {
-        let loss = DetectionLoss { box_threshold: 0.5, target: vec![2] };
-        let (t, g) = loss.yolo(&[map([-9.0; 8], [2; 8])], &[head()], 1.0).unwrap();
+        let (t, g) = eval(&loss(Reduce::Mean), &map([-9.0; 8], [2; 8]), 1.0);
         assert_eq!((t.boxes, t.proposals, t.l1 + t.l2), (0, 0, 0.0));
         assert!(g[0].iter().all(|x| *x == 0.0));
-        assert!(loss.yolo(&[(vec![0.0; 5], (1, 1))], &[head()], 1.0).is_err());
+        assert!(Predictions::darknet(&[(vec![0.0; 5], (1, 1))], &[2], 3).is_err());
+    }
+
+    #[test]
+    fn saturated_values_stay_finite_for_every_reduction_and_layout() {
+        // Logits at ±1e4 (darknet) and probabilities at exactly 0 and 1 (YOLOX).
+        let m = map([1e4, -1e4, 1e4, -1e4, 1e4, 1e4, -1e4, -1e4], [2, 2, 0, 2, 1, 2, 2, 2]);
+        let rows: Vec<f32> =
+            (0..6).flat_map(|r| [0.0, 0.0, 0.0, 0.0, (r % 2) as f32, 0.0, (r % 3 == 0) as u8 as f32, 1.0]).collect();
+        for how in [Reduce::Mean, Reduce::TopK(3), Reduce::Softmax(0.05), Reduce::Softmax(1e-6)] {
+            let (t, g) = eval(&loss(how), &m, 1.0);
+            assert!(t.l1.is_finite() && t.l2.is_finite() && g[0].iter().all(|v| v.is_finite()), "{how:?} {t:?}");
+            let p = Predictions::yolox(&rows, 3).unwrap();
+            let (t, g) = loss(how).terms(&p, &[&rows], 1.0).unwrap();
+            assert!(t.l1.is_finite() && t.l2.is_finite() && g[0].iter().all(|v| v.is_finite()), "{how:?} {t:?}");
+        }
+        // An empty YOLOX output: zero terms.
+        let p = Predictions::yolox(&[], 3).unwrap();
+        let (t, _) = loss(Reduce::TopK(1)).terms(&p, &[&[]], 1.0).unwrap();
+        assert_eq!((t.l1, t.l2), (0.0, 0.0));
+    }
+
+    #[test]
+    fn yolox_rows_are_probabilities_with_identity_chain() {
+        // Two rows, 3 classes: (box, obj, c0, c1, c2).
+        let rows = vec![0.0, 0.0, 0.0, 0.0, 0.9, 0.1, 0.2, 0.7, 0.0, 0.0, 0.0, 0.0, 0.3, 0.6, 0.1, 0.3];
+        let p = Predictions::yolox(&rows, 3).unwrap();
+        let (t, g) = loss(Reduce::Mean).terms(&p, &[&rows], 2.0).unwrap();
+        // Row 0 is a box whose best class is the car (2); row 1 (0.3) is below the threshold.
+        assert_eq!((t.boxes, t.proposals), (1, 1));
+        assert!((t.l1 - 0.9).abs() < 1e-6 && (t.l2 - 0.7).abs() < 1e-6);
+        assert!((t.max_score - 0.63).abs() < 1e-6);
+        assert_eq!((g[0][4], g[0][7], g[0][12]), (1.0, 2.0, 0.0));
     }
 }

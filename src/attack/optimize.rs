@@ -11,7 +11,7 @@ use super::config::OptimizeConfig;
 use super::setup::Setup;
 use super::smooth::smoothness;
 use super::view::View;
-use super::whitebox::WhiteBox;
+use super::whitebox::Ensemble;
 use crate::progress::Progress;
 use crate::rng::Rng;
 use crate::scene::eot;
@@ -57,6 +57,30 @@ pub struct StepLog {
     pub adjoint_ms: f64,
     /// Smoothness loss and Adam step, ms.
     pub optimizer_ms: f64,
+    /// Each white-box detector's own terms (`loss_detectors.csv`).
+    #[serde(skip)]
+    pub per_detector: Vec<DetectorStep>,
+}
+
+/// One white-box detector's terms at one step (a row of `loss_detectors.csv`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DetectorStep {
+    /// Global step.
+    pub step: u64,
+    /// Detector name.
+    pub detector: String,
+    /// Its weight in the loss.
+    pub weight: f32,
+    /// Its L1.
+    pub l1: f32,
+    /// Its L2.
+    pub l2: f32,
+    /// Its boxes.
+    pub boxes: usize,
+    /// Its car proposals.
+    pub proposals: usize,
+    /// Its highest car score.
+    pub max_score: f32,
 }
 
 /// How a run ended.
@@ -103,6 +127,9 @@ pub enum OptimizeError {
         /// Why.
         source: std::io::Error,
     },
+    /// The initial texture's file.
+    #[error(transparent)]
+    Init(#[from] crate::image::ImageError),
     /// Writing `loss.csv`.
     #[error("writing {path}: {source}")]
     Log {
@@ -158,7 +185,7 @@ fn epoch_order(n: usize, seed: u64, epoch: u64) -> Vec<usize> {
 /// One step on `view`: returns its record and adds ∂L/∂texture into `grad`.
 pub fn step(
     setup: &Setup,
-    wb: &WhiteBox,
+    wb: &Ensemble,
     cfg: &OptimizeConfig,
     view: &View,
     tex: &[f32],
@@ -180,6 +207,21 @@ pub fn step(
     let ls = smoothness(tex, setup.tex_size, setup.tex_size, cfg.loss.gamma, grad);
     let optimizer_ms = ms(t);
     let d = g.loss;
+    let per_detector = g
+        .per_detector
+        .iter()
+        .zip(&wb.members)
+        .map(|(t, (w, weight))| DetectorStep {
+            step: 0,
+            detector: w.name().into(),
+            weight: *weight,
+            l1: t.l1,
+            l2: t.l2,
+            boxes: t.boxes,
+            proposals: t.proposals,
+            max_score: t.max_score,
+        })
+        .collect();
     Ok(StepLog {
         step: 0,
         epoch: 0,
@@ -198,23 +240,40 @@ pub fn step(
         backward_ms: g.backward_ms,
         adjoint_ms,
         optimizer_ms,
+        per_detector,
     })
 }
 
-fn write_log(path: &Path, log: &[StepLog]) -> Result<(), OptimizeError> {
+/// Writes rows to `path` through a temporary file, so a crash never leaves half a log.
+fn write_rows<T: Serialize>(path: &Path, rows: impl Iterator<Item = T>) -> Result<(), OptimizeError> {
     let tmp = path.with_extension("csv.tmp");
     let csv_err = |source| OptimizeError::Log { path: tmp.clone(), source };
     let mut w = csv::Writer::from_path(&tmp).map_err(csv_err)?;
-    for r in log {
+    for r in rows {
         w.serialize(r).map_err(csv_err)?;
     }
     w.flush().map_err(|source| OptimizeError::Io { path: tmp.clone(), source })?;
     std::fs::rename(&tmp, path).map_err(|source| OptimizeError::Io { path: path.into(), source })
 }
 
-fn read_log(path: &Path, upto: u64) -> Vec<StepLog> {
-    let Ok(mut r) = csv::Reader::from_path(path) else { return Vec::new() };
-    r.deserialize::<StepLog>().filter_map(Result::ok).filter(|s| s.step < upto).collect()
+/// `loss.csv` and `loss_detectors.csv` in `dir`.
+fn write_log(dir: &Path, log: &[StepLog]) -> Result<(), OptimizeError> {
+    write_rows(&dir.join("loss.csv"), log.iter())?;
+    write_rows(&dir.join("loss_detectors.csv"), log.iter().flat_map(|s| s.per_detector.iter()))
+}
+
+/// The records of the steps before `upto` from `dir`'s logs (for a resumed run).
+fn read_log(dir: &Path, upto: u64) -> Vec<StepLog> {
+    let Ok(mut r) = csv::Reader::from_path(dir.join("loss.csv")) else { return Vec::new() };
+    let mut log: Vec<StepLog> = r.deserialize::<StepLog>().filter_map(Result::ok).filter(|s| s.step < upto).collect();
+    if let Ok(mut r) = csv::Reader::from_path(dir.join("loss_detectors.csv")) {
+        for d in r.deserialize::<DetectorStep>().filter_map(Result::ok) {
+            if let Some(s) = log.iter_mut().find(|s| s.step == d.step) {
+                s.per_detector.push(d);
+            }
+        }
+    }
+    log
 }
 
 /// Runs (or resumes) the optimization of `cfg` (loaded from `cfg_path`) on `setup`; `progress`
@@ -223,7 +282,7 @@ pub fn optimize_texture(
     cfg_path: &Path,
     cfg: &OptimizeConfig,
     setup: &Setup,
-    wb: &WhiteBox,
+    wb: &Ensemble,
     opts: &RunOptions,
     progress: &dyn Progress,
     stop: &AtomicBool,
@@ -232,7 +291,6 @@ pub fn optimize_texture(
     let hash =
         fingerprint(&std::fs::read(cfg_path).map_err(|source| OptimizeError::Io { path: cfg_path.into(), source })?);
     let ckpt_path = opts.out.join("checkpoint.bin");
-    let log_path = opts.out.join("loss.csv");
     let n_values = setup.tex_size * setup.tex_size * 3;
     let (mut tex, mut adam, mut rng, start, mut log) = if opts.resume && ckpt_path.exists() {
         let c = Checkpoint::load(&ckpt_path)?;
@@ -246,7 +304,7 @@ pub fn optimize_texture(
         if c.texture.len() != n_values {
             return Err(refuse("its texture size does not match the config's".into()));
         }
-        let log = read_log(&log_path, c.steps_done);
+        let log = read_log(&opts.out, c.steps_done);
         progress.note(&format!("resuming from step {} ({})", c.steps_done, ckpt_path.display()));
         (c.texture, c.adam, Rng { state: c.rng_state }, c.steps_done, log)
     } else {
@@ -256,7 +314,7 @@ pub fn optimize_texture(
                 why: "exists: pass --resume to continue it, or choose another --out".into(),
             });
         }
-        let tex = setup.initial_texture(cfg.mesh.init, cfg.optimizer.seed);
+        let tex = setup.initial_texture(&cfg.mesh.init, cfg.optimizer.seed)?;
         (tex, Adam::new(n_values, cfg.optimizer.lr), Rng::new(cfg.optimizer.seed), 0, Vec::new())
     };
     let views = setup.training_views();
@@ -272,7 +330,7 @@ pub fn optimize_texture(
             adam: adam.clone(),
         }
         .save(&ckpt_path)?;
-        write_log(&log_path, log)
+        write_log(&opts.out, log)
     };
     progress.begin("step", total);
     progress.set_position(start);
@@ -293,6 +351,7 @@ pub fn optimize_texture(
         grad.fill(0.0);
         let mut rec = step(setup, wb, cfg, view, &tex, &mut rng, &mut grad)?;
         (rec.step, rec.epoch) = (s, epoch);
+        rec.per_detector.iter_mut().for_each(|d| d.step = s);
         let finite = rec.total.is_finite() && setup.region_values.iter().all(|&i| grad[i as usize].is_finite());
         if finite {
             let t = Instant::now();

@@ -9,7 +9,8 @@ use crate::geometry::camera::{fca, pav_camou, Camera};
 use crate::geometry::mesh::Mesh;
 use crate::geometry::parts::select_faces;
 use crate::geometry::uv::faces_mask;
-use crate::image::{Frame, Rgb};
+use crate::image::resize::{resize, Interpolation};
+use crate::image::{to_u8, Frame, ImageError, Rgb};
 use crate::render::bake::{bake, BakeError, Plate, Shot, BAKE_SIZE};
 use crate::render::mask::MaskError;
 use crate::render::shade::{vertex_normals, Lights};
@@ -370,12 +371,25 @@ impl Setup {
     }
 
     /// The starting texture; a random start draws its blocks from `seed`.
-    pub fn initial_texture(&self, init: Init, seed: u64) -> Vec<f32> {
-        match init {
-            Init::Grey(g) => vec![g; self.tex_size * self.tex_size * 3],
+    pub fn initial_texture(&self, init: &Init, seed: u64) -> Result<Vec<f32>, ImageError> {
+        Ok(match init {
+            Init::Grey(g) => vec![*g; self.tex_size * self.tex_size * 3],
             // Not seed itself: the random baselines of eval-digital and crossval draw small seeds.
             Init::Named(InitName::Random) => self.random_texture(self.random_block(), seed ^ 0x1417_0000),
+            Init::File(p) => self.load_texture(p)?,
+        })
+    }
+
+    /// A texture image resampled to the atlas (antialiased when it shrinks, as PIL resizes), so
+    /// textures made at any size, a peer's included, can be scored and fine-tuned.
+    pub fn load_texture(&self, path: &Path) -> Result<Vec<f32>, ImageError> {
+        let t = Rgb::load(path)?;
+        let n = self.tex_size;
+        if (t.width, t.height) == (n, n) {
+            return Ok(t.rgb);
         }
+        let frame = Frame { width: t.width, height: t.height, bgr: t.rgb.iter().map(|v| to_u8(*v)).collect() };
+        Ok(resize(&frame, n, n, Interpolation::Antialias).into_iter().map(|v| v / 255.0).collect())
     }
 }
 

@@ -1,19 +1,21 @@
-//! The white-box detector side of a step: composite image → YOLOv3-tiny → L1 + β·L2, and the
-//! exact gradient back to the composite's pixels.
+//! The white-box detector side of a step: composite image → detector → L1 + β·L2, and the exact
+//! gradient back to the composite's pixels.
 //!
-//! The network is the ONNX graph that `evaluate` runs (exported from the same darknet files), and
-//! its input gradient is that graph differentiated (`detect::autodiff`), both run by ONNX Runtime
-//! (`detect::ortgrad`). The resize from the composite to the network input is a fixed linear map
-//! with its exact adjoint.
+//! A white box is the evaluated model itself: the ONNX file its detector config names (the same
+//! one `evaluate` runs), differentiated as a graph (`detect::autodiff`) and run by ONNX Runtime
+//! (`detect::ortgrad`). The input transform the config describes (resize, channel order, scale,
+//! mean and std) is applied here with its exact adjoint. Outputs are read by their layout:
+//! darknet heads and YOLOX rows, both with objectness (see `attack::loss`).
 
-use super::config::DetectorSection;
-use super::loss::{DetectionLoss, HeadMap, HeadShapeError};
+use super::config::OptimizeConfig;
+use super::loss::{DetectionLoss, HeadShapeError, Predictions};
 use crate::detect::autodiff::{differentiate_with, AutodiffError, Kernels};
-use crate::detect::darknet::cfg::YoloHead;
-use crate::detect::darknet::{to_onnx, DarknetError, Network, Weights};
+use crate::detect::config::{ChannelOrder, DetectorConfig, OutputLayout};
+use crate::detect::onnx_proto::{Dim, Model, ProtoError};
 use crate::detect::ortgrad::{GradSession, Pass};
 use crate::detect::DetectError;
 use crate::image::resize::{Interpolation, Resampler};
+use std::path::PathBuf;
 use std::sync::Mutex;
 use std::time::Instant;
 
@@ -31,30 +33,49 @@ pub struct DetectorGrad {
     pub backward_ms: f64,
 }
 
-/// YOLOv3-tiny with the paper's loss and its input gradient.
+/// How the outputs are read.
+#[derive(Clone, Debug)]
+enum Heads {
+    /// Darknet heads: per graph output (in graph order), its anchor count.
+    Darknet { anchors: Vec<usize>, classes: usize },
+    /// YOLOX rows `[R, 5 + C]`.
+    Yolox { classes: usize },
+}
+
+/// A detector with the paper's loss and its input gradient.
 pub struct WhiteBox {
+    name: String,
     session: Mutex<GradSession>,
-    heads: Vec<YoloHead>,
+    heads: Heads,
     head_sizes: Vec<(usize, usize)>,
     loss: DetectionLoss,
     input: usize,
     resample: Resampler,
+    /// Model channel c reads RGB channel `channel[c]`, as `v·gain[c] + offset[c]` for v in [0, 1].
+    channel: [usize; 3],
+    gain: [f32; 3],
+    offset: [f32; 3],
     composite: usize,
 }
 
 /// Errors of the white-box detector.
 #[derive(Debug, thiserror::Error)]
 pub enum WhiteBoxError {
-    /// Model files.
+    /// The detector config or its model file.
     #[error("white-box detector: {0}")]
-    Model(#[from] DarknetError),
+    Config(#[from] DetectError),
+    /// The model file is not an ONNX model pav reads.
+    #[error("white-box detector {path}: {source}")]
+    Model {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: ProtoError,
+    },
     /// A graph without a gradient.
     #[error("white-box detector: {0}")]
     Autodiff(#[from] AutodiffError),
-    /// ONNX Runtime.
-    #[error("white-box detector: {0}")]
-    Runtime(#[from] DetectError),
-    /// Head maps that do not fit the cfg's heads.
+    /// Outputs that do not fit the layout.
     #[error("white-box detector: {0}")]
     Heads(#[from] HeadShapeError),
     /// A composite of another size than the one the detector was loaded for.
@@ -65,9 +86,14 @@ pub enum WhiteBoxError {
         /// The composite side it was loaded for.
         expected: usize,
     },
-    /// A network whose input is not square.
-    #[error("white-box detector: non-square network input {0}x{1}")]
-    NotSquare(usize, usize),
+    /// A set-up pav has no white-box loss or input transform for.
+    #[error("white-box detector {name}: {why}")]
+    Unsupported {
+        /// Detector name.
+        name: String,
+        /// What is missing.
+        why: String,
+    },
 }
 
 /// How a [`WhiteBox`] runs, beyond its config.
@@ -82,28 +108,82 @@ pub struct WhiteBoxOptions {
 }
 
 impl WhiteBox {
-    /// Loads the darknet model for composites of `size × size` pixels.
-    pub fn load(cfg: &DetectorSection, size: usize) -> Result<Self, WhiteBoxError> {
-        Self::with_options(cfg, WhiteBoxOptions { composite: size, input: None, threads: 0 })
+    /// Loads the detector of `cfg` for composites of `size × size` pixels.
+    pub fn load(cfg: &DetectorConfig, loss: DetectionLoss, size: usize) -> Result<Self, WhiteBoxError> {
+        Self::with_options(cfg, loss, WhiteBoxOptions { composite: size, input: None, threads: 0 })
     }
 
-    /// Loads the darknet model as `o` says.
-    pub fn with_options(cfg: &DetectorSection, o: WhiteBoxOptions) -> Result<Self, WhiteBoxError> {
-        let size = o.composite;
-        let net = Network::from_file(&cfg.cfg)?;
-        let w = Weights::from_file(&cfg.weights, &net)?;
-        if net.width != net.height {
-            return Err(WhiteBoxError::NotSquare(net.width, net.height));
+    /// Loads the detector of `cfg` as `o` says.
+    pub fn with_options(cfg: &DetectorConfig, loss: DetectionLoss, o: WhiteBoxOptions) -> Result<Self, WhiteBoxError> {
+        let unsupported = |why: String| WhiteBoxError::Unsupported { name: cfg.name.clone(), why };
+        let i = &cfg.input;
+        // A square composite letterboxed into a square input is a plain resize.
+        if i.width != i.height {
+            return Err(unsupported(format!("a non-square input {}x{}", i.width, i.height)));
         }
-        let (iw, ih) = (o.input.unwrap_or(net.width), o.input.unwrap_or(net.height));
-        let heads: Vec<YoloHead> = net.heads().into_iter().map(|(_, h)| h.clone()).collect();
-        let model = to_onnx::export(&net, &w)?;
-        let d = differentiate_with(&model, &[1, 3, ih as i64, iw as i64], Kernels::Fused)?;
-        let head_sizes = d.outputs.iter().map(|(_, s)| (s[2] as usize, s[3] as usize)).collect();
-        let session = GradSession::new("yolov3-tiny (white-box)", d, o.threads)?;
-        let loss = DetectionLoss { box_threshold: cfg.box_threshold, target: cfg.target.clone() };
-        let resample = Resampler::new(size, iw, Interpolation::Bilinear);
-        Ok(WhiteBox { session: Mutex::new(session), heads, head_sizes, loss, input: iw, resample, composite: size })
+        let side = o.input.unwrap_or(i.width);
+        let bytes = std::fs::read(&cfg.model).map_err(|source| DetectError::ConfigRead {
+            path: cfg.source.display().to_string(),
+            what: format!("the model {}", cfg.model.display()),
+            source,
+        })?;
+        let model =
+            Model::from_bytes(&bytes).map_err(|source| WhiteBoxError::Model { path: cfg.model.clone(), source })?;
+        if let Some(x) = model.inputs.first() {
+            if x.dims.len() == 4 && x.dims[2..].iter().any(|d| matches!(d, Dim::Fixed(v) if *v != side as i64)) {
+                return Err(unsupported(format!("the graph's input is fixed at {:?}, not {side}²", x.dims)));
+            }
+        }
+        let d = differentiate_with(&model, &[1, 3, side as i64, side as i64], Kernels::Fused)?;
+        let names: Vec<&str> = d.outputs.iter().map(|(n, _)| n.as_str()).collect();
+        let heads = match &cfg.output {
+            OutputLayout::Darknet { heads } => {
+                let anchors = names
+                    .iter()
+                    .map(|n| heads.iter().find(|h| h.output == *n).map(|h| h.anchors.len()))
+                    .collect::<Option<Vec<usize>>>()
+                    .ok_or_else(|| {
+                        unsupported(format!("graph outputs {names:?} are not all darknet heads of the config"))
+                    })?;
+                let classes = d.outputs[0].1[1] as usize / anchors[0] - 5;
+                Heads::Darknet { anchors, classes }
+            }
+            OutputLayout::Yolox { .. } if d.outputs.len() == 1 => {
+                Heads::Yolox { classes: *d.outputs[0].1.last().unwrap_or(&5) as usize - 5 }
+            }
+            other => {
+                return Err(unsupported(format!(
+                    "no white-box loss for the {} layout (objectness-based losses need darknet or yolox outputs)",
+                    format!("{other:?}").split([' ', '{']).next().unwrap_or("?")
+                )))
+            }
+        };
+        let head_sizes = d.outputs.iter().map(|(_, s)| (s[s.len() - 2] as usize, s[s.len() - 1] as usize)).collect();
+        let session = GradSession::new(&format!("{} (white-box)", cfg.name), d, o.threads)?;
+        let channel = match i.channels {
+            ChannelOrder::Rgb => [0, 1, 2],
+            ChannelOrder::Bgr => [2, 1, 0],
+        };
+        let gain = [0, 1, 2].map(|c| 255.0 * i.scale / i.std[c]);
+        let offset = [0, 1, 2].map(|c| -i.mean[c] / i.std[c]);
+        Ok(WhiteBox {
+            name: cfg.name.clone(),
+            session: Mutex::new(session),
+            heads,
+            head_sizes,
+            loss,
+            input: side,
+            resample: Resampler::new(o.composite, side, Interpolation::Bilinear),
+            channel,
+            gain,
+            offset,
+            composite: o.composite,
+        })
+    }
+
+    /// The detector's name.
+    pub fn name(&self) -> &str {
+        &self.name
     }
 
     /// Network input side.
@@ -115,32 +195,142 @@ impl WhiteBox {
         self.session.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// The head maps of the `size × size` composite `img`, each with its `(H, W)`, and what the
-    /// backward needs.
-    fn heads_of(&self, s: &mut GradSession, img: &[f32], size: usize) -> Result<(Vec<HeadMap>, Pass), WhiteBoxError> {
+    /// The model input of the `size × size` composite `img`: resized, channels ordered and
+    /// normalized as the config says.
+    fn model_input(&self, img: &[f32], size: usize) -> Result<Vec<f32>, WhiteBoxError> {
         if size != self.composite || img.len() != size * size * 3 {
             return Err(WhiteBoxError::Size { got: img.len(), expected: self.composite });
         }
-        let (maps, pass) = s.forward(self.resample.apply(img, 3))?;
-        Ok((maps.into_iter().zip(self.head_sizes.iter().copied()).collect(), pass))
+        let rgb = self.resample.apply(img, 3);
+        let plane = self.input * self.input;
+        let mut x = vec![0f32; 3 * plane];
+        for c in 0..3 {
+            let src = &rgb[self.channel[c] * plane..(self.channel[c] + 1) * plane];
+            let (g, o) = (self.gain[c], self.offset[c]);
+            x[c * plane..(c + 1) * plane].iter_mut().zip(src).for_each(|(d, &v)| *d = v * g + o);
+        }
+        Ok(x)
+    }
+
+    /// The adjoint of [`WhiteBox::model_input`].
+    fn input_adjoint(&self, g: &[f32]) -> Vec<f32> {
+        let plane = self.input * self.input;
+        let mut rgb = vec![0f32; 3 * plane];
+        for c in 0..3 {
+            let dst = &mut rgb[self.channel[c] * plane..(self.channel[c] + 1) * plane];
+            dst.iter_mut().zip(&g[c * plane..(c + 1) * plane]).for_each(|(d, &v)| *d += v * self.gain[c]);
+        }
+        self.resample.adjoint(&rgb, 3)
+    }
+
+    /// The loss terms of the outputs and their gradients.
+    fn score(&self, outs: &[Vec<f32>], beta: f32) -> Result<(DetectorLoss, Vec<Vec<f32>>), WhiteBoxError> {
+        let p = match &self.heads {
+            Heads::Darknet { anchors, classes } => {
+                let maps: Vec<_> = outs.iter().cloned().zip(self.head_sizes.iter().copied()).collect();
+                Predictions::darknet(&maps, anchors, *classes)?
+            }
+            Heads::Yolox { classes } => Predictions::yolox(&outs[0], *classes)?,
+        };
+        let raw: Vec<&[f32]> = outs.iter().map(|v| v.as_slice()).collect();
+        Ok(self.loss.terms(&p, &raw, beta)?)
+    }
+
+    fn outputs(&self, s: &mut GradSession, img: &[f32], size: usize) -> Result<(Vec<Vec<f32>>, Pass), WhiteBoxError> {
+        Ok(s.forward(self.model_input(img, size)?)?)
     }
 
     /// Loss of the `size × size` RGB composite `img` and its gradient for weight `beta` on L2.
     pub fn loss_and_grad(&self, img: &[f32], size: usize, beta: f32) -> Result<DetectorGrad, WhiteBoxError> {
         let t0 = Instant::now();
         let mut s = self.session();
-        let (maps, pass) = self.heads_of(&mut s, img, size)?;
-        let (loss, head_grads) = self.loss.yolo(&maps, &self.heads, beta)?;
+        let (outs, pass) = self.outputs(&mut s, img, size)?;
+        let (loss, out_grads) = self.score(&outs, beta)?;
         let forward_ms = t0.elapsed().as_secs_f64() * 1e3;
         let t1 = Instant::now();
-        let g = s.backward(&pass, head_grads)?;
-        let grad = self.resample.adjoint(&g, 3);
+        let g = s.backward(&pass, out_grads)?;
+        let grad = self.input_adjoint(&g);
         Ok(DetectorGrad { loss, grad, forward_ms, backward_ms: t1.elapsed().as_secs_f64() * 1e3 })
     }
 
     /// The loss terms of a composite, without gradients (for scoring).
     pub fn loss(&self, img: &[f32], size: usize) -> Result<DetectorLoss, WhiteBoxError> {
-        let (maps, _) = self.heads_of(&mut self.session(), img, size)?;
-        Ok(self.loss.yolo(&maps, &self.heads, 1.0)?.0)
+        let (outs, _) = self.outputs(&mut self.session(), img, size)?;
+        Ok(self.score(&outs, 1.0)?.0)
+    }
+}
+
+/// Several white-box detectors with weights: the loss is their weighted sum.
+pub struct Ensemble {
+    /// The detectors and their weights.
+    pub members: Vec<(WhiteBox, f32)>,
+}
+
+/// One step's gradient over an ensemble, with each member's terms.
+pub struct EnsembleGrad {
+    /// Weighted sums of the members' terms (`boxes`, `proposals`: summed; `max_score`: the highest).
+    pub loss: DetectorLoss,
+    /// Each member's own terms, in member order.
+    pub per_detector: Vec<DetectorLoss>,
+    /// The weighted gradient with respect to the composite.
+    pub grad: Vec<f32>,
+    /// Forward time over all members (ms).
+    pub forward_ms: f64,
+    /// Backward time over all members (ms).
+    pub backward_ms: f64,
+}
+
+impl Ensemble {
+    /// Loads the `[[white_box]]` detectors of `cfg` for composites of `size × size` pixels.
+    pub fn load(cfg: &OptimizeConfig, size: usize) -> Result<Self, WhiteBoxError> {
+        let members = cfg
+            .white_box
+            .iter()
+            .map(|e| {
+                let d = DetectorConfig::load(&e.detector)?;
+                let loss = DetectionLoss {
+                    box_threshold: cfg.loss.box_threshold,
+                    target: d.target_classes.clone(),
+                    reduce: cfg.loss.reduce,
+                };
+                Ok((WhiteBox::load(&d, loss, size)?, e.weight))
+            })
+            .collect::<Result<_, WhiteBoxError>>()?;
+        Ok(Ensemble { members })
+    }
+
+    /// Weighted `L1 + β·L2` over the members and its gradient.
+    pub fn loss_and_grad(&self, img: &[f32], size: usize, beta: f32) -> Result<EnsembleGrad, WhiteBoxError> {
+        let mut out = EnsembleGrad {
+            loss: DetectorLoss { l1: 0.0, l2: 0.0, boxes: 0, proposals: 0, max_score: 0.0 },
+            per_detector: Vec::new(),
+            grad: vec![0f32; img.len()],
+            forward_ms: 0.0,
+            backward_ms: 0.0,
+        };
+        for (wb, w) in &self.members {
+            let g = wb.loss_and_grad(img, size, beta)?;
+            out.grad.iter_mut().zip(&g.grad).for_each(|(a, b)| *a += w * b);
+            let l = &mut out.loss;
+            l.l1 += w * g.loss.l1;
+            l.l2 += w * g.loss.l2;
+            l.boxes += g.loss.boxes;
+            l.proposals += g.loss.proposals;
+            l.max_score = l.max_score.max(g.loss.max_score);
+            out.forward_ms += g.forward_ms;
+            out.backward_ms += g.backward_ms;
+            out.per_detector.push(g.loss);
+        }
+        Ok(out)
+    }
+
+    /// The first member, which scores the per-view reports.
+    pub fn first(&self) -> &WhiteBox {
+        &self.members[0].0
+    }
+
+    /// The members' names joined with `+`.
+    pub fn names(&self) -> String {
+        self.members.iter().map(|(w, _)| w.name()).collect::<Vec<_>>().join("+")
     }
 }

@@ -32,6 +32,35 @@ pub fn asr(images: &[ImageDetections], threshold: f32) -> Option<f64> {
     Some(1.0 - detected as f64 / images.len() as f64)
 }
 
+/// A mean difference with its 95 % paired-bootstrap interval.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Interval {
+    /// Mean of the differences.
+    pub mean: f64,
+    /// 2.5th percentile of the resampled means.
+    pub lo: f64,
+    /// 97.5th percentile of the resampled means.
+    pub hi: f64,
+    /// Number of paired units (views).
+    pub n: usize,
+}
+
+/// The mean of per-unit differences `d` with a 95 % percentile interval from `resamples`
+/// bootstrap resamples of the units (drawn with replacement from `seed`); None for no units.
+pub fn paired_bootstrap(d: &[f64], resamples: usize, seed: u64) -> Option<Interval> {
+    if d.is_empty() {
+        return None;
+    }
+    let n = d.len();
+    let mut rng = crate::rng::Rng::new(seed);
+    let mut means: Vec<f64> = (0..resamples.max(1))
+        .map(|_| (0..n).map(|_| d[(rng.next_u64() % n as u64) as usize]).sum::<f64>() / n as f64)
+        .collect();
+    means.sort_by(f64::total_cmp);
+    let at = |q: f64| means[((q * (means.len() - 1) as f64).round() as usize).min(means.len() - 1)];
+    Some(Interval { mean: d.iter().sum::<f64>() / n as f64, lo: at(0.025), hi: at(0.975), n })
+}
+
 /// Car AP at IoU 0.5 over the images with a ground-truth box (None when there are none).
 pub fn ap50(images: &[ImageDetections]) -> Option<f64> {
     let with_gt: Vec<&ImageDetections> = images.iter().filter(|i| i.gt.is_some()).collect();
@@ -69,6 +98,23 @@ pub fn ap50(images: &[ImageDetections]) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bootstrap_interval_brackets_the_mean_and_shrinks_with_agreement() {
+        let d: Vec<f64> = (0..11).map(|i| -0.1 + 0.02 * (i as f64 - 5.0)).collect();
+        let iv = paired_bootstrap(&d, 4000, 3).unwrap();
+        assert!((iv.mean + 0.1).abs() < 1e-12 && iv.lo < iv.mean && iv.mean < iv.hi, "{iv:?}");
+        // All below zero: the interval excludes zero. Equal differences: a zero-width interval.
+        assert!(iv.hi < 0.0);
+        let same = paired_bootstrap(&[0.25; 5], 100, 1).unwrap();
+        assert_eq!((same.lo, same.hi), (0.25, 0.25));
+        // One large win among ties: the interval reaches zero.
+        let mut one = vec![0.0; 10];
+        one[3] = -0.5;
+        let iv = paired_bootstrap(&one, 4000, 3).unwrap();
+        assert!(iv.lo < iv.mean && iv.hi == 0.0, "{iv:?}");
+        assert!(paired_bootstrap(&[], 10, 1).is_none());
+    }
 
     fn im(gt: BBox, cars: &[(f32, BBox)]) -> ImageDetections {
         ImageDetections { gt: Some(gt), cars: cars.to_vec() }

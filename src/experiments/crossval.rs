@@ -10,13 +10,13 @@ use crate::attack::config::OptimizeConfig;
 use crate::attack::optimize::{optimize_texture, Finish, RunOptions};
 use crate::attack::setup::Setup;
 use crate::attack::view::View;
-use crate::attack::whitebox::WhiteBox;
+use crate::attack::whitebox::Ensemble;
 use crate::detect::load::load_detectors;
 use crate::detect::Detector;
-use crate::eval::digital::ImageDetections;
+use crate::eval::digital::{paired_bootstrap, ImageDetections};
 use crate::image::save_rgb;
 use crate::progress::{Progress, Silent};
-use crate::table::write_csv;
+use crate::table::{unique, write_csv};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -35,8 +35,10 @@ pub struct CrossvalOptions {
     pub out: PathBuf,
     /// Score threshold for ASR.
     pub threshold: f32,
-    /// Name of the white-box detector.
-    pub white_box: String,
+    /// Names of the white-box detectors.
+    pub white_box: Vec<String>,
+    /// Fixed textures scored beside the optimized one (a peer's published texture), by name.
+    pub references: Vec<(String, Vec<f32>)>,
 }
 
 /// The best car score of one detector on one view under one texture.
@@ -70,7 +72,7 @@ pub fn crossval(
     cfg_path: &Path,
     cfg: &OptimizeConfig,
     setup: &Setup,
-    wb: &WhiteBox,
+    wb: &Ensemble,
     detectors: &mut [Box<dyn Detector>],
     opts: &CrossvalOptions,
     progress: &dyn Progress,
@@ -87,7 +89,7 @@ pub fn crossval(
     progress.begin("folds", 2 * k as u64);
     let stage = |f: usize, s: &str| progress.status(&format!("fold {}/{k}: {s}", f + 1));
     // (role, texture, detector index) → detections, pooled over folds and seeds.
-    let mut pooled: HashMap<(&'static str, &'static str, usize), Vec<ImageDetections>> = HashMap::new();
+    let mut pooled: HashMap<(&'static str, String, usize), Vec<ImageDetections>> = HashMap::new();
     let mut records = Vec::new();
     for f in 0..k {
         let (tr, te) = fold_split(all.len(), k, f);
@@ -115,16 +117,20 @@ pub fn crossval(
         save_rgb(&ro.out.join("texture.png"), fs.tex_size, fs.tex_size, &o.texture)?;
         stage(f, "scoring");
         progress.advance(1);
-        let mut textures: Vec<(&'static str, u64, Option<Vec<f32>>)> =
-            vec![("original", 0, None), ("optimized", 0, Some(o.texture))];
-        for s in 0..opts.random_seeds {
-            let seed = 1 + s + 1000 * f as u64;
-            textures.push(("random", seed, Some(fs.random_texture(opts.random_block, seed))));
+        let mut textures: Vec<(String, u64, Option<&[f32]>)> =
+            vec![("original".into(), 0, None), ("optimized".into(), 0, Some(&o.texture))];
+        let randoms: Vec<Vec<f32>> =
+            (0..opts.random_seeds).map(|s| fs.random_texture(opts.random_block, 1 + s + 1000 * f as u64)).collect();
+        for (s, r) in randoms.iter().enumerate() {
+            textures.push(("random".into(), 1 + s as u64 + 1000 * f as u64, Some(r)));
+        }
+        for (name, r) in &opts.references {
+            textures.push((name.clone(), 0, Some(r)));
         }
         for (role, views) in [("train", &fs.train), ("held-out", &fs.test)] {
             for v in views.iter() {
                 for (tname, seed, tex) in &textures {
-                    let dets = detect_view(v, tex.as_deref(), &fs, detectors)?;
+                    let dets = detect_view(v, *tex, &fs, detectors)?;
                     for (d, im) in dets.into_iter().enumerate() {
                         records.push(ViewRecord {
                             fold: f,
@@ -135,7 +141,7 @@ pub fn crossval(
                             detector: detectors[d].name().to_string(),
                             score: im.best_score(),
                         });
-                        pooled.entry((role, *tname, d)).or_default().push(im);
+                        pooled.entry((role, tname.clone(), d)).or_default().push(im);
                     }
                 }
             }
@@ -145,25 +151,113 @@ pub fn crossval(
     }
     progress.end(None);
     let mut rows = Vec::new();
-    for tname in ["original", "random", "optimized"] {
+    let names = ["original", "random", "optimized"].map(String::from).into_iter();
+    for tname in names.chain(opts.references.iter().map(|r| r.0.clone())) {
         for (d, det) in detectors.iter().enumerate() {
             for role in ["held-out", "train"] {
-                let ims = pooled.get(&(role, tname, d)).map(Vec::as_slice).unwrap_or_default();
-                rows.extend(aggregate(det.name(), det.name() == opts.white_box, tname, role, ims, opts.threshold));
+                let ims = pooled.get(&(role, tname.clone(), d)).map(Vec::as_slice).unwrap_or_default();
+                rows.extend(aggregate(
+                    det.name(),
+                    opts.white_box.iter().any(|w| w == det.name()),
+                    &tname,
+                    role,
+                    ims,
+                    opts.threshold,
+                ));
             }
         }
     }
     Ok((rows, records))
 }
 
+/// Optimized against another texture on the held-out views of one detector: the per-view
+/// difference of best car scores (optimized − other; below zero, the optimized texture hides the
+/// car better), with its paired-bootstrap interval.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Paired {
+    /// Detector.
+    pub detector: String,
+    /// Whether it was a white box.
+    pub white_box: bool,
+    /// The other texture ("random" is each view's mean over its random seeds).
+    pub against: String,
+    /// Mean difference.
+    pub mean: f64,
+    /// 95 % interval, low end.
+    pub lo: f64,
+    /// 95 % interval, high end.
+    pub hi: f64,
+    /// Held-out views.
+    pub views: usize,
+}
+
+/// The paired comparisons of the optimized texture with every other texture of `records`,
+/// per detector, over held-out views (10,000 bootstrap resamples).
+pub fn paired(records: &[ViewRecord], white_box: &[String]) -> Vec<Paired> {
+    let held: Vec<&ViewRecord> = records.iter().filter(|r| r.role == "held-out").collect();
+    let mut out = Vec::new();
+    for det in unique(held.iter().map(|r| r.detector.clone())) {
+        let mine: Vec<&&ViewRecord> = held.iter().filter(|r| r.detector == det).collect();
+        let others = unique(mine.iter().map(|r| r.texture.clone()).filter(|t| t != "optimized"));
+        for other in others {
+            let mut d = Vec::new();
+            for o in mine.iter().filter(|r| r.texture == "optimized") {
+                let theirs: Vec<f64> = mine
+                    .iter()
+                    .filter(|r| r.texture == other && r.fold == o.fold && r.view == o.view)
+                    .map(|r| r.score as f64)
+                    .collect();
+                if !theirs.is_empty() {
+                    d.push(o.score as f64 - theirs.iter().sum::<f64>() / theirs.len() as f64);
+                }
+            }
+            if let Some(iv) = paired_bootstrap(&d, 10_000, 7) {
+                out.push(Paired {
+                    detector: det.clone(),
+                    white_box: white_box.contains(&det),
+                    against: other,
+                    mean: iv.mean,
+                    lo: iv.lo,
+                    hi: iv.hi,
+                    views: iv.n,
+                });
+            }
+        }
+    }
+    out
+}
+
+/// The paired comparisons as a Markdown table: a row per detector, a column per other texture.
+fn markdown_paired(p: &[Paired]) -> String {
+    let against = unique(p.iter().map(|r| r.against.clone()));
+    let mut s = format!(
+        "| detector | {} |\n|---|{}\n",
+        against.iter().map(|a| format!("vs {a}")).collect::<Vec<_>>().join(" | "),
+        "---:|".repeat(against.len())
+    );
+    for det in unique(p.iter().map(|r| (r.detector.clone(), r.white_box))) {
+        s.push_str(&format!("| {}{} |", det.0, if det.1 { " *" } else { "" }));
+        for a in &against {
+            match p.iter().find(|r| r.detector == det.0 && &r.against == a) {
+                Some(r) => s.push_str(&format!(" {:+.3} [{:+.3}, {:+.3}] |", r.mean, r.lo, r.hi)),
+                None => s.push_str(" – |"),
+            }
+        }
+        s.push('\n');
+    }
+    s
+}
+
 /// `pav crossval`: cross-validates `config` with `folds` folds (default: leave-one-out) and
 /// `random_seeds` random textures per fold; writes `crossval.csv`, `crossval_views.csv`,
 /// `crossval.md` and a folder per fold into `out` (finished folds resume), and returns the
 /// Markdown.
+#[allow(clippy::too_many_arguments)]
 pub fn crossval_report(
     config: &Path,
     folds: Option<usize>,
     random_seeds: u64,
+    references: &[PathBuf],
     scoring: &Scoring,
     out: &Path,
     progress: &dyn Progress,
@@ -172,7 +266,7 @@ pub fn crossval_report(
     let threshold = scoring.threshold;
     let cfg = OptimizeConfig::load(config)?;
     let setup = Setup::load_photos(&cfg, None)?;
-    let wb = WhiteBox::load(&cfg.detector, cfg.views.size)?;
+    let wb = Ensemble::load(&cfg, cfg.views.size)?;
     let mut dets = load_detectors(&scoring.detectors, &[], 1)?;
     let n = setup.train.len() + setup.test.len();
     let k = folds.unwrap_or(n);
@@ -183,12 +277,22 @@ pub fn crossval_report(
         random_block: setup.random_block(),
         out: out.to_path_buf(),
         threshold,
-        white_box: scoring.white_box.clone(),
+        white_box: cfg.white_box_names()?,
+        references: references
+            .iter()
+            .map(|p| {
+                let name =
+                    p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| p.display().to_string());
+                setup.load_texture(p).map(|t| (name, t))
+            })
+            .collect::<Result<_, _>>()?,
     };
     let t = Instant::now();
     let (rows, records) = crossval(config, &cfg, &setup, &wb, &mut dets, &opts, progress, stop)?;
     write_csv(&out.join("crossval.csv"), &rows)?;
     write_csv(&out.join("crossval_views.csv"), &records)?;
+    let pairs = paired(&records, &opts.white_box);
+    write_csv(&out.join("crossval_paired.csv"), &pairs)?;
     let mut md = format!(
         "# Cross-validation, {k} folds over {n} views ({:.0} s)\n\nEach texture is optimized on the other folds' views{} ({}, {} epochs) and scored on its held-out views; \"random\" pools {random_seeds} random textures of {}-texel blocks per fold. Car detected above {threshold}; P@0.5 over boxes from score {AP_MIN_SCORE}; * = white-box.\n",
         t.elapsed().as_secs_f64(),
@@ -207,6 +311,10 @@ pub fn crossval_report(
         md.push_str(&format!("\n## {title}: ASR / P@0.5 (%)\n\n{}", markdown(&rows, split)));
         md.push_str(&format!("\n## {title}: mean best car score\n\n{}", markdown_scores(&rows, split)));
     }
+    md.push_str(&format!(
+        "\n## Optimized against each other texture, held-out views: mean difference of the best car score [95 % paired-bootstrap interval over views]\n\nBelow zero: the optimized texture leaves the car a lower score. An interval entirely below zero is a win with error bars.\n\n{}",
+        markdown_paired(&pairs)
+    ));
     write_markdown(out, "crossval.md", &md)?;
     Ok(md)
 }

@@ -66,15 +66,14 @@ impl From<crate::attack::optimize::OptimizeError> for ExperimentError {
     }
 }
 
-/// How composites are scored: which detectors, at which threshold, and which one is white-box.
+/// How composites are scored: which detectors, at which threshold. The config's `[[white_box]]`
+/// detectors are starred in tables; the others are black boxes.
 #[derive(Clone, Debug)]
 pub struct Scoring {
     /// Detector configs or folders of them.
     pub detectors: Vec<PathBuf>,
     /// A car counts as detected above this score.
     pub threshold: f32,
-    /// Name of the white-box detector (starred in tables).
-    pub white_box: String,
 }
 
 /// Creates `dir` and its parents.

@@ -8,7 +8,7 @@ use crate::attack::export::{atlas_side_m, write_sheet, PrintSpec, Sheet};
 use crate::attack::optimize::{optimize_texture, Finish, RunOptions, StepLog};
 use crate::attack::setup::Setup;
 use crate::attack::view::View;
-use crate::attack::whitebox::{WhiteBox, WhiteBoxError};
+use crate::attack::whitebox::{Ensemble, WhiteBox, WhiteBoxError};
 use crate::image::{halve, save_rgb, tile, ImageError};
 use crate::plot::{loss_curve, PlotError};
 use crate::progress::Progress;
@@ -89,8 +89,8 @@ pub struct Prepared {
     pub cfg: OptimizeConfig,
     /// Mesh, region, scene and views.
     pub setup: Setup,
-    /// The white-box detector.
-    pub wb: WhiteBox,
+    /// The white-box detectors.
+    pub wb: Ensemble,
     /// Seconds the preparation took.
     pub seconds: f64,
 }
@@ -103,7 +103,7 @@ impl Prepared {
         cfg.views.size = size.unwrap_or(cfg.views.size);
         let t = Instant::now();
         let setup = Setup::load(&cfg, None)?;
-        let wb = WhiteBox::load(&cfg.detector, cfg.views.size)?;
+        let wb = Ensemble::load(&cfg, cfg.views.size)?;
         Ok(Prepared { path: config.into(), cfg, setup, wb, seconds: t.elapsed().as_secs_f64() })
     }
 
@@ -156,7 +156,7 @@ pub fn optimize_and_report(
     let o = optimize_texture(&p.path, &p.cfg, setup, &p.wb, &opts, progress, stop)?;
     save_rgb(&out.join("texture.png"), n, n, &o.texture)?;
     plot_log(&out.join("loss.png"), &o.log, setup.training_views().len())?;
-    let mut files = vec!["region.png", "texture.png", "loss.csv", "loss.png"];
+    let mut files = vec!["region.png", "texture.png", "loss.csv", "loss_detectors.csv", "loss.png"];
     if matches!(o.finish, Finish::Stopped) {
         return Ok(OptimizeReport { finish: o.finish, scores: Vec::new(), sheet: None, files });
     }
@@ -169,8 +169,8 @@ pub fn optimize_and_report(
         preview(&out.join("synthetic.png"), &synthetic, &o.texture, &scene)?;
         files.push("synthetic.png");
     }
-    let initial = setup.initial_texture(p.cfg.mesh.init, p.cfg.optimizer.seed);
-    let scores = score_views(setup, &p.wb, &initial, &o.texture)?;
+    let initial = setup.initial_texture(&p.cfg.mesh.init, p.cfg.optimizer.seed)?;
+    let scores = score_views(setup, p.wb.first(), &initial, &o.texture)?;
     write_csv(&out.join("scores.csv"), &scores)?;
     files.push("scores.csv");
     let (side, spread) = atlas_side_m(&setup.mesh, &setup.region, n, p.cfg.mesh.car_length_m)

@@ -9,7 +9,7 @@ use crate::attack::view::View;
 use crate::detect::load::load_detectors;
 use crate::detect::Detector;
 use crate::eval::digital::{ap50, asr, ImageDetections};
-use crate::image::{to_u8, Frame, Rgb};
+use crate::image::{to_u8, Frame};
 use crate::progress::Progress;
 use crate::table::{unique, write_csv};
 use std::path::{Path, PathBuf};
@@ -106,7 +106,7 @@ pub fn score_textures(
     detectors: &mut [Box<dyn Detector>],
     textures: &[(String, Option<Vec<f32>>)],
     threshold: f32,
-    white_box: &str,
+    white_box: &[String],
     progress: &dyn Progress,
 ) -> Result<Vec<DigitalRow>, crate::detect::DetectError> {
     progress.begin("composites", (textures.len() * (setup.train.len() + setup.test.len())) as u64);
@@ -125,7 +125,14 @@ pub fn score_textures(
             for split in ["train", "test", "all"] {
                 let ims: Vec<ImageDetections> =
                     per[d].iter().filter(|(s, _)| split == "all" || *s == split).map(|(_, i)| i.clone()).collect();
-                rows.extend(aggregate(det.name(), det.name() == white_box, tname, split, &ims, threshold));
+                rows.extend(aggregate(
+                    det.name(),
+                    white_box.iter().any(|w| w == det.name()),
+                    tname,
+                    split,
+                    &ims,
+                    threshold,
+                ));
             }
         }
     }
@@ -149,26 +156,17 @@ pub fn eval_digital(
     let mut conditions: Vec<(String, Option<Vec<f32>>)> =
         vec![("original".into(), None), ("random".into(), Some(setup.random_texture(setup.random_block(), 1)))];
     for t in textures {
-        let tex = Rgb::load(t)?;
-        if (tex.width, tex.height) != (setup.tex_size, setup.tex_size) {
-            return Err(ExperimentError::Invalid(format!(
-                "{} is {}x{}, the config's texture is {}²",
-                t.display(),
-                tex.width,
-                tex.height,
-                setup.tex_size
-            )));
-        }
+        let tex = setup.load_texture(t)?;
         let name = t
             .parent()
             .and_then(|p| p.file_name())
             .or(t.file_stem())
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| t.display().to_string());
-        conditions.push((name, Some(tex.rgb)));
+        conditions.push((name, Some(tex)));
     }
     let mut dets = load_detectors(&scoring.detectors, &[], 1)?;
-    let rows = score_textures(&setup, &mut dets, &conditions, threshold, &scoring.white_box, progress)?;
+    let rows = score_textures(&setup, &mut dets, &conditions, threshold, &cfg.white_box_names()?, progress)?;
     create_dir(out)?;
     write_csv(&out.join("digital.csv"), &rows)?;
     let mut md = format!(

@@ -3,15 +3,15 @@
 use crate::common::Bar;
 use anyhow::{Context, Result};
 use pav::attack::bench::time_step;
-use pav::attack::config::OptimizeConfig;
+use pav::detect::DetectorConfig;
 use pav::table::write_csv;
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Optimization config whose white-box detector is timed.
-    #[arg(long, default_value = "configs/optimize/paper.toml")]
-    config: PathBuf,
+    /// Detector config of the white box to time.
+    #[arg(long, default_value = "configs/detectors/yolov3-tiny.toml")]
+    detector: PathBuf,
     /// Network input sizes (the composite has the same size).
     #[arg(long, value_delimiter = ',', default_value = "416,608")]
     sizes: Vec<usize>,
@@ -27,8 +27,8 @@ pub struct Args {
 }
 
 pub fn run(a: &Args) -> Result<()> {
-    let cfg = OptimizeConfig::load(&a.config)?;
-    let rows = time_step(&cfg.detector, &a.sizes, a.threads, a.repeats, &Bar::default())?;
+    let cfg = DetectorConfig::load(&a.detector)?;
+    let rows = time_step(&cfg, &a.sizes, a.threads, a.repeats, &Bar::default())?;
     if let Some(d) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
     }

@@ -17,6 +17,10 @@ pub struct Args {
     /// Random textures per fold (pooled as "random").
     #[arg(long, default_value_t = 5)]
     random_seeds: u64,
+    /// Fixed textures scored beside the optimized one on every fold (e.g. a peer's published
+    /// texture); any size, resampled to the atlas. Repeatable.
+    #[arg(long = "reference")]
+    references: Vec<PathBuf>,
     #[command(flatten)]
     scoring: Scoring,
     /// Output folder; an interrupted run resumes from it.
@@ -26,8 +30,20 @@ pub struct Args {
 
 pub fn run(a: &Args) -> Result<()> {
     let stop = ctrl_c_flag()?;
-    let md = crossval_report(&a.config, a.folds, a.random_seeds, &a.scoring.to_lib(), &a.out, &Bar::default(), &stop)?;
+    let md = crossval_report(
+        &a.config,
+        a.folds,
+        a.random_seeds,
+        &a.references,
+        &a.scoring.to_lib(),
+        &a.out,
+        &Bar::default(),
+        &stop,
+    )?;
     println!("{md}");
-    eprintln!("wrote crossval.csv, crossval_views.csv, crossval.md and a folder per fold in {}", a.out.display());
+    eprintln!(
+        "wrote crossval.csv, crossval_views.csv, crossval_paired.csv, crossval.md and a folder per fold in {}",
+        a.out.display()
+    );
     Ok(())
 }

@@ -67,19 +67,12 @@ struct Scoring {
     /// A car counts as detected above this score (paper 0.5; the authors' code 0.6).
     #[arg(long, default_value_t = 0.5)]
     threshold: f32,
-    /// Name of the white-box detector (starred).
-    #[arg(long, default_value = "yolov3-tiny")]
-    white_box: String,
 }
 
 #[cfg(feature = "optimize")]
 impl Scoring {
     fn to_lib(&self) -> pav::experiments::Scoring {
-        pav::experiments::Scoring {
-            detectors: self.detectors.clone(),
-            threshold: self.threshold,
-            white_box: self.white_box.clone(),
-        }
+        pav::experiments::Scoring { detectors: self.detectors.clone(), threshold: self.threshold }
     }
 }
 

@@ -66,7 +66,10 @@ pub fn run(a: &Args) -> Result<()> {
         eprintln!("stopped: state saved in {}; run again with --resume", a.out.join("checkpoint.bin").display());
         return Ok(());
     }
-    println!("white-box YOLOv3-tiny car score per view (no EoT): original photo / initial texture / optimized");
+    println!(
+        "white-box {} car score per view (no EoT): original photo / initial texture / optimized",
+        p.wb.first().name()
+    );
     for s in &r.scores {
         println!("  {:5} {:10} {:.3} / {:.3} / {:.3}", s.split, s.view, s.original, s.initial, s.optimized);
     }
