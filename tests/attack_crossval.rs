@@ -6,7 +6,7 @@
 mod common;
 
 use pav::attack::config::OptimizeConfig;
-use pav::experiments::crossval::{crossval, paired, CrossvalOptions};
+use pav::experiments::crossval::{conditional_asr, crossval, paired, CrossvalOptions};
 use pav::progress::{Progress, Silent};
 use std::cell::RefCell;
 
@@ -77,12 +77,17 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     assert_eq!(held, ["data12501", "data12502", "data12503"]);
     let cell = |t: &str, split: &str| rows.iter().find(|r| r.texture == t && r.split == split).unwrap().images;
     assert_eq!((cell("original", "held-out"), cell("optimized", "held-out"), cell("random", "held-out")), (3, 3, 6));
-    assert_eq!(cell("RAUCA_E2E", "held-out"), 3);
+    assert_eq!((cell("RAUCA_E2E", "held-out"), cell("random32", "held-out")), (3, 6));
     // Optimized against each other texture, paired by view: three held-out views each.
     let pairs = paired(&recs, &opts.white_box);
     let against: Vec<(&str, usize)> = pairs.iter().map(|p| (p.against.as_str(), p.views)).collect();
-    assert_eq!(against, [("original", 3), ("random", 3), ("RAUCA_E2E", 3)], "{pairs:?}");
+    assert_eq!(against, [("original", 3), ("random", 3), ("random32", 3), ("RAUCA_E2E", 3)], "{pairs:?}");
     assert!(pairs.iter().all(|p| p.lo <= p.mean && p.mean <= p.hi && p.white_box));
+    // ASR over the held-out views the original paint is detected on: those views only.
+    let cond = conditional_asr(&recs, 0.5);
+    let detected = recs.iter().filter(|r| r.role == "held-out" && r.texture == "original" && r.score >= 0.5).count();
+    assert_eq!(cond.len(), 4);
+    assert!(cond.iter().all(|c| c.views == detected && (0.0..=1.0).contains(&c.asr)), "{cond:?}");
     assert_eq!(cell("optimized", "train"), 3, "each view trains in the one fold that does not hold it out");
     assert!(recs.iter().all(|r| r.score.is_finite() && (0.0..=1.0).contains(&r.score)));
     // Both folds wrote their texture; a second call finds them finished and scores the same.

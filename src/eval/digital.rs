@@ -28,7 +28,7 @@ pub fn asr(images: &[ImageDetections], threshold: f32) -> Option<f64> {
     if images.is_empty() {
         return None;
     }
-    let detected = images.iter().filter(|i| i.cars.iter().any(|(s, _)| *s > threshold)).count();
+    let detected = images.iter().filter(|i| i.cars.iter().any(|(s, _)| super::detected(*s, threshold))).count();
     Some(1.0 - detected as f64 / images.len() as f64)
 }
 

@@ -13,6 +13,7 @@ use crate::attack::view::View;
 use crate::attack::whitebox::Ensemble;
 use crate::detect::load::load_detectors;
 use crate::detect::Detector;
+use crate::eval::detected;
 use crate::eval::digital::{paired_bootstrap, ImageDetections};
 use crate::image::save_rgb;
 use crate::progress::{Progress, Silent};
@@ -121,8 +122,15 @@ pub fn crossval(
             vec![("original".into(), 0, None), ("optimized".into(), 0, Some(&o.texture))];
         let randoms: Vec<Vec<f32>> =
             (0..opts.random_seeds).map(|s| fs.random_texture(opts.random_block, 1 + s + 1000 * f as u64)).collect();
+        // The paper's random baseline: a 32×32 random image scaled up (blocks of 1/32 of the side).
+        let randoms32: Vec<Vec<f32>> = (0..opts.random_seeds)
+            .map(|s| fs.random_texture((fs.tex_size / 32).max(1), 1 + s + 1000 * f as u64))
+            .collect();
         for (s, r) in randoms.iter().enumerate() {
             textures.push(("random".into(), 1 + s as u64 + 1000 * f as u64, Some(r)));
+        }
+        for (s, r) in randoms32.iter().enumerate() {
+            textures.push(("random32".into(), 1 + s as u64 + 1000 * f as u64, Some(r)));
         }
         for (name, r) in &opts.references {
             textures.push((name.clone(), 0, Some(r)));
@@ -151,7 +159,7 @@ pub fn crossval(
     }
     progress.end(None);
     let mut rows = Vec::new();
-    let names = ["original", "random", "optimized"].map(String::from).into_iter();
+    let names = ["original", "random", "random32", "optimized"].map(String::from).into_iter();
     for tname in names.chain(opts.references.iter().map(|r| r.0.clone())) {
         for (d, det) in detectors.iter().enumerate() {
             for role in ["held-out", "train"] {
@@ -227,6 +235,45 @@ pub fn paired(records: &[ViewRecord], white_box: &[String]) -> Vec<Paired> {
     out
 }
 
+/// ASR over the held-out views whose original paint is detected (a view the original already
+/// misses is no success of a texture), per detector and texture; random textures pool their seeds.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ConditionalAsr {
+    /// Detector.
+    pub detector: String,
+    /// Texture.
+    pub texture: String,
+    /// Share of the (view, seed) scorings below the threshold.
+    pub asr: f64,
+    /// Held-out views whose original is detected.
+    pub views: usize,
+}
+
+/// [`ConditionalAsr`] for every detector and texture of `records` at `threshold`.
+pub fn conditional_asr(records: &[ViewRecord], threshold: f32) -> Vec<ConditionalAsr> {
+    let held: Vec<&ViewRecord> = records.iter().filter(|r| r.role == "held-out").collect();
+    let mut out = Vec::new();
+    for det in unique(held.iter().map(|r| r.detector.clone())) {
+        let seen: Vec<(usize, &str)> = held
+            .iter()
+            .filter(|r| r.detector == det && r.texture == "original" && detected(r.score, threshold))
+            .map(|r| (r.fold, r.view.as_str()))
+            .collect();
+        for tex in unique(held.iter().map(|r| r.texture.clone()).filter(|t| t != "original")) {
+            let s: Vec<bool> = held
+                .iter()
+                .filter(|r| r.detector == det && r.texture == tex && seen.contains(&(r.fold, r.view.as_str())))
+                .map(|r| !detected(r.score, threshold))
+                .collect();
+            if !s.is_empty() {
+                let asr = s.iter().filter(|&&x| x).count() as f64 / s.len() as f64;
+                out.push(ConditionalAsr { detector: det.clone(), texture: tex, asr, views: seen.len() });
+            }
+        }
+    }
+    out
+}
+
 /// The paired comparisons as a Markdown table: a row per detector, a column per other texture.
 fn markdown_paired(p: &[Paired]) -> String {
     let against = unique(p.iter().map(|r| r.against.clone()));
@@ -294,7 +341,7 @@ pub fn crossval_report(
     let pairs = paired(&records, &opts.white_box);
     write_csv(&out.join("crossval_paired.csv"), &pairs)?;
     let mut md = format!(
-        "# Cross-validation, {k} folds over {n} views ({:.0} s)\n\nEach texture is optimized on the other folds' views{} ({}, {} epochs) and scored on its held-out views; \"random\" pools {random_seeds} random textures of {}-texel blocks per fold. Car detected above {threshold}; P@0.5 over boxes from score {AP_MIN_SCORE}; * = white-box.\n",
+        "# Cross-validation, {k} folds over {n} views ({:.0} s)\n\nEach texture is optimized on the other folds' views{} ({}, {} epochs) and scored on its held-out views; \"random\" pools {random_seeds} random textures of {}-texel blocks per fold, \"random32\" as many of the paper's kind (a 32×32 random image scaled up){}. Car detected at score ≥ {threshold}; P@0.5 over boxes from score {AP_MIN_SCORE}; * = white-box.\n",
         t.elapsed().as_secs_f64(),
         if cfg.views.turns.is_empty() {
             String::new()
@@ -304,12 +351,32 @@ pub fn crossval_report(
         config.display(),
         cfg.optimizer.epochs,
         setup.random_block(),
+        opts.references.iter().map(|r| format!("; reference texture {}", r.0)).collect::<String>(),
     );
     for (split, title) in
         [("held-out", "held-out views"), ("train", "training views (each view once per fold it trained in)")]
     {
         md.push_str(&format!("\n## {title}: ASR / P@0.5 (%)\n\n{}", markdown(&rows, split)));
         md.push_str(&format!("\n## {title}: mean best car score\n\n{}", markdown_scores(&rows, split)));
+    }
+    let cond = conditional_asr(&records, threshold);
+    write_csv(&out.join("crossval_asr_detected.csv"), &cond)?;
+    let texs = unique(cond.iter().map(|c| c.texture.clone()));
+    md.push_str(&format!(
+        "\n## ASR (%) over the held-out views whose original paint is detected\n\n| detector | views | {} |\n|---|---:|{}\n",
+        texs.join(" | "),
+        "---:|".repeat(texs.len())
+    ));
+    for det in unique(cond.iter().map(|c| c.detector.clone())) {
+        let n = cond.iter().find(|c| c.detector == det).map_or(0, |c| c.views);
+        md.push_str(&format!("| {det} | {n} |"));
+        for t in &texs {
+            match cond.iter().find(|c| c.detector == det && &c.texture == t) {
+                Some(c) => md.push_str(&format!(" {:.1} |", 100.0 * c.asr)),
+                None => md.push_str(" – |"),
+            }
+        }
+        md.push('\n');
     }
     md.push_str(&format!(
         "\n## Optimized against each other texture, held-out views: mean difference of the best car score [95 % paired-bootstrap interval over views]\n\nBelow zero: the optimized texture leaves the car a lower score. An interval entirely below zero is a win with error bars.\n\n{}",

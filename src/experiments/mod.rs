@@ -72,7 +72,7 @@ impl From<crate::attack::optimize::OptimizeError> for ExperimentError {
 pub struct Scoring {
     /// Detector configs or folders of them.
     pub detectors: Vec<PathBuf>,
-    /// A car counts as detected above this score.
+    /// A car counts as detected when its score reaches this (`eval::detected`).
     pub threshold: f32,
 }
 

@@ -64,7 +64,7 @@ struct Scoring {
     /// Detector configs or folders of them.
     #[arg(long = "detectors", short = 'd', default_value = "configs/detectors")]
     detectors: Vec<std::path::PathBuf>,
-    /// A car counts as detected above this score (paper 0.5; the authors' code 0.6).
+    /// A car counts as detected when its score reaches this (paper 0.5; the authors' code 0.6).
     #[arg(long, default_value_t = 0.5)]
     threshold: f32,
 }
