@@ -1,6 +1,7 @@
 //! `pav optimize` configs (TOML). Relative paths are resolved against the config's folder.
 
 use super::loss::Reduce;
+use super::smooth::SmoothNorm;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -120,6 +121,9 @@ pub struct LossConfig {
     /// `"mean"` (the paper), `{ top_k = k }` or `{ softmax = τ }`.
     #[serde(default = "mean")]
     pub reduce: Reduce,
+    /// L_s normalization: `"mean"` over texels (the authors' code, the default) or `"sum"` (Eq. 12).
+    #[serde(default)]
+    pub smoothness: SmoothNorm,
 }
 
 fn mean() -> Reduce {

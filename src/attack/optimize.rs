@@ -204,7 +204,7 @@ pub fn step(
     view.backward(&tape, &g.grad, grad);
     let adjoint_ms = ms(t);
     let t = Instant::now();
-    let ls = smoothness(tex, setup.tex_size, setup.tex_size, cfg.loss.gamma, grad);
+    let ls = smoothness(tex, setup.tex_size, setup.tex_size, cfg.loss.smoothness, cfg.loss.gamma, grad);
     let optimizer_ms = ms(t);
     let d = g.loss;
     let per_detector = g
