@@ -121,10 +121,11 @@ mod tests {
     }
 
     #[test]
-    fn asr_counts_images_with_a_car_above_threshold() {
+    fn asr_counts_images_with_a_car_at_or_above_threshold() {
         let b = [0.0, 0.0, 10.0, 10.0];
+        // A score equal to the threshold is a detection (`eval::detected`), as in A_physical.
         let ims = [im(b, &[(0.7, b)]), im(b, &[(0.4, b)]), im(b, &[]), im(b, &[(0.5, b)])];
-        assert_eq!(asr(&ims, 0.5), Some(0.75));
+        assert_eq!(asr(&ims, 0.5), Some(0.5));
         assert_eq!(asr(&ims, 0.3), Some(0.25));
         assert_eq!(asr(&[], 0.5), None);
     }
