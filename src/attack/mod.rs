@@ -7,7 +7,6 @@ pub mod bench;
 pub mod checkpoint;
 pub mod config;
 pub mod export;
-#[cfg(feature = "optimize")]
 pub mod loss;
 #[cfg(feature = "optimize")]
 pub mod optimize;
