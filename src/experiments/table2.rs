@@ -140,7 +140,7 @@ pub fn score_textures(
     Ok(rows)
 }
 
-/// `pav eval-digital`: the original paint, one random texture and each texture file in
+/// `pav eval-digital`: the original paint, one random texture of each kind and each texture file in
 /// `textures` (named by its folder) on the views of `config`; writes `digital.csv` and
 /// `digital.md` into `out` and returns the Markdown.
 pub fn eval_digital(
@@ -153,8 +153,12 @@ pub fn eval_digital(
     let threshold = scoring.threshold;
     let cfg = OptimizeConfig::load(config)?;
     let setup = Setup::load_photos(&cfg, None)?;
-    let mut conditions: Vec<(String, Option<Vec<f32>>)> =
-        vec![("original".into(), None), ("random".into(), Some(setup.random_texture(setup.random_block(), 1)))];
+    // "random32" is the paper's baseline: a 32×32 random image scaled up.
+    let mut conditions: Vec<(String, Option<Vec<f32>>)> = vec![
+        ("original".into(), None),
+        ("random".into(), Some(setup.random_texture(setup.random_block(), 1))),
+        ("random32".into(), Some(setup.random_texture((setup.tex_size / 32).max(1), 1))),
+    ];
     for t in textures {
         let tex = setup.load_texture(t)?;
         let name = t
