@@ -104,3 +104,33 @@ fn eval_digital_resamples_a_texture_of_another_size() {
     // Measured: 0.855 for the original paint; RAUCA-E2E's texture hides the car far better.
     assert!(original > 0.8 && rauca < 0.5 * original, "{csv}");
 }
+
+/// Ctrl-C during `pav optimize` saves the state and exits non-zero, so a following command in
+/// `pav optimize && …` does not go on with a partial texture (resuming is tested in attack_optimize).
+#[cfg(all(feature = "optimize", unix))]
+#[test]
+fn an_interrupted_optimize_exits_non_zero_and_resumes() {
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("run");
+    let mut child = pav()
+        .args(["optimize", "--config", "configs/optimize/paper.toml", "--epochs", "60", "-o"])
+        .arg(&out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The first epoch's checkpoint shows the run (and its Ctrl-C handler) is going.
+    let t = std::time::Instant::now();
+    while !out.join("loss.csv").exists() {
+        assert!(t.elapsed().as_secs() < 300, "no checkpoint after 5 minutes");
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let kill = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    assert!(kill.success());
+    let o = child.wait_with_output().unwrap();
+    let msg = text(&o);
+    assert!(!o.status.success() && msg.contains("stopped: state saved"), "{msg}");
+    let done = pav::attack::checkpoint::Checkpoint::load(&out.join("checkpoint.bin")).unwrap().steps_done;
+    assert!(done >= 6 && done < 360, "{done} steps saved");
+}

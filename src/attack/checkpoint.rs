@@ -1,11 +1,15 @@
 //! Checkpoints: the texture, Adam's moments, the step count and the EoT generator, written
-//! atomically (temp file + rename) so a crash mid-write never leaves a broken checkpoint.
+//! atomically (temp file + rename) so a crash mid-write never leaves a broken checkpoint, and
+//! checksummed so a damaged file is refused instead of resumed with another texture.
 
 use super::adam::Adam;
 use std::io::{Read, Write};
 use std::path::Path;
 
-const MAGIC: &[u8; 8] = b"PAVCKPT1";
+/// Version 2 ends with an FNV-1a checksum of everything before it; version 1 (no checksum) is
+/// still read.
+const MAGIC: &[u8; 8] = b"PAVCKPT2";
+const MAGIC_V1: &[u8; 8] = b"PAVCKPT1";
 
 /// A resumable optimization state.
 #[derive(Clone, Debug, PartialEq)]
@@ -70,6 +74,8 @@ impl Checkpoint {
         put_f32s(&mut b, &self.texture);
         put_f32s(&mut b, &self.adam.m);
         put_f32s(&mut b, &self.adam.v);
+        let sum = fingerprint(&b);
+        b.extend_from_slice(&sum.to_le_bytes());
         let tmp = path.with_extension("tmp");
         let mut f = std::fs::File::create(&tmp).map_err(io)?;
         f.write_all(&b).map_err(io)?;
@@ -84,16 +90,24 @@ impl Checkpoint {
         std::fs::File::open(path)
             .and_then(|mut f| f.read_to_end(&mut b))
             .map_err(|source| CheckpointError::Io { path: path.display().to_string(), source })?;
-        if b.len() < 64 || &b[..8] != MAGIC {
+        if b.len() < 64 || (&b[..8] != MAGIC && &b[..8] != MAGIC_V1) {
             return Err(fmt("not a pav checkpoint".into()));
+        }
+        let v2 = &b[..8] == MAGIC;
+        let n = u64::from_le_bytes(b[40..48].try_into().unwrap_or([0; 8])) as usize;
+        let body = 64;
+        let expected = n.saturating_mul(12).saturating_add(body + if v2 { 8 } else { 0 });
+        if b.len() != expected {
+            return Err(fmt(format!("{} bytes, expected {expected} for {n} values (truncated?)", b.len())));
+        }
+        if v2 {
+            let (data, sum) = b.split_at(b.len() - 8);
+            if fingerprint(data).to_le_bytes() != sum {
+                return Err(fmt("checksum mismatch: the file is damaged; remove it to start over".into()));
+            }
         }
         let u = |i: usize| u64::from_le_bytes(b[8 + 8 * i..16 + 8 * i].try_into().unwrap());
         let f = |i: usize| f32::from_le_bytes(b[48 + 4 * i..52 + 4 * i].try_into().unwrap());
-        let n = u(4) as usize;
-        let body = 64;
-        if b.len() != body + 12 * n {
-            return Err(fmt(format!("{} bytes, expected {} for {n} values (truncated?)", b.len(), body + 12 * n)));
-        }
         let arr = |k: usize| -> Vec<f32> {
             b[body + 4 * n * k..body + 4 * n * (k + 1)]
                 .chunks_exact(4)
@@ -135,6 +149,17 @@ mod tests {
         std::fs::write(&p, &bytes[..bytes.len() - 3]).unwrap();
         let e = Checkpoint::load(&p).unwrap_err().to_string();
         assert!(e.contains("truncated"), "{e}");
+        // One flipped bit anywhere is refused.
+        let mut flipped = bytes.clone();
+        flipped[70] ^= 0x10;
+        std::fs::write(&p, &flipped).unwrap();
+        let e = Checkpoint::load(&p).unwrap_err().to_string();
+        assert!(e.contains("checksum"), "{e}");
+        // A version-1 file (no checksum) still loads.
+        let mut v1 = bytes[..bytes.len() - 8].to_vec();
+        v1[..8].copy_from_slice(MAGIC_V1);
+        std::fs::write(&p, &v1).unwrap();
+        assert_eq!(Checkpoint::load(&p).unwrap(), c);
         std::fs::write(&p, b"hello").unwrap();
         assert!(Checkpoint::load(&p).unwrap_err().to_string().contains("not a pav checkpoint"));
         assert_ne!(fingerprint(b"lr = 0.015"), fingerprint(b"lr = 0.001"));

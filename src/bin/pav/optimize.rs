@@ -1,7 +1,7 @@
 //! `pav optimize`.
 
 use crate::common::{ctrl_c_flag, Bar};
-use anyhow::Result;
+use anyhow::{bail, Result};
 use pav::attack::export::PrintSpec;
 use pav::attack::optimize::Finish;
 use pav::experiments::outputs::{optimize_and_report, OptimizeRun, Prepared};
@@ -63,8 +63,8 @@ pub fn run(a: &Args) -> Result<()> {
     };
     let r = optimize_and_report(&p, &run, &Bar::default(), &stop)?;
     if matches!(r.finish, Finish::Stopped) {
-        eprintln!("stopped: state saved in {}; run again with --resume", a.out.join("checkpoint.bin").display());
-        return Ok(());
+        // Not a success: `pav optimize && pav eval-digital` must not go on with a partial texture.
+        bail!("stopped: state saved in {}; run again with --resume", a.out.join("checkpoint.bin").display());
     }
     println!(
         "white-box {} car score per view (no EoT): original photo / initial texture / optimized",
