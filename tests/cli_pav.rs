@@ -90,26 +90,33 @@ fn eval_digital_resamples_a_texture_of_another_size() {
     let out = text(&o);
     assert!(o.status.success(), "{out}");
     let csv = std::fs::read_to_string(tmp.path().join("digital.csv")).unwrap();
-    let p50 = |texture: &str| -> f64 {
+    let column = |texture: &str, name: &str| -> f64 {
         let line = csv
             .lines()
             .find(|l| l.contains(&format!(",{texture},all,")))
             .unwrap_or_else(|| panic!("no {texture} row: {csv}"));
         let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
-        let i = header.iter().position(|h| *h == "p50").unwrap();
+        let i = header.iter().position(|h| *h == name).unwrap();
         line.split(',').nth(i).unwrap().parse().unwrap()
     };
+    let p50 = |texture: &str| column(texture, "p50");
     let (original, random32, rauca) = (p50("original"), p50("random32"), p50("rauca-e2e"));
     eprintln!("YOLOv3-tiny P@0.5 over 11 views: original {original:.3}, random32 {random32:.3}, RAUCA-E2E {rauca:.3}");
     // Measured: 0.855 for the original paint; RAUCA-E2E's texture hides the car far better.
     assert!(original > 0.8 && rauca < 0.5 * original, "{csv}");
+    // ASR over the views whose original paint is detected: 0 for the original itself; RAUCA-E2E's
+    // texture hides the car on every one of them (measured 1.000).
+    assert_eq!(column("original", "asr_detected"), 0.0);
+    let (asr, asr_detected) = (column("rauca-e2e", "asr"), column("rauca-e2e", "asr_detected"));
+    eprintln!("RAUCA-E2E ASR {asr:.3}, over detected originals {asr_detected:.3}");
+    assert!(asr_detected >= 0.9, "{csv}");
 }
 
 /// Ctrl-C during `pav optimize` saves the state and exits non-zero, so a following command in
 /// `pav optimize && …` does not go on with a partial texture (resuming is tested in attack_optimize).
 #[cfg(all(feature = "optimize", unix))]
 #[test]
-fn an_interrupted_optimize_exits_non_zero_and_resumes() {
+fn an_interrupted_optimize_saves_and_exits_non_zero() {
     common::real_data();
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("run");

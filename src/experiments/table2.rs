@@ -8,6 +8,7 @@ use crate::attack::setup::Setup;
 use crate::attack::view::View;
 use crate::detect::load::load_detectors;
 use crate::detect::Detector;
+use crate::eval::detected;
 use crate::eval::digital::{ap50, asr, ImageDetections};
 use crate::image::{to_u8, Frame};
 use crate::progress::Progress;
@@ -34,6 +35,10 @@ pub struct DigitalRow {
     pub images: usize,
     /// ASR at `threshold`.
     pub asr: f64,
+    /// ASR over the images whose original paint is detected (a view the original already
+    /// misses is no success of the texture); empty where not computed (crossval writes it to
+    /// `crossval_asr_detected.csv`) or when the original is detected on none.
+    pub asr_detected: Option<f64>,
     /// Car AP at IoU 0.5 (NaN without ground truth).
     pub p50: f64,
     /// Mean over images of the best car score (0 when no box): the attack's effect below the threshold.
@@ -93,6 +98,7 @@ pub fn aggregate(
         split: split.into(),
         images: ims.len(),
         asr: a,
+        asr_detected: None,
         p50: ap50(ims).unwrap_or(f64::NAN),
         mean_score: ims.iter().map(|i| i.best_score() as f64).sum::<f64>() / ims.len() as f64,
         threshold,
@@ -111,6 +117,8 @@ pub fn score_textures(
 ) -> Result<Vec<DigitalRow>, crate::detect::DetectError> {
     progress.begin("composites", (textures.len() * (setup.train.len() + setup.test.len())) as u64);
     let mut rows = Vec::new();
+    // Per detector, whether the unmodified photo of each view (in view order) is detected.
+    let mut original: Option<Vec<Vec<bool>>> = None;
     for (tname, tex) in textures {
         let mut per: Vec<Vec<(&'static str, ImageDetections)>> = vec![Vec::new(); detectors.len()];
         for (split, views) in [("train", &setup.train), ("test", &setup.test)] {
@@ -121,18 +129,29 @@ pub fn score_textures(
                 progress.advance(1);
             }
         }
+        let caught = |d: usize| per[d].iter().map(|(_, i)| i.cars.iter().any(|c| detected(c.0, threshold))).collect();
+        if tex.is_none() && original.is_none() {
+            original = Some((0..detectors.len()).map(caught).collect());
+        }
         for (d, det) in detectors.iter().enumerate() {
             for split in ["train", "test", "all"] {
+                let keep = |s: &str| split == "all" || s == split;
                 let ims: Vec<ImageDetections> =
-                    per[d].iter().filter(|(s, _)| split == "all" || *s == split).map(|(_, i)| i.clone()).collect();
-                rows.extend(aggregate(
-                    det.name(),
-                    white_box.iter().any(|w| w == det.name()),
-                    tname,
-                    split,
-                    &ims,
-                    threshold,
-                ));
+                    per[d].iter().filter(|(s, _)| keep(s)).map(|(_, i)| i.clone()).collect();
+                let mut row =
+                    aggregate(det.name(), white_box.iter().any(|w| w == det.name()), tname, split, &ims, threshold);
+                if let (Some(r), Some(o)) = (row.as_mut(), original.as_ref()) {
+                    let seen: Vec<bool> = per[d]
+                        .iter()
+                        .zip(&o[d])
+                        .filter(|((s, _), &o)| keep(s) && o)
+                        .map(|((_, i), _)| !i.cars.iter().any(|c| detected(c.0, threshold)))
+                        .collect();
+                    if !seen.is_empty() {
+                        r.asr_detected = Some(seen.iter().filter(|&&x| x).count() as f64 / seen.len() as f64);
+                    }
+                }
+                rows.extend(row);
             }
         }
     }
@@ -182,6 +201,12 @@ pub fn eval_digital(
         if rows.iter().any(|r| r.split == split) {
             let n = rows.iter().find(|r| r.split == split).map(|r| r.images).unwrap_or(0);
             md.push_str(&format!("\n## {title} ({n})\n\n{}", markdown(&rows, split)));
+            md.push_str(&format!(
+                "\nASR (%) over the {title} whose original paint is detected:\n\n{}",
+                table(&rows, split, |r, star| r
+                    .asr_detected
+                    .map_or("–".into(), |a| format!("{:.1}{star}", 100.0 * a)))
+            ));
         }
     }
     write_markdown(out, "digital.md", &md)?;
