@@ -65,7 +65,7 @@ pub struct LossTerms {
 /// Why outputs cannot be scored.
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
-pub struct HeadShapeError(pub String);
+pub struct HeadShapeError(String);
 
 /// Whether raw values are logits (sigmoid applied here) or probabilities.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -152,8 +152,8 @@ impl Predictions {
         self.obj.is_empty()
     }
 
-    /// The gradient with respect to the raw outputs (`sizes` values each) of a loss whose
-    /// gradients with respect to the probabilities are `dobj` (per box) and `dcls` (box, class, value).
+    /// The gradient with respect to the raw outputs `raw` of a loss whose gradients with respect
+    /// to the probabilities are `dobj` (per box) and `dcls` (box, class, value).
     fn backprop(&self, raw: &[&[f32]], dobj: &[f32], dcls: &[(usize, usize, f32)]) -> Vec<Vec<f32>> {
         let mut g: Vec<Vec<f32>> = raw.iter().map(|r| vec![0f32; r.len()]).collect();
         let chain = |x: f32| if self.raw == Raw::Logit { sigmoid(x).1 } else { 1.0 };
@@ -232,11 +232,11 @@ impl DetectionLoss {
                 .fold((targets[0], f32::NEG_INFINITY), |m, t| if t.1 > m.1 { t } else { m })
         };
         let n = p.len();
+        let tk: Vec<(usize, f32)> = (0..n).map(best_target).collect();
         let mut max_score = 0f32;
         let (mut boxes, mut proposals) = (Vec::new(), Vec::new());
-        for i in 0..n {
-            let o = p.obj[i];
-            max_score = max_score.max(o * best_target(i).1);
+        for (i, (&o, &(_, car))) in p.obj.iter().zip(&tk).enumerate() {
+            max_score = max_score.max(o * car);
             if o >= self.box_threshold && o.is_finite() {
                 boxes.push(i);
                 let b = best(i).0;
@@ -258,7 +258,6 @@ impl DetectionLoss {
             how => {
                 let (l1, w1) = reduce(&p.obj, how);
                 w1.iter().enumerate().for_each(|(i, &w)| dobj[i] += w);
-                let tk: Vec<(usize, f32)> = (0..n).map(best_target).collect();
                 let scores: Vec<f32> = (0..n).map(|i| p.obj[i] * tk[i].1).collect();
                 let (l2, w2) = reduce(&scores, how);
                 for (i, &w) in w2.iter().enumerate() {

@@ -11,7 +11,7 @@ use super::config::OptimizeConfig;
 use super::setup::Setup;
 use super::smooth::smoothness;
 use super::view::View;
-use super::whitebox::Ensemble;
+use super::whitebox::{Ensemble, EnsembleGrad};
 use crate::progress::Progress;
 use crate::rng::Rng;
 use crate::scene::eot;
@@ -199,7 +199,7 @@ pub fn step(
     let t = Instant::now();
     let tape = eot::apply(&setup.scene, &mut img, 3, &view.active, rng);
     let eot_ms = ms(t);
-    let g = wb.loss_and_grad(&img, view.size, cfg.loss.beta)?;
+    let EnsembleGrad { sum: g, per_detector } = wb.loss_and_grad(&img, view.size, cfg.loss.beta)?;
     let t = Instant::now();
     view.backward(&tape, &g.grad, grad);
     let adjoint_ms = ms(t);
@@ -207,8 +207,7 @@ pub fn step(
     let ls = smoothness(tex, setup.tex_size, setup.tex_size, cfg.loss.smoothness, cfg.loss.gamma, grad);
     let optimizer_ms = ms(t);
     let d = g.loss;
-    let per_detector = g
-        .per_detector
+    let per_detector = per_detector
         .iter()
         .zip(&wb.members)
         .map(|(t, (w, weight))| DetectorStep {

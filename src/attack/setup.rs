@@ -24,6 +24,9 @@ use std::sync::Arc;
 /// printed pattern when `mesh.texture_size` changes.
 pub const RANDOM_BLOCKS_PER_SIDE: usize = 64;
 
+/// The paper's random baseline: a random image of this many pixels across, scaled up to the atlas.
+pub const PAPER_RANDOM_SIDE: usize = 32;
+
 /// Errors preparing an optimization.
 #[derive(Debug, thiserror::Error)]
 pub enum SetupError {
@@ -357,6 +360,11 @@ impl Setup {
     /// Edge of the random baseline's blocks in texels at this atlas size.
     pub fn random_block(&self) -> usize {
         (self.tex_size / RANDOM_BLOCKS_PER_SIDE).max(1)
+    }
+
+    /// Block edge of the paper's random baseline ("random32", see [`PAPER_RANDOM_SIDE`]).
+    pub fn paper_random_block(&self) -> usize {
+        (self.tex_size / PAPER_RANDOM_SIDE).max(1)
     }
 
     /// The "random" baseline: uniform random colours in `block × block` texel squares (a

@@ -136,6 +136,8 @@ impl WhiteBox {
         }
         let d = differentiate_with(&model, &[1, 3, side as i64, side as i64], Kernels::Fused)?;
         let names: Vec<&str> = d.outputs.iter().map(|(n, _)| n.as_str()).collect();
+        // As evaluate decodes: the config's class list; the loss checks the outputs against it.
+        let classes = cfg.class_names.len();
         let heads = match &cfg.output {
             OutputLayout::Darknet { heads } => {
                 let anchors = names
@@ -145,12 +147,9 @@ impl WhiteBox {
                     .ok_or_else(|| {
                         unsupported(format!("graph outputs {names:?} are not all darknet heads of the config"))
                     })?;
-                let classes = d.outputs[0].1[1] as usize / anchors[0] - 5;
                 Heads::Darknet { anchors, classes }
             }
-            OutputLayout::Yolox { .. } if d.outputs.len() == 1 => {
-                Heads::Yolox { classes: *d.outputs[0].1.last().unwrap_or(&5) as usize - 5 }
-            }
+            OutputLayout::Yolox { .. } if d.outputs.len() == 1 => Heads::Yolox { classes },
             other => {
                 return Err(unsupported(format!(
                     "no white-box loss for the {} layout (objectness-based losses need darknet or yolox outputs)",
@@ -268,16 +267,11 @@ pub struct Ensemble {
 
 /// One step's gradient over an ensemble, with each member's terms.
 pub struct EnsembleGrad {
-    /// Weighted sums of the members' terms (`boxes`, `proposals`: summed; `max_score`: the highest).
-    pub loss: DetectorLoss,
+    /// The weighted sum over the members: terms and gradient weighted (`boxes`, `proposals`
+    /// summed; `max_score` the highest), times summed.
+    pub sum: DetectorGrad,
     /// Each member's own terms, in member order.
     pub per_detector: Vec<DetectorLoss>,
-    /// The weighted gradient with respect to the composite.
-    pub grad: Vec<f32>,
-    /// Forward time over all members (ms).
-    pub forward_ms: f64,
-    /// Backward time over all members (ms).
-    pub backward_ms: f64,
 }
 
 impl Ensemble {
@@ -301,36 +295,31 @@ impl Ensemble {
 
     /// Weighted `L1 + β·L2` over the members and its gradient.
     pub fn loss_and_grad(&self, img: &[f32], size: usize, beta: f32) -> Result<EnsembleGrad, WhiteBoxError> {
-        let mut out = EnsembleGrad {
+        let mut sum = DetectorGrad {
             loss: DetectorLoss { l1: 0.0, l2: 0.0, boxes: 0, proposals: 0, max_score: 0.0 },
-            per_detector: Vec::new(),
             grad: vec![0f32; img.len()],
             forward_ms: 0.0,
             backward_ms: 0.0,
         };
+        let mut per_detector = Vec::with_capacity(self.members.len());
         for (wb, w) in &self.members {
             let g = wb.loss_and_grad(img, size, beta)?;
-            out.grad.iter_mut().zip(&g.grad).for_each(|(a, b)| *a += w * b);
-            let l = &mut out.loss;
+            sum.grad.iter_mut().zip(&g.grad).for_each(|(a, b)| *a += w * b);
+            let l = &mut sum.loss;
             l.l1 += w * g.loss.l1;
             l.l2 += w * g.loss.l2;
             l.boxes += g.loss.boxes;
             l.proposals += g.loss.proposals;
             l.max_score = l.max_score.max(g.loss.max_score);
-            out.forward_ms += g.forward_ms;
-            out.backward_ms += g.backward_ms;
-            out.per_detector.push(g.loss);
+            sum.forward_ms += g.forward_ms;
+            sum.backward_ms += g.backward_ms;
+            per_detector.push(g.loss);
         }
-        Ok(out)
+        Ok(EnsembleGrad { sum, per_detector })
     }
 
     /// The first member, which scores the per-view reports.
     pub fn first(&self) -> &WhiteBox {
         &self.members[0].0
-    }
-
-    /// The members' names joined with `+`.
-    pub fn names(&self) -> String {
-        self.members.iter().map(|(w, _)| w.name()).collect::<Vec<_>>().join("+")
     }
 }

@@ -21,6 +21,11 @@ impl ImageDetections {
     pub fn best_score(&self) -> f32 {
         self.cars.iter().map(|c| c.0).fold(0.0, f32::max)
     }
+
+    /// Whether a car is detected at `threshold` (`eval::detected`).
+    pub fn car_detected(&self, threshold: f32) -> bool {
+        self.cars.iter().any(|(s, _)| super::detected(*s, threshold))
+    }
 }
 
 /// Attack success rate at `threshold` (None for no images).
@@ -28,7 +33,7 @@ pub fn asr(images: &[ImageDetections], threshold: f32) -> Option<f64> {
     if images.is_empty() {
         return None;
     }
-    let detected = images.iter().filter(|i| i.cars.iter().any(|(s, _)| super::detected(*s, threshold))).count();
+    let detected = images.iter().filter(|i| i.car_detected(threshold)).count();
     Some(1.0 - detected as f64 / images.len() as f64)
 }
 

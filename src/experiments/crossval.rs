@@ -120,18 +120,15 @@ pub fn crossval(
         progress.advance(1);
         let mut textures: Vec<(String, u64, Option<&[f32]>)> =
             vec![("original".into(), 0, None), ("optimized".into(), 0, Some(&o.texture))];
-        let randoms: Vec<Vec<f32>> =
-            (0..opts.random_seeds).map(|s| fs.random_texture(opts.random_block, 1 + s + 1000 * f as u64)).collect();
-        // The paper's random baseline: a 32×32 random image scaled up (blocks of 1/32 of the side).
-        let randoms32: Vec<Vec<f32>> = (0..opts.random_seeds)
-            .map(|s| fs.random_texture((fs.tex_size / 32).max(1), 1 + s + 1000 * f as u64))
-            .collect();
-        for (s, r) in randoms.iter().enumerate() {
-            textures.push(("random".into(), 1 + s as u64 + 1000 * f as u64, Some(r)));
+        // Both random baselines, the same seeds for each: blocks, and the paper's 32×32 image.
+        let mut randoms = Vec::new();
+        for (name, block) in [("random", opts.random_block), ("random32", fs.paper_random_block())] {
+            for s in 0..opts.random_seeds {
+                let seed = 1 + s + 1000 * f as u64;
+                randoms.push((name, seed, fs.random_texture(block, seed)));
+            }
         }
-        for (s, r) in randoms32.iter().enumerate() {
-            textures.push(("random32".into(), 1 + s as u64 + 1000 * f as u64, Some(r)));
-        }
+        textures.extend(randoms.iter().map(|(name, seed, r)| (name.to_string(), *seed, Some(r.as_slice()))));
         for (name, r) in &opts.references {
             textures.push((name.clone(), 0, Some(r)));
         }

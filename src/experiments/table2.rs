@@ -8,7 +8,6 @@ use crate::attack::setup::Setup;
 use crate::attack::view::View;
 use crate::detect::load::load_detectors;
 use crate::detect::Detector;
-use crate::eval::detected;
 use crate::eval::digital::{ap50, asr, ImageDetections};
 use crate::image::{to_u8, Frame};
 use crate::progress::Progress;
@@ -129,9 +128,8 @@ pub fn score_textures(
                 progress.advance(1);
             }
         }
-        let caught = |d: usize| per[d].iter().map(|(_, i)| i.cars.iter().any(|c| detected(c.0, threshold))).collect();
         if tex.is_none() && original.is_none() {
-            original = Some((0..detectors.len()).map(caught).collect());
+            original = Some(per.iter().map(|p| p.iter().map(|(_, i)| i.car_detected(threshold)).collect()).collect());
         }
         for (d, det) in detectors.iter().enumerate() {
             for split in ["train", "test", "all"] {
@@ -145,7 +143,7 @@ pub fn score_textures(
                         .iter()
                         .zip(&o[d])
                         .filter(|((s, _), &o)| keep(s) && o)
-                        .map(|((_, i), _)| !i.cars.iter().any(|c| detected(c.0, threshold)))
+                        .map(|((_, i), _)| !i.car_detected(threshold))
                         .collect();
                     if !seen.is_empty() {
                         r.asr_detected = Some(seen.iter().filter(|&&x| x).count() as f64 / seen.len() as f64);
@@ -172,11 +170,10 @@ pub fn eval_digital(
     let threshold = scoring.threshold;
     let cfg = OptimizeConfig::load(config)?;
     let setup = Setup::load_photos(&cfg, None)?;
-    // "random32" is the paper's baseline: a 32×32 random image scaled up.
     let mut conditions: Vec<(String, Option<Vec<f32>>)> = vec![
         ("original".into(), None),
         ("random".into(), Some(setup.random_texture(setup.random_block(), 1))),
-        ("random32".into(), Some(setup.random_texture((setup.tex_size / 32).max(1), 1))),
+        ("random32".into(), Some(setup.random_texture(setup.paper_random_block(), 1))),
     ];
     for t in textures {
         let tex = setup.load_texture(t)?;
