@@ -19,7 +19,7 @@ fn connect(s: &SimTurntable, timeout_ms: u64) -> Turntable {
 fn moves_and_spins_end_exactly_where_commanded() {
     let s = sim(20.0, Faults::default());
     let mut t = connect(&s, 500);
-    assert_eq!((t.usteps_per_rev(), t.firmware()), (3200, "0.1.0"));
+    assert_eq!((t.usteps_per_rev(), t.firmware()), (3200, "0.2.0"));
     let st = t.status().unwrap();
     assert_eq!((st.state, st.pos), (State::Idle, 0));
     let seq = t.command(Command::MoveTo(Milli(90_000))).unwrap();
@@ -115,4 +115,45 @@ fn reconnect_handshakes_again() {
     assert_eq!(t.status().unwrap().state, State::Idle);
     let e = Turntable::open("/dev/does-not-exist", 115_200, Duration::from_millis(100)).err().unwrap();
     assert!(e.to_string().contains("cannot open turntable port /dev/does-not-exist"), "{e}");
+}
+
+/// A protocol-1 turntable on a pty, as firmware 0.1.0 answered: XOR checksums it cannot match
+/// against a CRC, bare replies, a bare banner on `INFO`.
+fn protocol_1_device() -> (std::thread::JoinHandle<()>, String) {
+    use serialport::{SerialPort, TTYPort};
+    use std::io::{Read, Write};
+    let (mut master, slave) = TTYPort::pair().unwrap();
+    let path = slave.name().unwrap();
+    master.set_timeout(Duration::from_millis(20)).unwrap();
+    let h = std::thread::spawn(move || {
+        let _slave = slave;
+        let (mut line, mut buf, t0) = (Vec::new(), [0u8; 64], Instant::now());
+        while t0.elapsed() < Duration::from_secs(5) {
+            let n = master.read(&mut buf).unwrap_or(0);
+            for &b in &buf[..n] {
+                if b != b'\n' {
+                    line.push(b);
+                    continue;
+                }
+                let l = String::from_utf8_lossy(&line).to_string();
+                line.clear();
+                let seq = l.split_whitespace().next().filter(|w| w.starts_with('N')).map(|w| format!(" {w}"));
+                let reply = match (l.trim(), seq) {
+                    ("INFO", _) => "pav-turntable 0.1.0 usteps=3200 proto=1\nok\n".to_string(),
+                    (_, Some(s)) if l.contains('*') => format!("error:3{s} bad checksum\n"),
+                    _ => "ok\n".to_string(),
+                };
+                let _ = master.write_all(reply.as_bytes());
+            }
+        }
+    });
+    (h, path)
+}
+
+#[test]
+fn a_protocol_1_turntable_is_named_not_timed_out() {
+    let (_dev, path) = protocol_1_device();
+    let e = Turntable::open(&path, 115_200, Duration::from_millis(200)).err().expect("protocol 1 refused");
+    assert!(matches!(e, TurntableError::Protocol { found: 1, need: 2, .. }), "{e}");
+    assert!(e.to_string().contains("speaks protocol 1 and this pav speaks 2"), "{e}");
 }

@@ -1,5 +1,6 @@
-//! Host-side turntable client over a serial port: framed commands with sequence numbers and
-//! checksums, per-command timeouts, resynchronisation after timeouts, and reconnection.
+//! Host-side turntable client over a serial port: commands with sequence numbers sealed by a
+//! CRC-16, replies read only when their own CRC-16 matches, per-command timeouts,
+//! resynchronisation after timeouts, and reconnection.
 
 use serialport::{ClearBuffer, SerialPort};
 use std::collections::VecDeque;
@@ -8,7 +9,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, TryRecvError};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use turntable_proto::{Alarm, Command, ErrorCode, Frame, Reply, State};
+use turntable_proto::frame::{self, Check};
+use turntable_proto::{Alarm, Command, ErrorCode, Frame, Reply, State, PROTOCOL_VERSION, SEQ_MODULUS};
 
 /// Errors talking to the turntable.
 #[derive(Debug, thiserror::Error)]
@@ -28,6 +30,16 @@ pub enum TurntableError {
         path: String,
         /// How long we waited.
         after: Duration,
+    },
+    /// The device speaks another protocol version.
+    #[error("{path}: the turntable speaks protocol {found} and this pav speaks {need}: flash the firmware in firmware/ (0.2.0 or newer for protocol 2), or use the pav that matches it")]
+    Protocol {
+        /// Port path.
+        path: String,
+        /// The device's protocol version.
+        found: u32,
+        /// This host's.
+        need: u32,
     },
     /// A command got no answer in time.
     #[error("turntable did not answer `{cmd}` within {after:?}")]
@@ -109,8 +121,12 @@ pub struct Turntable {
     firmware: String,
     events: VecDeque<Event>,
     timeout: Duration,
-    /// Lines that did not parse (line noise), for diagnostics.
+    /// Lines dropped because their CRC was missing or wrong, or they were no reply (line noise).
     pub garbage_lines: usize,
+    /// Unsealed lines that read as replies: a protocol-1 device.
+    bare_replies: usize,
+    /// Protocol version of the last banner seen.
+    proto: Option<u32>,
     /// When the device last showed a motion is alive (`busy`, an angle report, `done`, an alarm).
     last_alive: Instant,
 }
@@ -202,6 +218,8 @@ impl Turntable {
             events: VecDeque::new(),
             timeout,
             garbage_lines: 0,
+            bare_replies: 0,
+            proto: None,
             last_alive: Instant::now(),
         };
         t.handshake()?;
@@ -245,15 +263,47 @@ impl Turntable {
 
     fn handshake(&mut self) -> Result<()> {
         self.discard_input()?;
+        self.bare_replies = 0;
+        self.proto = None;
         // A few tries: the first bytes after opening may meet a device still booting.
         for _ in 0..3 {
             match self.request(Command::Info, self.timeout) {
-                Ok(_) if self.usteps_per_rev > 0 => return Ok(()),
-                Ok(_) | Err(TurntableError::Timeout { .. }) => continue,
+                Ok(_) if self.usteps_per_rev > 0 => return self.same_protocol(),
+                Ok(_) | Err(TurntableError::Timeout { .. }) if self.bare_replies == 0 => continue,
+                Ok(_) | Err(TurntableError::Timeout { .. }) => break,
                 Err(e) => return Err(e),
             }
         }
+        if self.bare_replies > 0 {
+            return Err(self.older_protocol());
+        }
         Err(TurntableError::NoDevice { path: self.path.clone(), after: self.timeout * 3 })
+    }
+
+    fn same_protocol(&self) -> Result<()> {
+        match self.proto {
+            Some(p) if p != PROTOCOL_VERSION => {
+                Err(TurntableError::Protocol { path: self.path.clone(), found: p, need: PROTOCOL_VERSION })
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// Unsealed replies came back: ask for the banner the old way, which a protocol-1 device
+    /// answers, to name its version.
+    fn older_protocol(&mut self) -> TurntableError {
+        let _ = self.discard_input();
+        let mut found = 1;
+        if self.write(b"INFO\n").is_ok() {
+            let deadline = Instant::now() + self.timeout;
+            while let Ok(Some((l, _))) = self.read_line(deadline) {
+                if let Some(Reply::Banner { proto, .. }) = Reply::parse(&l) {
+                    found = proto;
+                    break;
+                }
+            }
+        }
+        TurntableError::Protocol { path: self.path.clone(), found, need: PROTOCOL_VERSION }
     }
 
     /// Next line with its arrival time, or `None` when `deadline` passes first (a past deadline
@@ -283,7 +333,10 @@ impl Turntable {
 
     /// Files an unsolicited line as an event; returns the parsed reply for the caller to inspect.
     fn file<'l>(&mut self, line: &'l str, rx: Instant) -> Option<Reply<'l>> {
-        let Some(r) = Reply::parse(line) else {
+        let Some(r) = Reply::open(line) else {
+            if let Check::Bare(body) = frame::check(line) {
+                self.bare_replies += usize::from(Reply::parse(body).is_some());
+            }
             if !line.is_empty() {
                 self.garbage_lines += 1;
             }
@@ -296,21 +349,27 @@ impl Turntable {
             Reply::Angle { t_ms, pos } => self.events.push_back(Event::Angle { t_ms, pos, rx }),
             Reply::Done { seq, pos } => self.events.push_back(Event::Done { seq, pos }),
             Reply::Alarm(a) => self.events.push_back(Event::Alarm(a)),
-            Reply::Banner { fw, usteps_per_rev, .. } => {
+            Reply::Banner { fw, usteps_per_rev, proto } => {
                 self.usteps_per_rev = usteps_per_rev;
                 self.firmware = fw.to_string();
+                self.proto = Some(proto);
             }
             _ => {}
         }
         Some(r)
     }
 
+    /// The next sequence number: 9 digits, wrapping to 0.
+    fn next_seq(&mut self) -> u32 {
+        self.seq = (self.seq + 1) % SEQ_MODULUS;
+        self.seq
+    }
+
     /// Sends `cmd` and waits for its `ok`; returns the sequence number and the status line, if any.
     fn request(&mut self, cmd: Command, timeout: Duration) -> Result<(u32, Option<Status>)> {
-        self.seq = self.seq.wrapping_add(1) % 1_000_000_000;
-        let seq = self.seq;
+        let seq = self.next_seq();
         let frame = Frame { seq: Some(seq), cmd };
-        let text = frame.encode(true);
+        let text = frame.encode();
         let mut line = text.as_str().as_bytes().to_vec();
         line.push(b'\n');
         self.write(&line)?;
@@ -322,9 +381,9 @@ impl Turntable {
                 Some(Reply::Error { code, seq: Some(s), msg }) if s == seq => {
                     return Err(TurntableError::Refused { cmd: cmd.to_string(), code, msg: msg.to_string() });
                 }
-                // A checksum failure cannot be tied to a sequence number if the N field was hit.
+                // A damaged line cannot be tied to a sequence number: the device does not echo one.
                 Some(Reply::Error {
-                    code: ErrorCode::Checksum | ErrorCode::Garbage | ErrorCode::LineTooLong,
+                    code: ErrorCode::Checksum | ErrorCode::Garbage | ErrorCode::LineTooLong | ErrorCode::Framing,
                     seq: None,
                     ..
                 }) => {
@@ -343,9 +402,8 @@ impl Turntable {
     /// command cannot be taken for answers to the next one.
     fn resync(&mut self) -> Result<()> {
         self.discard_input()?;
-        self.seq = self.seq.wrapping_add(1) % 1_000_000_000;
-        let seq = self.seq;
-        let line = format!("{}\n", Frame { seq: Some(seq), cmd: Command::Ping }.encode(true).as_str());
+        let seq = self.next_seq();
+        let line = format!("{}\n", Frame { seq: Some(seq), cmd: Command::Ping }.encode().as_str());
         self.write(line.as_bytes())?;
         let deadline = Instant::now() + self.timeout;
         while let Some((l, rx)) = self.read_line(deadline)? {

@@ -1,5 +1,6 @@
 //! Commands (host → device): parsing on the device, encoding on the host, one definition.
 
+use crate::frame::{self, Check};
 use crate::text::{Milli, Text};
 use crate::MAX_LINE;
 use core::fmt::{self, Write};
@@ -42,20 +43,35 @@ pub enum Command {
 /// A command with its optional sequence number.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Frame {
-    /// `N<seq>` prefix, echoed in the reply.
+    /// `N<seq>` prefix, echoed in the reply; below [`SEQ_MODULUS`].
     pub seq: Option<u32>,
     /// The command.
     pub cmd: Command,
 }
 
-/// Why a line could not be parsed; carries the sequence number when it was readable.
+/// Sequence numbers have at most 9 digits; hosts count modulo this and wrap to 0.
+pub const SEQ_MODULUS: u32 = 1_000_000_000;
+
+/// A command line that parsed, and whether it carried a valid CRC.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Received {
+    /// The command.
+    pub frame: Frame,
+    /// The line was sealed with a matching CRC (see [`crate::frame`]).
+    pub sealed: bool,
+}
+
+/// Why a line could not be parsed; carries the sequence number only from a sealed line.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ParseError {
-    /// `*<xor>` did not match the line.
-    Checksum {
-        /// Sequence number, if present.
-        seq: Option<u32>,
-    },
+    /// The CRC field does not match the line: nothing in it can be trusted, not its sequence number either.
+    Checksum,
+    /// A protocol-1 XOR checksum: the host speaks an older protocol.
+    Legacy,
+    /// A sequence number without a CRC: a sealed line that lost its `*`, or a host that does not seal.
+    Unsealed,
+    /// `N` followed by more than 9 digits.
+    Sequence,
     /// Unknown keyword.
     Unknown {
         /// Sequence number, if present.
@@ -72,14 +88,10 @@ impl ParseError {
     /// The sequence number the reply should echo.
     pub fn seq(&self) -> Option<u32> {
         match *self {
-            ParseError::Checksum { seq } | ParseError::Unknown { seq } | ParseError::BadArgument { seq } => seq,
+            ParseError::Unknown { seq } | ParseError::BadArgument { seq } => seq,
+            ParseError::Checksum | ParseError::Legacy | ParseError::Unsealed | ParseError::Sequence => None,
         }
     }
-}
-
-/// XOR of all bytes (the Marlin-style line checksum).
-pub fn checksum(s: &str) -> u8 {
-    s.bytes().fold(0, |a, b| a ^ b)
 }
 
 fn parse_u32(s: &str) -> Option<u32> {
@@ -90,11 +102,13 @@ fn parse_u32(s: &str) -> Option<u32> {
 }
 
 impl Frame {
-    /// Parses one trimmed line.
-    pub fn parse(line: &str) -> Result<Frame, ParseError> {
-        let (body, sum) = match line.rsplit_once('*') {
-            Some((b, s)) => (b, Some(s.trim())),
-            None => (line, None),
+    /// Parses one trimmed line, sealed (`…*XXXX`) or bare.
+    pub fn parse(line: &str) -> Result<Received, ParseError> {
+        let (body, sealed) = match frame::check(line) {
+            Check::Sealed(b) => (b, true),
+            Check::Bare(b) => (b, false),
+            Check::Legacy => return Err(ParseError::Legacy),
+            Check::Damaged => return Err(ParseError::Checksum),
         };
         let mut words = body.split_ascii_whitespace().peekable();
         let seq = match words.peek() {
@@ -103,17 +117,14 @@ impl Frame {
                     && (w.starts_with('N') || w.starts_with('n'))
                     && w[1..].bytes().all(|b| b.is_ascii_digit()) =>
             {
-                let s = parse_u32(&w[1..]);
+                let s = parse_u32(&w[1..]).ok_or(ParseError::Sequence)?;
                 words.next();
-                s
+                Some(s)
             }
             _ => None,
         };
-        if let Some(sum) = sum {
-            let ok = sum.parse::<u8>().map(|v| v == checksum(body)).unwrap_or(false);
-            if !ok {
-                return Err(ParseError::Checksum { seq });
-            }
+        if seq.is_some() && !sealed {
+            return Err(ParseError::Unsealed);
         }
         let bad = ParseError::BadArgument { seq };
         let kw = words.next().ok_or(ParseError::Unknown { seq })?;
@@ -155,21 +166,18 @@ impl Frame {
         if words.next().is_some() {
             return Err(bad);
         }
-        Ok(Frame { seq, cmd })
+        Ok(Received { frame: Frame { seq, cmd }, sealed })
     }
 
-    /// Encodes the frame as one line (no terminator), with `*<xor>` when `with_checksum`.
-    pub fn encode(&self, with_checksum: bool) -> Text<MAX_LINE> {
+    /// Encodes the frame as one sealed line (no terminator): `N<seq> <command>*XXXX`.
+    pub fn encode(&self) -> Text<MAX_LINE> {
         let mut t: Text<MAX_LINE> = Text::default();
         // Every command fits well inside MAX_LINE, so the writes cannot fail.
         if let Some(s) = self.seq {
             let _ = write!(t, "N{s} ");
         }
         let _ = write!(t, "{}", self.cmd);
-        if with_checksum {
-            let sum = checksum(t.as_str());
-            let _ = write!(t, "*{sum}");
-        }
+        let _ = frame::seal(&mut t);
         t
     }
 }
@@ -197,28 +205,51 @@ impl fmt::Display for Command {
 mod tests {
     use super::*;
 
-    #[test]
-    fn parses_plain_sequenced_and_checksummed_lines() {
-        assert_eq!(Frame::parse("move 90"), Ok(Frame { seq: None, cmd: Command::MoveTo(Milli(90_000)) }));
-        assert_eq!(
-            Frame::parse("N7 SPIN 28 2"),
-            Ok(Frame { seq: Some(7), cmd: Command::Spin { period_s: Milli(28_000), turns: 2 } })
-        );
-        let f = Frame { seq: Some(12), cmd: Command::MoveBy(Milli(-45_500)) };
-        let line = f.encode(true);
-        assert_eq!(Frame::parse(line.as_str()), Ok(f));
-        assert!(line.as_str().starts_with("N12 MOVEBY -45.500*"));
+    fn bare(line: &str) -> Result<Frame, ParseError> {
+        Frame::parse(line).map(|r| {
+            assert!(!r.sealed, "{line}");
+            r.frame
+        })
     }
 
     #[test]
-    fn errors_keep_the_sequence_number() {
-        assert_eq!(Frame::parse("N3 MOVE 90*1"), Err(ParseError::Checksum { seq: Some(3) }));
-        assert_eq!(Frame::parse("N4 FLY"), Err(ParseError::Unknown { seq: Some(4) }));
-        assert_eq!(Frame::parse("N5 MOVE"), Err(ParseError::BadArgument { seq: Some(5) }));
-        assert_eq!(Frame::parse("MOVE 1 2"), Err(ParseError::BadArgument { seq: None }));
-        assert_eq!(Frame::parse("SPIN 0"), Err(ParseError::BadArgument { seq: None }));
-        assert_eq!(Frame::parse("SPEED -3"), Err(ParseError::BadArgument { seq: None }));
-        assert_eq!(Frame::parse(""), Err(ParseError::Unknown { seq: None }));
-        assert_eq!(Frame::parse("SUPERCALIFRAGILISTIC"), Err(ParseError::Unknown { seq: None }));
+    fn parses_bare_and_sealed_lines() {
+        assert_eq!(bare("move 90"), Ok(Frame { seq: None, cmd: Command::MoveTo(Milli(90_000)) }));
+        let f = Frame { seq: Some(12), cmd: Command::MoveBy(Milli(-45_500)) };
+        let line = f.encode();
+        assert_eq!(Frame::parse(line.as_str()), Ok(Received { frame: f, sealed: true }));
+        assert!(line.as_str().starts_with("N12 MOVEBY -45.500*"));
+        let f = Frame { seq: Some(SEQ_MODULUS - 1), cmd: Command::Spin { period_s: Milli(-28_000), turns: 4 } };
+        assert_eq!(Frame::parse(f.encode().as_str()).map(|r| r.frame), Ok(f));
+    }
+
+    #[test]
+    fn errors_keep_only_a_trusted_sequence_number() {
+        let sealed = |s: u32, c: &str| {
+            let mut t: Text<MAX_LINE> = Text::default();
+            write!(t, "N{s} {c}").unwrap();
+            frame::seal(&mut t).unwrap();
+            t
+        };
+        assert_eq!(Frame::parse(sealed(4, "FLY").as_str()), Err(ParseError::Unknown { seq: Some(4) }));
+        assert_eq!(Frame::parse(sealed(5, "MOVE").as_str()), Err(ParseError::BadArgument { seq: Some(5) }));
+        assert_eq!(Frame::parse("N3 MOVE 90*1A2B"), Err(ParseError::Checksum));
+        assert_eq!(Frame::parse("N3 MOVE 90*17"), Err(ParseError::Legacy));
+        // A sequence number promises a seal: the line lost its `*`, or its sender does not seal.
+        assert_eq!(Frame::parse("N5 MOVE 90"), Err(ParseError::Unsealed));
+        // Ten digits used to be read as "no sequence number" and run unsequenced.
+        assert_eq!(
+            Frame::parse(sealed(0, "PING").as_str().replacen("N0", "N1000000000", 1).as_str()),
+            Err(ParseError::Checksum)
+        );
+        let mut t: Text<MAX_LINE> = Text::default();
+        write!(t, "N1000000000 PING").unwrap();
+        frame::seal(&mut t).unwrap();
+        assert_eq!(Frame::parse(t.as_str()), Err(ParseError::Sequence));
+        assert_eq!(bare("MOVE 1 2"), Err(ParseError::BadArgument { seq: None }));
+        assert_eq!(bare("SPIN 0"), Err(ParseError::BadArgument { seq: None }));
+        assert_eq!(bare("SPEED -3"), Err(ParseError::BadArgument { seq: None }));
+        assert_eq!(bare(""), Err(ParseError::Unknown { seq: None }));
+        assert_eq!(bare("SUPERCALIFRAGILISTIC"), Err(ParseError::Unknown { seq: None }));
     }
 }

@@ -6,6 +6,7 @@
 
 use crate::codec::{Event, LineCodec, Realtime};
 use crate::command::{Command, Frame, ParseError};
+use crate::frame;
 use crate::motion::{Motion, Profile};
 use crate::reply::{Alarm, ErrorCode, Reply, State};
 use crate::text::{Milli, Text};
@@ -38,7 +39,7 @@ pub struct Config {
 impl Default for Config {
     fn default() -> Self {
         // 200-step motor, 16 microsteps, direct drive; one turn per second at most.
-        Config { fw_version: "0.1.0", usteps_per_rev: 3200, max_speed: 3200, accel: 6400, report_ms: 50, busy_ms: 1000 }
+        Config { fw_version: "0.2.0", usteps_per_rev: 3200, max_speed: 3200, accel: 6400, report_ms: 50, busy_ms: 1000 }
     }
 }
 
@@ -53,15 +54,19 @@ pub struct Device {
     active: Option<Option<u32>>,
     /// Physical microsteps that read as position 0 (set by `HOME`).
     origin: i64,
+    /// A sealed, sequenced line was accepted since the last reset: bare lines are refused now.
+    framed: bool,
     boot_us: u64,
     next_report_us: u64,
     next_busy_us: u64,
 }
 
+/// Sends one reply, sealed with its CRC.
 fn send(out: &mut impl Sink, r: Reply<'_>) {
     let mut t: Text<128> = Text::default();
-    // Replies are short and bounded; 128 bytes holds the longest.
+    // Replies are short and bounded; 128 bytes holds the longest with its seal.
     let _ = write!(t, "{r}");
+    let _ = frame::seal(&mut t);
     out.send(t.as_str());
 }
 
@@ -76,6 +81,7 @@ impl Device {
             alarm: None,
             active: None,
             origin: 0,
+            framed: false,
             boot_us: now_us,
             next_report_us: 0,
             next_busy_us: 0,
@@ -87,10 +93,12 @@ impl Device {
         &self.cfg
     }
 
-    /// Soft reset: halts at once, drops any partial line, keeps an active alarm, prints the banner.
+    /// Soft reset: halts at once, drops any partial line, ends a framed session, keeps an active
+    /// alarm, prints the banner.
     pub fn reset(&mut self, now_us: u64, out: &mut impl Sink) {
         self.motion.halt(now_us);
         self.active = None;
+        self.framed = false;
         self.codec = LineCodec::default();
         self.state = if self.alarm.is_some() { State::Alarm } else { State::Idle };
         send(out, self.banner());
@@ -161,10 +169,27 @@ impl Device {
                     return;
                 }
                 match Frame::parse(self.codec.line()) {
-                    Ok(f) => self.execute(f, now_us, out),
+                    Ok(r) if self.framed && !(r.sealed && r.frame.seq.is_some()) => send(
+                        out,
+                        Reply::Error {
+                            code: ErrorCode::Framing,
+                            seq: None,
+                            msg: "framed session: seal and number every line (Ctrl-X resets)",
+                        },
+                    ),
+                    Ok(r) => {
+                        self.framed |= r.sealed && r.frame.seq.is_some();
+                        self.execute(r.frame, now_us, out)
+                    }
                     Err(e) => {
                         let (code, msg) = match e {
-                            ParseError::Checksum { .. } => (ErrorCode::Checksum, "bad checksum"),
+                            ParseError::Checksum => (ErrorCode::Checksum, "bad CRC"),
+                            ParseError::Legacy => (
+                                ErrorCode::Checksum,
+                                "protocol 1 checksum: this turntable speaks protocol 2 (CRC-16 seals); update pav",
+                            ),
+                            ParseError::Unsealed => (ErrorCode::Framing, "sequence number without a CRC"),
+                            ParseError::Sequence => (ErrorCode::Framing, "sequence number of more than 9 digits"),
                             ParseError::Unknown { .. } => (ErrorCode::Unknown, "unknown command"),
                             ParseError::BadArgument { .. } => (ErrorCode::BadArgument, "bad argument"),
                         };

@@ -1,5 +1,6 @@
 //! Replies and reports (device → host): formatting on the device, parsing on the host.
 
+use crate::frame::{self, Check};
 use core::fmt;
 
 /// Error codes in `error:<code>` replies.
@@ -19,6 +20,9 @@ pub enum ErrorCode {
     Busy = 6,
     /// 7: non-printable bytes in the line.
     Garbage = 7,
+    /// 8: framing: a sequence number without a CRC, an unsealed or unsequenced line once the
+    /// session is framed, or a sequence number of more than 9 digits.
+    Framing = 8,
 }
 
 impl ErrorCode {
@@ -32,6 +36,7 @@ impl ErrorCode {
             5 => ErrorCode::Locked,
             6 => ErrorCode::Busy,
             7 => ErrorCode::Garbage,
+            8 => ErrorCode::Framing,
             _ => return None,
         })
     }
@@ -207,7 +212,17 @@ fn kv<'a>(w: &'a str, key: &str) -> Option<&'a str> {
 }
 
 impl<'a> Reply<'a> {
-    /// Parses one line from the device; `None` for anything that is not a reply.
+    /// Parses one sealed line from the device (`<reply>*XXXX`); `None` for a line whose CRC is
+    /// missing or wrong, or that is not a reply.
+    pub fn open(line: &'a str) -> Option<Reply<'a>> {
+        match frame::check(line.trim()) {
+            Check::Sealed(body) => Reply::parse(body),
+            _ => None,
+        }
+    }
+
+    /// Parses the body of one line from the device, without its seal; `None` for anything that
+    /// is not a reply.
     pub fn parse(line: &'a str) -> Option<Reply<'a>> {
         let line = line.trim();
         if let Some(rest) = line.strip_prefix("ok") {
@@ -303,5 +318,15 @@ mod tests {
         }
         assert_eq!(Reply::parse("garbage"), None);
         assert_eq!(Reply::parse("ok N"), None);
+    }
+
+    #[test]
+    fn open_reads_sealed_lines_only() {
+        let mut t: Text<96> = Text::default();
+        write!(t, "{}", Reply::Done { seq: Some(3), pos: 3200 }).unwrap();
+        assert_eq!(Reply::open(t.as_str()), None, "a bare line is not trusted");
+        crate::frame::seal(&mut t).unwrap();
+        assert_eq!(Reply::open(t.as_str()), Some(Reply::Done { seq: Some(3), pos: 3200 }));
+        assert_eq!(Reply::open(&t.as_str().replace("3200", "3300")), None);
     }
 }

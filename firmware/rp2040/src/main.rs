@@ -163,7 +163,7 @@ async fn cdc_tx_task(mut tx: Sender<'static, UsbDrv>) {
 async fn main(spawner: Spawner) {
     let p = embassy_rp::init(Default::default());
     DEVICE.lock(|d| {
-        let mut dev = Device::new(Config { fw_version: "0.1.0-rp2040", ..Config::default() }, now_us());
+        let mut dev = Device::new(Config { fw_version: "0.2.0-rp2040", ..Config::default() }, now_us());
         dev.reset(now_us(), &mut Fanout);
         *d.borrow_mut() = Some(dev);
     });
