@@ -92,3 +92,21 @@ fn turntable_commands_on_the_simulator() {
     let o = pav_rig().args(["turntable", "--port", "sim", "status"]).output().unwrap();
     assert!(text(&o).contains("state Idle  position 0 microsteps"), "{}", text(&o));
 }
+
+#[test]
+fn simulator_options_out_of_range_are_refused() {
+    // `--disconnect-after 1e300` once panicked in `Duration::from_secs_f64`.
+    for (flag, value, needle) in [
+        ("--disconnect-after", "1e300", "--disconnect-after = 1e300 s is beyond any time"),
+        ("--stall-after", "-1", "--stall-after must be a number of seconds ≥ 0, not -1.0"),
+        ("--stall-after", "NaN", "--stall-after must be a number of seconds ≥ 0, not NaN"),
+        ("--drop-rate", "1.5", "drop rate is a probability in [0, 1], not 1.5"),
+        ("--time-scale", "0", "time scale must be positive and finite, not 0"),
+    ] {
+        let o = pav_rig().args(["simulate", &format!("{flag}={value}")]).env("RUST_BACKTRACE", "0").output().unwrap();
+        let out = text(&o);
+        assert_eq!(o.status.code(), Some(1), "{flag} {value}: {out}");
+        assert!(out.contains(needle), "{flag} {value}: {out}");
+        assert!(!out.contains("panicked"), "{out}");
+    }
+}

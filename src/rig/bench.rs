@@ -46,7 +46,7 @@ pub struct AngleSync {
 pub enum RigBenchError {
     /// The simulator did not start.
     #[error("starting the simulated turntable: {0}")]
-    Simulator(#[source] std::io::Error),
+    Simulator(#[source] super::sim::SimError),
     /// The table.
     #[error(transparent)]
     Turntable(#[from] TurntableError),

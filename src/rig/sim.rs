@@ -26,6 +26,42 @@ pub struct Faults {
     pub hang_after: Option<Duration>,
 }
 
+/// Why a simulator could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// An option out of its range.
+    #[error("simulator: {0}")]
+    Invalid(String),
+    /// The pseudo-terminal or the thread could not be made.
+    #[error("simulator: {0}")]
+    Io(#[from] std::io::Error),
+}
+
+/// A fault time given in seconds: finite, not negative, and short enough for a `Duration`.
+pub fn fault_seconds(name: &str, secs: f64) -> Result<Duration, SimError> {
+    if secs.is_nan() || secs < 0.0 {
+        return Err(SimError::Invalid(format!("{name} must be a number of seconds ≥ 0, not {secs:?}")));
+    }
+    Duration::try_from_secs_f64(secs)
+        .map_err(|_| SimError::Invalid(format!("{name} = {secs:?} s is beyond any time the simulator can wait")))
+}
+
+impl SimOptions {
+    /// Refuses options that make no simulation: a time scale that is not a positive finite
+    /// number, or probabilities outside [0, 1].
+    pub fn check(&self) -> Result<(), SimError> {
+        if !(self.time_scale.is_finite() && self.time_scale > 0.0) {
+            return Err(SimError::Invalid(format!("time scale must be positive and finite, not {}", self.time_scale)));
+        }
+        for (name, p) in [("drop rate", self.faults.drop_byte), ("garbage rate", self.faults.garbage_line)] {
+            if !(0.0..=1.0).contains(&p) {
+                return Err(SimError::Invalid(format!("{name} is a probability in [0, 1], not {p}")));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Simulator settings.
 #[derive(Clone, Debug)]
 pub struct SimOptions {
@@ -100,7 +136,8 @@ impl Dice {
 
 impl SimTurntable {
     /// Starts a simulator; the host opens [`SimTurntable::path`] like a real serial device.
-    pub fn spawn(opts: SimOptions) -> std::io::Result<Self> {
+    pub fn spawn(opts: SimOptions) -> Result<Self, SimError> {
+        opts.check()?;
         let (mut master, slave) = TTYPort::pair().map_err(std::io::Error::other)?;
         let path = PathBuf::from(slave.name().ok_or_else(|| std::io::Error::other("pty has no name"))?);
         master.set_timeout(Duration::from_millis(2)).map_err(std::io::Error::other)?;

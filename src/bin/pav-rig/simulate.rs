@@ -2,7 +2,7 @@
 
 use crate::common::ctrl_c_flag;
 use anyhow::Result;
-use pav::rig::sim::{Faults, SimOptions, SimTurntable};
+use pav::rig::sim::{fault_seconds, Faults, SimOptions, SimTurntable};
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
@@ -29,13 +29,13 @@ pub struct Args {
 }
 
 pub fn run(a: &Args) -> Result<()> {
-    let secs = |s: Option<f64>| s.filter(|v| *v >= 0.0).map(Duration::from_secs_f64);
+    let secs = |name: &str, s: Option<f64>| s.map(|v| fault_seconds(name, v)).transpose();
     let faults = Faults {
         drop_byte: a.drop_rate,
         garbage_line: a.garbage_rate,
         delay: Duration::from_millis(a.delay_ms),
-        stall_after: secs(a.stall_after),
-        disconnect_after: secs(a.disconnect_after),
+        stall_after: secs("--stall-after", a.stall_after)?,
+        disconnect_after: secs("--disconnect-after", a.disconnect_after)?,
         hang_after: None,
     };
     let sim = SimTurntable::spawn(SimOptions { time_scale: a.time_scale, faults, ..SimOptions::default() })?;
