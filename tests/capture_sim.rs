@@ -144,3 +144,33 @@ fn camera_sources_fail_clearly_or_stream() {
     assert_eq!((f.width, f.height), (320, 240));
     assert_eq!(g.size(), (320, 240));
 }
+
+#[test]
+fn dropped_bytes_cost_reports_never_angles() {
+    // Protocol 1 turned a dropped digit in `@t pos` into another valid report: with 1 % of the
+    // device's bytes dropped, 3 of 120 frames were stamped 60–120° off. The CRC drops such lines.
+    for (k, drop) in [0.01, 0.03].into_iter().enumerate() {
+        let tmp = tempfile::tempdir().unwrap();
+        let video = tmp.path().join("drops.mp4");
+        let (s, mut table) = rig(5.0, Faults { drop_byte: drop, ..Faults::default() });
+        let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
+        let mut o = opts(&video);
+        o.home = false;
+        let sum = capture(&mut table, &mut cam, &o, &Silent, &AtomicBool::new(false))
+            .unwrap_or_else(|e| panic!("drop rate {drop}: {e}"));
+        let rows = sidecar::read(&sidecar::sidecar_path(&video)).unwrap();
+        assert_eq!(rows.len(), sum.frames);
+        let worst = rows
+            .iter()
+            .zip(&cam.true_angles)
+            .map(|(r, truth)| ((r.angle_deg - truth + 540.0).rem_euclid(360.0) - 180.0).abs())
+            .fold(0.0, f64::max);
+        eprintln!(
+            "drop rate {drop}: {} frames, {} garbage lines, worst angle error {worst:.4}°",
+            rows.len(),
+            table.garbage_lines
+        );
+        assert!(table.garbage_lines > 0, "bytes were dropped but no line was refused");
+        assert!(worst < 0.5, "drop rate {drop} (run {k}): worst angle error {worst:.3}°");
+    }
+}

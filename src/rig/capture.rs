@@ -1,11 +1,12 @@
 //! A capture session: home the table, spin it, record every camera frame to video and tie each
 //! frame to the table angle through the device's timestamped reports.
 //!
-//! The device clock is mapped to the host clock from the reports' arrival times (rate by least
-//! squares, offset from the report that travelled fastest), and each frame's angle is
-//! interpolated between the reports around its capture instant. Video frames are written as they arrive and sidecar rows as soon
+//! The device clock is mapped to the host clock from the reports' arrival times (the upper
+//! envelope of [`super::clockmap`], which only the fastest reports decide), and each frame's
+//! angle is interpolated between the reports around its capture instant. Video frames are written as they arrive and sidecar rows as soon
 //! as their angle is known; on any fault both files are finalized before the error is returned.
 
+use super::clockmap::ClockMap;
 use super::source::FrameSource;
 use super::turntable::{Event, Turntable, TurntableError};
 use crate::progress::Progress;
@@ -108,16 +109,16 @@ pub enum CaptureError {
 
 /// Device reports mapped onto the host clock.
 ///
-/// The device clock is modelled as `dev = rate·host + c`. `rate` is the least-squares slope over
-/// all reports, which absorbs crystal drift (and the simulator's time scale). Latency only ever
-/// delays arrivals, so `c` is the largest `dev − rate·host`, which comes from the report that
-/// travelled fastest.
+/// The device clock is modelled as `dev = rate·host + c` ([`ClockMap`]): `rate` absorbs crystal
+/// drift (and the simulator's time scale), and the fit is the upper envelope of the arrivals, so
+/// host load that delays most reports does not move it.
 #[derive(Default)]
 struct AngleTrack {
     epoch: Option<Instant>,
     /// (host seconds at arrival, device seconds, microsteps)
     samples: Vec<(f64, f64, i64)>,
-    sums: [f64; 5],
+    /// The clock map of the samples so far, refitted at every new sample.
+    map: Option<ClockMap>,
     finished: bool,
 }
 
@@ -136,20 +137,19 @@ impl AngleTrack {
         let (h, d) = (self.host_s(rx), t_ms as f64 / 1000.0);
         if self.samples.last().is_none_or(|l| d > l.1) {
             self.samples.push((h, d, pos));
-            for (k, v) in [1.0, h, d, h * h, h * d].into_iter().enumerate() {
-                self.sums[k] += v;
-            }
+            let arrivals: Vec<(f64, f64)> = self.samples.iter().map(|s| (s.0, s.1)).collect();
+            self.map = ClockMap::fit(&arrivals);
         }
     }
 
     /// Clock model (rate, c).
     fn clock(&self) -> (f64, f64) {
-        let [n, sh, sd, shh, shd] = self.sums;
-        let var = n * shh - sh * sh;
-        // Until the reports span some time, assume the device clock runs at host speed.
-        let rate = if n >= 2.0 && var > 1e-6 * n * n { (n * shd - sh * sd) / var } else { 1.0 };
-        let c = self.samples.iter().map(|s| s.1 - rate * s.0).fold(f64::NEG_INFINITY, f64::max);
-        (rate, c)
+        match self.map {
+            Some(m) => (m.rate, m.c),
+            // Until the reports span some time, assume the device clock runs at host speed,
+            // offset by the report that travelled fastest.
+            None => (1.0, self.samples.iter().map(|s| s.1 - s.0).fold(f64::NEG_INFINITY, f64::max)),
+        }
     }
 
     /// Position (fractional microsteps) at host instant `at`, once reports cover it.

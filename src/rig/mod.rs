@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod capture;
+pub mod clockmap;
 pub mod sim;
 pub mod source;
 pub mod turntable;

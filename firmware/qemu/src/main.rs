@@ -1,14 +1,18 @@
 //! Turntable firmware for QEMU's lm3s6965evb: the shared protocol logic
-//! ([`turntable_proto::Device`]) served on UART0, with a SysTick time base and the commanded
-//! position driven out as STEP/DIR pulses on GPIO port F (pins 0 and 1).
+//! ([`turntable_proto::Device`]) served on UART0, with a free-running SysTick time base and the
+//! commanded position driven out as STEP/DIR pulses on GPIO port F (pins 0 and 1).
 //!
-//! The core sleeps in WFI with PRIMASK set: a pending UART0 or SysTick interrupt wakes it
-//! without running a handler, so QEMU does not spin a host core.
+//! The core sleeps in WFI with PRIMASK set: a pending UART0 or timer 0A interrupt wakes it
+//! without running a handler, so QEMU does not spin a host core. Timer 0A only wakes the loop
+//! every millisecond; time itself is the SysTick counter, read as a difference on every poll,
+//! so a vCPU that the host deschedules for up to 1.3 s (the 24-bit counter's period) loses no
+//! time. (Counting SysTick wraps instead lost every wrap missed while descheduled: on a loaded
+//! host the device clock ran 15–34 % slow.)
 #![no_std]
 #![no_main]
 
 use core::ptr::{read_volatile, write_volatile};
-use cortex_m::peripheral::{syst::SystClkSource, NVIC, SCB, SYST};
+use cortex_m::peripheral::{syst::SystClkSource, NVIC, SYST};
 use cortex_m_rt::entry;
 use panic_halt as _;
 use turntable_proto::{Config, Device, Sink};
@@ -19,6 +23,15 @@ const FR: usize = 0x018; // bit 4 RXFE, bit 5 TXFF
 const IM: usize = 0x038; // bit 4 RXIM, bit 6 RTIM
 const ICR: usize = 0x044;
 const UART0_IRQ: u16 = 5;
+const SYSCTL_RCGC1: usize = 0x400F_E104;
+const TIMER0: usize = 0x4003_0000;
+const TIMER_CFG: usize = 0x000;
+const TIMER_TAMR: usize = 0x004;
+const TIMER_CTL: usize = 0x00C;
+const TIMER_IMR: usize = 0x018;
+const TIMER_ICR: usize = 0x024;
+const TIMER_TAILR: usize = 0x028;
+const TIMER0A_IRQ: u16 = 19;
 const GPIOF: usize = 0x4002_5000;
 const GPIO_DIR: usize = 0x400;
 const STEP_PIN: u32 = 1 << 0;
@@ -59,28 +72,28 @@ impl Sink for Uart {
     }
 }
 
-/// Microsecond clock from the millisecond SysTick wrap count plus the current counter value.
+/// SysTick's full 24-bit range: the counter wraps every 1.34 s at 12.5 MHz.
+const SYST_MASK: u32 = 0x00FF_FFFF;
+
+/// Microsecond clock: every poll adds the ticks the down-counter moved since the last one.
 struct Clock {
-    syst: SYST,
-    ms: u64,
+    last: u32,
+    ticks: u64,
 }
 
 impl Clock {
     fn now_us(&mut self) -> u64 {
-        // The SysTick exception is never taken (PRIMASK=1), so clear its pending bit by hand.
-        SCB::clear_pendst();
-        if self.syst.has_wrapped() {
-            self.ms += 1;
-        }
-        let elapsed = TICKS_PER_MS - 1 - SYST::get_current().min(TICKS_PER_MS - 1);
-        self.ms * 1000 + (elapsed as u64 * 1000 / TICKS_PER_MS as u64)
+        let cur = SYST::get_current() & SYST_MASK;
+        self.ticks += (self.last.wrapping_sub(cur) & SYST_MASK) as u64;
+        self.last = cur;
+        self.ticks * 1000 / TICKS_PER_MS as u64
     }
 }
 
 #[derive(Clone, Copy)]
 struct Irq(u16);
 
-// SAFETY: 5 is UART0's interrupt number on the LM3S6965.
+// SAFETY: 5 (UART0) and 19 (timer 0A) are interrupt numbers of the LM3S6965.
 unsafe impl cortex_m::interrupt::InterruptNumber for Irq {
     fn number(self) -> u16 {
         self.0
@@ -120,12 +133,24 @@ fn main() -> ! {
         write_volatile(reg(GPIOF + GPIO_DIR), STEP_PIN | DIR_PIN);
     }
     cp.SYST.set_clock_source(SystClkSource::Core);
-    cp.SYST.set_reload(TICKS_PER_MS - 1);
+    cp.SYST.set_reload(SYST_MASK);
     cp.SYST.clear_current();
-    cp.SYST.enable_interrupt();
+    cp.SYST.disable_interrupt();
     cp.SYST.enable_counter();
-    let mut clock = Clock { syst: cp.SYST, ms: 0 };
-    let mut dev = Device::new(Config { fw_version: "0.1.0-qemu", ..Config::default() }, 0);
+    // SAFETY: timer 0 as a 32-bit periodic timer with its time-out interrupt (a wake-up source
+    // only), configured while it is disabled, during single-threaded init.
+    unsafe {
+        write_volatile(reg(SYSCTL_RCGC1), read_volatile(reg(SYSCTL_RCGC1)) | (1 << 16));
+        write_volatile(reg(TIMER0 + TIMER_CTL), 0);
+        write_volatile(reg(TIMER0 + TIMER_CFG), 0);
+        write_volatile(reg(TIMER0 + TIMER_TAMR), 0x2);
+        write_volatile(reg(TIMER0 + TIMER_TAILR), TICKS_PER_MS - 1);
+        write_volatile(reg(TIMER0 + TIMER_IMR), 1);
+        NVIC::unmask(Irq(TIMER0A_IRQ));
+        write_volatile(reg(TIMER0 + TIMER_CTL), 1);
+    }
+    let mut clock = Clock { last: SYST::get_current() & SYST_MASK, ticks: 0 };
+    let mut dev = Device::new(Config { fw_version: "0.2.0-qemu", ..Config::default() }, 0);
     dev.reset(0, &mut Uart);
     let mut stepper = Stepper { at: 0 };
     loop {
@@ -137,8 +162,12 @@ fn main() -> ! {
         dev.poll(now, &mut Uart);
         stepper.follow(dev.physical_position(now));
         cortex_m::asm::wfi();
-        // SAFETY: clearing UART0 interrupt flags; the interrupt is only used to wake WFI.
-        unsafe { write_volatile(reg(UART0 + ICR), 0x7ff) };
+        // SAFETY: clearing UART0 and timer 0A interrupt flags; both only wake WFI.
+        unsafe {
+            write_volatile(reg(UART0 + ICR), 0x7ff);
+            write_volatile(reg(TIMER0 + TIMER_ICR), 1);
+        }
         NVIC::unpend(Irq(UART0_IRQ));
+        NVIC::unpend(Irq(TIMER0A_IRQ));
     }
 }
