@@ -174,3 +174,25 @@ fn dropped_bytes_cost_reports_never_angles() {
         assert!(worst < 0.5, "drop rate {drop} (run {k}): worst angle error {worst:.3}°");
     }
 }
+
+#[test]
+fn a_lost_end_of_motion_still_completes_the_capture() {
+    let tmp = tempfile::tempdir().unwrap();
+    let video = tmp.path().join("end.mp4");
+    let (s, mut table) = rig(5.0, Faults { lose_end: true, ..Faults::default() });
+    let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
+    let mut o = opts(&video);
+    o.home = false;
+    let sum = capture(&mut table, &mut cam, &o, &Silent, &AtomicBool::new(false)).unwrap();
+    assert!(sum.done_lost);
+    assert!((sum.final_deg.unwrap() - 360.0).abs() < 1e-9, "{:?}", sum.final_deg);
+    let rows = sidecar::read(&sidecar::sidecar_path(&video)).unwrap();
+    assert_eq!(rows.len(), sum.frames);
+    let worst = rows
+        .iter()
+        .zip(&cam.true_angles)
+        .map(|(r, truth)| ((r.angle_deg - truth + 540.0).rem_euclid(360.0) - 180.0).abs())
+        .fold(0.0, f64::max);
+    eprintln!("lost end of motion: {} frames, worst angle error {worst:.4}°", rows.len());
+    assert!(worst < 0.5, "worst angle error {worst:.3}°");
+}

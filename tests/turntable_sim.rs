@@ -157,3 +157,17 @@ fn a_protocol_1_turntable_is_named_not_timed_out() {
     assert!(matches!(e, TurntableError::Protocol { found: 1, need: 2, .. }), "{e}");
     assert!(e.to_string().contains("speaks protocol 1 and this pav speaks 2"), "{e}");
 }
+
+#[test]
+fn a_lost_done_is_recovered_from_the_status() {
+    // Every motion's last report and `done` are lost on the line, as a failed CRC drops them.
+    let s = sim(20.0, Faults { lose_end: true, ..Faults::default() });
+    let mut t = connect(&s, 300);
+    let seq = t.command(Command::MoveTo(Milli(90_000))).unwrap();
+    let t0 = Instant::now();
+    assert_eq!(t.wait_done(seq, Duration::from_secs(3)).unwrap(), 800);
+    // Asked after a third of the no-progress limit, not failed after all of it.
+    assert!(t0.elapsed() < Duration::from_secs(2), "{:?}", t0.elapsed());
+    let seq = t.command(Command::MoveBy(Milli(-45_000))).unwrap();
+    assert_eq!(t.wait_done(seq, Duration::from_secs(3)).unwrap(), 400);
+}

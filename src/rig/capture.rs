@@ -66,6 +66,8 @@ pub struct CaptureSummary {
     pub interpolated: usize,
     /// Final table position, degrees from home (not wrapped).
     pub final_deg: Option<f64>,
+    /// The table's `done` was lost on the line; the end came from a status report.
+    pub done_lost: bool,
 }
 
 /// Why a capture failed.
@@ -119,7 +121,9 @@ struct AngleTrack {
     samples: Vec<(f64, f64, i64)>,
     /// The clock map of the samples so far, refitted at every new sample.
     map: Option<ClockMap>,
-    finished: bool,
+    /// The motion is over and ended at this position (from `done`, or from a status report
+    /// when `done` was lost).
+    end: Option<i64>,
 }
 
 impl AngleTrack {
@@ -161,11 +165,29 @@ impl AngleTrack {
             return Some(first.2 as f64);
         }
         if d >= last.1 {
-            return self.finished.then_some(last.2 as f64);
+            return self.end.map(|end| self.tail(d, end));
         }
         let i = self.samples.partition_point(|s| s.1 <= d);
         let (a, b) = (self.samples[i - 1], self.samples[i]);
         Some(a.2 as f64 + (b.2 - a.2) as f64 * (d - a.1) / (b.1 - a.1))
+    }
+
+    /// Position at device time `d` after the last report of a motion that ended at `end`: the
+    /// end itself when the last report is it; otherwise (the last reports were lost on the line)
+    /// the recent speed carried forward, stopping at `end`. Spins decelerate within about one
+    /// microstep, so carrying the cruise speed to the end is exact to that.
+    fn tail(&self, d: f64, end: i64) -> f64 {
+        let last = *self.samples.last().expect("called with samples");
+        if last.2 == end {
+            return end as f64;
+        }
+        // Speed over the last half second of reports: whole-microstep reports 10 ms apart are
+        // too coarse for a speed from two of them.
+        let from = self.samples.iter().rev().find(|s| last.1 - s.1 >= 0.5).unwrap_or(&self.samples[0]);
+        let v = if last.1 > from.1 { (last.2 - from.2) as f64 / (last.1 - from.1) } else { 0.0 };
+        let p = last.2 as f64 + v * (d - last.1);
+        let (lo, hi) = if end >= last.2 { (last.2 as f64, end as f64) } else { (end as f64, last.2 as f64) };
+        p.clamp(lo, hi)
     }
 
     /// Best estimate when no later report will come: extrapolate the last two samples.
@@ -225,6 +247,11 @@ pub fn capture(
     let (mut frames, mut interpolated) = (0usize, 0usize);
     let mut last_event = Instant::now();
     let mut final_pos = None;
+    // Silence longer than this while spinning means lost reports or a lost `done`.
+    let quiet = Duration::from_millis(20 * opts.report_ms.max(1) as u64)
+        .max(Duration::from_millis(200))
+        .min(opts.no_progress / 2);
+    let (mut asked, mut done_lost) = (Instant::now(), false);
     let write_row = |side: &mut sidecar::Writer, idx: usize, at: Instant, pos: f64, first: Instant| {
         let angle = (pos * 360.0 / rev).rem_euclid(360.0);
         side.push(AngleSample { frame: idx, timestamp_s: at.duration_since(first).as_secs_f64(), angle_deg: angle })
@@ -260,7 +287,7 @@ pub fn capture(
                     last_event = rx;
                 }
                 Ok(Some(Event::Done { seq: Some(s), pos })) if s == seq => {
-                    track.finished = true;
+                    track.end = Some(pos);
                     final_pos = Some(pos);
                 }
                 Ok(Some(Event::Alarm(a))) => break 'rec Some(format!("turntable alarm: {}", a.text())),
@@ -279,8 +306,21 @@ pub fn capture(
             pending.pop_front();
             progress.status(&format!("{:.1}°", (pos * 360.0 / rev).rem_euclid(360.0)));
         }
-        if track.finished && pending.is_empty() {
+        if track.end.is_some() && pending.is_empty() {
             break None;
+        }
+        // Reports stopped: the motion may be over with its `done` lost on the line. Ask.
+        if track.end.is_none() && last_event.max(asked).elapsed() > quiet {
+            asked = Instant::now();
+            match table.motion_ended(seq) {
+                Ok(Some(pos)) => {
+                    track.end = Some(pos);
+                    final_pos = Some(pos);
+                    done_lost = true;
+                }
+                Ok(None) => {}
+                Err(e) => break Some(e.to_string()),
+            }
         }
         if last_event.elapsed() > opts.no_progress {
             break Some(format!("turntable sent no angle report for {:?}", opts.no_progress));
@@ -304,6 +344,7 @@ pub fn capture(
         frames,
         interpolated,
         final_deg: final_pos.map(|p| p as f64 * 360.0 / rev),
+        done_lost,
     };
     let cause = cause.or_else(|| released.err().map(|e| format!("closing the video: {e}")));
     match cause {
@@ -344,7 +385,7 @@ mod tests {
         assert!((p - 1000.0).abs() < 5.0, "{p}");
         // Beyond the last report: unknown until the motion is done.
         assert_eq!(tr.at(t0 + Duration::from_secs(5)), None);
-        tr.finished = true;
+        tr.end = Some(1990);
         assert_eq!(tr.at(t0 + Duration::from_secs(5)), Some(1990.0));
     }
 }

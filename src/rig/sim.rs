@@ -24,6 +24,8 @@ pub struct Faults {
     pub stall_after: Option<Duration>,
     /// Stop answering anything after this long (a hung firmware).
     pub hang_after: Option<Duration>,
+    /// Lose every motion's last angle report and its `done` on the line.
+    pub lose_end: bool,
 }
 
 /// Why a simulator could not start.
@@ -230,6 +232,15 @@ fn serve(mut port: TTYPort, opts: SimOptions, stop: Arc<AtomicBool>, truth: Trut
         if hung {
             lines.clear();
             continue;
+        }
+        if f.lose_end {
+            // The device sends a motion's last `@t pos` and its `done` together.
+            while let Some(i) = lines.iter().position(|l| l.starts_with("done")) {
+                lines.remove(i);
+                if i > 0 && lines[i - 1].starts_with('@') {
+                    lines.remove(i - 1);
+                }
+            }
         }
         for line in lines.drain(..) {
             if !f.delay.is_zero() {

@@ -462,10 +462,16 @@ impl Turntable {
 
     /// [`Turntable::wait_done`], and when `stop` is raised (Ctrl-C) the table is told to ramp
     /// down, once; the motion then ends with its `done` at wherever the table stopped.
+    ///
+    /// A `done` lost on the line (its CRC failed) is not waited for until `no_progress`: after a
+    /// third of that without news the table is asked for its status, and an idle table has ended
+    /// the motion.
     pub fn wait_done_or_stop(&mut self, seq: u32, no_progress: Duration, stop: &AtomicBool) -> Result<i64> {
         // Poll often enough to act on `stop` promptly.
         const POLL: Duration = Duration::from_millis(100);
+        let quiet = (no_progress / 3).max(POLL);
         let start = Instant::now();
+        let mut asked = start;
         let mut stopping = false;
         loop {
             if !stopping && stop.load(Ordering::Relaxed) {
@@ -477,8 +483,36 @@ impl Turntable {
                 Some(Event::Alarm(a)) => return Err(TurntableError::Alarm(a)),
                 _ => {}
             }
+            if self.last_alive.max(asked).elapsed() >= quiet {
+                asked = Instant::now();
+                if let Some(pos) = self.motion_ended(seq)? {
+                    return Ok(pos);
+                }
+            }
             if self.last_alive.max(start).elapsed() >= no_progress {
                 return Err(TurntableError::NoProgress(no_progress));
+            }
+        }
+    }
+
+    /// Asks the table whether the motion `seq` is over, for when its `done` may have been lost:
+    /// `Some(final position)` if the table is idle (or its `done` arrived meanwhile), `None` while
+    /// it still moves. A table that answers while moving counts as alive.
+    pub fn motion_ended(&mut self, seq: u32) -> Result<Option<i64>> {
+        let st = self.status()?;
+        // Replies are in order: a `done` sent before the status line has been filed by now.
+        if let Some(i) = self.events.iter().position(|e| matches!(e, Event::Done { seq: Some(s), .. } if *s == seq)) {
+            let Some(Event::Done { pos, .. }) = self.events.remove(i) else { unreachable!("found above") };
+            return Ok(Some(pos));
+        }
+        if let Some(a) = st.alarm {
+            return Err(TurntableError::Alarm(a));
+        }
+        match st.state {
+            State::Idle | State::Alarm => Ok(Some(st.pos)),
+            State::Moving | State::Spinning | State::Homing => {
+                self.last_alive = Instant::now();
+                Ok(None)
             }
         }
     }

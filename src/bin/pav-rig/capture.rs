@@ -67,6 +67,9 @@ pub fn run(a: &Args) -> Result<()> {
         sum.interpolated,
         sum.final_deg.unwrap_or(f64::NAN)
     );
+    if sum.done_lost {
+        println!("the table's `done` was lost on the line; its end position came from a status report");
+    }
     println!("video   {}\nsidecar {}", sum.video.display(), sum.sidecar.display());
     Ok(())
 }

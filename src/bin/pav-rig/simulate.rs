@@ -37,6 +37,7 @@ pub fn run(a: &Args) -> Result<()> {
         stall_after: secs("--stall-after", a.stall_after)?,
         disconnect_after: secs("--disconnect-after", a.disconnect_after)?,
         hang_after: None,
+        lose_end: false,
     };
     let sim = SimTurntable::spawn(SimOptions { time_scale: a.time_scale, faults, ..SimOptions::default() })?;
     println!("{}", sim.path().display());
