@@ -15,7 +15,10 @@
 //! per = "pixel"         # or "image": one draw for the whole render
 //! ```
 
+pub mod align;
+pub mod blender;
 pub mod eot;
+pub mod views;
 
 use crate::render::shade::Lights;
 use serde::Deserialize;

@@ -17,6 +17,7 @@ mod eval_digital;
 mod optimize;
 mod render;
 mod uv;
+mod views;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -55,6 +56,9 @@ enum Cmd {
     BenchStep(bench_step::Args),
     /// Render the mesh with its UV texture (flat, unlit) and the textured-region mask as PNGs.
     Render(render::Args),
+    /// Physically based views of the car by Blender Cycles (headless): photos, masks, manifest.
+    #[command(subcommand)]
+    Views(views::Cmd),
 }
 
 /// How `eval-digital` and `crossval` score composites.
@@ -89,5 +93,6 @@ fn main() -> Result<()> {
         #[cfg(feature = "optimize")]
         Cmd::BenchStep(a) => bench_step::run(&a),
         Cmd::Render(a) => render::run(&a),
+        Cmd::Views(c) => views::run(&c),
     }
 }

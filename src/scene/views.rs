@@ -1,0 +1,539 @@
+//! Physically based training and test views rendered by Blender Cycles, run headless.
+//!
+//! pav computes every camera itself ([`crate::geometry::camera`]) and hands Blender the mesh
+//! already in its own world frame, so the two renderers share one camera convention by
+//! construction; [`super::align`] checks that they agree to the pixel. A config lists the mesh,
+//! the pose grid, the environments and the effects; only listed effects are simulated.
+//!
+//! ```toml
+//! [mesh]
+//! obj = "../../../shared/data/pav-camou/xfl_yxz.obj"
+//! normalize = "pav"            # PAV-Camou's (vertex mean, max-abs) or "bbox" (FCA/DAS)
+//! up = "+y"                    # the file's up axis; pav's world is +Y up
+//! texture = "paint.png"        # body texture; default: the mesh's first map_Kd
+//!
+//! [render]
+//! size = 416
+//! samples = 32
+//! effects = ["shadows"]        # "shadows" (a shadow-catcher ground), "reflections" (clear coat)
+//!
+//! [[environments]]             # a Blender studio light by name, or an .exr/.hdr path
+//! name = "city"
+//!
+//! [[poses]]                    # distances in normalized mesh units, angles in degrees
+//! distances = [2.2]
+//! elevations = [10, 30]
+//! azimuth_step = 90            # or azimuths = [...]
+//! ```
+
+use super::blender::{Blender, BlenderError, Job, JobView, Mode};
+use crate::geometry::camera::{spherical, Camera};
+use crate::geometry::mesh::{Mesh, MeshError};
+use crate::progress::Progress;
+use crate::render::raster::{GBuffer, EMPTY};
+use serde::Deserialize;
+use std::collections::HashSet;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Where Debian's `blender` package puts its HDR environments.
+pub const STUDIO_LIGHTS: &str = "/usr/share/blender/datafiles/studiolights/world";
+
+/// Errors making views.
+#[derive(Debug, thiserror::Error)]
+pub enum ViewsError {
+    /// The config file could not be read or parsed.
+    #[error("{path}: {msg}")]
+    Config {
+        /// Config file.
+        path: PathBuf,
+        /// What is wrong.
+        msg: String,
+    },
+    /// The mesh could not be used.
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
+    /// Blender could not render.
+    #[error(transparent)]
+    Blender(#[from] BlenderError),
+    /// Reading or writing a file failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// An image could not be written.
+    #[error(transparent)]
+    Image(#[from] crate::image::ImageError),
+}
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ViewsError + '_ {
+    move |source| ViewsError::Io { path: path.into(), source }
+}
+
+/// How the mesh is normalized (which fixes the units of the pose grid).
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Normalize {
+    /// PAV-Camou: vertex-mean centring, max-abs scaling.
+    #[default]
+    Pav,
+    /// neural_renderer (FCA, DAS): bounding box centred, longest side 2.
+    Bbox,
+}
+
+/// The car.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ViewMesh {
+    /// OBJ with UVs.
+    pub obj: PathBuf,
+    /// Normalization.
+    #[serde(default)]
+    pub normalize: Normalize,
+    /// The file's up axis: `+y` (pav's own), `-y`, `+z`, `-z`, `+x`, `-x`.
+    #[serde(default = "plus_y")]
+    pub up: String,
+    /// Body texture; default: the first `map_Kd` of the mesh's materials.
+    #[serde(default)]
+    pub texture: Option<PathBuf>,
+}
+
+fn plus_y() -> String {
+    "+y".into()
+}
+
+/// An effect the PBR render simulates; everything not listed is off.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Hash)]
+#[serde(rename_all = "lowercase")]
+pub enum PbrEffect {
+    /// A shadow-catcher ground plane under the car.
+    Shadows,
+    /// Glossy paint (metallic flakes and a clear coat) reflecting the environment; without it
+    /// the paint is diffuse.
+    Reflections,
+}
+
+/// Image settings.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RenderSettings {
+    /// Image side in pixels (square).
+    pub size: usize,
+    /// Cycles samples per pixel.
+    pub samples: u32,
+    /// Effects to simulate.
+    #[serde(default)]
+    pub effects: Vec<PbrEffect>,
+}
+
+/// A lighting environment.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Environment {
+    /// A studio light name (`city`, `courtyard`, `forest`, `interior`, `night`, `studio`,
+    /// `sunrise`, `sunset`) or a path to an .exr/.hdr map.
+    pub name: String,
+    /// Brightness multiplier.
+    #[serde(default = "one")]
+    pub strength: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+/// A grid of cameras on spheres around a target, looking at it with +Y up.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PoseGrid {
+    /// Camera distances (normalized mesh units).
+    pub distances: Vec<f32>,
+    /// Elevations above the horizon, degrees.
+    pub elevations: Vec<f32>,
+    /// Azimuths, degrees.
+    #[serde(default)]
+    pub azimuths: Vec<f32>,
+    /// Or every this many degrees from 0.
+    #[serde(default)]
+    pub azimuth_step: Option<f32>,
+    /// Field of view, degrees.
+    #[serde(default = "sixty")]
+    pub fov_deg: f32,
+    /// Look-at point.
+    #[serde(default)]
+    pub target: [f32; 3],
+}
+
+fn sixty() -> f32 {
+    60.0
+}
+
+/// A `pav views render` config.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ViewsConfig {
+    /// The car.
+    pub mesh: ViewMesh,
+    /// Image settings and effects.
+    pub render: RenderSettings,
+    /// Lighting environments (every pose is rendered in each).
+    pub environments: Vec<Environment>,
+    /// Camera grids.
+    pub poses: Vec<PoseGrid>,
+}
+
+/// One view to render.
+#[derive(Clone, Debug, PartialEq)]
+pub struct View {
+    /// Unique name, also the file stem.
+    pub name: String,
+    /// Index into the config's environments.
+    pub environment: usize,
+    /// Distance, elevation and azimuth (units, degrees, degrees).
+    pub pose: [f32; 3],
+    /// The camera.
+    pub camera: Camera,
+}
+
+impl ViewsConfig {
+    /// Reads a config; relative paths are taken from the config's folder.
+    pub fn load(path: &Path) -> Result<ViewsConfig, ViewsError> {
+        let err = |msg: String| ViewsError::Config { path: path.into(), msg };
+        let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+        let mut c: ViewsConfig = toml::from_str(&text).map_err(|e| err(e.to_string()))?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        c.mesh.obj = dir.join(&c.mesh.obj);
+        c.mesh.texture = c.mesh.texture.map(|t| dir.join(t));
+        for e in &mut c.environments {
+            if e.name.contains('/') || e.name.contains('.') {
+                e.name = dir.join(&e.name).display().to_string();
+            }
+        }
+        c.check().map_err(err)?;
+        Ok(c)
+    }
+
+    /// Refuses configs that would render nothing or something else than asked.
+    pub fn check(&self) -> Result<(), String> {
+        if self.render.size < 8 || self.render.samples == 0 {
+            return Err(format!(
+                "render: size {} and samples {}: need size ≥ 8 and samples ≥ 1",
+                self.render.size, self.render.samples
+            ));
+        }
+        if self.environments.is_empty() || self.poses.is_empty() {
+            return Err("list at least one [[environments]] and one [[poses]]".into());
+        }
+        up_rotation(&self.mesh.up)?;
+        for (i, p) in self.poses.iter().enumerate() {
+            let az = p.azimuths.len() + usize::from(p.azimuth_step.is_some());
+            if p.distances.is_empty() || p.elevations.is_empty() || az == 0 {
+                return Err(format!("poses #{}: needs distances, elevations and azimuths or azimuth_step", i + 1));
+            }
+            if p.distances.iter().any(|d| !(d.is_finite() && *d > 0.0)) {
+                return Err(format!("poses #{}: distances must be positive", i + 1));
+            }
+            if p.azimuth_step.is_some_and(|s| !(s.is_finite() && s > 0.0)) {
+                return Err(format!("poses #{}: azimuth_step must be positive", i + 1));
+            }
+            if !(p.fov_deg > 1.0 && p.fov_deg < 170.0) {
+                return Err(format!("poses #{}: fov_deg {} is not a field of view", i + 1, p.fov_deg));
+            }
+        }
+        let mut seen = HashSet::new();
+        if let Some(v) = self.views().into_iter().find(|v| !seen.insert(v.name.clone())) {
+            return Err(format!("view {} comes twice (an environment listed twice, or grids that overlap)", v.name));
+        }
+        Ok(())
+    }
+
+    /// The environment map file of environment `i`.
+    pub fn environment_path(&self, i: usize) -> Result<PathBuf, String> {
+        let name = &self.environments[i].name;
+        let p =
+            if name.contains('/') { PathBuf::from(name) } else { Path::new(STUDIO_LIGHTS).join(format!("{name}.exr")) };
+        if p.exists() {
+            Ok(p)
+        } else {
+            Err(format!(
+                "environment `{name}`: {} does not exist (studio lights: city, courtyard, forest, interior, night, studio, sunrise, sunset)",
+                p.display()
+            ))
+        }
+    }
+
+    /// Every view of the config, in a fixed order: environments, then grids, distances,
+    /// elevations, azimuths.
+    pub fn views(&self) -> Vec<View> {
+        let mut out = Vec::new();
+        for (ei, env) in self.environments.iter().enumerate() {
+            let env_name = Path::new(&env.name).file_stem().map_or(env.name.clone(), |s| s.to_string_lossy().into());
+            for g in &self.poses {
+                let mut az = g.azimuths.clone();
+                if let Some(step) = g.azimuth_step {
+                    az.extend((0..).map(|k| k as f32 * step).take_while(|a| *a < 360.0 - 1e-3));
+                }
+                for &d in &g.distances {
+                    for &e in &g.elevations {
+                        for &a in &az {
+                            let name = format!("{env_name}_d{d:.2}_e{e:.0}_a{a:05.1}");
+                            let eye = spherical(d, e, a);
+                            let eye = [eye[0] + g.target[0], eye[1] + g.target[1], eye[2] + g.target[2]];
+                            let camera = Camera::look_at(eye, g.target, [0.0, 1.0, 0.0], g.fov_deg);
+                            out.push(View { name, environment: ei, pose: [d, e, a], camera });
+                        }
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// The mesh in pav's world frame: up axis turned to +Y, then normalized.
+    pub fn load_mesh(&self) -> Result<Mesh, ViewsError> {
+        // The loader refuses a face corner without a UV index.
+        let mut m = Mesh::load_obj(&self.mesh.obj)?;
+        let r = up_rotation(&self.mesh.up).expect("checked by load");
+        for p in &mut m.positions {
+            *p = [0, 1, 2].map(|k| r[k][0] * p[0] + r[k][1] * p[1] + r[k][2] * p[2]);
+        }
+        for n in &mut m.normals {
+            *n = [0, 1, 2].map(|k| r[k][0] * n[0] + r[k][1] * n[1] + r[k][2] * n[2]);
+        }
+        match self.mesh.normalize {
+            Normalize::Pav => {
+                m.normalize();
+            }
+            Normalize::Bbox => m.normalize_bbox(),
+        }
+        Ok(m)
+    }
+
+    /// The body texture: the config's, else the mesh's first `map_Kd`.
+    pub fn texture(&self, mesh: &Mesh) -> Result<PathBuf, ViewsError> {
+        self.mesh.texture.clone().or_else(|| mesh.materials.iter().find_map(|m| m.map_kd.clone())).ok_or_else(|| {
+            ViewsError::Config {
+                path: self.mesh.obj.clone(),
+                msg: "no texture: set mesh.texture (the mesh names no map_Kd)".into(),
+            }
+        })
+    }
+}
+
+/// The rotation taking a file whose up axis is `up` to pav's +Y up (a proper rotation, so the
+/// mesh is never mirrored).
+pub fn up_rotation(up: &str) -> Result<[[f32; 3]; 3], String> {
+    Ok(match up {
+        "+y" => [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        "-y" => [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]],
+        "+z" => [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]],
+        "-z" => [[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]],
+        "+x" => [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]],
+        "-x" => [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]],
+        other => return Err(format!("mesh.up `{other}`: use +y, -y, +z, -z, +x or -x")),
+    })
+}
+
+/// The manifest's columns.
+pub const MANIFEST_HEADER: &str =
+    "name,environment,image,mask,distance,elevation_deg,azimuth_deg,eye_x,eye_y,eye_z,fov_deg,size,samples,seconds";
+
+/// The manifest of a view folder, or of one shard of it.
+pub fn manifest_path(dir: &Path, shard: Option<(usize, usize)>) -> PathBuf {
+    match shard {
+        Some((k, n)) => dir.join(format!("manifest.{k}-of-{n}.csv")),
+        None => dir.join("manifest.csv"),
+    }
+}
+
+/// Names already in a manifest whose image exists (what a resumed run skips).
+pub fn rendered(manifest: &Path, dir: &Path) -> HashSet<String> {
+    let Ok(text) = std::fs::read_to_string(manifest) else { return HashSet::new() };
+    text.lines()
+        .skip(1)
+        .filter_map(|l| {
+            let mut f = l.split(',');
+            let (name, image) = (f.next()?, f.nth(1)?);
+            dir.join(image).exists().then(|| name.to_string())
+        })
+        .collect()
+}
+
+/// What a `render_views` run did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderSummary {
+    /// Views this run (or shard) covers.
+    pub total: usize,
+    /// Of them, already rendered by an earlier run.
+    pub resumed: usize,
+    /// Rendered now.
+    pub rendered: usize,
+    /// The manifest written.
+    pub manifest: PathBuf,
+}
+
+/// Renders the config's views (shard `k` of `n`, 1-based, when given) into `dir`: per view
+/// `views/<name>.png` (Cycles) and `views/<name>_mask.png` (the car's silhouette from pav's
+/// rasterizer, which the alignment test ties to Blender's), and a manifest row written as
+/// each view finishes, so a crash loses at most the view in progress and a rerun resumes.
+pub fn render_views(
+    cfg: &ViewsConfig,
+    dir: &Path,
+    shard: Option<(usize, usize)>,
+    blender: &Blender,
+    progress: &dyn Progress,
+) -> Result<RenderSummary, ViewsError> {
+    let mesh = cfg.load_mesh()?;
+    let texture = cfg.texture(&mesh)?;
+    let tex = crate::image::Rgb::load(&texture)?;
+    let envs: Vec<PathBuf> = (0..cfg.environments.len())
+        .map(|i| cfg.environment_path(i))
+        .collect::<Result<_, _>>()
+        .map_err(|msg| ViewsError::Config { path: dir.into(), msg })?;
+    let views_dir = dir.join("views");
+    std::fs::create_dir_all(&views_dir).map_err(io(&views_dir))?;
+    let obj = dir.join("mesh.obj");
+    mesh.write_obj(&obj, None).map_err(io(&obj))?;
+    let all = cfg.views();
+    let mine: Vec<&View> = match shard {
+        Some((k, n)) => all.iter().enumerate().filter(|(i, _)| i % n == k - 1).map(|(_, v)| v).collect(),
+        None => all.iter().collect(),
+    };
+    let manifest = manifest_path(dir, shard);
+    let done = rendered(&manifest, dir);
+    if !manifest.exists() {
+        std::fs::write(&manifest, format!("{MANIFEST_HEADER}\n")).map_err(io(&manifest))?;
+    }
+    let mut rows = std::fs::OpenOptions::new().append(true).open(&manifest).map_err(io(&manifest))?;
+    let total = mine.len();
+    let resumed = mine.iter().filter(|v| done.contains(&v.name)).count();
+    progress.begin("rendering views", total as u64);
+    progress.set_position(resumed as u64);
+    let ground_y = mesh.bounds().0[1];
+    let effects: HashSet<PbrEffect> = cfg.render.effects.iter().copied().collect();
+    let mut rendered_now = 0;
+    for (ei, env) in envs.iter().enumerate() {
+        let todo: Vec<&&View> = mine.iter().filter(|v| v.environment == ei && !done.contains(&v.name)).collect();
+        if todo.is_empty() {
+            continue;
+        }
+        let mut job = Job::new(Mode::Pbr, obj.clone(), cfg.render.size, cfg.render.samples, ground_y);
+        job.texture = Some(std::fs::canonicalize(&texture).map_err(io(&texture))?);
+        job.tex_size = [tex.width, tex.height];
+        job.environment = Some(env.clone());
+        job.env_strength = cfg.environments[ei].strength;
+        job.shadows = effects.contains(&PbrEffect::Shadows);
+        if effects.contains(&PbrEffect::Reflections) {
+            (job.metallic, job.roughness, job.clearcoat) = (0.3, 0.35, 0.5);
+        }
+        job.views =
+            todo.iter().map(|v| JobView::new(&v.name, &v.camera, views_dir.join(format!("{}.png", v.name)))).collect();
+        let mut failure = None;
+        blender.run(&job, dir, |name, secs| {
+            let Some(v) = todo.iter().find(|v| v.name == name) else { return };
+            let g = GBuffer::render(&mesh, &v.camera, cfg.render.size);
+            let mask: Vec<f32> = g.face.iter().flat_map(|f| [if *f == EMPTY { 0.0 } else { 1.0 }; 3]).collect();
+            let mask_path = views_dir.join(format!("{name}_mask.png"));
+            if let Err(e) = crate::image::save_rgb(&mask_path, cfg.render.size, cfg.render.size, &mask) {
+                failure.get_or_insert(ViewsError::Image(e));
+                return;
+            }
+            let [d, e, a] = v.pose;
+            let c = &v.camera;
+            let line = format!(
+                "{name},{},views/{name}.png,views/{name}_mask.png,{d},{e},{a},{},{},{},{},{},{},{secs:.3}\n",
+                Path::new(&cfg.environments[ei].name).file_stem().map_or("".into(), |s| s.to_string_lossy()),
+                c.eye[0],
+                c.eye[1],
+                c.eye[2],
+                c.fov_deg,
+                cfg.render.size,
+                cfg.render.samples
+            );
+            if let Err(e) = rows.write_all(line.as_bytes()).and_then(|_| rows.flush()) {
+                failure.get_or_insert(ViewsError::Io { path: manifest.clone(), source: e });
+                return;
+            }
+            rendered_now += 1;
+            progress.advance(1);
+            progress.status(&format!("{name}: {secs:.1} s"));
+        })?;
+        if let Some(e) = failure {
+            return Err(e);
+        }
+    }
+    progress.end(None);
+    Ok(RenderSummary { total, resumed, rendered: rendered_now, manifest })
+}
+
+/// Joins the shard manifests `manifest.K-of-N.csv` in `dir` into `manifest.csv`, refusing a
+/// view listed twice; returns the number of views.
+pub fn merge_shards(dir: &Path) -> Result<usize, ViewsError> {
+    let mut shards: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(io(dir))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            let n = p.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
+            n.starts_with("manifest.") && n.ends_with(".csv") && n.contains("-of-")
+        })
+        .collect();
+    shards.sort();
+    if shards.is_empty() {
+        return Err(ViewsError::Config {
+            path: dir.into(),
+            msg: "no shard manifests (manifest.K-of-N.csv) here".into(),
+        });
+    }
+    let mut seen = HashSet::new();
+    let mut out = format!("{MANIFEST_HEADER}\n");
+    for s in &shards {
+        let text = std::fs::read_to_string(s).map_err(io(s))?;
+        for l in text.lines().skip(1).filter(|l| !l.is_empty()) {
+            let name = l.split(',').next().unwrap_or_default().to_string();
+            if !seen.insert(name.clone()) {
+                return Err(ViewsError::Config { path: s.clone(), msg: format!("view {name} is in two shards") });
+            }
+            out.push_str(l);
+            out.push('\n');
+        }
+    }
+    let path = manifest_path(dir, None);
+    std::fs::write(&path, out).map_err(io(&path))?;
+    Ok(seen.len())
+}
+
+/// Writes `contact.png` in `dir`: up to `max` views of its manifest side by side, each beside
+/// its mask, evenly picked, so a glance shows poses, lighting and alignment.
+pub fn contact_sheet(dir: &Path, max: usize) -> Result<PathBuf, ViewsError> {
+    let manifest = manifest_path(dir, None);
+    let text = std::fs::read_to_string(&manifest).map_err(io(&manifest))?;
+    let rows: Vec<(String, String)> = text
+        .lines()
+        .skip(1)
+        .filter_map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            Some((f.get(2)?.to_string(), f.get(3)?.to_string()))
+        })
+        .collect();
+    let pick: Vec<&(String, String)> =
+        if rows.len() <= max { rows.iter().collect() } else { (0..max).map(|k| &rows[k * rows.len() / max]).collect() };
+    let mut tiles = Vec::new();
+    let mut side = 0;
+    for (img, mask) in pick {
+        for p in [img, mask] {
+            let t = crate::image::Rgb::load(&dir.join(p))?;
+            side = t.width;
+            tiles.push(t.rgb);
+        }
+    }
+    let path = dir.join("contact.png");
+    if tiles.is_empty() || tiles.iter().any(|t| t.len() != side * side * 3) {
+        return Err(ViewsError::Config { path: manifest, msg: "no views of one size to show".into() });
+    }
+    let (w, h, px) = crate::image::tile(&tiles, side, side, 8, 1.0);
+    crate::image::save_rgb(&path, w, h, &px)?;
+    Ok(path)
+}

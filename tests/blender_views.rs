@@ -1,0 +1,199 @@
+//! Blender Cycles views: pav's rasterizer and Blender agree on pose and texture mapping to the
+//! pixel (the composite lays one over the other), and a flipped or mirrored mapping fails the
+//! same check. Needs Debian's `blender` (scripts/setup.sh installs it).
+
+mod common;
+
+use pav::geometry::camera::{spherical, Camera};
+use pav::geometry::mesh::Mesh;
+use pav::render::raster::GBuffer;
+use pav::scene::align::{compare, compare_texels, pav_uv, read_uv_png, texel_code};
+use pav::scene::blender::{Blender, Job, JobView, Mode};
+
+fn impala() -> Mesh {
+    let mut m = Mesh::load_obj(&common::shared_data().join("pav-camou/xfl_yxz.obj")).unwrap();
+    m.normalize();
+    m
+}
+
+#[test]
+fn blender_and_pav_agree_to_the_pixel() {
+    let blender = Blender::find().expect("blender (scripts/setup.sh installs it)");
+    let mesh = impala();
+    let tmp = tempfile::tempdir().unwrap();
+    let obj = tmp.path().join("mesh.obj");
+    mesh.write_obj(&obj, None).unwrap();
+    let size = 256;
+    let cams: Vec<Camera> = [(2.2, 20.0, 45.0), (1.6, 5.0, 200.0), (3.0, 45.0, 300.0)]
+        .iter()
+        .map(|&(d, e, a)| Camera::look_at(spherical(d, e, a), [0.0; 3], [0.0, 1.0, 0.0], 60.0))
+        .collect();
+    let mut job = Job::new(Mode::Uv, obj, size, 1, mesh.bounds().0[1]);
+    job.views = cams
+        .iter()
+        .enumerate()
+        .map(|(i, c)| JobView::new(&format!("v{i}"), c, tmp.path().join(format!("v{i}.png"))))
+        .collect();
+    let mut done = Vec::new();
+    blender.run(&job, tmp.path(), |name, _| done.push(name.to_string())).unwrap();
+    assert_eq!(done, ["v0", "v1", "v2"]);
+    for (i, cam) in cams.iter().enumerate() {
+        let (n, b) = read_uv_png(&tmp.path().join(format!("v{i}.png"))).unwrap();
+        assert_eq!(n, size);
+        let g = GBuffer::render(&mesh, cam, size);
+        let uv = pav_uv(&g, &mesh);
+        let a = compare(&g, &uv, &b);
+        eprintln!("view {i}: {a:?}");
+        assert!(a.pixels > 2000, "{a:?}");
+        assert!(a.within_one_pixel(), "view {i}: {a:?}");
+        assert!(a.iou > 0.97, "view {i}: {a:?}");
+        // A texture flipped in v, or an image mirrored left to right, must fail the same check.
+        let flipped: Vec<_> = uv.iter().map(|o| o.map(|[u, v]| [u, 1.0 - v])).collect();
+        let f = compare(&g, &flipped, &b);
+        assert!(!f.within_one_pixel(), "a v-flipped UV passed: {f:?}");
+        let mirrored: Vec<[f64; 3]> = (0..size * size).map(|k| b[(k / size) * size + size - 1 - k % size]).collect();
+        let m = compare(&g, &uv, &mirrored);
+        assert!(!m.within_one_pixel(), "a mirrored image passed: {m:?}");
+    }
+}
+
+#[test]
+fn a_texture_lands_on_the_same_texels_in_both_renderers() {
+    let blender = Blender::find().expect("blender (scripts/setup.sh installs it)");
+    let mesh = impala();
+    let tmp = tempfile::tempdir().unwrap();
+    let obj = tmp.path().join("mesh.obj");
+    mesh.write_obj(&obj, None).unwrap();
+    // A coarse code: texels several pixels wide, so a half-texel convention slip shows.
+    let (w, h) = (96, 64);
+    let tex = tmp.path().join("code.png");
+    texel_code(w, h).save(&tex).unwrap();
+    let size = 256;
+    let cam = Camera::look_at(spherical(2.0, 25.0, 60.0), [0.0; 3], [0.0, 1.0, 0.0], 60.0);
+    let mut job = Job::new(Mode::Emission, obj, size, 1, mesh.bounds().0[1]);
+    job.texture = Some(tex);
+    job.tex_size = [w, h];
+    job.interpolation = "Closest".into();
+    job.raw = true;
+    job.views = vec![JobView::new("code", &cam, tmp.path().join("code_render.png"))];
+    blender.run(&job, tmp.path(), |_, _| {}).unwrap();
+    let (_, b) = read_uv_png(&tmp.path().join("code_render.png")).unwrap();
+    let g = GBuffer::render(&mesh, &cam, size);
+    let uv = pav_uv(&g, &mesh);
+    let (same, worst, n) = compare_texels(&uv, &b, w, h);
+    eprintln!("texel code: {n} pixels, {:.2} % on the same texel, worst {worst} texels", 100.0 * same);
+    assert!(n > 5000, "{n}");
+    assert!(same > 0.97 && worst <= 1, "{same} same, worst {worst}");
+    let flipped: Vec<_> = uv.iter().map(|o| o.map(|[u, v]| [u, 1.0 - v])).collect();
+    let (fs, _, _) = compare_texels(&flipped, &b, w, h);
+    assert!(fs < 0.5, "a v-flipped texture matched {fs}");
+}
+
+fn pav() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_pav"))
+}
+
+fn run_ok(c: &mut std::process::Command) -> String {
+    let o = c.output().unwrap();
+    let text = format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "{text}");
+    text
+}
+
+fn manifest_names(path: &std::path::Path) -> Vec<String> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next().unwrap(), pav::scene::views::MANIFEST_HEADER);
+    lines.map(|l| l.split(',').next().unwrap().to_string()).collect()
+}
+
+#[test]
+fn the_ci_config_renders_resumes_and_shards() {
+    common::shared_data();
+    let cfg = common::repo().join("configs/views/ci.toml");
+    let tmp = tempfile::tempdir().unwrap();
+    let full = tmp.path().join("full");
+    // Killed part way (pav and its Blender child): what was finished stays, a rerun resumes.
+    let mut child = {
+        use std::os::unix::process::CommandExt;
+        pav().args(["views", "render"]).arg(&cfg).arg("-o").arg(&full).process_group(0).spawn().unwrap()
+    };
+    let manifest = full.join("manifest.csv");
+    let t0 = std::time::Instant::now();
+    while std::fs::read_to_string(&manifest).map_or(0, |t| t.lines().count()) < 3 {
+        assert!(t0.elapsed() < std::time::Duration::from_secs(120), "no view within 2 min");
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let killed = std::process::Command::new("kill").args(["-s", "KILL", "--", &format!("-{}", child.id())]).status();
+    assert!(killed.unwrap().success());
+    let _ = child.wait();
+    let before = manifest_names(&manifest).len();
+    assert!((2..6).contains(&before), "{before} views before the kill");
+    let out = run_ok(pav().args(["views", "render"]).arg(&cfg).arg("-o").arg(&full));
+    assert!(out.contains(&format!("6 views: {} rendered now, {before} from an earlier run", 6 - before)), "{out}");
+    let names = manifest_names(&manifest);
+    assert_eq!(names.len(), 6, "{names:?}");
+    assert_eq!(names.iter().collect::<std::collections::HashSet<_>>().len(), 6, "{names:?}");
+    assert!(full.join("contact.png").exists());
+    // Every view shows the car where pav's mask says, brighter or darker than its surroundings.
+    for n in &names {
+        let img = pav::image::Rgb::load(&full.join(format!("views/{n}.png"))).unwrap();
+        let mask = pav::image::Rgb::load(&full.join(format!("views/{n}_mask.png"))).unwrap();
+        assert_eq!((img.width, mask.width), (64, 64));
+        let on: Vec<usize> = (0..64 * 64).filter(|&i| mask.rgb[3 * i] > 0.5).collect();
+        assert!(on.len() > 200 && on.len() < 3000, "{n}: car covers {} px", on.len());
+    }
+    // A rerun renders nothing; a deleted image is rendered again.
+    let out = run_ok(pav().args(["views", "render"]).arg(&cfg).arg("-o").arg(&full));
+    assert!(out.contains("6 views: 0 rendered now, 6 from an earlier run"), "{out}");
+    std::fs::remove_file(full.join(format!("views/{}.png", names[4]))).unwrap();
+    let out = run_ok(pav().args(["views", "render"]).arg(&cfg).arg("-o").arg(&full));
+    assert!(out.contains("6 views: 1 rendered now, 5 from an earlier run"), "{out}");
+    // Two shards and a merge make the same set of views.
+    let sharded = tmp.path().join("sharded");
+    for k in ["1/2", "2/2"] {
+        let out = run_ok(pav().args(["views", "render"]).arg(&cfg).arg("-o").arg(&sharded).args(["--shard", k]));
+        assert!(out.contains("3 views: 3 rendered now"), "{out}");
+    }
+    let out = run_ok(pav().args(["views", "merge"]).arg(&sharded));
+    assert!(out.contains("6 views"), "{out}");
+    let mut a = manifest_names(&sharded.join("manifest.csv"));
+    let mut b = names.clone();
+    a.sort();
+    b.sort();
+    assert_eq!(a, b);
+}
+
+#[test]
+fn bad_input_gets_a_clear_error() {
+    common::shared_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let ci = std::fs::read_to_string(common::repo().join("configs/views/ci.toml")).unwrap();
+    let shared = common::repo().join("../shared/data").display().to_string();
+    let ci = ci.replace("../../../shared/data", &shared);
+    let write = |name: &str, text: &str| {
+        let p = tmp.path().join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    };
+    let fails = |cfg: &std::path::Path, env: Option<(&str, &str)>, needle: &str| {
+        let mut c = pav();
+        c.args(["views", "render"]).arg(cfg).arg("-o").arg(tmp.path().join("out"));
+        if let Some((k, v)) = env {
+            c.env(k, v);
+        }
+        let o = c.output().unwrap();
+        let text = String::from_utf8_lossy(&o.stderr).to_string();
+        assert!(!o.status.success(), "{needle}: {text}");
+        assert!(text.contains(needle), "expected `{needle}` in: {text}");
+    };
+    let good = write("good.toml", &ci);
+    fails(&good, Some(("PAV_BLENDER", "/nonexistent/blender")), "blender not found");
+    fails(&write("env.toml", &ci.replace("\"sunset\"", "\"nowhere\"")), None, "environment `nowhere`");
+    fails(&write("twice.toml", &ci.replace("\"sunset\"", "\"city\"")), None, "view city_d2.20_e15_a000.0 comes twice");
+    fails(&write("up.toml", &ci.replace("up = \"+y\"", "up = \"sideways\"")), None, "mesh.up `sideways`");
+    fails(&write("effect.toml", &ci.replace("[\"shadows\"]", "[\"shadows\", \"lens-flare\"]")), None, "lens-flare");
+    let obj = write("flat.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    let no_uv = ci.replace(&format!("{shared}/pav-camou/xfl_yxz.obj"), &obj.display().to_string());
+    fails(&write("nouv.toml", &no_uv), None, "the mesh needs UVs");
+}
