@@ -9,6 +9,7 @@ use pav::geometry::mesh::Mesh;
 use pav::render::raster::GBuffer;
 use pav::scene::align::{compare, compare_texels, pav_uv, read_uv_png, texel_code};
 use pav::scene::blender::{Blender, Job, JobView, Mode};
+use pav::scene::views::{render_views, ViewsConfig};
 
 fn impala() -> Mesh {
     let mut m = Mesh::load_obj(&common::shared_data().join("pav-camou/xfl_yxz.obj")).unwrap();
@@ -196,4 +197,57 @@ fn bad_input_gets_a_clear_error() {
     let obj = write("flat.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
     let no_uv = ci.replace(&format!("{shared}/pav-camou/xfl_yxz.obj"), &obj.display().to_string());
     fails(&write("nouv.toml", &no_uv), None, "the mesh needs UVs");
+}
+
+/// Three Cycles views of the e-tron as `paper.toml` loads it (bounding-box normalization; the
+/// file is +Z up), into `dir`.
+fn render_etron(dir: &std::path::Path) {
+    let obj = common::shared_data().join("rauca-e2e/pytorch3d_Etron.obj");
+    let cfg_path = dir.with_extension("toml");
+    std::fs::write(
+        &cfg_path,
+        format!(
+            "[mesh]\nobj = {:?}\nnormalize = \"bbox\"\nup = \"+z\"\n[render]\nsize = 96\nsamples = 2\n\
+             [[environments]]\nname = \"city\"\n[[poses]]\ndistances = [2.6]\nelevations = [20]\nazimuths = [30, 150, 270]\n",
+            obj.display().to_string()
+        ),
+    )
+    .unwrap();
+    let cfg = ViewsConfig::load(&cfg_path).unwrap();
+    let s = render_views(&cfg, dir, None, &Blender::find().unwrap(), &pav::progress::Silent).unwrap();
+    assert_eq!(s.rendered, 3);
+}
+
+#[cfg(feature = "optimize")]
+#[test]
+fn the_optimizer_trains_on_rendered_views() {
+    use pav::attack::config::{CameraConvention, OptimizeConfig};
+    use pav::attack::optimize::{optimize_texture, Finish, RunOptions};
+    use pav::attack::setup::Setup;
+    use pav::attack::whitebox::Ensemble;
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("etron");
+    render_etron(&dir);
+    let path = common::repo().join("configs/optimize/paper.toml");
+    let mut cfg = OptimizeConfig::load(&path).unwrap();
+    cfg.views.train = cfg.views.train[1..2].to_vec();
+    cfg.views.test.clear();
+    cfg.views.pbr = vec![dir.clone()];
+    let s = Setup::load(&cfg, None).unwrap();
+    assert_eq!(s.pbr.len(), 3, "every rendered pose shows the region");
+    assert_eq!(s.training_views().len(), 4);
+    assert!(s.pbr.iter().all(|v| v.name.starts_with("pbr:city_")));
+    let wb = Ensemble::load(&cfg, cfg.views.size).unwrap();
+    let out = tmp.path().join("run");
+    let ro = RunOptions { out: out.clone(), resume: false, checkpoint_every: 1000, max_skips: 0, epochs: Some(1) };
+    let o =
+        optimize_texture(&path, &cfg, &s, &wb, &ro, &pav::progress::Silent, &std::sync::atomic::AtomicBool::new(false))
+            .unwrap();
+    assert!(matches!(o.finish, Finish::Done));
+    assert_eq!(o.log.len(), 4, "one step per training view, rendered ones included");
+    // Views of another normalization are refused: their cameras are in another frame.
+    cfg.mesh.camera = CameraConvention::PavCamou;
+    let e = Setup::load(&cfg, None).err().expect("a frame mismatch is refused").to_string();
+    assert!(e.contains("normalized `bbox`, but this config optimizes"), "{e}");
 }

@@ -90,6 +90,11 @@ pub struct ViewsConfig {
     /// photos (`render::bake`). Used for training only; reports score the photos.
     #[serde(default)]
     pub turns: Vec<f64>,
+    /// Folders rendered by `pav views render` from this config's mesh: every view in them is
+    /// trained on (after the photos and their turns) and never scored, so held-out scores stay
+    /// on real photos.
+    #[serde(default)]
+    pub pbr: Vec<PathBuf>,
 }
 
 /// One white-box detector of the ensemble.
@@ -219,6 +224,7 @@ impl OptimizeConfig {
         fix(&mut c.mesh.region);
         c.views.train.iter_mut().for_each(fix);
         c.views.test.iter_mut().for_each(fix);
+        c.views.pbr.iter_mut().for_each(fix);
         if let Some(l) = c.views.labels.as_mut() {
             fix(l);
         }

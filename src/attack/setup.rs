@@ -80,6 +80,9 @@ pub enum SetupError {
     /// The views or the region do not make a problem (nothing to optimize, a view listed twice).
     #[error("{0}")]
     Views(String),
+    /// A folder of rendered views (`views.pbr`).
+    #[error("views.pbr: {0}")]
+    Pbr(#[from] crate::scene::views::ViewsError),
 }
 
 /// The prepared problem.
@@ -98,6 +101,8 @@ pub struct Setup {
     pub train: Vec<View>,
     /// Synthetic training views (`views.turns`): trained on, never scored.
     pub synthetic: Vec<View>,
+    /// Rendered training views (`views.pbr`, Blender Cycles): trained on, never scored.
+    pub pbr: Vec<View>,
     /// Held-out views.
     pub test: Vec<View>,
     /// Ground-truth car boxes by view name, in view pixels.
@@ -167,6 +172,46 @@ fn read_boxes(path: &Path) -> Result<HashMap<String, BBox>, SetupError> {
         let v: Vec<f32> = f[1..5].iter().map(|s| s.trim().parse()).collect::<Result<_, _>>().map_err(|_| bad())?;
         let stem = Path::new(f[0]).file_stem().map(|s| s.to_string_lossy().into_owned()).ok_or_else(bad)?;
         out.insert(stem, [v[0], v[1], v[2], v[3]]);
+    }
+    Ok(out)
+}
+
+/// The views of every `views.pbr` folder, after checking it was rendered from this config's
+/// mesh in the normalization its camera convention uses (the cameras are in that frame).
+fn pbr_views(cfg: &OptimizeConfig, maker: &ViewMaker, mesh: &Mesh, region: &[f32]) -> Result<Vec<View>, SetupError> {
+    let mut out = Vec::new();
+    let ours = std::fs::canonicalize(&cfg.mesh.obj).unwrap_or_else(|_| cfg.mesh.obj.clone());
+    let normalize = match cfg.mesh.camera {
+        CameraConvention::Fca => "bbox",
+        CameraConvention::PavCamou => "pav",
+    };
+    for dir in &cfg.views.pbr {
+        let (info, rows) = crate::scene::views::read_view_set(dir)?;
+        if info.obj != ours || info.normalize != normalize {
+            return Err(SetupError::Views(format!(
+                "views.pbr {}: rendered from {} normalized `{}`, but this config optimizes {} normalized `{normalize}`",
+                dir.display(),
+                info.obj.display(),
+                info.normalize,
+                ours.display()
+            )));
+        }
+        for r in rows {
+            let img = Rgb::load(&dir.join(&r.image))?;
+            let photo = Frame {
+                width: img.width,
+                height: img.height,
+                bgr: img.rgb.chunks(3).flat_map(|c| [to_u8(c[2]), to_u8(c[1]), to_u8(c[0])]).collect(),
+            };
+            let name = format!("pbr:{}", r.name);
+            let v = maker
+                .view(&name, mesh, &r.camera(), &photo, region, cfg.mesh.texture_size)
+                .map_err(|source| SetupError::Mask { view: name.clone(), source })?;
+            // A pose that hides the region teaches nothing.
+            if !v.active.is_empty() {
+                out.push(v);
+            }
+        }
     }
     Ok(out)
 }
@@ -260,6 +305,7 @@ impl Setup {
         };
         let train = views(&cfg.views.train)?;
         let test = views(&cfg.views.test)?;
+        let pbr = pbr_views(cfg, &maker, &mesh, &region)?;
         Ok(Setup {
             mesh,
             tex_size: ts,
@@ -268,6 +314,7 @@ impl Setup {
             scene,
             train,
             synthetic: Vec::new(),
+            pbr,
             test,
             boxes,
             samples: Arc::new(samples),
@@ -313,9 +360,10 @@ impl Setup {
         Ok(out)
     }
 
-    /// The views an optimization steps through: the photos, then the synthetic views.
+    /// The views an optimization steps through: the photos, the synthetic views, the rendered
+    /// views.
     pub fn training_views(&self) -> Vec<&View> {
-        self.train.iter().chain(&self.synthetic).collect()
+        self.train.iter().chain(&self.synthetic).chain(&self.pbr).collect()
     }
 
     /// Shares of the optimizable texels that 0, 1 and 2 or more training views read: a texel
@@ -345,6 +393,7 @@ impl Setup {
             scene: self.scene.clone(),
             train,
             synthetic,
+            pbr: self.pbr.clone(),
             test,
             boxes: self.boxes.clone(),
             samples: self.samples.clone(),

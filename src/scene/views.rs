@@ -194,8 +194,15 @@ pub struct View {
     pub environment: usize,
     /// Distance, elevation and azimuth (units, degrees, degrees).
     pub pose: [f32; 3],
-    /// The camera.
+    /// Look-at point, in pav's frame.
+    pub target: [f32; 3],
+    /// The camera, in pav's frame (+Y up), as Blender and the mask see it.
     pub camera: Camera,
+}
+
+/// `R^T·p`: a pav-frame vector in the mesh file's frame (the rotation is orthonormal).
+fn unrotate(r: &[[f32; 3]; 3], p: [f32; 3]) -> [f32; 3] {
+    [0, 1, 2].map(|k| r[0][k] * p[0] + r[1][k] * p[1] + r[2][k] * p[2])
 }
 
 impl ViewsConfig {
@@ -283,7 +290,7 @@ impl ViewsConfig {
                             let eye = spherical(d, e, a);
                             let eye = [eye[0] + g.target[0], eye[1] + g.target[1], eye[2] + g.target[2]];
                             let camera = Camera::look_at(eye, g.target, [0.0, 1.0, 0.0], g.fov_deg);
-                            out.push(View { name, environment: ei, pose: [d, e, a], camera });
+                            out.push(View { name, environment: ei, pose: [d, e, a], target: g.target, camera });
                         }
                     }
                 }
@@ -337,9 +344,98 @@ pub fn up_rotation(up: &str) -> Result<[[f32; 3]; 3], String> {
     })
 }
 
-/// The manifest's columns.
-pub const MANIFEST_HEADER: &str =
-    "name,environment,image,mask,distance,elevation_deg,azimuth_deg,eye_x,eye_y,eye_z,fov_deg,size,samples,seconds";
+/// The manifest's columns. The camera (`eye`, `target`, `up`, `fov_deg`: `Camera::look_at` of
+/// them) is in the normalized mesh file's own frame, the frame `pav optimize` loads it in.
+pub const MANIFEST_HEADER: &str = "name,environment,image,mask,distance,elevation_deg,azimuth_deg,eye_x,eye_y,eye_z,\
+target_x,target_y,target_z,up_x,up_y,up_z,fov_deg,size,samples,seconds";
+
+/// One manifest row.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+pub struct ViewRecord {
+    /// View name.
+    pub name: String,
+    /// Environment name.
+    pub environment: String,
+    /// Image, relative to the view folder.
+    pub image: PathBuf,
+    /// pav's silhouette mask, relative to the view folder.
+    pub mask: PathBuf,
+    /// Camera distance (normalized units).
+    pub distance: f32,
+    /// Elevation, degrees.
+    pub elevation_deg: f32,
+    /// Azimuth, degrees.
+    pub azimuth_deg: f32,
+    /// Eye.
+    pub eye_x: f32,
+    /// Eye.
+    pub eye_y: f32,
+    /// Eye.
+    pub eye_z: f32,
+    /// Look-at point.
+    pub target_x: f32,
+    /// Look-at point.
+    pub target_y: f32,
+    /// Look-at point.
+    pub target_z: f32,
+    /// Up vector.
+    pub up_x: f32,
+    /// Up vector.
+    pub up_y: f32,
+    /// Up vector.
+    pub up_z: f32,
+    /// Field of view, degrees.
+    pub fov_deg: f32,
+    /// Image side.
+    pub size: usize,
+    /// Cycles samples.
+    pub samples: u32,
+    /// Blender's render time, seconds.
+    pub seconds: f64,
+}
+
+impl ViewRecord {
+    /// The camera in the mesh file's normalized frame.
+    pub fn camera(&self) -> Camera {
+        Camera::look_at(
+            [self.eye_x, self.eye_y, self.eye_z],
+            [self.target_x, self.target_y, self.target_z],
+            [self.up_x, self.up_y, self.up_z],
+            self.fov_deg,
+        )
+    }
+}
+
+/// What a view folder was rendered from (`views.toml`), so a consumer can check that its own
+/// mesh is the one in the pictures.
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
+pub struct ViewSetInfo {
+    /// The mesh file.
+    pub obj: PathBuf,
+    /// Its normalization.
+    pub normalize: String,
+    /// Its up axis.
+    pub up: String,
+}
+
+/// A rendered view folder: its metadata and the manifest's rows.
+pub fn read_view_set(dir: &Path) -> Result<(ViewSetInfo, Vec<ViewRecord>), ViewsError> {
+    let info_path = dir.join("views.toml");
+    let text = std::fs::read_to_string(&info_path).map_err(io(&info_path))?;
+    let info: ViewSetInfo =
+        toml::from_str(&text).map_err(|e| ViewsError::Config { path: info_path.clone(), msg: e.to_string() })?;
+    let manifest = manifest_path(dir, None);
+    let mut rdr = csv::Reader::from_path(&manifest)
+        .map_err(|e| ViewsError::Config { path: manifest.clone(), msg: e.to_string() })?;
+    let rows = rdr
+        .deserialize()
+        .collect::<Result<Vec<ViewRecord>, _>>()
+        .map_err(|e| ViewsError::Config { path: manifest.clone(), msg: e.to_string() })?;
+    if rows.is_empty() {
+        return Err(ViewsError::Config { path: manifest, msg: "no views listed".into() });
+    }
+    Ok((info, rows))
+}
 
 /// The manifest of a view folder, or of one shard of it.
 pub fn manifest_path(dir: &Path, shard: Option<(usize, usize)>) -> PathBuf {
@@ -397,6 +493,24 @@ pub fn render_views(
     std::fs::create_dir_all(&views_dir).map_err(io(&views_dir))?;
     let obj = dir.join("mesh.obj");
     mesh.write_obj(&obj, None).map_err(io(&obj))?;
+    let info = ViewSetInfo {
+        obj: std::fs::canonicalize(&cfg.mesh.obj).map_err(io(&cfg.mesh.obj))?,
+        normalize: format!("{:?}", cfg.mesh.normalize).to_lowercase(),
+        up: cfg.mesh.up.clone(),
+    };
+    let info_path = dir.join("views.toml");
+    let info_text = toml::to_string(&info).expect("view set info serializes");
+    match std::fs::read_to_string(&info_path) {
+        Ok(old) if old != info_text => {
+            return Err(ViewsError::Config {
+                path: info_path,
+                msg: "this folder holds views of another mesh or frame: use another output folder".into(),
+            })
+        }
+        Ok(_) => {}
+        Err(_) => std::fs::write(&info_path, &info_text).map_err(io(&info_path))?,
+    }
+    let rot = up_rotation(&cfg.mesh.up).expect("checked by load");
     let all = cfg.views();
     let mine: Vec<&View> = match shard {
         Some((k, n)) => all.iter().enumerate().filter(|(i, _)| i % n == k - 1).map(|(_, v)| v).collect(),
@@ -442,14 +556,20 @@ pub fn render_views(
                 return;
             }
             let [d, e, a] = v.pose;
-            let c = &v.camera;
+            let (eye, target, up) = (unrotate(&rot, v.camera.eye), unrotate(&rot, v.target), unrotate(&rot, [0.0, 1.0, 0.0]));
             let line = format!(
-                "{name},{},views/{name}.png,views/{name}_mask.png,{d},{e},{a},{},{},{},{},{},{},{secs:.3}\n",
+                "{name},{},views/{name}.png,views/{name}_mask.png,{d},{e},{a},{},{},{},{},{},{},{},{},{},{},{},{},{secs:.3}\n",
                 Path::new(&cfg.environments[ei].name).file_stem().map_or("".into(), |s| s.to_string_lossy()),
-                c.eye[0],
-                c.eye[1],
-                c.eye[2],
-                c.fov_deg,
+                eye[0],
+                eye[1],
+                eye[2],
+                target[0],
+                target[1],
+                target[2],
+                up[0],
+                up[1],
+                up[2],
+                v.camera.fov_deg,
                 cfg.render.size,
                 cfg.render.samples
             );

@@ -36,9 +36,10 @@ pub fn run(a: &Args) -> Result<()> {
     let p = Prepared::load(&a.config, a.size)?;
     let s = &p.setup;
     eprintln!(
-        "{} training (+{} synthetic) and {} held-out views at {}², texture {}² ({} optimizable values, {:.1} % of the atlas), scene {}; prepared in {:.1} s",
+        "{} training (+{} synthetic, +{} rendered) and {} held-out views at {}², texture {}² ({} optimizable values, {:.1} % of the atlas), scene {}; prepared in {:.1} s",
         s.train.len(),
         s.synthetic.len(),
+        s.pbr.len(),
         s.test.len(),
         p.cfg.views.size,
         s.tex_size,
