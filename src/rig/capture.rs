@@ -109,6 +109,9 @@ pub enum CaptureError {
     },
 }
 
+/// Device seconds of reports the clock map needs before it places frames.
+const MIN_FIT_SPAN_S: f64 = 1.0;
+
 /// Device reports mapped onto the host clock.
 ///
 /// The device clock is modelled as `dev = rate·host + c` ([`ClockMap`]): `rate` absorbs crystal
@@ -159,6 +162,18 @@ impl AngleTrack {
     /// Position (fractional microsteps) at host instant `at`, once reports cover it.
     fn at(&self, at: Instant) -> Option<f64> {
         let (first, last) = (self.samples.first()?, self.samples.last()?);
+        // The clock map is only as good as its fastest reports: before the reports span
+        // MIN_FIT_SPAN_S, a loaded host may not have delivered one near each end yet, so frames
+        // wait (a finished motion, or the end of the capture, settles them anyway).
+        if self.end.is_none() && last.1 - first.1 < MIN_FIT_SPAN_S {
+            return None;
+        }
+        self.place(at)
+    }
+
+    /// [`AngleTrack::at`] without waiting for the fit to mature.
+    fn place(&self, at: Instant) -> Option<f64> {
+        let (first, last) = (self.samples.first()?, self.samples.last()?);
         let (rate, c) = self.clock();
         let d = rate * self.host_s(at) + c;
         if d <= first.1 {
@@ -192,7 +207,7 @@ impl AngleTrack {
 
     /// Best estimate when no later report will come: extrapolate the last two samples.
     fn extrapolate(&self, at: Instant) -> Option<f64> {
-        if let Some(p) = self.at(at) {
+        if let Some(p) = self.place(at) {
             return Some(p);
         }
         let n = self.samples.len();

@@ -7,7 +7,9 @@
 //! closest to them on average (Moon, Skelly and Towsley's linear-programming skew estimate). It
 //! passes through the edge of the upper convex hull that spans the mean arrival time. Least
 //! squares instead fits the mean latency, whose spread grows with host load; the envelope needs
-//! only a few fast messages near either end, which even a busy host delivers.
+//! only a few fast messages near either end, which even a busy host delivers. The rate is then
+//! refined on a long baseline (the fastest message of the first third against the fastest of the
+//! last third), since the hull edge at the mean can be short.
 
 /// `d = rate·h + c`: device seconds at host second `h`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -56,8 +58,33 @@ impl ClockMap {
         let mean = sum_h / n as f64;
         let i = hull.partition_point(|p| p.0 <= mean).clamp(1, hull.len() - 1);
         let (a, b) = (hull[i - 1], hull[i]);
-        let rate = (b.1 - a.1) / (b.0 - a.0);
-        (rate > 0.0 && rate.is_finite()).then_some(ClockMap { rate, c: a.1 - rate * a.0 })
+        let mut rate = (b.1 - a.1) / (b.0 - a.0);
+        if !(rate > 0.0 && rate.is_finite()) {
+            return None;
+        }
+        // The hull edge at the mean can be short (two fast reports close together), and a
+        // short baseline turns a millisecond of latency into a visible rate error. Refine the
+        // rate on a long baseline: the fastest report of the first third against the fastest
+        // of the last third, twice (each pick depends on the rate a little).
+        let (h0, h1) = (hull[0].0, hull[hull.len() - 1].0);
+        let third = (h1 - h0) / 3.0;
+        for _ in 0..2 {
+            let fastest = |lo: f64, hi: f64| {
+                arrivals
+                    .iter()
+                    .filter(|p| p.0 >= lo && p.0 <= hi)
+                    .max_by(|p, q| (p.1 - rate * p.0).total_cmp(&(q.1 - rate * q.0)))
+                    .copied()
+            };
+            let (Some(p), Some(q)) = (fastest(h0, h0 + third), fastest(h1 - third, h1)) else { break };
+            let r = (q.1 - p.1) / (q.0 - p.0);
+            if q.0 - p.0 > 0.0 && r > 0.0 && r.is_finite() {
+                rate = r;
+            }
+        }
+        // Latency only delays: the line touches the fastest report of all.
+        let c = arrivals.iter().map(|p| p.1 - rate * p.0).fold(f64::NEG_INFINITY, f64::max);
+        Some(ClockMap { rate, c })
     }
 }
 

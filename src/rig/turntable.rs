@@ -496,10 +496,11 @@ impl Turntable {
     }
 
     /// Asks the table whether the motion `seq` is over, for when its `done` may have been lost:
-    /// `Some(final position)` if the table is idle (or its `done` arrived meanwhile), `None` while
-    /// it still moves. A table that answers while moving counts as alive.
+    /// `Some(final position)` if the table is idle (or its `done` arrived meanwhile), `None`
+    /// while it still moves or when no status report got through (ask again later). A table
+    /// that answers while moving counts as alive.
     pub fn motion_ended(&mut self, seq: u32) -> Result<Option<i64>> {
-        let st = self.status()?;
+        let Some(st) = self.realtime_status()? else { return Ok(None) };
         // Replies are in order: a `done` sent before the status line has been filed by now.
         if let Some(i) = self.events.iter().position(|e| matches!(e, Event::Done { seq: Some(s), .. } if *s == seq)) {
             let Some(Event::Done { pos, .. }) = self.events.remove(i) else { unreachable!("found above") };
@@ -515,6 +516,21 @@ impl Turntable {
                 Ok(None)
             }
         }
+    }
+
+    /// A status report by the real-time `?` byte: one reply line instead of `STATUS`'s two, so
+    /// it gets through a lossy line more often. Three tries of 150 ms; `None` if none answered.
+    fn realtime_status(&mut self) -> Result<Option<Status>> {
+        for _ in 0..3 {
+            self.write(&[turntable_proto::Realtime::Status.byte()])?;
+            let deadline = Instant::now() + Duration::from_millis(150).min(self.timeout);
+            while let Some((l, rx)) = self.read_line(deadline)? {
+                if let Some(Reply::Status { state, alarm, pos, t_ms }) = self.file(&l, rx) {
+                    return Ok(Some(Status { state, alarm, pos, t_ms }));
+                }
+            }
+        }
+        Ok(None)
     }
 
     /// Next event, waiting up to `timeout` for one; keep-alives reset nothing here but count as traffic.
