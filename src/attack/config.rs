@@ -328,6 +328,10 @@ mod tests {
         assert_eq!(half.parts().unwrap().len(), 2);
         let turns = OptimizeConfig::load(&shipped("half-turns.toml")).unwrap();
         assert_eq!((half.views.turns.len(), turns.views.turns.len()), (0, 4));
+        // Rendered views resolve like every other path (the folder is made by `pav views render`).
+        let pbr = OptimizeConfig::load(&shipped("half-turns-pbr.toml")).unwrap();
+        assert_eq!(pbr.views.pbr, [shipped("../../out/views_etron")]);
+        assert_eq!((pbr.views.train, pbr.mesh, pbr.loss), (turns.views.train, turns.mesh, turns.loss));
     }
 
     #[test]

@@ -657,3 +657,48 @@ pub fn contact_sheet(dir: &Path, max: usize) -> Result<PathBuf, ViewsError> {
     crate::image::save_rgb(&path, w, h, &px)?;
     Ok(path)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shipped(name: &str) -> ViewsConfig {
+        ViewsConfig::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/views").join(name))
+            .unwrap_or_else(|e| panic!("{name}: {e}"))
+    }
+
+    #[test]
+    fn shipped_configs_give_the_views_they_promise() {
+        assert_eq!(shipped("ci.toml").views().len(), 6);
+        assert_eq!(shipped("etron-64.toml").views().len(), 64);
+        // The paper's grid: 4 distances × (3 elevations × 20 azimuths + 2 × 8) per environment.
+        let grid = shipped("paper-grid.toml");
+        assert_eq!(grid.views().len(), 304 * grid.environments.len());
+        let v = &grid.views()[0];
+        // A camera on the grid looks at the target from its distance.
+        let d = v.camera.to_view(v.target);
+        assert!(d[0].abs() < 1e-4 && d[1].abs() < 1e-4 && (d[2] - v.pose[0]).abs() < 1e-4, "{d:?}");
+    }
+
+    #[test]
+    fn up_rotations_are_proper_and_bring_the_axis_up() {
+        for (up, axis) in [
+            ("+y", [0.0, 1.0, 0.0]),
+            ("-y", [0.0, -1.0, 0.0]),
+            ("+z", [0.0, 0.0, 1.0]),
+            ("-z", [0.0, 0.0, -1.0]),
+            ("+x", [1.0, 0.0, 0.0]),
+            ("-x", [-1.0, 0.0, 0.0]),
+        ] {
+            let r = up_rotation(up).unwrap();
+            let det = r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1])
+                - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
+                + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]);
+            assert_eq!(det, 1.0, "{up} mirrors");
+            let y: Vec<f32> = (0..3).map(|k| r[k][0] * axis[0] + r[k][1] * axis[1] + r[k][2] * axis[2]).collect();
+            assert_eq!(y, [0.0, 1.0, 0.0], "{up}");
+            assert_eq!(unrotate(&r, [0.0, 1.0, 0.0]), axis, "{up}");
+        }
+        assert!(up_rotation("up").is_err());
+    }
+}
