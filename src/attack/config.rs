@@ -331,7 +331,9 @@ mod tests {
         // Rendered views resolve like every other path (the folder is made by `pav views render`).
         let pbr = OptimizeConfig::load(&shipped("half-turns-pbr.toml")).unwrap();
         assert_eq!(pbr.views.pbr, [shipped("../../out/views_etron")]);
-        assert_eq!((pbr.views.train, pbr.mesh, pbr.loss), (turns.views.train, turns.mesh, turns.loss));
+        assert_eq!((pbr.views.train, pbr.mesh, pbr.loss), (turns.views.train, turns.mesh, turns.loss.clone()));
+        let pair = OptimizeConfig::load(&shipped("half-turns-ensemble-pbr.toml")).unwrap();
+        assert_eq!((pair.views.pbr.len(), pair.white_box.len(), pair.loss), (1, 2, turns.loss));
     }
 
     #[test]
