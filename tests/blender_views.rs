@@ -17,13 +17,19 @@ fn impala() -> Mesh {
     m
 }
 
-#[test]
-fn blender_and_pav_agree_to_the_pixel() {
+/// Blender, the normalized Impala, a temporary folder and the mesh written there in pav's frame.
+fn impala_job_files() -> (Blender, Mesh, tempfile::TempDir, std::path::PathBuf) {
     let blender = Blender::find().expect("blender (scripts/setup.sh installs it)");
     let mesh = impala();
     let tmp = tempfile::tempdir().unwrap();
     let obj = tmp.path().join("mesh.obj");
     mesh.write_obj(&obj, None).unwrap();
+    (blender, mesh, tmp, obj)
+}
+
+#[test]
+fn blender_and_pav_agree_to_the_pixel() {
+    let (blender, mesh, tmp, obj) = impala_job_files();
     let size = 256;
     let cams: Vec<Camera> = [(2.2, 20.0, 45.0), (1.6, 5.0, 200.0), (3.0, 45.0, 300.0)]
         .iter()
@@ -60,11 +66,7 @@ fn blender_and_pav_agree_to_the_pixel() {
 
 #[test]
 fn a_texture_lands_on_the_same_texels_in_both_renderers() {
-    let blender = Blender::find().expect("blender (scripts/setup.sh installs it)");
-    let mesh = impala();
-    let tmp = tempfile::tempdir().unwrap();
-    let obj = tmp.path().join("mesh.obj");
-    mesh.write_obj(&obj, None).unwrap();
+    let (blender, mesh, tmp, obj) = impala_job_files();
     // A coarse code: texels several pixels wide, so a half-texel convention slip shows.
     let (w, h) = (96, 64);
     let tex = tmp.path().join("code.png");

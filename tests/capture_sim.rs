@@ -27,6 +27,20 @@ fn rig(scale: f64, faults: Faults) -> (SimTurntable, Turntable) {
     (s, t)
 }
 
+/// The largest sidecar angle error against the simulated camera's truth, degrees; frames off by
+/// more than `report_above` are printed, for a failure to show where it went wrong.
+fn worst_angle_error(rows: &[sidecar::AngleSample], truth: &[f64], report_above: f64) -> f64 {
+    let mut worst = 0f64;
+    for (i, (r, t)) in rows.iter().zip(truth).enumerate() {
+        let d = ((r.angle_deg - t + 540.0).rem_euclid(360.0) - 180.0).abs();
+        if d > report_above {
+            eprintln!("  frame {i} t={:.3}: {:.3} vs {t:.3}", r.timestamp_s, r.angle_deg);
+        }
+        worst = worst.max(d);
+    }
+    worst
+}
+
 fn decoded_frames(video: &Path) -> usize {
     let mut r = VideoReader::open(video).unwrap();
     let mut n = 0;
@@ -50,11 +64,7 @@ fn one_revolution_has_every_frame_within_half_a_degree() {
     let rows = sidecar::read(&sidecar::sidecar_path(&video)).unwrap();
     assert_eq!(rows.len(), sum.frames);
     assert_eq!(decoded_frames(&video), sum.frames);
-    let mut worst = 0f64;
-    for (r, truth) in rows.iter().zip(&cam.true_angles) {
-        let d = (r.angle_deg - truth + 540.0).rem_euclid(360.0) - 180.0;
-        worst = worst.max(d.abs());
-    }
+    let worst = worst_angle_error(&rows, &cam.true_angles, 0.2);
     eprintln!("worst angle error over {} frames: {worst:.4}°", rows.len());
     assert!(worst < 0.5, "worst angle error {worst:.3}°");
     // The table turned through the full circle during the recording.
@@ -162,17 +172,7 @@ fn dropped_bytes_cost_reports_never_angles() {
             .unwrap_or_else(|e| panic!("drop rate {drop}: {e}"));
         let rows = sidecar::read(&sidecar::sidecar_path(&video)).unwrap();
         assert_eq!(rows.len(), sum.frames);
-        let worst = rows
-            .iter()
-            .zip(&cam.true_angles)
-            .map(|(r, truth)| ((r.angle_deg - truth + 540.0).rem_euclid(360.0) - 180.0).abs())
-            .fold(0.0, f64::max);
-        for (i, (r, truth)) in rows.iter().zip(&cam.true_angles).enumerate() {
-            let d = ((r.angle_deg - truth + 540.0).rem_euclid(360.0) - 180.0).abs();
-            if d > 0.2 {
-                eprintln!("  frame {i} t={:.3}: {:.3} vs {truth:.3}", r.timestamp_s, r.angle_deg);
-            }
-        }
+        let worst = worst_angle_error(&rows, &cam.true_angles, 0.2);
         eprintln!(
             "drop rate {drop}: {} frames, {} garbage lines, worst angle error {worst:.4}°",
             rows.len(),
@@ -196,17 +196,7 @@ fn a_lost_end_of_motion_still_completes_the_capture() {
     assert!((sum.final_deg.unwrap() - 360.0).abs() < 1e-9, "{:?}", sum.final_deg);
     let rows = sidecar::read(&sidecar::sidecar_path(&video)).unwrap();
     assert_eq!(rows.len(), sum.frames);
-    let worst = rows
-        .iter()
-        .zip(&cam.true_angles)
-        .map(|(r, truth)| ((r.angle_deg - truth + 540.0).rem_euclid(360.0) - 180.0).abs())
-        .fold(0.0, f64::max);
-    for (i, (r, truth)) in rows.iter().zip(&cam.true_angles).enumerate() {
-        let d = ((r.angle_deg - truth + 540.0).rem_euclid(360.0) - 180.0).abs();
-        if d > 0.15 {
-            eprintln!("  frame {i} t={:.3}: {:.3} vs {truth:.3}", r.timestamp_s, r.angle_deg);
-        }
-    }
+    let worst = worst_angle_error(&rows, &cam.true_angles, 0.15);
     eprintln!("lost end of motion: {} frames, worst angle error {worst:.4}°", rows.len());
     assert!(worst < 0.5, "worst angle error {worst:.3}°");
 }

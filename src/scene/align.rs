@@ -91,18 +91,15 @@ pub fn compare(g: &GBuffer, pav: &[Option<[f64; 2]>], blender: &[[f64; 3]]) -> A
             // perspective, and seams between faces would poison a difference).
             let f = g.face[i];
             let same = |j: usize| (g.face[j] == f).then(|| pav[j]).flatten();
-            let dx = match (same(i + 1), same(i - 1)) {
-                (Some(a), Some(b)) => [(a[0] - b[0]) / 2.0, (a[1] - b[1]) / 2.0],
-                (Some(a), None) => [a[0] - uv[0], a[1] - uv[1]],
-                (None, Some(b)) => [uv[0] - b[0], uv[1] - b[1]],
-                (None, None) => continue,
+            // UV per pixel along one axis: central where both neighbours lie on the face, else
+            // one-sided.
+            let derivative = |step: usize| match (same(i + step), same(i - step)) {
+                (Some(a), Some(b)) => Some([(a[0] - b[0]) / 2.0, (a[1] - b[1]) / 2.0]),
+                (Some(a), None) => Some([a[0] - uv[0], a[1] - uv[1]]),
+                (None, Some(b)) => Some([uv[0] - b[0], uv[1] - b[1]]),
+                (None, None) => None,
             };
-            let dy = match (same(i + n), same(i - n)) {
-                (Some(a), Some(b)) => [(a[0] - b[0]) / 2.0, (a[1] - b[1]) / 2.0],
-                (Some(a), None) => [a[0] - uv[0], a[1] - uv[1]],
-                (None, Some(b)) => [uv[0] - b[0], uv[1] - b[1]],
-                (None, None) => continue,
-            };
+            let (Some(dx), Some(dy)) = (derivative(1), derivative(n)) else { continue };
             let det = dx[0] * dy[1] - dy[0] * dx[1];
             if det.abs() < 1e-14 {
                 continue;

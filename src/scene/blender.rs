@@ -139,6 +139,19 @@ impl Job {
     }
 }
 
+/// The last lines of an output stream, for an error message.
+#[derive(Default)]
+struct Tail(std::collections::VecDeque<String>);
+
+impl Tail {
+    fn push(&mut self, line: String) {
+        self.0.push_back(line);
+        if self.0.len() > 20 {
+            self.0.pop_front();
+        }
+    }
+}
+
 /// The Blender executable.
 pub struct Blender(PathBuf);
 
@@ -173,16 +186,11 @@ impl Blender {
             .map_err(|e| BlenderError::NotFound(format!("{}: {e}", self.0.display())))?;
         let stderr = child.stderr.take().expect("piped");
         let err_thread = std::thread::spawn(move || {
-            let mut tail = std::collections::VecDeque::new();
-            for l in BufReader::new(stderr).lines().map_while(Result::ok) {
-                tail.push_back(l);
-                if tail.len() > 20 {
-                    tail.pop_front();
-                }
-            }
+            let mut tail = Tail::default();
+            BufReader::new(stderr).lines().map_while(Result::ok).for_each(|l| tail.push(l));
             tail
         });
-        let mut tail = std::collections::VecDeque::new();
+        let mut tail = Tail::default();
         for l in BufReader::new(child.stdout.take().expect("piped")).lines().map_while(Result::ok) {
             if let Some(rest) = l.strip_prefix("pav-view ") {
                 if let Some((name, secs)) = rest.rsplit_once(' ') {
@@ -190,16 +198,13 @@ impl Blender {
                     continue;
                 }
             }
-            tail.push_back(l);
-            if tail.len() > 20 {
-                tail.pop_front();
-            }
+            tail.push(l);
         }
         let status = child.wait().map_err(io(&self.0))?;
         let _ = std::fs::remove_file(&job_path);
         if !status.success() {
-            let mut t: Vec<String> = tail.into_iter().collect();
-            t.extend(err_thread.join().unwrap_or_default());
+            let mut t: Vec<String> = tail.0.into_iter().collect();
+            t.extend(err_thread.join().unwrap_or_default().0);
             return Err(BlenderError::Failed {
                 what: format!("{} views", job.views.len()),
                 code: status.code(),

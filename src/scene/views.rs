@@ -33,7 +33,6 @@ use crate::progress::Progress;
 use crate::render::raster::{GBuffer, EMPTY};
 use serde::Deserialize;
 use std::collections::HashSet;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// Where Debian's `blender` package puts its HDR environments.
@@ -272,12 +271,19 @@ impl ViewsConfig {
         }
     }
 
+    /// The name views and the manifest give environment `i`: a studio light's name, or a map
+    /// file's stem.
+    pub fn environment_name(&self, i: usize) -> String {
+        let name = &self.environments[i].name;
+        Path::new(name).file_stem().map_or(name.clone(), |s| s.to_string_lossy().into())
+    }
+
     /// Every view of the config, in a fixed order: environments, then grids, distances,
     /// elevations, azimuths.
     pub fn views(&self) -> Vec<View> {
         let mut out = Vec::new();
-        for (ei, env) in self.environments.iter().enumerate() {
-            let env_name = Path::new(&env.name).file_stem().map_or(env.name.clone(), |s| s.to_string_lossy().into());
+        for ei in 0..self.environments.len() {
+            let env_name = self.environment_name(ei);
             for g in &self.poses {
                 let mut az = g.azimuths.clone();
                 if let Some(step) = g.azimuth_step {
@@ -350,7 +356,7 @@ pub const MANIFEST_HEADER: &str = "name,environment,image,mask,distance,elevatio
 target_x,target_y,target_z,up_x,up_y,up_z,fov_deg,size,samples,seconds";
 
 /// One manifest row.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
 pub struct ViewRecord {
     /// View name.
     pub name: String,
@@ -425,12 +431,7 @@ pub fn read_view_set(dir: &Path) -> Result<(ViewSetInfo, Vec<ViewRecord>), Views
     let info: ViewSetInfo =
         toml::from_str(&text).map_err(|e| ViewsError::Config { path: info_path.clone(), msg: e.to_string() })?;
     let manifest = manifest_path(dir, None);
-    let mut rdr = csv::Reader::from_path(&manifest)
-        .map_err(|e| ViewsError::Config { path: manifest.clone(), msg: e.to_string() })?;
-    let rows = rdr
-        .deserialize()
-        .collect::<Result<Vec<ViewRecord>, _>>()
-        .map_err(|e| ViewsError::Config { path: manifest.clone(), msg: e.to_string() })?;
+    let rows = read_manifest(&manifest)?;
     if rows.is_empty() {
         return Err(ViewsError::Config { path: manifest, msg: "no views listed".into() });
     }
@@ -445,17 +446,31 @@ pub fn manifest_path(dir: &Path, shard: Option<(usize, usize)>) -> PathBuf {
     }
 }
 
-/// Names already in a manifest whose image exists (what a resumed run skips).
-pub fn rendered(manifest: &Path, dir: &Path) -> HashSet<String> {
-    let Ok(text) = std::fs::read_to_string(manifest) else { return HashSet::new() };
-    text.lines()
-        .skip(1)
-        .filter_map(|l| {
-            let mut f = l.split(',');
-            let (name, image) = (f.next()?, f.nth(1)?);
-            dir.join(image).exists().then(|| name.to_string())
-        })
-        .collect()
+/// The rows of a manifest (a shard's or a merged one).
+pub fn read_manifest(path: &Path) -> Result<Vec<ViewRecord>, ViewsError> {
+    let bad = |e: csv::Error| ViewsError::Config { path: path.into(), msg: e.to_string() };
+    csv::Reader::from_path(path).map_err(bad)?.deserialize().collect::<Result<Vec<ViewRecord>, _>>().map_err(bad)
+}
+
+/// Appends one row to a manifest (its header is already there).
+fn append_row(path: &Path, row: &ViewRecord) -> Result<(), ViewsError> {
+    let file = std::fs::OpenOptions::new().append(true).open(path).map_err(io(path))?;
+    let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(file);
+    w.serialize(row)
+        .and_then(|_| w.flush().map_err(csv::Error::from))
+        .map_err(|e| ViewsError::Config { path: path.into(), msg: e.to_string() })
+}
+
+/// Names in a manifest whose image exists (what a resumed run skips). A manifest missing is an
+/// empty one; a row cut short by a kill in mid-write is dropped first, so the next row does not
+/// run into it.
+pub fn rendered(manifest: &Path, dir: &Path) -> Result<HashSet<String>, ViewsError> {
+    let Ok(text) = std::fs::read_to_string(manifest) else { return Ok(HashSet::new()) };
+    if !text.ends_with('\n') {
+        let keep = text.rfind('\n').map_or(0, |i| i + 1);
+        std::fs::write(manifest, &text[..keep]).map_err(io(manifest))?;
+    }
+    Ok(read_manifest(manifest)?.into_iter().filter(|r| dir.join(&r.image).exists()).map(|r| r.name).collect())
 }
 
 /// What a `render_views` run did.
@@ -517,11 +532,10 @@ pub fn render_views(
         None => all.iter().collect(),
     };
     let manifest = manifest_path(dir, shard);
-    let done = rendered(&manifest, dir);
-    if !manifest.exists() {
+    let done = rendered(&manifest, dir)?;
+    if std::fs::metadata(&manifest).map_or(true, |m| m.len() == 0) {
         std::fs::write(&manifest, format!("{MANIFEST_HEADER}\n")).map_err(io(&manifest))?;
     }
-    let mut rows = std::fs::OpenOptions::new().append(true).open(&manifest).map_err(io(&manifest))?;
     let total = mine.len();
     let resumed = mine.iter().filter(|v| done.contains(&v.name)).count();
     progress.begin("rendering views", total as u64);
@@ -556,25 +570,32 @@ pub fn render_views(
                 return;
             }
             let [d, e, a] = v.pose;
-            let (eye, target, up) = (unrotate(&rot, v.camera.eye), unrotate(&rot, v.target), unrotate(&rot, [0.0, 1.0, 0.0]));
-            let line = format!(
-                "{name},{},views/{name}.png,views/{name}_mask.png,{d},{e},{a},{},{},{},{},{},{},{},{},{},{},{},{},{secs:.3}\n",
-                Path::new(&cfg.environments[ei].name).file_stem().map_or("".into(), |s| s.to_string_lossy()),
-                eye[0],
-                eye[1],
-                eye[2],
-                target[0],
-                target[1],
-                target[2],
-                up[0],
-                up[1],
-                up[2],
-                v.camera.fov_deg,
-                cfg.render.size,
-                cfg.render.samples
-            );
-            if let Err(e) = rows.write_all(line.as_bytes()).and_then(|_| rows.flush()) {
-                failure.get_or_insert(ViewsError::Io { path: manifest.clone(), source: e });
+            let (eye, target, up) =
+                (unrotate(&rot, v.camera.eye), unrotate(&rot, v.target), unrotate(&rot, [0.0, 1.0, 0.0]));
+            let row = ViewRecord {
+                name: name.into(),
+                environment: cfg.environment_name(ei),
+                image: format!("views/{name}.png").into(),
+                mask: format!("views/{name}_mask.png").into(),
+                distance: d,
+                elevation_deg: e,
+                azimuth_deg: a,
+                eye_x: eye[0],
+                eye_y: eye[1],
+                eye_z: eye[2],
+                target_x: target[0],
+                target_y: target[1],
+                target_z: target[2],
+                up_x: up[0],
+                up_y: up[1],
+                up_z: up[2],
+                fov_deg: v.camera.fov_deg,
+                size: cfg.render.size,
+                samples: cfg.render.samples,
+                seconds: (secs * 1000.0).round() / 1000.0,
+            };
+            if let Err(e) = append_row(&manifest, &row) {
+                failure.get_or_insert(e);
                 return;
             }
             rendered_now += 1;
@@ -608,20 +629,16 @@ pub fn merge_shards(dir: &Path) -> Result<usize, ViewsError> {
         });
     }
     let mut seen = HashSet::new();
-    let mut out = format!("{MANIFEST_HEADER}\n");
+    let path = manifest_path(dir, None);
+    std::fs::write(&path, format!("{MANIFEST_HEADER}\n")).map_err(io(&path))?;
     for s in &shards {
-        let text = std::fs::read_to_string(s).map_err(io(s))?;
-        for l in text.lines().skip(1).filter(|l| !l.is_empty()) {
-            let name = l.split(',').next().unwrap_or_default().to_string();
-            if !seen.insert(name.clone()) {
-                return Err(ViewsError::Config { path: s.clone(), msg: format!("view {name} is in two shards") });
+        for row in read_manifest(s)? {
+            if !seen.insert(row.name.clone()) {
+                return Err(ViewsError::Config { path: s.clone(), msg: format!("view {} is in two shards", row.name) });
             }
-            out.push_str(l);
-            out.push('\n');
+            append_row(&path, &row)?;
         }
     }
-    let path = manifest_path(dir, None);
-    std::fs::write(&path, out).map_err(io(&path))?;
     Ok(seen.len())
 }
 
@@ -629,16 +646,8 @@ pub fn merge_shards(dir: &Path) -> Result<usize, ViewsError> {
 /// its mask, evenly picked, so a glance shows poses, lighting and alignment.
 pub fn contact_sheet(dir: &Path, max: usize) -> Result<PathBuf, ViewsError> {
     let manifest = manifest_path(dir, None);
-    let text = std::fs::read_to_string(&manifest).map_err(io(&manifest))?;
-    let rows: Vec<(String, String)> = text
-        .lines()
-        .skip(1)
-        .filter_map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            Some((f.get(2)?.to_string(), f.get(3)?.to_string()))
-        })
-        .collect();
-    let pick: Vec<&(String, String)> =
+    let rows: Vec<(PathBuf, PathBuf)> = read_manifest(&manifest)?.into_iter().map(|r| (r.image, r.mask)).collect();
+    let pick: Vec<&(PathBuf, PathBuf)> =
         if rows.len() <= max { rows.iter().collect() } else { (0..max).map(|k| &rows[k * rows.len() / max]).collect() };
     let mut tiles = Vec::new();
     let mut side = 0;
