@@ -36,6 +36,11 @@ pub struct CaptureOptions {
     pub fourcc: [char; 4],
     /// Fail when the table sends nothing for this long.
     pub no_progress: Duration,
+    /// Round trips that bound the device clock before the spin (tries: twice this).
+    pub probes: usize,
+    /// A capture whose angles are not known to within this many degrees fails (its files are
+    /// kept, complete, and the error says by how much and why).
+    pub max_angle_error_deg: f64,
 }
 
 impl CaptureOptions {
@@ -49,6 +54,8 @@ impl CaptureOptions {
             report_ms: 10,
             fourcc: ['a', 'v', 'c', '1'],
             no_progress: Duration::from_secs(3),
+            probes: 5,
+            max_angle_error_deg: 0.5,
         }
     }
 }
@@ -68,6 +75,14 @@ pub struct CaptureSummary {
     pub final_deg: Option<f64>,
     /// The table's `done` was lost on the line; the end came from a status report.
     pub done_lost: bool,
+    /// Every frame's angle is within this many degrees of the truth: the clock's bounds from
+    /// round trips and report arrivals at the cruise speed, plus one microstep; `None` when no
+    /// round trip got through.
+    pub angle_bound_deg: Option<f64>,
+    /// The fastest round trip to the table, ms.
+    pub round_trip_ms: Option<f64>,
+    /// Angle reports refused because the commanded spin cannot have produced them.
+    pub reports_discarded: usize,
 }
 
 /// Why a capture failed.
@@ -93,6 +108,22 @@ pub enum CaptureError {
     /// The sidecar could not be created.
     #[error("capture could not start: {0}")]
     Sidecar(#[source] SidecarError),
+    /// The recording is complete, but its angles are not known as well as asked.
+    #[error("{reason}; the recording is complete ({frames} frames) but its angles cannot be trusted to ±{limit_deg}°: {video} and {sidecar} are kept for inspection")]
+    Uncertain {
+        /// Why, with the numbers.
+        reason: String,
+        /// The limit asked for, degrees.
+        limit_deg: f64,
+        /// Frames recorded.
+        frames: usize,
+        /// What was recorded.
+        summary: Box<CaptureSummary>,
+        /// Video path.
+        video: String,
+        /// Sidecar path.
+        sidecar: String,
+    },
     /// Failed while recording; everything recorded so far was saved.
     #[error("{cause}; stopped at frame {frames} (table at {angle}); saved {video} and {sidecar}")]
     Stopped {
@@ -127,6 +158,33 @@ struct AngleTrack {
     /// The motion is over and ended at this position (from `done`, or from a status report
     /// when `done` was lost).
     end: Option<i64>,
+    /// Round trips that read the device clock: (host s sent, host s arrived, device s).
+    probes: Vec<(f64, f64, f64)>,
+    /// The commanded spin, for refusing reports that contradict it: (direction ±1, largest
+    /// speed in microsteps per device second).
+    motion: Option<(f64, f64)>,
+    /// Reports refused because the commanded motion cannot have produced them.
+    discarded: usize,
+    /// The host instant the spin was sent and where the table stood then (from a status
+    /// reply): frames before the first report that got through interpolate from there.
+    start: Option<(Instant, i64)>,
+}
+
+/// Where the device-to-host clock offset lies, from both sides.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct OffsetBounds {
+    /// Largest offset the one-way arrivals allow (latency only delays them).
+    lo: f64,
+    /// Smallest offset the round trips allow (the device answered after the request left).
+    hi: Option<f64>,
+}
+
+impl OffsetBounds {
+    /// Half the width of the interval, device seconds: the worst error of its midpoint. `None`
+    /// without a round trip (unbounded); `Some(negative)` when the two sides contradict.
+    fn half_width(&self) -> Option<f64> {
+        self.hi.map(|hi| (hi - self.lo) / 2.0)
+    }
 }
 
 impl AngleTrack {
@@ -142,6 +200,15 @@ impl AngleTrack {
     fn push(&mut self, t_ms: u64, pos: i64, rx: Instant) {
         self.epoch.get_or_insert(rx);
         let (h, d) = (self.host_s(rx), t_ms as f64 / 1000.0);
+        if let (Some(l), Some((dir, speed))) = (self.samples.last(), self.motion) {
+            // A spin only moves one way, no faster than its cruise speed (plus a microstep of
+            // rounding at each end): a report that says otherwise is not what the table did.
+            let step = (pos - l.2) as f64;
+            if d > l.1 && (dir * step < -1.0 || step.abs() > speed * (d - l.1) * 1.01 + 2.0) {
+                self.discarded += 1;
+                return;
+            }
+        }
         if self.samples.last().is_none_or(|l| d > l.1) {
             self.samples.push((h, d, pos));
             let arrivals: Vec<(f64, f64)> = self.samples.iter().map(|s| (s.0, s.1)).collect();
@@ -149,10 +216,30 @@ impl AngleTrack {
         }
     }
 
-    /// Clock model (rate, c).
+    /// Files one round trip: sent and arrived on the host, and the device ms in the reply.
+    fn probe(&mut self, sent: Instant, rx: Instant, t_ms: u64) {
+        self.epoch.get_or_insert(sent);
+        self.probes.push((self.host_s(sent), self.host_s(rx), t_ms as f64 / 1000.0));
+    }
+
+    /// The clock offset's bounds at the fitted rate. Device times are whole milliseconds cut
+    /// down, so a reply stamped `t` was made in [t, t + 1 ms).
+    fn bounds(&self) -> Option<OffsetBounds> {
+        let rate = self.map?.rate;
+        let lo = self.probes.iter().map(|p| p.2 - rate * p.1).fold(self.map?.c, f64::max);
+        let hi = self.probes.iter().map(|p| p.2 + 0.001 - rate * p.0).reduce(f64::min);
+        Some(OffsetBounds { lo, hi })
+    }
+
+    /// Clock model (rate, c): the middle of the offset's bounds when round trips gave an upper
+    /// one that agrees with the arrivals, else the fastest arrival's offset.
     fn clock(&self) -> (f64, f64) {
         match self.map {
-            Some(m) => (m.rate, m.c),
+            Some(m) => match self.bounds() {
+                Some(OffsetBounds { lo, hi: Some(hi) }) if hi >= lo => (m.rate, (lo + hi) / 2.0),
+                Some(b) => (m.rate, b.lo),
+                None => (m.rate, m.c),
+            },
             // Until the reports span some time, assume the device clock runs at host speed,
             // offset by the report that travelled fastest.
             None => (1.0, self.samples.iter().map(|s| s.1 - s.0).fold(f64::NEG_INFINITY, f64::max)),
@@ -177,7 +264,11 @@ impl AngleTrack {
         let (rate, c) = self.clock();
         let d = rate * self.host_s(at) + c;
         if d <= first.1 {
-            return Some(first.2 as f64);
+            return Some(match self.start.map(|(sent, p)| (rate * self.host_s(sent) + c, p as f64)) {
+                Some((ds, p)) if d <= ds => p,
+                Some((ds, p)) if first.1 > ds => p + (first.2 as f64 - p) * (d - ds) / (first.1 - ds),
+                _ => first.2 as f64,
+            });
         }
         if d >= last.1 {
             return self.end.map(|end| self.tail(d, end));
@@ -222,6 +313,57 @@ impl AngleTrack {
     }
 }
 
+/// How far the sidecar's angles can be from the truth, judged at the end of a capture with the
+/// clock fitted to every report and bounded by round trips before and after the spin.
+struct ClockError {
+    /// Half the width of the final clock offset's bounds, device seconds; negative when round
+    /// trips and arrivals contradict each other, `None` without a round trip.
+    half_width: Option<f64>,
+    /// Largest difference between a row as written (with the clock known then) and the same
+    /// frame placed with the final clock, degrees.
+    drift_deg: f64,
+}
+
+impl ClockError {
+    /// Worst angle error, degrees, at `deg_per_s` per device second, for a table that reports
+    /// whole microsteps of `step_deg` (a reported position is up to one step behind the table).
+    fn bound_deg(&self, deg_per_s: f64, step_deg: f64) -> Option<f64> {
+        self.half_width.map(|h| h.abs() * deg_per_s + self.drift_deg + step_deg)
+    }
+
+    /// Why the angles cannot be trusted to `limit` degrees, if they cannot.
+    fn problem(&self, s: &CaptureSummary, limit: f64, deg_per_s: f64) -> Option<String> {
+        let Some(h) = self.half_width else {
+            return Some("no round trip to the table got through to bound its clock".into());
+        };
+        let bound = s.angle_bound_deg.unwrap_or(f64::INFINITY);
+        if bound <= limit {
+            return None;
+        }
+        Some(if h < 0.0 {
+            format!(
+                "the table's clock contradicts itself by {:.1} ms of device time ({:.2}° at {deg_per_s:.1}°/s): \
+                 round trips place it earlier than its reports can have been sent",
+                -2000.0 * h,
+                -2.0 * h * deg_per_s
+            )
+        } else {
+            format!(
+                "angles are known only to ±{bound:.2}°: the fastest round trip to the table took {:.0} ms, which \
+                 places its clock to ±{:.0} ms of device time at {deg_per_s:.1}°/s{} (a faster link, a slower \
+                 --period or a larger --max-angle-error)",
+                s.round_trip_ms.unwrap_or(f64::NAN),
+                h * 1000.0,
+                if self.drift_deg > 0.05 {
+                    format!("; rows written early moved {:.2}° as the clock fit settled", self.drift_deg)
+                } else {
+                    String::new()
+                }
+            )
+        })
+    }
+}
+
 /// Runs one capture; `progress` counts frames.
 pub fn capture(
     table: &mut Turntable,
@@ -242,6 +384,23 @@ pub fn capture(
     }
     table.command_retry(Command::Report(opts.report_ms.max(1)), 3).map_err(CaptureError::Table)?;
     let rev = table.usteps_per_rev() as f64;
+    let mut track =
+        AngleTrack { motion: Some((opts.period_s.signum(), rev / opts.period_s.abs())), ..AngleTrack::default() };
+    // Round trips before the spin, while the line is quiet: they bound the device clock from
+    // above, as the reports' arrivals bound it from below.
+    let mut round_trip: Option<Duration> = None;
+    let mut start_pos = None;
+    for _ in 0..opts.probes * 2 {
+        if track.probes.len() >= opts.probes {
+            break;
+        }
+        if let Some(p) = table.clock_probe().map_err(CaptureError::Table)? {
+            track.probe(p.sent, p.rx, p.t_ms);
+            start_pos = Some(p.pos);
+            let rtt = p.rx.saturating_duration_since(p.sent);
+            round_trip = Some(round_trip.map_or(rtt, |r| r.min(rtt)));
+        }
+    }
     let (w, h) = cam.size();
     if let Some(dir) = opts.video.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|source| CaptureError::Folder { path: dir.into(), source })?;
@@ -251,12 +410,13 @@ pub fn capture(
     let mut side = sidecar::Writer::create(&side_path).map_err(CaptureError::Sidecar)?;
 
     let period_ms = (opts.period_s * 1000.0).round() as i64;
+    // The table stands still until the spin command reaches it, so no sooner than it left.
+    track.start = start_pos.map(|p| (Instant::now(), p));
     let seq =
         table.command(Command::Spin { period_s: Milli(period_ms), turns: opts.turns }).map_err(CaptureError::Table)?;
     let expected = (cam.fps() * opts.period_s.abs() * opts.turns as f64).round() as u64;
     progress.begin("recording", expected);
 
-    let mut track = AngleTrack::default();
     let mut pending: VecDeque<(usize, Instant)> = VecDeque::new();
     let mut first_at: Option<Instant> = None;
     let (mut frames, mut interpolated) = (0usize, 0usize);
@@ -267,6 +427,8 @@ pub fn capture(
         .max(Duration::from_millis(200))
         .min(opts.no_progress / 2);
     let (mut asked, mut done_lost) = (Instant::now(), false);
+    // Every row as written, to judge at the end against the final clock.
+    let mut written: Vec<(Instant, f64)> = Vec::new();
     let write_row = |side: &mut sidecar::Writer, idx: usize, at: Instant, pos: f64, first: Instant| {
         let angle = (pos * 360.0 / rev).rem_euclid(360.0);
         side.push(AngleSample { frame: idx, timestamp_s: at.duration_since(first).as_secs_f64(), angle_deg: angle })
@@ -314,6 +476,7 @@ pub fn capture(
         let first = first_at.expect("a frame was recorded");
         while let Some(&(idx, at)) = pending.front() {
             let Some(pos) = track.at(at) else { break };
+            written.push((at, pos));
             if let Err(e) = write_row(&mut side, idx, at, pos, first) {
                 break 'rec Some(e.to_string());
             }
@@ -347,12 +510,35 @@ pub fn capture(
     if let Some(first) = first_at {
         while let Some((idx, at)) = pending.pop_front() {
             if let Some(pos) = track.extrapolate(at) {
+                written.push((at, pos));
                 let _ = write_row(&mut side, idx, at, pos, first);
                 last_angle = Some(pos);
             }
         }
     }
     let released = writer.finish();
+    // Round trips after the spin bound the clock at the far end too (the table is idle).
+    if cause.is_none() {
+        for _ in 0..opts.probes * 2 {
+            match table.clock_probe() {
+                Ok(Some(p)) => {
+                    track.probe(p.sent, p.rx, p.t_ms);
+                    if track.probes.len() >= 2 * opts.probes {
+                        break;
+                    }
+                }
+                Ok(None) => {}
+                Err(_) => break,
+            }
+        }
+    }
+    let error = ClockError {
+        half_width: track.bounds().and_then(|b| b.half_width()),
+        drift_deg: written
+            .iter()
+            .filter_map(|&(at, pos)| track.place(at).map(|p| (p - pos).abs() * 360.0 / rev))
+            .fold(0.0, f64::max),
+    };
     let summary = CaptureSummary {
         video: opts.video.clone(),
         sidecar: side_path.clone(),
@@ -360,10 +546,23 @@ pub fn capture(
         interpolated,
         final_deg: final_pos.map(|p| p as f64 * 360.0 / rev),
         done_lost,
+        angle_bound_deg: error.bound_deg(360.0 / opts.period_s.abs(), 360.0 / rev),
+        round_trip_ms: round_trip.map(|r| r.as_secs_f64() * 1000.0),
+        reports_discarded: track.discarded,
     };
     let cause = cause.or_else(|| released.err().map(|e| format!("closing the video: {e}")));
     match cause {
-        None => Ok(summary),
+        None => match error.problem(&summary, opts.max_angle_error_deg, 360.0 / opts.period_s.abs()) {
+            None => Ok(summary),
+            Some(reason) => Err(CaptureError::Uncertain {
+                reason,
+                limit_deg: opts.max_angle_error_deg,
+                frames,
+                video: opts.video.display().to_string(),
+                sidecar: side_path.display().to_string(),
+                summary: Box::new(summary),
+            }),
+        },
         Some(cause) => Err(CaptureError::Stopped {
             cause,
             frames,

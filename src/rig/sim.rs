@@ -16,7 +16,8 @@ pub struct Faults {
     pub drop_byte: f64,
     /// Probability of inserting a garbage line before each line the device sends (0–1).
     pub garbage_line: f64,
-    /// Extra latency before each reply.
+    /// Latency of every line the device sends (replies arrive this much later; the line's
+    /// throughput is unchanged).
     pub delay: Duration,
     /// Close the port (as an unplugged USB cable) after this long.
     pub disconnect_after: Option<Duration>,
@@ -195,6 +196,7 @@ fn serve(mut port: TTYPort, opts: SimOptions, stop: Arc<AtomicBool>, truth: Trut
     let mut motion_started: Option<u64> = None;
     let mut stalled = false;
     let f = &opts.faults;
+    let mut outbox: std::collections::VecDeque<(Instant, Vec<u8>)> = std::collections::VecDeque::new();
     while !stop.load(Ordering::Relaxed) {
         let wall = start.elapsed();
         if f.disconnect_after.is_some_and(|d| wall >= d) {
@@ -242,10 +244,10 @@ fn serve(mut port: TTYPort, opts: SimOptions, stop: Arc<AtomicBool>, truth: Trut
                 }
             }
         }
+        // Latency holds each line back without slowing the line down: lines queue with the
+        // instant they are due, as on a link that is slow to deliver but not narrow.
+        let now = Instant::now();
         for line in lines.drain(..) {
-            if !f.delay.is_zero() {
-                std::thread::sleep(f.delay);
-            }
             let mut bytes = Vec::with_capacity(line.len() + 8);
             if f.garbage_line > 0.0 && dice.unit() < f.garbage_line {
                 bytes.extend_from_slice(b"\x07#%garbage~\n");
@@ -255,6 +257,10 @@ fn serve(mut port: TTYPort, opts: SimOptions, stop: Arc<AtomicBool>, truth: Trut
             if f.drop_byte > 0.0 {
                 bytes.retain(|_| dice.unit() >= f.drop_byte);
             }
+            outbox.push_back((now + f.delay, bytes));
+        }
+        while outbox.front().is_some_and(|(due, _)| *due <= Instant::now()) {
+            let (_, bytes) = outbox.pop_front().expect("checked above");
             if port.write_all(&bytes).is_err() {
                 break;
             }

@@ -108,6 +108,20 @@ pub struct Status {
     pub t_ms: u64,
 }
 
+/// One round trip that read the device clock: the device stamped `t_ms` after the host's
+/// `sent` and before its `rx`, so the device-to-host clock offset is bounded from both sides.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ClockProbe {
+    /// Host instant just before the request left.
+    pub sent: Instant,
+    /// Host instant the status line arrived.
+    pub rx: Instant,
+    /// Device clock in the reply, ms.
+    pub t_ms: u64,
+    /// Table position in the reply, microsteps from home.
+    pub pos: i64,
+}
+
 /// A connected turntable.
 pub struct Turntable {
     /// `None` only while reconnecting (the old port must close before the device can be reopened).
@@ -365,8 +379,9 @@ impl Turntable {
         self.seq
     }
 
-    /// Sends `cmd` and waits for its `ok`; returns the sequence number and the status line, if any.
-    fn request(&mut self, cmd: Command, timeout: Duration) -> Result<(u32, Option<Status>)> {
+    /// Sends `cmd` and waits for its `ok`; returns the sequence number and the last status line
+    /// before it with its arrival, if any.
+    fn request(&mut self, cmd: Command, timeout: Duration) -> Result<(u32, Option<(Status, Instant)>)> {
         let seq = self.next_seq();
         let frame = Frame { seq: Some(seq), cmd };
         let text = frame.encode();
@@ -390,7 +405,9 @@ impl Turntable {
                     self.resync()?;
                     return Err(TurntableError::Timeout { cmd: cmd.to_string(), after: timeout });
                 }
-                Some(Reply::Status { state, alarm, pos, t_ms }) => status = Some(Status { state, alarm, pos, t_ms }),
+                Some(Reply::Status { state, alarm, pos, t_ms }) => {
+                    status = Some((Status { state, alarm, pos, t_ms }, rx))
+                }
                 _ => {}
             }
         }
@@ -443,7 +460,7 @@ impl Turntable {
         let mut last = None;
         for _ in 0..3 {
             match self.request(Command::Status, self.timeout) {
-                Ok((_, Some(st))) => return Ok(st),
+                Ok((_, Some((st, _)))) => return Ok(st),
                 Ok((_, None)) => {
                     last = Some(TurntableError::Timeout { cmd: "STATUS (report line)".into(), after: self.timeout })
                 }
@@ -452,6 +469,31 @@ impl Turntable {
             }
         }
         Err(last.expect("three attempts"))
+    }
+
+    /// One `STATUS` round trip for the clock map, or `None` when its reply did not get through
+    /// (a timeout is no error here: the caller tries again). The status line counts only when
+    /// the `ok` of this very request follows it, so a late reply cannot pass for this one.
+    pub fn clock_probe(&mut self) -> Result<Option<ClockProbe>> {
+        let seq = self.next_seq();
+        let line = format!("{}\n", Frame { seq: Some(seq), cmd: Command::Status }.encode().as_str());
+        let sent = Instant::now();
+        self.write(line.as_bytes())?;
+        let deadline = sent + self.timeout;
+        let mut status = None;
+        // No resync on a timeout: replies are matched by sequence number, and a status line
+        // that arrived before this request was sent was read by the request it answered.
+        while let Some((l, rx)) = self.read_line(deadline)? {
+            match self.file(&l, rx) {
+                Some(Reply::Status { t_ms, pos, .. }) => status = Some(ClockProbe { sent, rx, t_ms, pos }),
+                Some(Reply::Ok { seq: Some(s) }) if s == seq => return Ok(status),
+                Some(Reply::Error { code, seq: Some(s), msg }) if s == seq => {
+                    return Err(TurntableError::Refused { cmd: "STATUS".into(), code, msg: msg.to_string() });
+                }
+                _ => {}
+            }
+        }
+        Ok(None)
     }
 
     /// Waits until the motion started by `seq` reports `done`; fails on an alarm or when nothing

@@ -38,6 +38,9 @@ pub struct Args {
     /// Video codec FourCC (avc1 = H.264, mp4v = MPEG-4 part 2).
     #[arg(long, default_value = "avc1")]
     codec: String,
+    /// Fail (keeping the files) when the angles cannot be bounded to within this many degrees.
+    #[arg(long, default_value_t = 0.5)]
+    max_angle_error: f64,
 }
 
 pub fn run(a: &Args) -> Result<()> {
@@ -45,6 +48,9 @@ pub fn run(a: &Args) -> Result<()> {
     let [c0, c1, c2, c3] = codec[..] else {
         bail!("--codec must be a 4-character FourCC like avc1, got `{}`", a.codec)
     };
+    if !(a.max_angle_error.is_finite() && a.max_angle_error > 0.0) {
+        bail!("--max-angle-error must be a positive number of degrees, not {}", a.max_angle_error);
+    }
     if a.camera == "sim" && a.port.port != "sim" {
         bail!("--camera sim films the simulated turntable: use it with --port sim");
     }
@@ -57,6 +63,7 @@ pub fn run(a: &Args) -> Result<()> {
         turns: a.turns,
         home: !a.no_home,
         fourcc: [c0, c1, c2, c3],
+        max_angle_error_deg: a.max_angle_error,
         ..CaptureOptions::new(&a.out)
     };
     let stop = ctrl_c_flag()?;
@@ -67,6 +74,12 @@ pub fn run(a: &Args) -> Result<()> {
         sum.interpolated,
         sum.final_deg.unwrap_or(f64::NAN)
     );
+    if let (Some(b), Some(rtt)) = (sum.angle_bound_deg, sum.round_trip_ms) {
+        println!("every angle within ±{b:.3}° (fastest round trip to the table {rtt:.2} ms)");
+    }
+    if sum.reports_discarded > 0 {
+        println!("{} angle report(s) refused: the commanded spin cannot have produced them", sum.reports_discarded);
+    }
     if sum.done_lost {
         println!("the table's `done` was lost on the line; its end position came from a status report");
     }

@@ -17,7 +17,7 @@ pub struct Args {
     /// Probability of a garbage line before each reply.
     #[arg(long, default_value_t = 0.0)]
     garbage_rate: f64,
-    /// Extra reply latency in milliseconds.
+    /// Latency of every line the table sends, in milliseconds (throughput unchanged).
     #[arg(long, default_value_t = 0)]
     delay_ms: u64,
     /// Raise a stall alarm this many (simulated) seconds into the first motion.
