@@ -45,7 +45,8 @@ pub fn sidecar_path(video: &Path) -> PathBuf {
     video.with_extension("angles.csv")
 }
 
-/// Reads a sidecar; frames must be strictly increasing and values finite.
+/// Reads a sidecar; frames must be strictly increasing, timestamps finite and never going back,
+/// and angles within [0, 360).
 pub fn read(path: &Path) -> Result<Vec<AngleSample>, SidecarError> {
     let csv_err = |source| SidecarError::Csv { path: path.into(), source };
     let mut rd = csv::Reader::from_path(path).map_err(csv_err)?;
@@ -56,9 +57,18 @@ pub fn read(path: &Path) -> Result<Vec<AngleSample>, SidecarError> {
         if !s.angle_deg.is_finite() || !s.timestamp_s.is_finite() {
             return Err(row_err("non-finite timestamp or angle".into()));
         }
+        if !(0.0..360.0).contains(&s.angle_deg) {
+            return Err(row_err(format!("angle {}° is outside [0, 360)", s.angle_deg)));
+        }
         if let Some(prev) = out.last() {
             if s.frame <= prev.frame {
                 return Err(row_err(format!("frame {} does not follow frame {}", s.frame, prev.frame)));
+            }
+            if s.timestamp_s < prev.timestamp_s {
+                return Err(row_err(format!(
+                    "timestamp {} s goes back from {} s (frame {})",
+                    s.timestamp_s, prev.timestamp_s, prev.frame
+                )));
             }
         }
         out.push(s);
@@ -102,6 +112,17 @@ mod tests {
         assert_eq!(read(&p).unwrap()[1], AngleSample { frame: 2, timestamp_s: 0.066, angle_deg: 1.7 });
         std::fs::write(&p, "frame,timestamp_s,angle_deg\n3,0,0\n1,0,0\n").unwrap();
         assert!(read(&p).unwrap_err().to_string().contains("row 2"));
+        for (bad, needle) in [
+            ("0,0,720\n", "row 1: angle 720° is outside [0, 360)"),
+            ("0,0,-30\n", "angle -30° is outside"),
+            ("0,0,NaN\n", "non-finite"),
+            ("0,0.5,1\n1,0.2,2\n", "row 2: timestamp 0.2 s goes back from 0.5 s"),
+            ("0,0\n", "angle sidecar"),
+        ] {
+            std::fs::write(&p, format!("frame,timestamp_s,angle_deg\n{bad}")).unwrap();
+            let e = read(&p).unwrap_err().to_string();
+            assert!(e.contains(needle), "{bad:?}: {e}");
+        }
         assert_eq!(sidecar_path(Path::new("a/b.mp4")), Path::new("a/b.angles.csv"));
     }
 }

@@ -152,3 +152,73 @@ fn ctrl_c_keeps_every_scored_frame_and_a_summary() {
     let counted: usize = summary.lines().skip(1).map(|l| l.split(',').nth(5).unwrap().parse::<usize>().unwrap()).sum();
     assert_eq!(counted, scored);
 }
+
+/// The fixture video under another name, with `sidecar` (its text) beside it.
+fn video_with_sidecar(dir: &Path, name: &str, sidecar: &str) -> String {
+    let v = dir.join(format!("{name}.mp4"));
+    std::fs::copy(common::repo().join("fixtures/carla_orbit.mp4"), &v).unwrap();
+    std::fs::write(dir.join(format!("{name}.angles.csv")), sidecar).unwrap();
+    v.display().to_string()
+}
+
+#[test]
+fn bad_or_incomplete_sidecars_get_error_rows_and_fail_the_run() {
+    // Each of these used to vanish from the summary or pass as "complete" with exit 0.
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let good = std::fs::read_to_string(common::repo().join("fixtures/carla_orbit.angles.csv")).unwrap();
+    let lines: Vec<&str> = good.lines().collect();
+    let header = lines[0];
+    let keep = |skip: &dyn Fn(usize) -> bool| {
+        let mut s = String::from(header) + "\n";
+        for (i, l) in lines[1..].iter().enumerate() {
+            if !skip(i) {
+                s += l;
+                s += "\n";
+            }
+        }
+        s
+    };
+    let videos = [
+        video_with_sidecar(tmp.path(), "backwards", &format!("{header}\n0,0,0\n2,0.1,5\n1,0.2,10\n")),
+        video_with_sidecar(tmp.path(), "nan", &format!("{header}\n0,0,NaN\n")),
+        video_with_sidecar(tmp.path(), "short", &format!("{header}\n0,0\n")),
+        video_with_sidecar(tmp.path(), "wide", &format!("{header}\n0,0,720\n")),
+        video_with_sidecar(tmp.path(), "gaps", &keep(&|i| (10..20).contains(&i))),
+    ];
+    let out_dir = tmp.path().join("out");
+    let o = pav_rig()
+        .arg("evaluate")
+        .args(&videos)
+        .args(["-d", &cfg("yolox_nano"), "--stride", "5", "--no-plots", "-o"])
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    assert_clean_failure(&o, "5 problem(s)");
+    let (_, err) = text(&o);
+    assert!(err.contains("frame 1 does not follow frame 2"), "{err}");
+    assert!(err.contains("angle 720° is outside [0, 360)"), "{err}");
+    assert!(err.contains("gaps: angles incomplete: 2 of"), "{err}");
+    let summary = std::fs::read_to_string(out_dir.join("summary.csv")).unwrap();
+    for name in ["backwards", "nan", "short", "wide"] {
+        let row = summary.lines().find(|l| l.starts_with(&format!("{name},yolox_nano"))).expect(name);
+        assert!(row.contains("failed: angle sidecar"), "{row}");
+    }
+    // Frames 10–19 lack rows; stride 5 scores two of them (10 and 15).
+    let row = summary.lines().find(|l| l.starts_with("gaps,yolox_nano")).unwrap();
+    assert!(row.contains("angles incomplete: 2 of"), "{row}");
+    let md = std::fs::read_to_string(out_dir.join("summary.md")).unwrap();
+    assert!(md.contains("backwards") && md.contains("gaps"), "{md}");
+}
+
+#[test]
+fn out_of_range_settings_are_refused_before_any_work() {
+    for (flag, value, needle) in [
+        ("--start-angle", "NaN", "--start-angle NaN must be a number"),
+        ("--rotation-period", "0", "rotation period must be positive"),
+        ("--threshold", "1.01", "--threshold 1.01 must be within [0, 1]"),
+    ] {
+        let o = pav_rig().args(["evaluate", &fixture(), "-d", &cfg("yolox_nano"), flag, value]).output().unwrap();
+        assert_clean_failure(&o, needle);
+    }
+}

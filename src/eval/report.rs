@@ -10,6 +10,9 @@ use std::path::{Path, PathBuf};
 /// Errors writing report files.
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {
+    /// Settings that cannot make a report.
+    #[error("{0}")]
+    Options(String),
     /// The CSV writer failed.
     #[error("cannot write {path}: {source}")]
     Csv {

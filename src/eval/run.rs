@@ -96,6 +96,42 @@ impl Angles {
     }
 }
 
+impl EvalOptions {
+    /// Refuses settings that would score nothing or place angles nowhere.
+    pub fn check(&self) -> Result<(), ReportError> {
+        let bad = |m: String| Err(ReportError::Options(m));
+        if !(0.0..=1.0).contains(&self.threshold) {
+            return bad(format!("threshold {} must be within [0, 1]", self.threshold));
+        }
+        if !(self.rotation_period_s.is_finite() && self.rotation_period_s != 0.0) {
+            return bad(format!("rotation period {} s must be a non-zero number", self.rotation_period_s));
+        }
+        if !self.start_angle_deg.is_finite() {
+            return bad(format!("start angle {}° must be a number", self.start_angle_deg));
+        }
+        if self.angle_bins == 0 {
+            return bad("the per-angle breakdown needs at least one sector".into());
+        }
+        Ok(())
+    }
+}
+
+/// Error rows, one per detector, for a video that could not be scored at all.
+fn failed_rows(label: &str, detectors: &[Box<dyn Detector>], why: &str) -> Vec<SummaryRow> {
+    detectors
+        .iter()
+        .map(|d| SummaryRow {
+            video: label.to_string(),
+            detector: d.name().to_string(),
+            classes: d.target_label(),
+            accuracy: Accuracy::default(),
+            decoded_frames: 0,
+            declared_frames: 0,
+            status: format!("failed: {why}"),
+        })
+        .collect()
+}
+
 /// Runs every detector over every frame of every video and writes the reports into `opts.out_dir`;
 /// each video is one stage of `progress`, in frames.
 pub fn evaluate(
@@ -105,6 +141,7 @@ pub fn evaluate(
     progress: &dyn Progress,
     stop: &AtomicBool,
 ) -> Result<EvalOutcome, ReportError> {
+    opts.check()?;
     let t_run = Instant::now();
     std::fs::create_dir_all(&opts.out_dir).map_err(|e| super::report::io_err(&opts.out_dir, e))?;
     let frames_path = opts.out_dir.join("frames.csv");
@@ -126,7 +163,9 @@ pub fn evaluate(
                     Angles::Sidecar(rows.into_iter().map(|r| (r.frame, r)).collect())
                 }
                 Err(e) => {
+                    // A video whose angles are wrong is not scored: per-angle results would be.
                     out.failures.push(e.to_string());
+                    out.rows.extend(failed_rows(&job.label, detectors, &e.to_string()));
                     continue;
                 }
             },
@@ -142,17 +181,7 @@ pub fn evaluate(
             Ok(r) => r,
             Err(e) => {
                 out.failures.push(e.to_string());
-                for d in detectors.iter() {
-                    out.rows.push(SummaryRow {
-                        video: job.label.clone(),
-                        detector: d.name().to_string(),
-                        classes: d.target_label(),
-                        accuracy: Accuracy::default(),
-                        decoded_frames: 0,
-                        declared_frames: 0,
-                        status: format!("failed: {e}"),
-                    });
-                }
+                out.rows.extend(failed_rows(&job.label, detectors, &e.to_string()));
                 continue;
             }
         };
@@ -162,7 +191,9 @@ pub fn evaluate(
         let mut status = "complete".to_string();
         let mut failed_det: Vec<Option<String>> = vec![None; detectors.len()];
         let mut decoded = 0usize;
+        let mut no_angle = 0usize;
         let first_record = out.records.len();
+        let scored_before = out.timing.frames_scored;
         loop {
             if stop.load(Ordering::Relaxed) {
                 status = format!("interrupted after {decoded} frames");
@@ -193,6 +224,7 @@ pub fn evaluate(
             };
             out.timing.frames_scored += 1;
             let (time_s, angle_deg) = angles.at(idx, info.fps);
+            no_angle += usize::from(angle_deg.is_none());
             for (k, det) in detectors.iter_mut().enumerate() {
                 if failed_det[k].is_some() {
                     continue;
@@ -238,6 +270,28 @@ pub fn evaluate(
             // Containers estimate counts from duration; more than one frame short means a cut file.
             status = format!("truncated: decoded {decoded} of {} declared frames", info.declared_frames);
             out.failures.push(format!("{}: {status}", job.label));
+        }
+        if let Angles::Sidecar(rows) = &angles {
+            // Frames without a row, and rows for frames the video does not have, mean the
+            // sidecar and the video are not one recording (or one was cut short).
+            let beyond = if out.interrupted { 0 } else { rows.keys().filter(|&&f| f >= decoded).count() };
+            let scored = out.timing.frames_scored - scored_before;
+            let mut problems = Vec::new();
+            if no_angle > 0 {
+                problems.push(format!("{no_angle} of {scored} scored frames have no sidecar row"));
+            }
+            if beyond > 0 {
+                problems.push(format!("the sidecar has {beyond} rows for frames beyond the {decoded} decoded"));
+            }
+            if !problems.is_empty() {
+                let msg = format!("angles incomplete: {}", problems.join("; "));
+                out.failures.push(format!("{}: {msg}", job.label));
+                if status == "complete" {
+                    status = msg;
+                } else {
+                    status = format!("{status}; {msg}");
+                }
+            }
         }
         let recs = &out.records[first_record..];
         for (k, det) in detectors.iter().enumerate() {

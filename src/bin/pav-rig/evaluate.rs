@@ -73,8 +73,18 @@ pub fn run(a: &Args) -> Result<()> {
     if !(0.0..=1.0).contains(&a.threshold) {
         bail!("--threshold {} must be within [0, 1]", a.threshold);
     }
+    if !a.start_angle.is_finite() {
+        bail!("--start-angle {} must be a number of degrees", a.start_angle);
+    }
     let jobs = jobs(a)?;
-    let mut detectors = load_detectors(&a.detectors, &a.classes, a.threads)?;
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    if a.threads > cores {
+        eprintln!(
+            "warning: --threads {} is more than this machine's {cores} cores; threads beyond them only take \
+             turns (a run can take many times longer); 0 lets ONNX Runtime choose",
+            a.threads
+        );
+    }
     let stop = ctrl_c_flag()?;
     let opts = EvalOptions {
         threshold: a.threshold,
@@ -85,6 +95,8 @@ pub fn run(a: &Args) -> Result<()> {
         out_dir: a.out.clone(),
         plots: !a.no_plots,
     };
+    opts.check()?;
+    let mut detectors = load_detectors(&a.detectors, &a.classes, a.threads)?;
     eprintln!(
         "scoring {} video(s) with {} detector(s); threshold {}, classes {}, stride {}",
         jobs.len(),
