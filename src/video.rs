@@ -1,10 +1,11 @@
-//! Video files through OpenCV: decoding into BGR frames (with a prefetching decoder thread) and
-//! encoding frames, with errors that name the file and keep OpenCV's cause.
+//! Video files: decoding into BGR frames through OpenCV (with a prefetching decoder thread), and
+//! encoding through an `ffmpeg` child process that outlives a crash; errors name the file and
+//! keep the cause.
 
 use crate::image::Frame;
-use opencv::core::{Mat, Size};
+use opencv::core::Mat;
 use opencv::prelude::*;
-use opencv::videoio::{self, VideoCapture, CAP_FFMPEG};
+use opencv::videoio::{self, VideoCapture};
 use std::path::{Path, PathBuf};
 
 /// Errors opening, decoding or encoding a video.
@@ -37,23 +38,23 @@ pub enum VideoError {
         /// Why.
         source: MatError,
     },
-    /// The encoder could not be created for this file and codec.
-    #[error("OpenCV cannot write {path} with codec {codec}")]
+    /// The encoder could not be started for this file and codec.
+    #[error("cannot write {path} with codec {codec}: {reason}")]
     Encoder {
         /// Video path.
         path: PathBuf,
         /// FourCC.
         codec: String,
-        /// OpenCV's error, when it gave one.
-        source: Option<opencv::Error>,
+        /// Why.
+        reason: String,
     },
     /// Writing or closing the file failed.
-    #[error("writing {path}: {source}")]
+    #[error("writing {path}: {reason}")]
     Write {
         /// Video path.
         path: PathBuf,
-        /// Why.
-        source: MatError,
+        /// Why, with the encoder's last words when it gave any.
+        reason: String,
     },
 }
 
@@ -169,42 +170,133 @@ pub fn frame_to_mat(f: &Frame) -> opencv::Result<Mat> {
     m.try_clone()
 }
 
-/// Encodes frames into a video file as they come (OpenCV's FFmpeg backend).
+/// Encodes frames into a video file as they come, through an `ffmpeg` child process fed raw
+/// BGR frames on a pipe.
+///
+/// The child is what makes a recording survive its recorder: when pav dies, even by SIGKILL,
+/// the pipe closes and ffmpeg finalizes the file with every frame it was given. The child runs
+/// in its own process group, so a terminal's Ctrl-C reaches only pav, which then closes the file
+/// itself. MP4 and MOV files are written fragmented with a key frame every second, so even a
+/// killed ffmpeg leaves a file playable up to its last whole second.
 pub struct VideoWriter {
-    inner: videoio::VideoWriter,
+    child: std::process::Child,
+    stdin: Option<std::process::ChildStdin>,
+    stderr: Option<std::thread::JoinHandle<String>>,
     path: PathBuf,
+    size: (usize, usize),
+}
+
+/// ffmpeg encoder arguments for a FourCC.
+fn encoder_args(fourcc: &str) -> Option<&'static [&'static str]> {
+    Some(match fourcc {
+        "avc1" | "h264" | "H264" | "x264" | "X264" => {
+            &["-c:v", "libx264", "-preset", "veryfast", "-crf", "18", "-pix_fmt", "yuv420p"]
+        }
+        "mp4v" | "MP4V" | "FMP4" | "XVID" | "DIVX" => &["-c:v", "mpeg4", "-q:v", "3"],
+        "MJPG" | "mjpg" => &["-c:v", "mjpeg", "-q:v", "3"],
+        _ => return None,
+    })
 }
 
 impl VideoWriter {
-    /// Creates `path` for `width × height` frames at `fps` with codec `fourcc` (e.g. `avc1`).
+    /// Creates `path` for `width × height` frames at `fps` with codec `fourcc` (`avc1` = H.264,
+    /// `mp4v` = MPEG-4 part 2, `MJPG`).
     pub fn create(
         path: &Path,
         fourcc: [char; 4],
         fps: f64,
         (width, height): (usize, usize),
     ) -> Result<Self, VideoError> {
-        let encoder = |source| VideoError::Encoder { path: path.into(), codec: fourcc.iter().collect(), source };
-        let [a, b, c, d] = fourcc;
-        let code = videoio::VideoWriter::fourcc(a, b, c, d).map_err(|e| encoder(Some(e)))?;
-        let size = Size::new(width as i32, height as i32);
-        let inner = videoio::VideoWriter::new_with_backend(&*path.to_string_lossy(), CAP_FFMPEG, code, fps, size, true)
-            .map_err(|e| encoder(Some(e)))?;
-        if !inner.is_opened().unwrap_or(false) {
-            return Err(encoder(None));
+        use std::os::unix::process::CommandExt;
+        use std::process::{Command, Stdio};
+        let codec: String = fourcc.iter().collect();
+        let refuse = |reason: String| VideoError::Encoder { path: path.into(), codec: codec.clone(), reason };
+        let enc = encoder_args(&codec)
+            .ok_or_else(|| refuse("unknown codec: use avc1 (H.264), mp4v (MPEG-4 part 2) or MJPG".into()))?;
+        if !(fps.is_finite() && fps > 0.0) || width == 0 || height == 0 {
+            return Err(refuse(format!("{width}x{height} at {fps} fps is no video")));
         }
-        Ok(VideoWriter { inner, path: path.into() })
+        let gop = (fps.round() as usize).max(1).to_string();
+        let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+        let mut cmd = Command::new("ffmpeg");
+        cmd.args(["-hide_banner", "-loglevel", "error", "-nostats", "-y", "-f", "rawvideo", "-pix_fmt", "bgr24"])
+            .args(["-s", &format!("{width}x{height}"), "-r", &fps.to_string(), "-i", "pipe:0"])
+            .args(enc)
+            .args(["-g", &gop]);
+        if matches!(ext.as_str(), "mp4" | "mov" | "m4v") {
+            cmd.args(["-movflags", "+frag_keyframe+empty_moov+default_base_moof"]);
+        }
+        // Descriptors pav opened without close-on-exec (a serial port, a pseudo-terminal) would
+        // otherwise live on in ffmpeg: a port that cannot hang up, a device held after pav exits.
+        // SAFETY: the closure runs between fork and exec and only calls fcntl and syscall,
+        // which are async-signal-safe; it allocates nothing.
+        unsafe {
+            cmd.pre_exec(|| {
+                const CLOSE_RANGE_CLOEXEC: libc::c_uint = 1 << 2;
+                if libc::syscall(libc::SYS_close_range, 3 as libc::c_uint, libc::c_uint::MAX, CLOSE_RANGE_CLOEXEC) != 0
+                {
+                    for fd in 3..4096 {
+                        libc::fcntl(fd, libc::F_SETFD, libc::FD_CLOEXEC);
+                    }
+                }
+                Ok(())
+            });
+        }
+        let mut child = cmd
+            .arg(path)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .process_group(0)
+            .spawn()
+            .map_err(|e| refuse(format!("cannot run ffmpeg ({e}); scripts/setup.sh installs it")))?;
+        let stdin = child.stdin.take();
+        let mut err = child.stderr.take().expect("stderr was piped");
+        let stderr = std::thread::spawn(move || {
+            let mut s = String::new();
+            let _ = std::io::Read::read_to_string(&mut err, &mut s);
+            s
+        });
+        Ok(VideoWriter { child, stdin, stderr: Some(stderr), path: path.into(), size: (width, height) })
+    }
+
+    /// Waits for ffmpeg after its input closed; its error output when it failed.
+    fn close(&mut self) -> Result<(), String> {
+        drop(self.stdin.take());
+        let status = self.child.wait().map_err(|e| format!("waiting for ffmpeg: {e}"))?;
+        let said = self.stderr.take().and_then(|h| h.join().ok()).unwrap_or_default();
+        if status.success() {
+            Ok(())
+        } else {
+            Err(format!("ffmpeg {status}: {}", said.trim()))
+        }
     }
 
     /// Appends one frame.
     pub fn write(&mut self, f: &Frame) -> Result<(), VideoError> {
-        let write_err = |source: MatError| VideoError::Write { path: self.path.clone(), source };
-        let m = frame_to_mat(f).map_err(|e| write_err(e.into()))?;
-        self.inner.write(&m).map_err(|e| write_err(e.into()))
+        let fail = |reason: String| VideoError::Write { path: self.path.clone(), reason };
+        if (f.width, f.height) != self.size {
+            return Err(fail(format!("a {}x{} frame in a {}x{} video", f.width, f.height, self.size.0, self.size.1)));
+        }
+        let Some(stdin) = self.stdin.as_mut() else { return Err(fail("the file is closed".into())) };
+        if let Err(e) = std::io::Write::write_all(stdin, &f.bgr) {
+            let why = self.close().err().unwrap_or_default();
+            return Err(VideoError::Write { path: self.path.clone(), reason: format!("{e}; {why}") });
+        }
+        Ok(())
     }
 
-    /// Finalizes the file (the container's index is written here).
+    /// Finalizes the file: ffmpeg gets the end of its input and writes the container's index.
     pub fn finish(mut self) -> Result<(), VideoError> {
-        self.inner.release().map_err(|e| VideoError::Write { path: self.path.clone(), source: e.into() })
+        self.close().map_err(|reason| VideoError::Write { path: self.path.clone(), reason })
+    }
+}
+
+impl Drop for VideoWriter {
+    fn drop(&mut self) {
+        if self.stdin.is_some() {
+            let _ = self.close();
+        }
     }
 }
 

@@ -140,8 +140,11 @@ fn ctrl_c_stops_the_table_and_saves() {
         std::thread::sleep(Duration::from_millis(800));
         flag.store(true, std::sync::atomic::Ordering::Relaxed);
     });
-    let n =
-        expect_stopped(capture(&mut table, &mut cam, &opts(&video), &Silent, &stop), "interrupted (Ctrl-C)", &video);
+    let n = expect_stopped(
+        capture(&mut table, &mut cam, &opts(&video), &Silent, &stop),
+        "interrupted (Ctrl-C or SIGTERM)",
+        &video,
+    );
     assert!((15..40).contains(&n), "{n}");
 }
 

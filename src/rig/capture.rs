@@ -436,7 +436,7 @@ pub fn capture(
     let cause: Option<String> = 'rec: loop {
         if stop.load(Ordering::Relaxed) {
             let _ = table.command(Command::Stop);
-            break Some("interrupted (Ctrl-C)".into());
+            break Some("interrupted (Ctrl-C or SIGTERM)".into());
         }
         match cam.grab() {
             Ok(Some((f, at))) => {

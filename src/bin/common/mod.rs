@@ -57,10 +57,12 @@ impl Progress for Bar {
     }
 }
 
-/// A flag that Ctrl-C raises, so long runs save their state and stop between steps.
+/// A flag that Ctrl-C, SIGTERM or SIGHUP raises, so long runs save their state and stop between
+/// steps (a service manager's stop or a closed terminal loses nothing either).
 pub fn ctrl_c_flag() -> Result<Arc<AtomicBool>> {
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
-    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
+    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+        .context("installing the Ctrl-C and SIGTERM handler")?;
     Ok(stop)
 }
