@@ -116,6 +116,8 @@ pub struct LiveCapture {
     fps: f64,
     mat: Mat,
     index: usize,
+    /// Frames placed by their source timestamps; `None`: by the read instant.
+    stamps: Option<SourceClock>,
 }
 
 impl LiveCapture {
@@ -134,7 +136,9 @@ impl LiveCapture {
         ] {
             let _ = cap.set(prop, v);
         }
-        Self::wrap(cap, name)
+        let mut c = Self::wrap(cap, name)?;
+        c.stamps = Some(SourceClock::default());
+        Ok(c)
     }
 
     /// GStreamer's `videotestsrc` as a live camera (moving test pattern), for rigs without a camera.
@@ -158,7 +162,37 @@ impl LiveCapture {
         let g = |p| cap.get(p).unwrap_or(0.0);
         let size = (g(videoio::CAP_PROP_FRAME_WIDTH) as usize, g(videoio::CAP_PROP_FRAME_HEIGHT) as usize);
         let fps = Some(g(videoio::CAP_PROP_FPS)).filter(|f| f.is_finite() && *f > 0.0).unwrap_or(30.0);
-        Ok(LiveCapture { cap, name, size, fps, mat: Mat::default(), index: 0 })
+        Ok(LiveCapture { cap, name, size, fps, mat: Mat::default(), index: 0, stamps: None })
+    }
+}
+
+/// Places frames on the host clock by the source's own timestamps (a V4L2 buffer's capture
+/// time, which OpenCV reports as `CAP_PROP_POS_MSEC`) rather than by when they were read, which
+/// a busy host or the driver's queue delays. OpenCV's GStreamer backend answers the same
+/// property with a position query made at read time (measured: it follows the reads), so
+/// GStreamer sources keep the read instant. The source clock is anchored to the host by the
+/// frame read soonest after its timestamp (reading only ever comes later); without usable
+/// timestamps, the read instant stands.
+#[derive(Default)]
+struct SourceClock {
+    /// Smallest (read instant − source seconds) so far: the host instant of source time 0.
+    origin: Option<Instant>,
+    last_ts: Option<f64>,
+}
+
+impl SourceClock {
+    /// The capture instant of a frame read at `read` with source timestamp `ts_s` seconds.
+    fn stamp(&mut self, read: Instant, ts_s: f64) -> Instant {
+        let usable = ts_s.is_finite() && ts_s > 0.0 && self.last_ts.is_none_or(|l| ts_s > l);
+        if !usable {
+            return read;
+        }
+        self.last_ts = Some(ts_s);
+        let Some(back) = read.checked_sub(Duration::from_secs_f64(ts_s)) else { return read };
+        let origin = *self.origin.get_or_insert(back);
+        let origin = origin.min(back);
+        self.origin = Some(origin);
+        origin + Duration::from_secs_f64(ts_s)
     }
 }
 
@@ -175,10 +209,14 @@ impl FrameSource for LiveCapture {
     fn grab(&mut self) -> Result<Option<(Frame, Instant)>, CameraError> {
         let err = |source: SourceFault| CameraError::Read { source_name: self.name.clone(), frame: self.index, source };
         let ok = self.cap.read(&mut self.mat).map_err(|e| err(e.into()))?;
-        let at = Instant::now();
+        let read = Instant::now();
         if !ok || self.mat.empty() {
             return Err(err(SourceFault::Stream("the camera stopped delivering frames")));
         }
+        let at = match self.stamps.as_mut() {
+            Some(clock) => clock.stamp(read, self.cap.get(videoio::CAP_PROP_POS_MSEC).unwrap_or(f64::NAN) / 1000.0),
+            None => read,
+        };
         let f = mat_to_frame(&self.mat).map_err(|e| err(e.into()))?;
         self.index += 1;
         Ok(Some((f, at)))
@@ -305,5 +343,39 @@ impl FrameSource for SimCamera {
         self.true_angles.push(angle);
         self.index += 1;
         Ok(Some((f, at)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn source_timestamps_survive_a_burst_of_late_reads() {
+        // Frames taken every 33.3 ms; the reader falls 120 ms behind after frame 3 and then
+        // reads the queued frames back to back. Source time starts at 5 s (a kernel clock).
+        let t0 = Instant::now();
+        let mut clock = SourceClock::default();
+        let mut read = t0;
+        let mut stamps = Vec::new();
+        for k in 0..12u32 {
+            let taken = 5.0 + k as f64 / 30.0;
+            read = read.max(t0 + Duration::from_secs_f64(k as f64 / 30.0 + 0.004)); // 4 ms to read
+            if k == 4 {
+                read += Duration::from_millis(120);
+            }
+            stamps.push(clock.stamp(read, taken));
+            read += Duration::from_millis(1);
+        }
+        for (k, w) in stamps.windows(2).enumerate() {
+            let gap = (w[1] - w[0]).as_secs_f64() * 1000.0;
+            assert!((gap - 1000.0 / 30.0).abs() < 0.01, "frames {k}-{}: {gap} ms", k + 1);
+        }
+        // Anchored by the frames read soonest: 4 ms after they were taken.
+        let lag = (stamps[0] - t0).as_secs_f64();
+        assert!((lag - 0.004).abs() < 1e-6, "{lag}");
+        // No usable timestamp (0, NaN, going back): the read instant stands.
+        assert_eq!(clock.stamp(read, f64::NAN), read);
+        assert_eq!(clock.stamp(read, 1.0), read);
     }
 }
