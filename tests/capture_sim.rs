@@ -77,11 +77,12 @@ fn expect_stopped(r: Result<pav::rig::capture::CaptureSummary, CaptureError>, ne
     let e = r.expect_err("capture should stop");
     let msg = e.to_string();
     assert!(msg.contains(needle), "{msg}");
-    let CaptureError::Stopped { frames, .. } = e else { panic!("{msg}") };
+    let CaptureError::Stopped { frames, without_angle, .. } = e else { panic!("{msg}") };
     assert!(msg.contains("saved"), "{msg}");
-    // Nothing recorded is lost: the video decodes and the sidecar has a row per frame.
+    // Nothing recorded is lost: the video decodes, and the sidecar has a row per frame that
+    // reports placed (the rest are counted in the error).
     assert_eq!(decoded_frames(video), frames, "{msg}");
-    assert_eq!(sidecar::read(&sidecar::sidecar_path(video)).unwrap().len(), frames);
+    assert_eq!(sidecar::read(&sidecar::sidecar_path(video)).unwrap().len(), frames - without_angle, "{msg}");
     frames
 }
 
@@ -257,4 +258,103 @@ fn reply_latency_is_bounded_and_too_much_of_it_is_flagged() {
         assert!(worst <= bound + 0.01, "{ms} ms: error {worst:.3}° beyond the bound ±{bound:.3}°");
         assert_eq!(sum.reports_discarded, 0);
     }
+}
+
+/// How a capture under one fault ended.
+#[derive(Debug, PartialEq, Clone, Copy)]
+enum Outcome {
+    Ok,
+    Flagged,
+    Stopped,
+}
+
+#[test]
+fn fault_matrix_loses_no_frame_and_flags_every_doubtful_angle() {
+    // Every fault the simulator can inject, each in its own capture at 2x (25.7°/s), all at
+    // once. Whatever happens: the video and the sidecar hold every frame recorded, and a
+    // capture that ends well has every angle within its stated bound (never beyond the 0.5°
+    // limit); anything else ends in an error (a non-zero exit in pav-rig).
+    use Outcome::*;
+    let ms = Duration::from_millis;
+    let cases: Vec<(&str, Faults, Option<usize>, Option<u64>, &[Outcome])> = vec![
+        ("none", Faults::default(), None, None, &[Ok, Flagged]),
+        ("1 % bytes dropped", Faults { drop_byte: 0.01, ..Faults::default() }, None, None, &[Ok, Flagged]),
+        ("3 % bytes dropped", Faults { drop_byte: 0.03, ..Faults::default() }, None, None, &[Ok, Flagged]),
+        ("garbage before 10 % of lines", Faults { garbage_line: 0.1, ..Faults::default() }, None, None, &[Ok, Flagged]),
+        ("10 ms latency", Faults { delay: ms(10), ..Faults::default() }, None, None, &[Ok, Flagged]),
+        ("50 ms latency", Faults { delay: ms(50), ..Faults::default() }, None, None, &[Flagged]),
+        ("200 ms latency", Faults { delay: ms(200), ..Faults::default() }, None, None, &[Flagged]),
+        ("lost end of motion", Faults { lose_end: true, ..Faults::default() }, None, None, &[Ok, Flagged]),
+        ("stall alarm at 4 s", Faults { stall_after: Some(ms(4000)), ..Faults::default() }, None, None, &[Stopped]),
+        ("disconnect at 3 s", Faults { disconnect_after: Some(ms(3000)), ..Faults::default() }, None, None, &[Stopped]),
+        ("firmware hangs at 3 s", Faults { hang_after: Some(ms(3000)), ..Faults::default() }, None, None, &[Stopped]),
+        ("camera fails at frame 60", Faults::default(), Some(60), None, &[Stopped]),
+        ("interrupted at 3 s", Faults::default(), None, Some(3000), &[Stopped]),
+    ];
+    let runs: Vec<_> = cases
+        .into_iter()
+        .map(|(name, faults, fail_at, stop_ms, allowed)| {
+            std::thread::spawn(move || {
+                let tmp = tempfile::tempdir().unwrap();
+                let video = tmp.path().join("m.mp4");
+                let (s, mut table) = rig(2.0, faults);
+                let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
+                cam.fail_at = fail_at;
+                let mut o = opts(&video);
+                o.home = false;
+                o.no_progress = Duration::from_secs(5);
+                let stop = std::sync::Arc::new(AtomicBool::new(false));
+                if let Some(t) = stop_ms {
+                    let flag = stop.clone();
+                    std::thread::spawn(move || {
+                        std::thread::sleep(Duration::from_millis(t));
+                        flag.store(true, std::sync::atomic::Ordering::Relaxed);
+                    });
+                }
+                let r = capture(&mut table, &mut cam, &o, &Silent, &stop);
+                let rows = sidecar::read(&sidecar::sidecar_path(&video)).unwrap();
+                let worst = worst_angle_error(&rows, &cam.true_angles, 90.0);
+                let (outcome, frames, bound, why) = match r {
+                    Result::Ok(s) => (Ok, s.frames, s.angle_bound_deg, String::new()),
+                    Err(CaptureError::Uncertain { summary, reason, .. }) => {
+                        (Flagged, summary.frames, summary.angle_bound_deg, reason)
+                    }
+                    Err(e @ CaptureError::Stopped { frames, without_angle, .. }) => {
+                        (Stopped, frames - without_angle, None, e.to_string())
+                    }
+                    Err(e) => panic!("{name}: {e}"),
+                };
+                let decoded = decoded_frames(&video);
+                (name, allowed, outcome, frames, rows.len(), decoded, worst, bound, why)
+            })
+        })
+        .collect();
+    eprintln!("| fault | outcome | frames with angles | sidecar rows | decoded | worst angle error | stated bound |");
+    eprintln!("|---|---|---:|---:|---:|---:|---:|");
+    let mut failures = Vec::new();
+    for run in runs {
+        let (name, allowed, outcome, frames, rows, decoded, worst, bound, why) = run.join().unwrap();
+        let b = bound.map_or("–".into(), |b| format!("±{b:.2}°"));
+        eprintln!("| {name} | {outcome:?} | {frames} | {rows} | {decoded} | {worst:.2}° | {b} |");
+        if !allowed.contains(&outcome) {
+            failures.push(format!("{name}: {outcome:?} ({why}), expected one of {allowed:?}"));
+        }
+        if rows != frames || decoded < frames || (outcome != Stopped && decoded != frames) {
+            failures.push(format!("{name}: {frames} frames placed, {rows} sidecar rows, {decoded} decode"));
+        }
+        // A stopped capture is an error as a whole, yet the rows it keeps are still right.
+        if outcome == Stopped && worst > 0.5 {
+            failures.push(format!("{name}: a kept row is {worst:.3}° off"));
+        }
+        if outcome != Stopped {
+            let bound = bound.unwrap_or(0.0);
+            if worst > bound + 0.01 {
+                failures.push(format!("{name}: angle error {worst:.3}° beyond the stated bound ±{bound:.3}°"));
+            }
+            if outcome == Ok && bound > 0.5 {
+                failures.push(format!("{name}: passed with a bound of ±{bound:.3}°"));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

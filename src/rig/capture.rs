@@ -69,7 +69,8 @@ pub struct CaptureSummary {
     pub sidecar: PathBuf,
     /// Frames written.
     pub frames: usize,
-    /// Frames whose angle came from reports around them (the rest were extrapolated at the end).
+    /// Frames whose angle came from reports around them while recording (the rest were placed
+    /// when the motion ended).
     pub interpolated: usize,
     /// Final table position, degrees from home (not wrapped).
     pub final_deg: Option<f64>,
@@ -125,12 +126,14 @@ pub enum CaptureError {
         sidecar: String,
     },
     /// Failed while recording; everything recorded so far was saved.
-    #[error("{cause}; stopped at frame {frames} (table at {angle}); saved {video} and {sidecar}")]
+    #[error("{cause}; stopped at frame {frames} (table at {angle}); saved {video} and {sidecar}{}", if *.without_angle > 0 { format!(" ({without_angle} frames after the last angle report have no sidecar row)") } else { String::new() })]
     Stopped {
         /// What went wrong.
         cause: String,
         /// Frames recorded.
         frames: usize,
+        /// Frames at the end that no report placed, so without a sidecar row.
+        without_angle: usize,
         /// Last known angle.
         angle: String,
         /// Video path.
@@ -294,22 +297,6 @@ impl AngleTrack {
         let p = last.2 as f64 + v * (d - last.1);
         let (lo, hi) = if end >= last.2 { (last.2 as f64, end as f64) } else { (end as f64, last.2 as f64) };
         p.clamp(lo, hi)
-    }
-
-    /// Best estimate when no later report will come: extrapolate the last two samples.
-    fn extrapolate(&self, at: Instant) -> Option<f64> {
-        if let Some(p) = self.place(at) {
-            return Some(p);
-        }
-        let n = self.samples.len();
-        let last = *self.samples.last()?;
-        if n < 2 {
-            return Some(last.2 as f64);
-        }
-        let prev = self.samples[n - 2];
-        let (rate, c) = self.clock();
-        let d = rate * self.host_s(at) + c;
-        Some(last.2 as f64 + (last.2 - prev.2) as f64 * (d - last.1) / (last.1 - prev.1))
     }
 }
 
@@ -505,14 +492,20 @@ pub fn capture(
         }
     };
     progress.end(None);
-    // Finalize whatever happened: remaining frames get the best estimate, files are closed.
+    // Finalize whatever happened: frames that reports still place get their rows; frames after
+    // the last report of a motion that never ended get none (a guess there was 11° off when the
+    // firmware hung), and the error counts them. Files are closed either way.
     let mut last_angle = None;
+    let mut without_angle = 0;
     if let Some(first) = first_at {
         while let Some((idx, at)) = pending.pop_front() {
-            if let Some(pos) = track.extrapolate(at) {
-                written.push((at, pos));
-                let _ = write_row(&mut side, idx, at, pos, first);
-                last_angle = Some(pos);
+            match track.place(at) {
+                Some(pos) => {
+                    written.push((at, pos));
+                    let _ = write_row(&mut side, idx, at, pos, first);
+                    last_angle = Some(pos);
+                }
+                None => without_angle += 1,
             }
         }
     }
@@ -566,6 +559,7 @@ pub fn capture(
         Some(cause) => Err(CaptureError::Stopped {
             cause,
             frames,
+            without_angle,
             angle: last_angle
                 .or_else(|| track.samples.last().map(|s| s.2 as f64))
                 .map_or("an unknown angle".into(), |p| format!("{:.1}°", (p * 360.0 / rev).rem_euclid(360.0))),
