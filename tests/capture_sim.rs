@@ -268,6 +268,9 @@ enum Outcome {
     Stopped,
 }
 
+/// A fault, the camera frame that fails, when to interrupt (ms), and the outcomes allowed.
+type Case = (&'static str, Faults, Option<usize>, Option<u64>, &'static [Outcome]);
+
 #[test]
 fn fault_matrix_loses_no_frame_and_flags_every_doubtful_angle() {
     // Every fault the simulator can inject, each in its own capture at 2x (25.7°/s), all at
@@ -276,7 +279,7 @@ fn fault_matrix_loses_no_frame_and_flags_every_doubtful_angle() {
     // limit); anything else ends in an error (a non-zero exit in pav-rig).
     use Outcome::*;
     let ms = Duration::from_millis;
-    let cases: Vec<(&str, Faults, Option<usize>, Option<u64>, &[Outcome])> = vec![
+    let cases: Vec<Case> = vec![
         ("none", Faults::default(), None, None, &[Ok, Flagged]),
         ("1 % bytes dropped", Faults { drop_byte: 0.01, ..Faults::default() }, None, None, &[Ok, Flagged]),
         ("3 % bytes dropped", Faults { drop_byte: 0.03, ..Faults::default() }, None, None, &[Ok, Flagged]),
