@@ -180,7 +180,10 @@ pub fn frame_to_mat(f: &Frame) -> opencv::Result<Mat> {
 /// killed ffmpeg leaves a file playable up to its last whole second.
 pub struct VideoWriter {
     child: std::process::Child,
-    stdin: Option<std::process::ChildStdin>,
+    /// Frames on their way to ffmpeg: a feeder thread writes them to its pipe, so a slow encoder
+    /// (a loaded host) holds up this queue, not the caller's camera loop.
+    frames: Option<std::sync::mpsc::SyncSender<Vec<u8>>>,
+    feeder: Option<std::thread::JoinHandle<Result<(), String>>>,
     stderr: Option<std::thread::JoinHandle<String>>,
     path: PathBuf,
     size: (usize, usize),
@@ -250,25 +253,42 @@ impl VideoWriter {
             .process_group(0)
             .spawn()
             .map_err(|e| refuse(format!("cannot run ffmpeg ({e}); scripts/setup.sh installs it")))?;
-        let stdin = child.stdin.take();
+        let mut stdin = child.stdin.take().expect("stdin was piped");
+        // Two seconds of frames may wait for the encoder before the caller does.
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<u8>>((fps.round() as usize * 2).max(4));
+        let feeder = std::thread::spawn(move || {
+            for frame in rx {
+                std::io::Write::write_all(&mut stdin, &frame).map_err(|e| e.to_string())?;
+            }
+            Ok(())
+        });
         let mut err = child.stderr.take().expect("stderr was piped");
         let stderr = std::thread::spawn(move || {
             let mut s = String::new();
             let _ = std::io::Read::read_to_string(&mut err, &mut s);
             s
         });
-        Ok(VideoWriter { child, stdin, stderr: Some(stderr), path: path.into(), size: (width, height) })
+        Ok(VideoWriter {
+            child,
+            frames: Some(tx),
+            feeder: Some(feeder),
+            stderr: Some(stderr),
+            path: path.into(),
+            size: (width, height),
+        })
     }
 
-    /// Waits for ffmpeg after its input closed; its error output when it failed.
+    /// Hands ffmpeg the frames still queued, ends its input and waits for it; its error output
+    /// when it failed.
     fn close(&mut self) -> Result<(), String> {
-        drop(self.stdin.take());
+        drop(self.frames.take());
+        let fed = self.feeder.take().map_or(Ok(()), |h| h.join().unwrap_or_else(|_| Err("feeder panicked".into())));
         let status = self.child.wait().map_err(|e| format!("waiting for ffmpeg: {e}"))?;
         let said = self.stderr.take().and_then(|h| h.join().ok()).unwrap_or_default();
-        if status.success() {
-            Ok(())
-        } else {
-            Err(format!("ffmpeg {status}: {}", said.trim()))
+        match (status.success(), fed) {
+            (true, Ok(())) => Ok(()),
+            (_, Err(e)) => Err(format!("feeding ffmpeg: {e}; ffmpeg {status}: {}", said.trim())),
+            (false, Ok(())) => Err(format!("ffmpeg {status}: {}", said.trim())),
         }
     }
 
@@ -278,10 +298,11 @@ impl VideoWriter {
         if (f.width, f.height) != self.size {
             return Err(fail(format!("a {}x{} frame in a {}x{} video", f.width, f.height, self.size.0, self.size.1)));
         }
-        let Some(stdin) = self.stdin.as_mut() else { return Err(fail("the file is closed".into())) };
-        if let Err(e) = std::io::Write::write_all(stdin, &f.bgr) {
-            let why = self.close().err().unwrap_or_default();
-            return Err(VideoError::Write { path: self.path.clone(), reason: format!("{e}; {why}") });
+        let Some(frames) = self.frames.as_ref() else { return Err(fail("the file is closed".into())) };
+        if frames.send(f.bgr.clone()).is_err() {
+            // The feeder stopped: ffmpeg is gone; say why.
+            let why = self.close().err().unwrap_or_else(|| "the encoder stopped".into());
+            return Err(VideoError::Write { path: self.path.clone(), reason: why });
         }
         Ok(())
     }
@@ -294,7 +315,7 @@ impl VideoWriter {
 
 impl Drop for VideoWriter {
     fn drop(&mut self) {
-        if self.stdin.is_some() {
+        if self.frames.is_some() {
             let _ = self.close();
         }
     }

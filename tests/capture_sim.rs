@@ -283,6 +283,7 @@ fn fault_matrix_loses_no_frame_and_flags_every_doubtful_angle() {
         ("none", Faults::default(), None, None, &[Ok, Flagged]),
         ("1 % bytes dropped", Faults { drop_byte: 0.01, ..Faults::default() }, None, None, &[Ok, Flagged]),
         ("3 % bytes dropped", Faults { drop_byte: 0.03, ..Faults::default() }, None, None, &[Ok, Flagged]),
+        ("5 % bytes dropped", Faults { drop_byte: 0.05, ..Faults::default() }, None, None, &[Ok, Flagged]),
         ("garbage before 10 % of lines", Faults { garbage_line: 0.1, ..Faults::default() }, None, None, &[Ok, Flagged]),
         ("10 ms latency", Faults { delay: ms(10), ..Faults::default() }, None, None, &[Ok, Flagged]),
         ("50 ms latency", Faults { delay: ms(50), ..Faults::default() }, None, None, &[Flagged]),

@@ -149,8 +149,9 @@ fn a_killed_capture_leaves_a_playable_video() {
     let rows = pav::sidecar::read(&pav::sidecar::sidecar_path(&video)).unwrap();
     eprintln!("after SIGKILL: {frames} frames decode, {} sidecar rows", rows.len());
     assert!(frames >= 30, "{frames} frames after 2.5 s at 30 fps");
-    // Rows follow frames as their angles become known, within a second of them.
-    assert!(rows.len() <= frames && frames - rows.len() <= 45, "{} rows for {frames} frames", rows.len());
+    // Rows follow frames as their angles become known, and frames may still have been queued for
+    // the encoder: the two agree to within two seconds of frames (evaluate names the difference).
+    assert!(frames.abs_diff(rows.len()) <= 60, "{} rows for {frames} frames", rows.len());
 }
 
 #[test]
@@ -188,7 +189,15 @@ fn sigterm_stops_the_table_and_closes_the_files() {
     let _ = sim.kill();
     let _ = sim.wait();
     assert!(text(&st).contains("Idle"), "{}", text(&st));
+    // Every frame decodes; each has a sidecar row, but for the frames after the last angle
+    // report, which the error counts.
     let rows = pav::sidecar::read(&pav::sidecar::sidecar_path(&video)).unwrap();
-    assert_eq!(decoded_frames(&video), Some(rows.len()), "{out}");
-    assert!(rows.len() > 20, "{out}");
+    let unplaced = out
+        .split(" frames after the last angle report")
+        .next()
+        .filter(|_| out.contains("frames after the last angle report"))
+        .and_then(|s| s.rsplit('(').next())
+        .map_or(0, |n| n.trim().parse::<usize>().unwrap());
+    assert_eq!(decoded_frames(&video), Some(rows.len() + unplaced), "{out}");
+    assert!(rows.len() > 20 && unplaced <= 2, "{out}");
 }

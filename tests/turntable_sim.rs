@@ -171,3 +171,24 @@ fn a_lost_done_is_recovered_from_the_status() {
     let seq = t.command(Command::MoveBy(Milli(-45_000))).unwrap();
     assert_eq!(t.wait_done(seq, Duration::from_secs(3)).unwrap(), 400);
 }
+
+#[test]
+fn a_motion_whose_ok_is_lost_is_taken_not_sent_twice() {
+    // A lost `ok` used to fail a capture before it began ("did not answer SPIN within 500ms"),
+    // though the table was turning. Drop every byte of the device's `ok` lines after the first
+    // few: the status then shows the table moving, and the motion's `done` ends the wait.
+    let s = SimTurntable::spawn(SimOptions {
+        time_scale: 10.0,
+        faults: Faults { lose_ok_after: Some(2), ..Faults::default() },
+        ..SimOptions::default()
+    })
+    .unwrap();
+    let mut t = Turntable::open(&s.path().to_string_lossy(), 115_200, Duration::from_millis(300)).unwrap();
+    t.command(Command::Ping).unwrap();
+    let seq = t.start_motion(Command::MoveBy(Milli(90_000))).unwrap();
+    let pos = t.wait_done(seq, Duration::from_secs(3)).unwrap();
+    assert_eq!(t.degrees(pos), 90.0);
+    // A motion over before its status could be asked is confirmed by its own `done`.
+    let seq = t.start_motion(Command::MoveBy(Milli(0))).unwrap();
+    assert_eq!(t.wait_done(seq, Duration::from_secs(3)).unwrap(), pos);
+}

@@ -366,7 +366,7 @@ pub fn capture(
         )));
     }
     if opts.home {
-        let seq = table.command(Command::Home).map_err(CaptureError::Table)?;
+        let seq = table.start_motion(Command::Home).map_err(CaptureError::Table)?;
         table.wait_done(seq, opts.no_progress).map_err(CaptureError::Table)?;
     }
     table.command_retry(Command::Report(opts.report_ms.max(1)), 3).map_err(CaptureError::Table)?;
@@ -399,8 +399,9 @@ pub fn capture(
     let period_ms = (opts.period_s * 1000.0).round() as i64;
     // The table stands still until the spin command reaches it, so no sooner than it left.
     track.start = start_pos.map(|p| (Instant::now(), p));
-    let seq =
-        table.command(Command::Spin { period_s: Milli(period_ms), turns: opts.turns }).map_err(CaptureError::Table)?;
+    let seq = table
+        .start_motion(Command::Spin { period_s: Milli(period_ms), turns: opts.turns })
+        .map_err(CaptureError::Table)?;
     let expected = (cam.fps() * opts.period_s.abs() * opts.turns as f64).round() as u64;
     progress.begin("recording", expected);
 

@@ -27,6 +27,8 @@ pub struct Faults {
     pub hang_after: Option<Duration>,
     /// Lose every motion's last angle report and its `done` on the line.
     pub lose_end: bool,
+    /// Lose every `ok` line after this many have been sent.
+    pub lose_ok_after: Option<usize>,
 }
 
 /// Why a simulator could not start.
@@ -197,6 +199,7 @@ fn serve(mut port: TTYPort, opts: SimOptions, stop: Arc<AtomicBool>, truth: Trut
     let mut stalled = false;
     let f = &opts.faults;
     let mut outbox: std::collections::VecDeque<(Instant, Vec<u8>)> = std::collections::VecDeque::new();
+    let mut oks = 0usize;
     while !stop.load(Ordering::Relaxed) {
         let wall = start.elapsed();
         if f.disconnect_after.is_some_and(|d| wall >= d) {
@@ -243,6 +246,13 @@ fn serve(mut port: TTYPort, opts: SimOptions, stop: Arc<AtomicBool>, truth: Trut
                     lines.remove(i - 1);
                 }
             }
+        }
+        if let Some(n) = f.lose_ok_after {
+            lines.retain(|l| {
+                let ok = l.starts_with("ok");
+                oks += usize::from(ok);
+                !(ok && oks > n)
+            });
         }
         // Latency holds each line back without slowing the line down: lines queue with the
         // instant they are due, as on a link that is slow to deliver but not narrow.

@@ -439,6 +439,37 @@ impl Turntable {
         self.request(cmd, self.timeout).map(|r| r.0)
     }
 
+    /// Starts a motion; returns its sequence number for [`Turntable::wait_done`]. A motion is
+    /// never sent twice, but its `ok` can be lost on the line: after a timeout the table is
+    /// asked for its status, and a table that is moving (or has sent this motion's `done`) took
+    /// the command; its `done` carries this sequence number.
+    pub fn start_motion(&mut self, cmd: Command) -> Result<u32> {
+        let seq = (self.seq + 1) % SEQ_MODULUS;
+        let sent = Instant::now();
+        match self.command(cmd) {
+            // A short motion may be over already (its `done` waits for wait_done), and a table
+            // reports angles only while it moves, after the last motion's `done`.
+            Err(TurntableError::Timeout { .. })
+                if self.events.iter().any(|e| match e {
+                    Event::Done { seq: Some(s), .. } => *s == seq,
+                    Event::Angle { rx, .. } => *rx > sent,
+                    _ => false,
+                }) =>
+            {
+                self.last_alive = Instant::now();
+                Ok(seq)
+            }
+            Err(e @ TurntableError::Timeout { .. }) => match self.realtime_status()? {
+                Some(st) if matches!(st.state, State::Moving | State::Spinning | State::Homing) => {
+                    self.last_alive = Instant::now();
+                    Ok(seq)
+                }
+                _ => Err(e),
+            },
+            other => other,
+        }
+    }
+
     /// Sends a command that is safe to repeat (not a motion), retrying after timeouts.
     pub fn command_retry(&mut self, cmd: Command, attempts: usize) -> Result<u32> {
         assert!(

@@ -36,8 +36,7 @@ pub fn run(a: &Args) -> Result<()> {
         delay: Duration::from_millis(a.delay_ms),
         stall_after: secs("--stall-after", a.stall_after)?,
         disconnect_after: secs("--disconnect-after", a.disconnect_after)?,
-        hang_after: None,
-        lose_end: false,
+        ..Faults::default()
     };
     let sim = SimTurntable::spawn(SimOptions { time_scale: a.time_scale, faults, ..SimOptions::default() })?;
     println!("{}", sim.path().display());

@@ -77,7 +77,7 @@ pub fn run(a: &Args) -> Result<()> {
         Action::Spin { period, turns } => Command::Spin { period_s: milli(period)?, turns },
     };
     let stop = ctrl_c_flag()?;
-    let seq = t.command(motion)?;
+    let seq = t.start_motion(motion)?;
     // Angle reports arrive every 50 ms while moving; five silent seconds mean a dead link.
     let pos = t.wait_done_or_stop(seq, Duration::from_secs(5), &stop)?;
     println!("done at {pos} microsteps = {:.3}°", t.degrees(pos));
