@@ -446,27 +446,35 @@ impl Turntable {
     pub fn start_motion(&mut self, cmd: Command) -> Result<u32> {
         let seq = (self.seq + 1) % SEQ_MODULUS;
         let sent = Instant::now();
-        match self.command(cmd) {
-            // A short motion may be over already (its `done` waits for wait_done), and a table
-            // reports angles only while it moves, after the last motion's `done`.
-            Err(TurntableError::Timeout { .. })
-                if self.events.iter().any(|e| match e {
-                    Event::Done { seq: Some(s), .. } => *s == seq,
-                    Event::Angle { rx, .. } => *rx > sent,
-                    _ => false,
-                }) =>
-            {
-                self.last_alive = Instant::now();
-                Ok(seq)
-            }
-            Err(e @ TurntableError::Timeout { .. }) => match self.realtime_status()? {
-                Some(st) if matches!(st.state, State::Moving | State::Spinning | State::Homing) => {
-                    self.last_alive = Instant::now();
-                    Ok(seq)
-                }
-                _ => Err(e),
-            },
-            other => other,
+        let e = match self.command(cmd) {
+            Err(e @ TurntableError::Timeout { .. }) => e,
+            other => return other,
+        };
+        // A short motion may be over already (its `done` waits for wait_done), and a table
+        // reports angles only while it moves, after the last motion's `done`: listen a while
+        // for either, then ask for the status (one line each, so some get through a lossy line).
+        let taken = |events: &VecDeque<Event>| {
+            events.iter().any(|e| match e {
+                Event::Done { seq: Some(s), .. } => *s == seq,
+                Event::Angle { rx, .. } => *rx > sent,
+                _ => false,
+            })
+        };
+        let deadline = Instant::now() + (self.timeout / 2).max(Duration::from_millis(200));
+        while !taken(&self.events) {
+            let Some((l, rx)) = self.read_line(deadline)? else { break };
+            self.file(&l, rx);
+        }
+        let moving = taken(&self.events)
+            || matches!(
+                self.realtime_status()?,
+                Some(st) if matches!(st.state, State::Moving | State::Spinning | State::Homing)
+            );
+        if moving {
+            self.last_alive = Instant::now();
+            Ok(seq)
+        } else {
+            Err(e)
         }
     }
 
