@@ -221,4 +221,10 @@ fn out_of_range_settings_are_refused_before_any_work() {
         let o = pav_rig().args(["evaluate", &fixture(), "-d", &cfg("yolox_nano"), flag, value]).output().unwrap();
         assert_clean_failure(&o, needle);
     }
+    // Threads beyond the cores only take turns (1.2 s became over 60 s): said before anything.
+    let o = pav_rig()
+        .args(["evaluate", &fixture(), "-d", &cfg("yolox_nano"), "--threads", "1000", "--start-angle", "NaN"])
+        .output()
+        .unwrap();
+    assert_clean_failure(&o, "warning: --threads 1000 is more than this machine's");
 }

@@ -170,7 +170,8 @@ fn capture_against_the_firmware_follows_the_commanded_rotation() {
         ..CaptureOptions::new(video.clone())
     };
     let sum = capture(&mut t, &mut cam, &opts, &pav::progress::Silent, &AtomicBool::new(false)).unwrap();
-    assert!((85..=98).contains(&sum.frames), "{} frames for a 3 s turn at 30 fps", sum.frames);
+    // 3 s of cruise plus two 0.17 s ramps, and the `done` a loaded host reads late: 95–105.
+    assert!((85..=105).contains(&sum.frames), "{} frames for a 3 s turn at 30 fps", sum.frames);
     let rows = pav::sidecar::read(&pav::sidecar::sidecar_path(&video)).unwrap();
     assert_eq!(rows.len(), sum.frames);
     // Truth is the commanded motion: 120°/s, reached after a 0.17 s ramp that covers 10° at each

@@ -70,13 +70,6 @@ fn jobs(a: &Args) -> Result<Vec<VideoJob>> {
 }
 
 pub fn run(a: &Args) -> Result<()> {
-    if !(0.0..=1.0).contains(&a.threshold) {
-        bail!("--threshold {} must be within [0, 1]", a.threshold);
-    }
-    if !a.start_angle.is_finite() {
-        bail!("--start-angle {} must be a number of degrees", a.start_angle);
-    }
-    let jobs = jobs(a)?;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     if a.threads > cores {
         eprintln!(
@@ -85,6 +78,13 @@ pub fn run(a: &Args) -> Result<()> {
             a.threads
         );
     }
+    if !(0.0..=1.0).contains(&a.threshold) {
+        bail!("--threshold {} must be within [0, 1]", a.threshold);
+    }
+    if !a.start_angle.is_finite() {
+        bail!("--start-angle {} must be a number of degrees", a.start_angle);
+    }
+    let jobs = jobs(a)?;
     let stop = ctrl_c_flag()?;
     let opts = EvalOptions {
         threshold: a.threshold,
