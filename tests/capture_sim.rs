@@ -1,13 +1,14 @@
 //! `capture` over the simulated turntable and camera: one revolution yields the right frames
 //! with angles within 0.5° of the truth, and every fault ends in saved, readable files.
 
+mod common;
+
 use pav::progress::Silent;
 use pav::rig::capture::{capture, CaptureError, CaptureOptions};
 use pav::rig::sim::{Faults, SimOptions, SimTurntable};
 use pav::rig::source::{CameraError, FrameSource, LiveCapture, SimCamera};
 use pav::rig::turntable::Turntable;
 use pav::sidecar;
-use pav::video::VideoReader;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
@@ -51,12 +52,7 @@ fn worst_angle_error(rows: &[sidecar::AngleSample], truth: &[f64], report_above:
 }
 
 fn decoded_frames(video: &Path) -> usize {
-    let mut r = VideoReader::open(video).unwrap();
-    let mut n = 0;
-    while r.read().unwrap().is_some() {
-        n += 1;
-    }
-    n
+    common::decoded_frames(video).unwrap()
 }
 
 #[test]

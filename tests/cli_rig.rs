@@ -111,15 +111,6 @@ fn simulator_options_out_of_range_are_refused() {
     }
 }
 
-fn decoded_frames(video: &std::path::Path) -> Option<usize> {
-    let mut r = pav::video::VideoReader::open(video).ok()?;
-    let mut n = 0;
-    while let Ok(Some(_)) = r.read() {
-        n += 1;
-    }
-    Some(n)
-}
-
 #[test]
 fn a_killed_capture_leaves_a_playable_video() {
     // OpenCV's MP4 writer left 44 undecodable bytes after SIGKILL: the index comes at the end.
@@ -140,8 +131,8 @@ fn a_killed_capture_leaves_a_playable_video() {
     let mut frames = None;
     for _ in 0..100 {
         std::thread::sleep(std::time::Duration::from_millis(100));
-        frames = decoded_frames(&video).filter(|&n| n > 0);
-        if frames.is_some() && decoded_frames(&video) == frames {
+        frames = common::decoded_frames(&video).ok().filter(|&n| n > 0);
+        if frames.is_some() && common::decoded_frames(&video).ok() == frames {
             break;
         }
     }
@@ -198,6 +189,6 @@ fn sigterm_stops_the_table_and_closes_the_files() {
         .filter(|_| out.contains("frames after the last angle report"))
         .and_then(|s| s.rsplit('(').next())
         .map_or(0, |n| n.trim().parse::<usize>().unwrap());
-    assert_eq!(decoded_frames(&video), Some(rows.len() + unplaced), "{out}");
+    assert_eq!(common::decoded_frames(&video).unwrap(), rows.len() + unplaced, "{out}");
     assert!(rows.len() > 20 && unplaced <= 2, "{out}");
 }

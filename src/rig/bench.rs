@@ -50,9 +50,9 @@ pub enum RigBenchError {
     /// The table.
     #[error(transparent)]
     Turntable(#[from] TurntableError),
-    /// The capture (boxed: its error carries the paths and numbers of a whole recording).
+    /// The capture.
     #[error(transparent)]
-    Capture(#[from] Box<super::capture::CaptureError>),
+    Capture(#[from] super::capture::CaptureError),
     /// Its sidecar.
     #[error(transparent)]
     Sidecar(#[from] crate::sidecar::SidecarError),
@@ -104,7 +104,7 @@ pub fn angle_sync(time_scale: f64, fps: f64, dir: &Path) -> Result<AngleSync> {
     let mut cam = SimCamera::new(sim.truth(), 160, 120, fps);
     let video = dir.join(format!("sync_x{time_scale}.mp4"));
     let opts = CaptureOptions { fourcc: ['m', 'p', '4', 'v'], ..CaptureOptions::new(video.clone()) };
-    capture(&mut table, &mut cam, &opts, &Silent, &AtomicBool::new(false)).map_err(Box::new)?;
+    capture(&mut table, &mut cam, &opts, &Silent, &AtomicBool::new(false))?;
     let rows = crate::sidecar::read(&crate::sidecar::sidecar_path(&video))?;
     let mut err: Vec<f64> = rows
         .iter()

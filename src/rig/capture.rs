@@ -36,7 +36,7 @@ pub struct CaptureOptions {
     pub fourcc: [char; 4],
     /// Fail when the table sends nothing for this long.
     pub no_progress: Duration,
-    /// Round trips that bound the device clock before the spin (tries: twice this).
+    /// Round trips timed before and again after the spin to bound the device clock.
     pub probes: usize,
     /// A capture whose angles are not known to within this many degrees fails (its files are
     /// kept, complete, and the error says by how much and why).
@@ -110,20 +110,14 @@ pub enum CaptureError {
     #[error("capture could not start: {0}")]
     Sidecar(#[source] SidecarError),
     /// The recording is complete, but its angles are not known as well as asked.
-    #[error("{reason}; the recording is complete ({frames} frames) but its angles cannot be trusted to ±{limit_deg}°: {video} and {sidecar} are kept for inspection")]
+    #[error("{reason}; the recording is complete ({} frames) but its angles cannot be trusted to ±{limit_deg}°: {} and {} are kept for inspection", .summary.frames, .summary.video.display(), .summary.sidecar.display())]
     Uncertain {
         /// Why, with the numbers.
         reason: String,
         /// The limit asked for, degrees.
         limit_deg: f64,
-        /// Frames recorded.
-        frames: usize,
         /// What was recorded.
         summary: Box<CaptureSummary>,
-        /// Video path.
-        video: String,
-        /// Sidecar path.
-        sidecar: String,
     },
     /// Failed while recording; everything recorded so far was saved.
     #[error("{cause}; stopped at frame {frames} (table at {}); saved {video} and {sidecar}{}", .angle_deg.map_or("an unknown angle".into(), |a| format!("{a:.1}°")), if *.without_angle > 0 { format!(" ({without_angle} frames after the last angle report have no sidecar row)") } else { String::new() })]
@@ -357,6 +351,34 @@ impl ClockError {
     }
 }
 
+/// Times `want` round trips into `track`; returns the fastest and the table's position in the
+/// last reply, or `None` when none got through. The bound is as tight as the fastest round trip:
+/// on a loaded host it keeps trying (up to four times `want`) for one under 2 ms; lost replies
+/// cost a timeout each, so it gives up after twice `want` of them.
+fn time_round_trips(
+    table: &mut Turntable,
+    track: &mut AngleTrack,
+    want: usize,
+) -> Result<Option<(Duration, i64)>, TurntableError> {
+    let mut best: Option<(Duration, i64)> = None;
+    let (mut got, mut lost) = (0, 0);
+    while got + lost < 4 * want && lost < 2 * want {
+        if got >= want && (best.is_some_and(|b| b.0 <= FAST_ROUND_TRIP) || got + lost >= 2 * want) {
+            break;
+        }
+        match table.clock_probe()? {
+            Some(p) => {
+                got += 1;
+                track.probe(p.sent, p.rx, p.t_ms);
+                let rtt = p.rx.saturating_duration_since(p.sent);
+                best = Some((best.map_or(rtt, |b| b.0.min(rtt)), p.pos));
+            }
+            None => lost += 1,
+        }
+    }
+    Ok(best)
+}
+
 /// Runs one capture; `progress` counts frames.
 pub fn capture(
     table: &mut Turntable,
@@ -382,26 +404,7 @@ pub fn capture(
         AngleTrack { motion: Some((opts.period_s.signum(), rev / opts.period_s.abs())), ..AngleTrack::default() };
     // Round trips before the spin, while the line is quiet: they bound the device clock from
     // above, as the reports' arrivals bound it from below.
-    let mut round_trip: Option<Duration> = None;
-    let mut start_pos = None;
-    let (mut got, mut lost) = (0, 0);
-    // The bound is as tight as the fastest round trip: on a loaded host, keep trying (up to
-    // four times the count) for one under 2 ms; lost replies cost a timeout each, so fewer.
-    while got + lost < 4 * opts.probes && lost < 2 * opts.probes {
-        if got >= opts.probes && (round_trip.is_some_and(|r| r <= FAST_ROUND_TRIP) || got + lost >= 2 * opts.probes) {
-            break;
-        }
-        match table.clock_probe().map_err(CaptureError::Table)? {
-            Some(p) => {
-                got += 1;
-                track.probe(p.sent, p.rx, p.t_ms);
-                start_pos = Some(p.pos);
-                let rtt = p.rx.saturating_duration_since(p.sent);
-                round_trip = Some(round_trip.map_or(rtt, |r| r.min(rtt)));
-            }
-            None => lost += 1,
-        }
-    }
+    let before = time_round_trips(table, &mut track, opts.probes).map_err(CaptureError::Table)?;
     let (w, h) = cam.size();
     if let Some(dir) = opts.video.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|source| CaptureError::Folder { path: dir.into(), source })?;
@@ -412,7 +415,7 @@ pub fn capture(
 
     let period_ms = (opts.period_s * 1000.0).round() as i64;
     // The table stands still until the spin command reaches it, so no sooner than it left.
-    track.start = start_pos.map(|p| (Instant::now(), p));
+    track.start = before.map(|b| (Instant::now(), b.1));
     let seq = table
         .start_motion(Command::Spin { period_s: Milli(period_ms), turns: opts.turns })
         .map_err(CaptureError::Table)?;
@@ -525,21 +528,10 @@ pub fn capture(
         }
     }
     let released = writer.finish();
-    // Round trips after the spin bound the clock at the far end too (the table is idle).
-    if cause.is_none() {
-        for _ in 0..opts.probes * 2 {
-            match table.clock_probe() {
-                Ok(Some(p)) => {
-                    track.probe(p.sent, p.rx, p.t_ms);
-                    if track.probes.len() >= 2 * opts.probes {
-                        break;
-                    }
-                }
-                Ok(None) => {}
-                Err(_) => break,
-            }
-        }
-    }
+    // Round trips after the spin bound the clock at the far end too (the table is idle); a
+    // table that cannot answer now only leaves the bound wider.
+    let after = if cause.is_none() { time_round_trips(table, &mut track, opts.probes).ok().flatten() } else { None };
+    let round_trip = [before, after].into_iter().flatten().map(|r| r.0).min();
     let error = ClockError {
         half_width: track.bounds().and_then(|b| b.half_width()),
         drift_deg: written
@@ -562,14 +554,9 @@ pub fn capture(
     match cause {
         None => match error.problem(&summary, opts.max_angle_error_deg, 360.0 / opts.period_s.abs()) {
             None => Ok(summary),
-            Some(reason) => Err(CaptureError::Uncertain {
-                reason,
-                limit_deg: opts.max_angle_error_deg,
-                frames,
-                video: opts.video.display().to_string(),
-                sidecar: side_path.display().to_string(),
-                summary: Box::new(summary),
-            }),
+            Some(reason) => {
+                Err(CaptureError::Uncertain { reason, limit_deg: opts.max_angle_error_deg, summary: Box::new(summary) })
+            }
         },
         Some(cause) => Err(CaptureError::Stopped {
             cause,

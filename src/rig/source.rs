@@ -189,8 +189,7 @@ impl SourceClock {
         }
         self.last_ts = Some(ts_s);
         let Some(back) = read.checked_sub(Duration::from_secs_f64(ts_s)) else { return read };
-        let origin = *self.origin.get_or_insert(back);
-        let origin = origin.min(back);
+        let origin = self.origin.map_or(back, |o| o.min(back));
         self.origin = Some(origin);
         origin + Duration::from_secs_f64(ts_s)
     }

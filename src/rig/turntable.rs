@@ -379,15 +379,17 @@ impl Turntable {
         self.seq
     }
 
-    /// Sends `cmd` and waits for its `ok`; returns the sequence number and the last status line
-    /// before it with its arrival, if any.
-    fn request(&mut self, cmd: Command, timeout: Duration) -> Result<(u32, Option<(Status, Instant)>)> {
+    /// Seals `cmd` with the next sequence number and sends it; returns that number.
+    fn send(&mut self, cmd: Command) -> Result<u32> {
         let seq = self.next_seq();
-        let frame = Frame { seq: Some(seq), cmd };
-        let text = frame.encode();
-        let mut line = text.as_str().as_bytes().to_vec();
-        line.push(b'\n');
-        self.write(&line)?;
+        let line = format!("{}\n", Frame { seq: Some(seq), cmd }.encode().as_str());
+        self.write(line.as_bytes())?;
+        Ok(seq)
+    }
+
+    /// Sends `cmd` and waits for its `ok`; returns the sequence number and the status line, if any.
+    fn request(&mut self, cmd: Command, timeout: Duration) -> Result<(u32, Option<Status>)> {
+        let seq = self.send(cmd)?;
         let deadline = Instant::now() + timeout;
         let mut status = None;
         while let Some((l, rx)) = self.read_line(deadline)? {
@@ -405,9 +407,7 @@ impl Turntable {
                     self.resync()?;
                     return Err(TurntableError::Timeout { cmd: cmd.to_string(), after: timeout });
                 }
-                Some(Reply::Status { state, alarm, pos, t_ms }) => {
-                    status = Some((Status { state, alarm, pos, t_ms }, rx))
-                }
+                Some(Reply::Status { state, alarm, pos, t_ms }) => status = Some(Status { state, alarm, pos, t_ms }),
                 _ => {}
             }
         }
@@ -419,9 +419,7 @@ impl Turntable {
     /// command cannot be taken for answers to the next one.
     fn resync(&mut self) -> Result<()> {
         self.discard_input()?;
-        let seq = self.next_seq();
-        let line = format!("{}\n", Frame { seq: Some(seq), cmd: Command::Ping }.encode().as_str());
-        self.write(line.as_bytes())?;
+        let seq = self.send(Command::Ping)?;
         let deadline = Instant::now() + self.timeout;
         while let Some((l, rx)) = self.read_line(deadline)? {
             if let Some(Reply::Ok { seq: Some(s) }) = self.file(&l, rx) {
@@ -499,7 +497,7 @@ impl Turntable {
         let mut last = None;
         for _ in 0..3 {
             match self.request(Command::Status, self.timeout) {
-                Ok((_, Some((st, _)))) => return Ok(st),
+                Ok((_, Some(st))) => return Ok(st),
                 Ok((_, None)) => {
                     last = Some(TurntableError::Timeout { cmd: "STATUS (report line)".into(), after: self.timeout })
                 }
@@ -514,10 +512,8 @@ impl Turntable {
     /// (a timeout is no error here: the caller tries again). The status line counts only when
     /// the `ok` of this very request follows it, so a late reply cannot pass for this one.
     pub fn clock_probe(&mut self) -> Result<Option<ClockProbe>> {
-        let seq = self.next_seq();
-        let line = format!("{}\n", Frame { seq: Some(seq), cmd: Command::Status }.encode().as_str());
         let sent = Instant::now();
-        self.write(line.as_bytes())?;
+        let seq = self.send(Command::Status)?;
         let deadline = sent + self.timeout;
         let mut status = None;
         // No resync on a timeout: replies are matched by sequence number, and a status line

@@ -58,3 +58,13 @@ pub fn reference_labels(shared: &Path) -> Vec<(PathBuf, std::collections::HashMa
         })
         .collect()
 }
+
+/// Frames `video` decodes to, read to the end; a decode error is an error.
+pub fn decoded_frames(video: &Path) -> Result<usize, pav::video::VideoError> {
+    let mut r = pav::video::VideoReader::open(video)?;
+    let mut n = 0;
+    while r.read()?.is_some() {
+        n += 1;
+    }
+    Ok(n)
+}
