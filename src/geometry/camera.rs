@@ -24,8 +24,6 @@ pub struct Camera {
     pub fov_deg: f32,
     /// Near clipping distance.
     pub znear: f32,
-    /// Mirror the image horizontally (neural_renderer's x axis points the other way).
-    pub mirror_x: bool,
 }
 
 impl Camera {
@@ -40,7 +38,7 @@ impl Camera {
         }
         let x = normalize(x);
         let y = normalize(cross(z, x));
-        Camera { axes: [x, y, z], eye, fov_deg, znear: 1e-3, mirror_x: false }
+        Camera { axes: [x, y, z], eye, fov_deg, znear: 1e-3 }
     }
 
     /// World point → view coordinates.
@@ -54,7 +52,6 @@ impl Camera {
         let t = (self.fov_deg.to_radians() / 2.0).tan();
         let (nx, ny) = (v[0] / (v[2] * t), v[1] / (v[2] * t));
         let s = size as f32 / 2.0;
-        let nx = if self.mirror_x { -nx } else { nx };
         [(1.0 - nx) * s, (1.0 - ny) * s]
     }
 }
@@ -78,9 +75,15 @@ pub const FCA_ORIGIN_LIFT_M: f64 = 0.20;
 
 /// The FCA/DAS camera for a CARLA npz pose, with the mesh normalized as neural_renderer does
 /// ([`crate::geometry::mesh::Mesh::normalize_bbox`]): eye = camera offset × 0.40, view direction
-/// and up from the camera pitch and yaw, Z up, all rotated about Z by −vehicle yaw; a 90° field of
-/// view (neural_renderer `viewing_angle` 45) and a mirrored x axis. Measured against the FCA
-/// masks in `tests/render_fca.rs`.
+/// and up from the camera pitch and yaw, Z up, all taken into the vehicle's frame (rotated about
+/// Z by −vehicle yaw) and from CARLA's left-handed axes into the mesh's right-handed ones; a 90°
+/// field of view (neural_renderer `viewing_angle` 45). Measured against the FCA masks in
+/// `tests/render_fca.rs`.
+///
+/// FCA and RAUCA-E2E feed CARLA's offsets to neural_renderer as if they were right-handed and
+/// render with neural_renderer's mirrored image x: the two mirrors cancel in the silhouette, but
+/// each photo then shows the texels of the car's other side (the e-tron is left-hand drive with
+/// +X forward, so +Y is its left). Here the eye sits on the side the photo shows.
 ///
 /// The camera offset is taken from the CARLA actor origin, which is not the bounding-box centre
 /// the normalized mesh sits on: the eye is lowered by [`FCA_ORIGIN_LIFT_M`].
@@ -91,14 +94,14 @@ pub fn fca(cam_trans: [[f64; 3]; 2], veh_trans: [[f64; 3]; 2]) -> Camera {
     let dir = [p.cos() * y.cos(), p.cos() * y.sin(), p.sin()];
     let q = p + std::f64::consts::FRAC_PI_2;
     let up = [q.cos() * y.cos(), q.cos() * y.sin(), q.sin()];
-    let rot = |v: [f64; 3]| {
-        [(v[0] * vy.cos() + v[1] * vy.sin()) as f32, (-v[0] * vy.sin() + v[1] * vy.cos()) as f32, v[2] as f32]
+    // World (CARLA, left-handed) → vehicle (forward, right, up) → mesh (forward, left, up).
+    let to_mesh = |v: [f64; 3]| {
+        let (forward, right) = (v[0] * vy.cos() + v[1] * vy.sin(), -v[0] * vy.sin() + v[1] * vy.cos());
+        [forward as f32, -right as f32, v[2] as f32]
     };
-    let eye = rot(eye0);
-    let at = rot([eye0[0] + dir[0], eye0[1] + dir[1], eye0[2] + dir[2]]);
-    let mut cam = Camera::look_at(eye, at, rot(up), 90.0);
-    cam.mirror_x = true;
-    cam
+    let eye = to_mesh(eye0);
+    let at = to_mesh([eye0[0] + dir[0], eye0[1] + dir[1], eye0[2] + dir[2]]);
+    Camera::look_at(eye, at, to_mesh(up), 90.0)
 }
 
 #[cfg(test)]
