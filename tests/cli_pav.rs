@@ -81,14 +81,22 @@ fn eval_digital_resamples_a_texture_of_another_size() {
             "-d",
             "configs/detectors/yolov3-tiny.toml",
         ])
-        .arg("-t")
-        .arg(shared.join("rauca-e2e/RAUCA_E2E.png"))
-        .arg("-o")
+        .args(["-t", "data:rauca-e2e/RAUCA_E2E.png", "-o"])
         .arg(tmp.path())
         .output()
         .unwrap();
     let out = text(&o);
     assert!(o.status.success(), "{out}");
+    // The run's record names the texture by manifest entry and hash, and the models it ran.
+    let run = common::run_record(&tmp.path().join("run.toml"));
+    let texture = common::record_input(&run, "rauca-e2e/RAUCA_E2E.png");
+    assert_eq!(texture["data"].as_str(), Some("rauca-e2e/RAUCA_E2E.png"), "{run}");
+    let entry = pav::data::manifest::Manifest::builtin().get("rauca-e2e/RAUCA_E2E.png").unwrap();
+    assert_eq!(texture["sha256"].as_str(), Some(entry.sha256.as_str()));
+    assert!(shared.join("rauca-e2e/RAUCA_E2E.png").is_file());
+    common::record_input(&run, "yolov3-tiny.onnx");
+    assert!(run["config"]["path"].as_str().unwrap().ends_with("half-turns.toml"), "{run}");
+    assert!(run["tools"]["onnxruntime"].as_str().unwrap().contains("libonnxruntime.so.1.31"), "{run}");
     let csv = std::fs::read_to_string(tmp.path().join("digital.csv")).unwrap();
     let column = |texture: &str, name: &str| -> f64 {
         let line = csv
@@ -140,4 +148,10 @@ fn an_interrupted_optimize_saves_and_exits_non_zero() {
     assert!(!o.status.success() && msg.contains("stopped: state saved"), "{msg}");
     let done = pav::attack::checkpoint::Checkpoint::load(&out.join("checkpoint.bin")).unwrap().steps_done;
     assert!((6..360).contains(&done), "{done} steps saved");
+    let run = common::run_record(&out.join("run.toml"));
+    assert_eq!(run["settings"]["seed"].as_str(), Some("0"), "{run}");
+    assert_eq!(
+        common::record_input(&run, "pytorch3d_Etron.obj")["data"].as_str(),
+        Some("rauca-e2e/pytorch3d_Etron.obj")
+    );
 }

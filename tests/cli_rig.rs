@@ -43,6 +43,13 @@ fn capture_on_the_simulator_then_evaluate_uses_the_sidecar() {
     assert!(out.contains("table ended at 360.000°"), "{out}");
     let rows = pav::sidecar::read(&pav::sidecar::sidecar_path(&video)).unwrap();
     assert!((80..=90).contains(&rows.len()), "{} frames for 2.8 s at 30 fps", rows.len());
+    // The capture's record states its bound and the link's round trip, as the summary printed.
+    let run = common::run_record(&tmp.path().join("spin.run.toml"));
+    let bound: f64 = run["result"]["angle_bound_deg"].as_str().unwrap().parse().unwrap();
+    assert!(bound > 0.0 && bound <= 0.5, "{run}");
+    assert!(run["result"]["round_trip_ms"].as_str().unwrap().parse::<f64>().is_ok(), "{run}");
+    assert_eq!(run["result"]["frames"].as_str(), Some(rows.len().to_string().as_str()), "{run}");
+    assert!(run["tools"]["ffmpeg"].as_str().unwrap().starts_with("ffmpeg version"), "{run}");
     common::real_data();
     let o = pav_rig()
         .args(["evaluate"])
@@ -54,6 +61,15 @@ fn capture_on_the_simulator_then_evaluate_uses_the_sidecar() {
     assert!(o.status.success(), "{}", text(&o));
     let md = std::fs::read_to_string(tmp.path().join("eval/summary.md")).unwrap();
     assert!(md.contains("Angles for **spin**: sidecar"), "{md}");
+    let run = common::run_record(&tmp.path().join("eval/run.toml"));
+    let (video_sha, sidecar_sha) = (
+        pav::data::store::file_digest(&video).unwrap().1,
+        pav::data::store::file_digest(&pav::sidecar::sidecar_path(&video)).unwrap().1,
+    );
+    assert_eq!(common::record_input(&run, "spin.mp4")["sha256"].as_str(), Some(video_sha.as_str()));
+    assert_eq!(common::record_input(&run, "spin.angles.csv")["sha256"].as_str(), Some(sidecar_sha.as_str()));
+    assert_eq!(common::record_input(&run, "yolox_nano.onnx")["data"].as_str(), Some("models-yolox/yolox_nano.onnx"));
+    assert!(run["tools"]["opencv"].as_str().unwrap().starts_with('4'), "{run}");
     // The synthetic disc is no car: nothing is detected.
     assert!(md.contains("| spin | 0.0 |"), "{md}");
 }

@@ -7,7 +7,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
 const LAYERS: [&[&str]; 4] = [
-    &["image", "video", "geometry", "rng", "sidecar", "table", "plot", "progress"],
+    &["data", "provenance", "image", "video", "geometry", "rng", "sidecar", "table", "plot", "progress"],
     &["render", "scene", "dataset", "detect"],
     &["attack", "eval", "rig"],
     &["experiments"],

@@ -192,6 +192,14 @@ pub enum ConfigError {
         /// The TOML parser's error.
         source: toml::de::Error,
     },
+    /// A `data:` file is unknown or not fetched.
+    #[error("optimize config {path}: {source}")]
+    Data {
+        /// The file.
+        path: PathBuf,
+        /// Which entry, and the `pav data` command that fixes it.
+        source: Box<crate::data::DataError>,
+    },
     /// A value is out of range.
     #[error("optimize config {path}: {source}")]
     Invalid {
@@ -214,17 +222,19 @@ impl OptimizeConfig {
         let mut c: OptimizeConfig =
             toml::from_str(&text).map_err(|source| ConfigError::Parse { path: path.into(), source })?;
         let dir = path.parent().unwrap_or(Path::new("."));
-        let fix = |p: &mut PathBuf| {
-            if p.is_relative() {
-                *p = dir.join(&*p);
+        let mut first_err = None;
+        let mut fix = |p: &mut PathBuf| match crate::data::resolve(dir, p) {
+            Ok(r) => *p = r,
+            Err(e) => {
+                first_err.get_or_insert(e);
             }
         };
         fix(&mut c.scene);
         fix(&mut c.mesh.obj);
         fix(&mut c.mesh.region);
-        c.views.train.iter_mut().for_each(fix);
-        c.views.test.iter_mut().for_each(fix);
-        c.views.pbr.iter_mut().for_each(fix);
+        c.views.train.iter_mut().for_each(&mut fix);
+        c.views.test.iter_mut().for_each(&mut fix);
+        c.views.pbr.iter_mut().for_each(&mut fix);
         if let Some(l) = c.views.labels.as_mut() {
             fix(l);
         }
@@ -232,8 +242,26 @@ impl OptimizeConfig {
         if let Init::File(p) = &mut c.mesh.init {
             fix(p);
         }
+        if let Some(source) = first_err {
+            return Err(ConfigError::Data { path: path.into(), source: Box::new(source) });
+        }
         c.check().map_err(|source| ConfigError::Invalid { path: path.into(), source })?;
         Ok(c)
+    }
+
+    /// Every file the optimization reads: scene, mesh, region, initial texture, photos, labels,
+    /// rendered views, and each white box's config and model (for `run.toml`).
+    #[cfg(feature = "eval")]
+    pub fn inputs(&self) -> Vec<PathBuf> {
+        let mut v = vec![self.scene.clone(), self.mesh.obj.clone(), self.mesh.region.clone()];
+        if let Init::File(p) = &self.mesh.init {
+            v.push(p.clone());
+        }
+        v.extend(self.views.train.iter().chain(&self.views.test).chain(&self.views.pbr).cloned());
+        v.extend(self.views.labels.clone());
+        let boxes: Vec<PathBuf> = self.white_box.iter().map(|w| w.detector.clone()).collect();
+        v.extend(crate::detect::load::detector_inputs(&boxes));
+        v
     }
 
     /// Value checks with messages that say what to change.
@@ -322,7 +350,9 @@ mod tests {
     fn shipped_configs_load_and_resolve_paths() {
         for name in ["paper.toml", "authors.toml", "half.toml", "half-random.toml", "half-turns.toml"] {
             let c = OptimizeConfig::load(&shipped(name)).unwrap_or_else(|e| panic!("{e}"));
-            assert!(c.mesh.obj.starts_with(shipped("").parent().unwrap()), "{name}: {:?}", c.mesh.obj);
+            // `data:` entries resolve into the data store, relative paths against the config.
+            assert!(c.mesh.obj.starts_with(crate::data::store::Store::from_env().root), "{name}: {:?}", c.mesh.obj);
+            assert!(c.scene.starts_with(shipped("")), "{name}: {:?}", c.scene);
         }
         let half = OptimizeConfig::load(&shipped("half.toml")).unwrap();
         assert_eq!(half.parts().unwrap().len(), 2);

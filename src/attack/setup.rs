@@ -180,20 +180,19 @@ fn read_boxes(path: &Path) -> Result<HashMap<String, BBox>, SetupError> {
 /// mesh in the normalization its camera convention uses (the cameras are in that frame).
 fn pbr_views(cfg: &OptimizeConfig, maker: &ViewMaker, mesh: &Mesh, region: &[f32]) -> Result<Vec<View>, SetupError> {
     let mut out = Vec::new();
-    let ours = std::fs::canonicalize(&cfg.mesh.obj).unwrap_or_else(|_| cfg.mesh.obj.clone());
     let normalize = match cfg.mesh.camera {
         CameraConvention::Fca => "bbox",
         CameraConvention::PavCamou => "pav",
     };
     for dir in &cfg.views.pbr {
         let (info, rows) = crate::scene::views::read_view_set(dir)?;
-        if info.obj != ours || info.normalize != normalize {
+        if !info.shows(&cfg.mesh.obj) || info.normalize != normalize {
             return Err(SetupError::Views(format!(
                 "views.pbr {}: rendered from {} normalized `{}`, but this config optimizes {} normalized `{normalize}`",
                 dir.display(),
                 info.obj.display(),
                 info.normalize,
-                ours.display()
+                cfg.mesh.obj.display()
             )));
         }
         for r in rows {

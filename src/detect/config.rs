@@ -225,10 +225,14 @@ impl DetectorConfig {
         let raw: RawConfig =
             toml::from_str(&text).map_err(|source| DetectError::ConfigParse { path: shown.clone(), source })?;
         let dir = path.parent().unwrap_or(Path::new("."));
+        let resolve = |p: &Path| {
+            crate::data::resolve(dir, p)
+                .map_err(|source| DetectError::ConfigData { path: shown.clone(), source: Box::new(source) })
+        };
         let class_names: Vec<String> = if raw.classes.names == "coco80" {
             COCO80.iter().map(|s| s.to_string()).collect()
         } else {
-            let p = dir.join(&raw.classes.names);
+            let p = resolve(Path::new(&raw.classes.names))?;
             std::fs::read_to_string(&p)
                 .map_err(|source| DetectError::ConfigRead {
                     path: shown.clone(),
@@ -243,7 +247,7 @@ impl DetectorConfig {
         let mut cfg = DetectorConfig {
             name: raw.name,
             description: raw.description,
-            model: dir.join(&raw.model),
+            model: resolve(&raw.model)?,
             input: raw.input,
             output: raw.output,
             class_names,

@@ -34,6 +34,14 @@ pub fn expand_configs(paths: &[PathBuf]) -> Result<Vec<PathBuf>, DetectError> {
     Ok(out)
 }
 
+/// The detector configs `paths` name (folders expanded) and their model files, for `run.toml`;
+/// what cannot be read is left out (loading the detectors reports it).
+pub fn detector_inputs(paths: &[PathBuf]) -> Vec<PathBuf> {
+    let configs = expand_configs(paths).unwrap_or_default();
+    let models: Vec<PathBuf> = configs.iter().filter_map(|c| DetectorConfig::load(c).ok()).map(|d| d.model).collect();
+    configs.into_iter().chain(models).collect()
+}
+
 /// Loads every detector of `paths` (files or folders), with `classes` as targets when given.
 /// Every config is checked before any model loads, so all config mistakes show at once.
 pub fn load_detectors(

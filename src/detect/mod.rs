@@ -70,6 +70,14 @@ pub enum DetectError {
         /// What is wrong.
         msg: String,
     },
+    /// The model or class-names file named by `data:` is unknown or not fetched.
+    #[error("detector config {path}: {source}")]
+    ConfigData {
+        /// Config file.
+        path: String,
+        /// Which entry, and the `pav data` command that fixes it.
+        source: Box<crate::data::DataError>,
+    },
     /// A config file, its class-names file or a folder of configs could not be read.
     #[error("detector config {path}: cannot read {what}: {source}")]
     ConfigRead {

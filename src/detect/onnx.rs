@@ -54,6 +54,15 @@ pub fn runtime() -> Result<&'static ort::environment::Environment, DetectError> 
     .map_err(|e| DetectError::Runtime(e.clone()))
 }
 
+/// The ONNX Runtime library file (symlinks followed: its name carries the version) and its
+/// build string, once it loads; for `run.toml`.
+pub fn runtime_version() -> Option<String> {
+    runtime().ok()?;
+    let lib = library_candidates().into_iter().find(|p| p.is_file())?;
+    let file = std::fs::canonicalize(&lib).unwrap_or(lib);
+    Some(format!("{} ({})", file.display(), ort::info()))
+}
+
 /// Wraps an ONNX Runtime error of detector `name` while doing `what`.
 pub(crate) fn session_err<'a, E: Into<ort::Error>>(
     name: &'a str,

@@ -166,6 +166,11 @@ impl Blender {
         }
     }
 
+    /// The first line of `blender --version` (for `run.toml`).
+    pub fn version(&self) -> Option<String> {
+        crate::provenance::tool_version(&self.0.display().to_string(), &["--version"])
+    }
+
     /// Runs `job` in one Blender process (files in `work`); `done(name, seconds)` is called as
     /// each view is written.
     pub fn run(&self, job: &Job, work: &Path, mut done: impl FnMut(&str, f64)) -> Result<(), BlenderError> {

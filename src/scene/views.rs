@@ -7,7 +7,7 @@
 //!
 //! ```toml
 //! [mesh]
-//! obj = "../../../shared/data/pav-camou/xfl_yxz.obj"
+//! obj = "data:pav-camou/xfl_yxz.obj"
 //! normalize = "pav"            # PAV-Camou's (vertex mean, max-abs) or "bbox" (FCA/DAS)
 //! up = "+y"                    # the file's up axis; pav's world is +Y up
 //! texture = "paint.png"        # body texture; default: the mesh's first map_Kd
@@ -211,11 +211,12 @@ impl ViewsConfig {
         let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
         let mut c: ViewsConfig = toml::from_str(&text).map_err(|e| err(e.to_string()))?;
         let dir = path.parent().unwrap_or(Path::new("."));
-        c.mesh.obj = dir.join(&c.mesh.obj);
-        c.mesh.texture = c.mesh.texture.map(|t| dir.join(t));
+        let resolve = |p: &Path| crate::data::resolve(dir, p).map_err(|e| err(e.to_string()));
+        c.mesh.obj = resolve(&c.mesh.obj)?;
+        c.mesh.texture = c.mesh.texture.as_deref().map(resolve).transpose()?;
         for e in &mut c.environments {
             if e.name.contains('/') || e.name.contains('.') {
-                e.name = dir.join(&e.name).display().to_string();
+                e.name = resolve(Path::new(&e.name))?.display().to_string();
             }
         }
         c.check().map_err(err)?;
@@ -418,10 +419,28 @@ impl ViewRecord {
 pub struct ViewSetInfo {
     /// The mesh file.
     pub obj: PathBuf,
+    /// Its sha256 (folders rendered before it was recorded lack it), so the same mesh at
+    /// another path (a data store elsewhere) is still recognized.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub obj_sha256: Option<String>,
     /// Its normalization.
     pub normalize: String,
     /// Its up axis.
     pub up: String,
+}
+
+impl ViewSetInfo {
+    /// Whether `obj` (a mesh file) is the mesh these views show: the same path, or the same
+    /// bytes as the recorded hash or as the recorded file.
+    pub fn shows(&self, obj: &Path) -> bool {
+        let digest = |p: &Path| crate::data::store::file_digest(p).ok().map(|d| d.1);
+        let ours = std::fs::canonicalize(obj).unwrap_or_else(|_| obj.to_path_buf());
+        if self.obj == ours {
+            return true;
+        }
+        let Some(sha) = digest(obj) else { return false };
+        self.obj_sha256.as_ref().map_or_else(|| digest(&self.obj) == Some(sha.clone()), |s| *s == sha)
+    }
 }
 
 /// A rendered view folder: its metadata and the manifest's rows.
@@ -510,19 +529,23 @@ pub fn render_views(
     mesh.write_obj(&obj, None).map_err(io(&obj))?;
     let info = ViewSetInfo {
         obj: std::fs::canonicalize(&cfg.mesh.obj).map_err(io(&cfg.mesh.obj))?,
+        obj_sha256: Some(crate::data::store::file_digest(&cfg.mesh.obj).map_err(io(&cfg.mesh.obj))?.1),
         normalize: format!("{:?}", cfg.mesh.normalize).to_lowercase(),
         up: cfg.mesh.up.clone(),
     };
     let info_path = dir.join("views.toml");
     let info_text = toml::to_string(&info).expect("view set info serializes");
+    let other = || ViewsError::Config {
+        path: info_path.clone(),
+        msg: "this folder holds views of another mesh or frame: use another output folder".into(),
+    };
     match std::fs::read_to_string(&info_path) {
-        Ok(old) if old != info_text => {
-            return Err(ViewsError::Config {
-                path: info_path,
-                msg: "this folder holds views of another mesh or frame: use another output folder".into(),
-            })
+        Ok(old) => {
+            let old: ViewSetInfo = toml::from_str(&old).map_err(|_| other())?;
+            if !(old.shows(&cfg.mesh.obj) && old.normalize == info.normalize && old.up == info.up) {
+                return Err(other());
+            }
         }
-        Ok(_) => {}
         Err(_) => std::fs::write(&info_path, &info_text).map_err(io(&info_path))?,
     }
     let rot = up_rotation(&cfg.mesh.up).expect("checked by load");

@@ -8,17 +8,38 @@ pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// `../shared/data`; a test that needs it fails, saying where it must be, when it is absent (a
-/// test that skipped would pass without having checked anything).
+/// pav's data store (`PAV_DATA`, else the XDG cache), checked against the manifest once per test
+/// binary: a test that needs it fails, naming the missing files and the command that fetches
+/// them (a test that skipped would pass without having checked anything).
 pub fn shared_data() -> PathBuf {
-    let p = repo().join("../shared/data");
-    assert!(
-        p.join("MANIFEST.tsv").is_file(),
-        "../shared/data (with its MANIFEST.tsv) is absent next to the repository at {}: this test needs the real \
-         data there",
-        p.display()
-    );
-    p
+    static CHECKED: std::sync::OnceLock<Result<PathBuf, String>> = std::sync::OnceLock::new();
+    let checked = CHECKED.get_or_init(|| {
+        use pav::data::store::{State, Store};
+        let store = Store::from_env();
+        let bad: Vec<String> = pav::data::manifest::Manifest::builtin()
+            .entries
+            .iter()
+            .filter_map(|e| match store.state(e, false) {
+                State::Present => None,
+                State::Missing => Some(format!("{} (missing)", e.name)),
+                State::Corrupt(why) => Some(format!("{} ({why})", e.name)),
+            })
+            .collect();
+        if bad.is_empty() {
+            Ok(store.root)
+        } else {
+            Err(format!(
+                "this test needs pav's data, and the store {} lacks {} of its files ({}{}). Fill it with \
+                 `cargo run --release --bin pav -- data fetch --mirror ../shared/data` from a copy of the data, or \
+                 `pav data fetch` to download; PAV_DATA picks another store",
+                store.root.display(),
+                bad.len(),
+                bad.iter().take(3).cloned().collect::<Vec<_>>().join(", "),
+                if bad.len() > 3 { ", …" } else { "" }
+            ))
+        }
+    });
+    checked.clone().unwrap_or_else(|msg| panic!("{msg}"))
 }
 
 /// Panics with the fix when scripts/setup.sh has not installed ONNX Runtime and the models.
@@ -54,7 +75,7 @@ pub fn reference_labels(shared: &Path) -> Vec<(PathBuf, std::collections::HashMa
         .map(|l| {
             let cols: Vec<&str> = l.split('\t').collect();
             let map = header.iter().zip(&cols).map(|(h, c)| (h.to_string(), c.to_string())).collect();
-            (shared.join("..").join(cols[0]), map)
+            (shared.join(cols[0].strip_prefix("data/").unwrap_or(cols[0])), map)
         })
         .collect()
 }
@@ -67,4 +88,24 @@ pub fn decoded_frames(video: &Path) -> Result<usize, pav::video::VideoError> {
         n += 1;
     }
     Ok(n)
+}
+
+/// Reads a `run.toml` and checks what every record holds: pav's version and commit, the command
+/// line, the host. Returns it for the caller's own checks.
+pub fn run_record(path: &Path) -> toml::Value {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let v: toml::Value = toml::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}\n{text}", path.display()));
+    assert_eq!(v["pav_version"].as_str(), Some(env!("CARGO_PKG_VERSION")), "{text}");
+    assert_eq!(v["git_commit"].as_str().map(str::len), Some(40), "{text}");
+    assert!(v["command"].as_array().is_some_and(|c| c.len() > 1), "{text}");
+    assert!(v["host"]["cpus"].as_str().is_some_and(|c| c != "0"), "{text}");
+    v
+}
+
+/// The input of a run record whose path ends with `suffix`.
+pub fn record_input<'a>(v: &'a toml::Value, suffix: &str) -> &'a toml::Value {
+    v["inputs"]
+        .as_array()
+        .and_then(|a| a.iter().find(|i| i["path"].as_str().is_some_and(|p| p.ends_with(suffix))))
+        .unwrap_or_else(|| panic!("no input ending in {suffix}: {v}"))
 }

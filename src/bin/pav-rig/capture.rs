@@ -2,7 +2,7 @@
 
 use crate::common::{ctrl_c_flag, Bar};
 use crate::port::{connect, parse_signed_seconds, PortArgs};
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use pav::rig::capture::{capture, CaptureOptions};
 use pav::rig::source::open_source;
 use std::path::PathBuf;
@@ -66,8 +66,32 @@ pub fn run(a: &Args) -> Result<()> {
         max_angle_error_deg: a.max_angle_error,
         ..CaptureOptions::new(&a.out)
     };
+    let mut record = pav::provenance::Run::start()
+        .setting("port", &a.port.port)
+        .setting("camera", cam.describe())
+        .setting("size", format!("{w}x{h}"))
+        .setting("fps", cam.fps())
+        .setting("period_s", a.period)
+        .setting("turns", a.turns)
+        .setting("max_angle_error_deg", a.max_angle_error)
+        .tool("ffmpeg", pav::video::ffmpeg_version());
+    let record_path = a.out.with_extension("run.toml");
+    let write =
+        |r: &pav::provenance::Run| r.write(&record_path).with_context(|| format!("writing {}", record_path.display()));
+    write(&record)?;
     let stop = ctrl_c_flag()?;
-    let sum = capture(&mut table, cam.as_mut(), &opts, &Bar::default(), &stop)?;
+    let result = capture(&mut table, cam.as_mut(), &opts, &Bar::default(), &stop);
+    match &result {
+        Ok(sum) => {
+            record.result("frames", sum.frames);
+            record.result("angle_bound_deg", sum.angle_bound_deg.map_or("none".into(), |b| format!("{b:.4}")));
+            record.result("round_trip_ms", sum.round_trip_ms.map_or("none".into(), |r| format!("{r:.3}")));
+            record.result("reports_discarded", sum.reports_discarded);
+        }
+        Err(e) => record.result("error", e),
+    }
+    write(&record)?;
+    let sum = result?;
     println!(
         "recorded {} frames ({} with angles between reports), table ended at {:.3}°",
         sum.frames,

@@ -2,7 +2,7 @@
 
 use crate::common::{ctrl_c_flag, Bar};
 use crate::port::parse_seconds;
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use pav::detect::load::load_detectors;
 use pav::eval::report::summary_table;
 use pav::eval::run::{default_label, evaluate, EvalOptions, VideoJob};
@@ -97,6 +97,19 @@ pub fn run(a: &Args) -> Result<()> {
     };
     opts.check()?;
     let mut detectors = load_detectors(&a.detectors, &a.classes, a.threads)?;
+    let sidecars: Vec<PathBuf> =
+        jobs.iter().map(|j| j.sidecar.clone().unwrap_or_else(|| pav::sidecar::sidecar_path(&j.path))).collect();
+    let record = pav::provenance::Run::start()
+        .inputs(jobs.iter().map(|j| j.path.as_path()).chain(sidecars.iter().map(|p| p.as_path())))
+        .inputs(pav::detect::load::detector_inputs(&a.detectors).iter().map(|p| p.as_path()))
+        .setting("threshold", a.threshold)
+        .setting("stride", a.stride)
+        .setting("rotation_period_s", a.rotation_period)
+        .setting("start_angle_deg", a.start_angle)
+        .tool("onnxruntime", pav::detect::onnx::runtime_version())
+        .tool("opencv", pav::video::opencv_version());
+    let record_path = a.out.join(pav::provenance::FILE);
+    record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
     eprintln!(
         "scoring {} video(s) with {} detector(s); threshold {}, classes {}, stride {}",
         jobs.len(),

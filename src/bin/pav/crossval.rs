@@ -2,7 +2,7 @@
 
 use crate::common::{ctrl_c_flag, Bar};
 use crate::Scoring;
-use anyhow::Result;
+use anyhow::{Context, Result};
 use pav::experiments::crossval::crossval_report;
 use std::path::PathBuf;
 
@@ -18,8 +18,8 @@ pub struct Args {
     #[arg(long, default_value_t = 5)]
     random_seeds: u64,
     /// Fixed textures scored beside the optimized one on every fold (e.g. a peer's published
-    /// texture); any size, resampled to the atlas. Repeatable.
-    #[arg(long = "reference")]
+    /// texture, `data:rauca-e2e/RAUCA_E2E.png`); any size, resampled to the atlas. Repeatable.
+    #[arg(long = "reference", value_parser = crate::data::arg_path)]
     references: Vec<PathBuf>,
     #[command(flatten)]
     scoring: Scoring,
@@ -29,6 +29,18 @@ pub struct Args {
 }
 
 pub fn run(a: &Args) -> Result<()> {
+    let cfg = pav::attack::config::OptimizeConfig::load(&a.config)?;
+    let record = pav::provenance::Run::start()
+        .config(&a.config)
+        .inputs(cfg.inputs().iter().chain(&a.references).map(|p| p.as_path()))
+        .inputs(pav::detect::load::detector_inputs(&a.scoring.detectors).iter().map(|p| p.as_path()))
+        .setting("seed", cfg.optimizer.seed)
+        .setting("folds", a.folds.map_or("one per view".to_string(), |k| k.to_string()))
+        .setting("random_seeds", a.random_seeds)
+        .setting("threshold", a.scoring.threshold)
+        .tool("onnxruntime", pav::detect::onnx::runtime_version());
+    let record_path = a.out.join(pav::provenance::FILE);
+    record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
     let stop = ctrl_c_flag()?;
     let md = crossval_report(
         &a.config,

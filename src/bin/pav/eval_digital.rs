@@ -2,7 +2,7 @@
 
 use crate::common::Bar;
 use crate::Scoring;
-use anyhow::Result;
+use anyhow::{Context, Result};
 use pav::experiments::table2::eval_digital;
 use std::path::PathBuf;
 
@@ -11,8 +11,8 @@ pub struct Args {
     /// Optimization config (mesh, views, scene lighting).
     #[arg(long, default_value = "configs/optimize/paper.toml")]
     config: PathBuf,
-    /// Texture PNGs to evaluate (named by their folder).
-    #[arg(long = "texture", short = 't')]
+    /// Texture PNGs to evaluate (named by their folder); `data:NAME` for a manifest entry.
+    #[arg(long = "texture", short = 't', value_parser = crate::data::arg_path)]
     textures: Vec<PathBuf>,
     #[command(flatten)]
     scoring: Scoring,
@@ -22,6 +22,15 @@ pub struct Args {
 }
 
 pub fn run(a: &Args) -> Result<()> {
+    let cfg = pav::attack::config::OptimizeConfig::load(&a.config)?;
+    let record = pav::provenance::Run::start()
+        .config(&a.config)
+        .inputs(cfg.inputs().iter().chain(&a.textures).map(|p| p.as_path()))
+        .inputs(pav::detect::load::detector_inputs(&a.scoring.detectors).iter().map(|p| p.as_path()))
+        .setting("threshold", a.scoring.threshold)
+        .tool("onnxruntime", pav::detect::onnx::runtime_version());
+    let record_path = a.out.join(pav::provenance::FILE);
+    record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
     let md = eval_digital(&a.config, &a.textures, &a.scoring.to_lib(), &a.out, &Bar::default())?;
     println!("{md}");
     eprintln!("wrote {}/digital.csv and digital.md", a.out.display());

@@ -11,6 +11,7 @@ mod bench_render;
 mod bench_step;
 #[cfg(feature = "optimize")]
 mod crossval;
+mod data;
 #[cfg(feature = "optimize")]
 mod eval_digital;
 #[cfg(feature = "optimize")]
@@ -59,6 +60,10 @@ enum Cmd {
     /// Physically based views of the car by Blender Cycles (headless): photos, masks, manifest.
     #[command(subcommand)]
     Views(views::Cmd),
+    /// The external data (models, meshes, CARLA samples, textures) by manifest: list, fetch
+    /// with checksums, find.
+    #[command(subcommand)]
+    Data(data::Cmd),
 }
 
 /// How `eval-digital` and `crossval` score composites.
@@ -94,5 +99,6 @@ fn main() -> Result<()> {
         Cmd::BenchStep(a) => bench_step::run(&a),
         Cmd::Render(a) => render::run(&a),
         Cmd::Views(c) => views::run(&c),
+        Cmd::Data(c) => data::run(&c),
     }
 }

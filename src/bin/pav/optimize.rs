@@ -1,7 +1,7 @@
 //! `pav optimize`.
 
 use crate::common::{ctrl_c_flag, Bar};
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use pav::attack::export::PrintSpec;
 use pav::attack::optimize::Finish;
 use pav::experiments::outputs::{optimize_and_report, OptimizeRun, Prepared};
@@ -55,6 +55,14 @@ pub fn run(a: &Args) -> Result<()> {
         100.0 * one,
         100.0 * more
     );
+    let record = pav::provenance::Run::start()
+        .config(&a.config)
+        .inputs(p.cfg.inputs().iter().map(|p| p.as_path()))
+        .setting("seed", p.cfg.optimizer.seed)
+        .setting("resume", a.resume)
+        .tool("onnxruntime", pav::detect::onnx::runtime_version());
+    let record_path = a.out.join(pav::provenance::FILE);
+    record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
     let stop = ctrl_c_flag()?;
     let run = OptimizeRun {
         out: a.out.clone(),

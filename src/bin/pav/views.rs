@@ -45,6 +45,18 @@ pub fn run(c: &Cmd) -> Result<()> {
             let cfg = ViewsConfig::load(&a.config)?;
             let shard = a.shard.as_deref().map(shard).transpose()?;
             let blender = Blender::find()?;
+            let mut inputs = vec![cfg.mesh.obj.clone()];
+            inputs.extend(cfg.mesh.texture.clone());
+            let record = pav::provenance::Run::start()
+                .config(&a.config)
+                .inputs(inputs.iter().map(|p| p.as_path()))
+                .setting("shard", a.shard.as_deref().unwrap_or("all"))
+                .tool("blender", blender.version());
+            let name = match shard {
+                Some((k, n)) => format!("run.{k}-of-{n}.toml"),
+                None => pav::provenance::FILE.to_string(),
+            };
+            record.write(&a.out.join(&name)).with_context(|| format!("writing {}", a.out.join(&name).display()))?;
             let s = render_views(&cfg, &a.out, shard, &blender, &Bar::default())?;
             println!(
                 "{} views: {} rendered now, {} from an earlier run; manifest {}",

@@ -1,0 +1,96 @@
+//! `pav data`: the external files pav reads, by manifest: list them, fetch them, find them.
+
+use anyhow::{bail, Result};
+use pav::data::manifest::Manifest;
+use pav::data::store::{Fetched, Origin, State, Store, ENV_MIRROR};
+
+#[derive(clap::Subcommand)]
+pub enum Cmd {
+    /// Every manifest entry with its licence and whether the store holds it (present, missing,
+    /// corrupt: sizes and sha256 are checked).
+    List {
+        /// Only entries whose name starts with one of these.
+        names: Vec<String>,
+    },
+    /// Fills the store (PAV_DATA, else the XDG cache) with verified files: from each entry's
+    /// public source, or from a mirror.
+    Fetch {
+        /// Entries or folders of them (`fca/`); all when none.
+        names: Vec<String>,
+        /// A folder laid out like the store (e.g. ../shared/data) or an http(s) URL of one;
+        /// default $PAV_DATA_MIRROR, else upstream.
+        #[arg(long)]
+        mirror: Option<String>,
+    },
+    /// Prints the file of an entry (fails, saying how to fetch it, when the store lacks it).
+    Path {
+        /// The entry's name.
+        name: String,
+    },
+}
+
+pub fn run(cmd: &Cmd) -> Result<()> {
+    let (store, manifest) = (Store::from_env(), Manifest::builtin());
+    match cmd {
+        Cmd::List { names } => {
+            let entries = manifest.select(names)?;
+            let mut counts = [0usize; 3];
+            println!("store: {}", store.root.display());
+            println!("{:<8} {:>9}  {:<46} {:<28} source", "state", "bytes", "name", "licence");
+            for e in &entries {
+                let state = store.state(e, true);
+                let shown = match &state {
+                    State::Present => "present".to_string(),
+                    State::Missing => "missing".to_string(),
+                    State::Corrupt(why) => format!("corrupt ({why})"),
+                };
+                counts[match state {
+                    State::Present => 0,
+                    State::Missing => 1,
+                    State::Corrupt(_) => 2,
+                }] += 1;
+                let license: String = e.license.chars().take(28).collect();
+                println!("{shown:<8} {:>9}  {:<46} {license:<28} {}", e.bytes, e.name, e.source);
+            }
+            println!("{} present, {} missing, {} corrupt", counts[0], counts[1], counts[2]);
+            if counts[1] + counts[2] > 0 {
+                println!("fill the store: pav data fetch [--mirror DIR|URL]");
+            }
+        }
+        Cmd::Fetch { names, mirror } => {
+            let entries = manifest.select(names)?;
+            let origin = match mirror.clone().or_else(|| std::env::var(ENV_MIRROR).ok().filter(|m| !m.is_empty())) {
+                Some(m) => Origin::mirror(&m),
+                None => Origin::Upstream,
+            };
+            if let Origin::Dir(d) = &origin {
+                if !d.is_dir() {
+                    bail!("mirror {} is not a folder", d.display());
+                }
+            }
+            eprintln!("fetching {} files from {origin} into {}", entries.len(), store.root.display());
+            let bar = crate::common::Bar::default();
+            let results = store.fetch_all(&entries, &origin, &bar);
+            let (mut kept, mut written, mut failed) = (0, 0, Vec::new());
+            for (_, r) in &results {
+                match r {
+                    Ok(Fetched::Kept) => kept += 1,
+                    Ok(Fetched::Written) => written += 1,
+                    Err(err) => failed.push(format!("  {err}")),
+                }
+            }
+            println!("{written} written, {kept} already present, {} failed", failed.len());
+            if !failed.is_empty() {
+                bail!("{} of {} files could not be fetched:\n{}", failed.len(), entries.len(), failed.join("\n"));
+            }
+        }
+        Cmd::Path { name } => println!("{}", store.require(name)?.display()),
+    }
+    Ok(())
+}
+
+/// clap's parser for path arguments: `data:NAME` becomes the entry's file in the store (an
+/// error saying how to fetch it when absent), any other path stays as given.
+pub fn arg_path(s: &str) -> Result<std::path::PathBuf, String> {
+    pav::data::resolve(std::path::Path::new(""), std::path::Path::new(s)).map_err(|e| e.to_string())
+}
