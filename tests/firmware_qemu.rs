@@ -167,9 +167,15 @@ fn capture_against_the_firmware_follows_the_commanded_rotation() {
         period_s: 3.0,
         fourcc: ['m', 'p', '4', 'v'],
         no_progress: Duration::from_secs(2),
+        // At 120°/s through QEMU's emulated UART on two loaded cores, the capture's own bound
+        // (clock interval plus how far early rows moved as the fit settled) reached 0.70° while
+        // the rows stayed within 0.5° of the commanded motion: the test checks the bound against
+        // that truth instead of the shipped 0.5° limit.
+        max_angle_error_deg: 2.0,
         ..CaptureOptions::new(video.clone())
     };
     let sum = capture(&mut t, &mut cam, &opts, &pav::progress::Silent, &AtomicBool::new(false)).unwrap();
+    let bound = sum.angle_bound_deg.expect("a completed capture states its bound");
     // 3 s of cruise plus two 0.17 s ramps, and the `done` a loaded host reads late: 95–105.
     assert!((85..=105).contains(&sum.frames), "{} frames for a 3 s turn at 30 fps", sum.frames);
     let rows = pav::sidecar::read(&pav::sidecar::sidecar_path(&video)).unwrap();
@@ -192,7 +198,9 @@ fn capture_against_the_firmware_follows_the_commanded_rotation() {
     let cruise: Vec<&(f64, f64)> = unwrapped.iter().filter(|(_, a)| (12.0..348.0).contains(a)).collect();
     let t0 = cruise.iter().map(|(t, a)| t - a / 120.0).sum::<f64>() / cruise.len() as f64;
     let worst = cruise.iter().map(|(t, a)| (a - 120.0 * (t - t0)).abs()).fold(0.0, f64::max);
-    eprintln!("QEMU capture: {} cruise frames, worst deviation {worst:.3}°", cruise.len());
+    eprintln!("QEMU capture: {} cruise frames, worst deviation {worst:.3}°, stated bound ±{bound:.3}°", cruise.len());
     assert!(worst < 0.5, "worst deviation from the commanded rotation {worst:.3}°");
+    // The fitted start absorbs a constant offset, so this checks the bound's spread part.
+    assert!(worst <= bound, "rows {worst:.3}° off, beyond the stated ±{bound:.3}°");
     assert!(cruise.len() > 75, "{}", cruise.len());
 }
