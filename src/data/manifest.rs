@@ -172,16 +172,9 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_builtin_manifest_parses_and_its_shipped_files_match_it() {
+    fn the_builtin_manifest_parses_and_selects_folders() {
         let m = Manifest::parse(BUILTIN).unwrap();
         assert!(m.entries.len() >= 50, "{}", m.entries.len());
-        for e in &m.entries {
-            if let Source::Shipped(p) = &e.source {
-                let b = e.source.shipped_bytes().unwrap_or_else(|| panic!("{p} is not compiled in"));
-                assert_eq!(b.len() as u64, e.bytes, "{p}");
-                assert_eq!(super::super::store::sha256_hex(b), e.sha256, "{p}");
-            }
-        }
         assert_eq!(m.select(&["fca/carla_dataset/test".into()]).unwrap().len(), 10);
         assert!(m.select(&["fca/carla".into()]).is_err(), "a prefix that is not a folder");
     }

@@ -259,6 +259,17 @@ mod tests {
     }
 
     #[test]
+    fn shipped_files_are_compiled_in_and_match_the_manifest() {
+        for e in &Manifest::builtin().entries {
+            if let Source::Shipped(p) = &e.source {
+                let b = e.source.shipped_bytes().unwrap_or_else(|| panic!("{p} is not compiled in"));
+                assert_eq!(b.len() as u64, e.bytes, "{p}");
+                assert_eq!(sha256_hex(b), e.sha256, "{p}");
+            }
+        }
+    }
+
+    #[test]
     fn sha256_of_a_known_text() {
         // FIPS 180-2 example.
         assert_eq!(sha256_hex(b"abc"), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
