@@ -351,16 +351,16 @@ pub struct Prefetch {
 }
 
 impl Prefetch {
-    /// Starts decoding `reader`, converting every `stride`-th frame, at most `depth` frames ahead.
-    pub fn new(mut reader: VideoReader, stride: usize, depth: usize) -> Self {
+    /// Starts decoding `reader`, converting the frames `keep` picks by index (the others are
+    /// only skipped over), at most `depth` frames ahead.
+    pub fn new(mut reader: VideoReader, keep: impl Fn(usize) -> bool + Send + 'static, depth: usize) -> Self {
         let (tx, rx) = std::sync::mpsc::sync_channel(depth.max(1));
         let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         let flag = stop.clone();
         let thread = std::thread::spawn(move || {
-            let stride = stride.max(1);
             let mut n = 0usize;
             while !flag.load(std::sync::atomic::Ordering::Relaxed) {
-                let step = if n % stride == 0 {
+                let step = if keep(n) {
                     match reader.read() {
                         Ok(Some((i, f))) => Step::Frame(i, f),
                         Ok(None) => Step::End,

@@ -42,7 +42,7 @@ fn evaluate_prints_table_and_writes_reports() {
     assert!(o.status.success(), "{out}\n{err}");
     assert!(out.contains("A_physical at score threshold 0.5"), "{out}");
     assert!(out.lines().any(|l| l.starts_with("carla_orbit") && l.contains(" 10 ") && l.contains(" 15 ")), "{out}");
-    assert!(err.contains("stride 3"), "{err}");
+    assert!(err.contains("one frame in 3"), "{err}");
     assert!(tmp.path().join("accuracy.png").exists());
 }
 
@@ -227,4 +227,31 @@ fn out_of_range_settings_are_refused_before_any_work() {
         .output()
         .unwrap();
     assert_clean_failure(&o, "warning: --threads 1000 is more than this machine's");
+}
+
+#[test]
+fn sample_spreads_frames_and_a_repeated_label_pools_videos() {
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let fx = fixture();
+    let o = pav_rig()
+        .args(["evaluate", &fx, &fx, "--label", "camo", "--label", "camo", "--sample", "5"])
+        .args(["-d", &cfg("yolox_nano"), "--no-plots", "-o"])
+        .arg(tmp.path())
+        .output()
+        .unwrap();
+    let (out, err) = text(&o);
+    assert!(o.status.success(), "{out}\n{err}");
+    assert!(err.contains("5 evenly spaced frames per video"), "{err}");
+    let summary = std::fs::read_to_string(tmp.path().join("summary.csv")).unwrap();
+    assert_eq!(summary.lines().count(), 2, "{summary}");
+    assert!(summary.lines().nth(1).unwrap().starts_with("camo,yolox_nano,car,0.5,even 5,10,"), "{summary}");
+    let md = std::fs::read_to_string(tmp.path().join("summary.md")).unwrap();
+    assert!(md.contains("Videos that share a label are pooled into one row."), "{md}");
+    // Two ways of choosing frames at once is refused, and so is pooling by accident.
+    let o =
+        pav_rig().args(["evaluate", &fx, "-d", &cfg("yolox_nano"), "--sample", "5", "--stride", "2"]).output().unwrap();
+    assert_clean_failure(&o, "cannot be used with");
+    let o = pav_rig().args(["evaluate", &fx, &fx, "-d", &cfg("yolox_nano")]).output().unwrap();
+    assert_clean_failure(&o, "the same --label to pool them");
 }

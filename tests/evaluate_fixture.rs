@@ -6,7 +6,7 @@ mod common;
 use pav::detect::onnx::OnnxDetector;
 use pav::detect::{Detector, DetectorConfig};
 use pav::eval::physical::Accuracy;
-use pav::eval::run::{evaluate, EvalOptions, EvalOutcome, VideoJob};
+use pav::eval::run::{evaluate, EvalOptions, EvalOutcome, Frames, VideoJob};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -47,10 +47,10 @@ fn detectors(names: &[&str]) -> Vec<Box<dyn Detector>> {
         .collect()
 }
 
-fn opts(out: &Path, stride: usize) -> EvalOptions {
+fn opts(out: &Path, frames: Frames) -> EvalOptions {
     EvalOptions {
         threshold: 0.5,
-        stride,
+        frames,
         rotation_period_s: 28.0,
         start_angle_deg: 0.0,
         angle_bins: 8,
@@ -60,8 +60,12 @@ fn opts(out: &Path, stride: usize) -> EvalOptions {
 }
 
 fn run(jobs: &[VideoJob], dets: &[&str], out: &Path, stride: usize) -> EvalOutcome {
+    run_frames(jobs, dets, out, Frames::Stride(stride))
+}
+
+fn run_frames(jobs: &[VideoJob], dets: &[&str], out: &Path, frames: Frames) -> EvalOutcome {
     let mut d = detectors(dets);
-    evaluate(jobs, &mut d, &opts(out, stride), &pav::progress::Silent, &AtomicBool::new(false)).unwrap()
+    evaluate(jobs, &mut d, &opts(out, frames), &pav::progress::Silent, &AtomicBool::new(false)).unwrap()
 }
 
 fn job(path: PathBuf, label: &str) -> VideoJob {
@@ -170,4 +174,51 @@ fn several_videos_make_a_table_and_bad_ones_keep_the_rest() {
     assert!(md.contains("Score threshold **0.5**; target classes **car**"), "{md}");
     let summary = std::fs::read_to_string(out_dir.join("summary.csv")).unwrap();
     assert!(summary.lines().any(|l| l.starts_with("missing,yolox_nano") && l.contains("failed")), "{summary}");
+}
+
+#[test]
+fn even_sampling_picks_the_middle_of_equal_stretches_and_shared_labels_pool() {
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    // The same recording under a second name, sidecar included: one texture at two polar angles.
+    let copy = tmp.path().join("second.mp4");
+    std::fs::copy(fixture(), &copy).unwrap();
+    std::fs::copy(common::repo().join("fixtures/carla_orbit.angles.csv"), tmp.path().join("second.angles.csv"))
+        .unwrap();
+    let jobs = [job(fixture(), "texture"), job(copy, "texture"), job(tmp.path().join("gone.mp4"), "lost")];
+    let out = run_frames(&jobs, &["yolox_nano"], &tmp.path().join("out"), Frames::Even(11));
+    // 45 frames in 11 stretches of 45/11: the middle frame of each.
+    let want: Vec<usize> = vec![2, 6, 10, 14, 18, 22, 26, 30, 34, 38, 42];
+    for file in ["carla_orbit.mp4", "second.mp4"] {
+        let frames: Vec<usize> = out.records.iter().filter(|r| r.file == file).map(|r| r.frame).collect();
+        assert_eq!(frames, want, "{file}");
+    }
+    let truth = truth();
+    let hits = want.iter().filter(|&&f| expected(&truth[f], "yolox_nano")).count();
+    assert_eq!(out.rows.len(), 2, "{:?}", out.rows);
+    let cell = &out.rows[0];
+    assert_eq!((cell.video.as_str(), cell.videos), ("texture", 2));
+    assert_eq!(cell.accuracy, Accuracy { detected: 2 * hits, total: 22 });
+    assert_eq!((cell.decoded_frames, cell.status.as_str()), (90, "complete"));
+    let csv = std::fs::read_to_string(tmp.path().join("out/summary.csv")).unwrap();
+    assert!(
+        csv.lines().any(|l| l.starts_with("texture,yolox_nano,car,0.5,even 11,22,") && l.ends_with(",2,complete")),
+        "{csv}"
+    );
+    let frames_csv = std::fs::read_to_string(tmp.path().join("out/frames.csv")).unwrap();
+    assert!(frames_csv.lines().next().unwrap().ends_with(",file"), "{frames_csv}");
+    assert_eq!(frames_csv.lines().filter(|l| l.ends_with(",second.mp4")).count(), 11);
+
+    // More frames than the video has: every frame is scored and the run says it fell short; a
+    // pooled cell with a failed video says which one.
+    let jobs = [job(fixture(), "texture"), job(tmp.path().join("gone.mp4"), "texture")];
+    let out = run_frames(&jobs, &["yolox_nano"], &tmp.path().join("out2"), Frames::Even(60));
+    let cell = &out.rows[0];
+    assert_eq!((cell.accuracy.total, cell.videos), (45, 2));
+    assert!(
+        cell.status.starts_with("video 1: 60 frames asked, the video declares 45; video 2: failed:"),
+        "{}",
+        cell.status
+    );
+    assert!(out.failures.iter().any(|f| f.contains("60 frames asked")), "{:?}", out.failures);
 }

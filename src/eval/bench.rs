@@ -154,7 +154,7 @@ fn run_evaluate(opts: &BenchOptions, cfg: &DetectorConfig, stride: usize) -> Res
     let tmp = std::env::temp_dir().join(format!("pav-bench-{}", std::process::id()));
     let eval_opts = EvalOptions {
         threshold: opts.threshold,
-        stride,
+        frames: super::run::Frames::Stride(stride),
         rotation_period_s: 28.0,
         start_angle_deg: 0.0,
         angle_bins: 12,

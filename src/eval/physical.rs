@@ -25,6 +25,8 @@ pub struct FrameRecord {
     pub x2: Option<f32>,
     /// See `x1`.
     pub y2: Option<f32>,
+    /// The video file's name: videos that share a label are pooled, and this tells them apart.
+    pub file: String,
 }
 
 /// Detected / total frame counts.
@@ -114,6 +116,7 @@ mod tests {
             y1: None,
             x2: None,
             y2: None,
+            file: "v.mp4".into(),
         }
     }
 

@@ -77,10 +77,12 @@ pub struct SummaryRow {
     pub classes: String,
     /// f_d / f_o.
     pub accuracy: Accuracy,
-    /// Frames decoded from the video (all, before the stride).
+    /// Frames decoded from the video (all of them, scored or not).
     pub decoded_frames: usize,
     /// Frames the container declared.
     pub declared_frames: usize,
+    /// Videos pooled into this row (they share its label).
+    pub videos: usize,
     /// `complete`, or what cut the run short.
     pub status: String,
 }
@@ -90,8 +92,10 @@ pub struct SummaryRow {
 pub(crate) struct ReportSettings {
     /// Score threshold for "detected".
     pub threshold: f32,
-    /// Every N-th frame scored.
-    pub stride: usize,
+    /// Which frames were scored, short (`stride 4`, `even 44`).
+    pub sampling: String,
+    /// The same in words.
+    pub sampling_text: String,
     /// Number of angle sectors.
     pub angle_bins: usize,
     /// Where angles came from, per video label.
@@ -110,7 +114,7 @@ pub(crate) fn write_summary_csv(path: &Path, rows: &[SummaryRow], s: &ReportSett
         "detector",
         "classes",
         "threshold",
-        "stride",
+        "sampling",
         "frames",
         "detected",
         "a_physical",
@@ -118,6 +122,7 @@ pub(crate) fn write_summary_csv(path: &Path, rows: &[SummaryRow], s: &ReportSett
         "ci95_high",
         "decoded_frames",
         "declared_frames",
+        "videos",
         "status",
     ])
     .map_err(|e| csv_err(path, e))?;
@@ -129,7 +134,7 @@ pub(crate) fn write_summary_csv(path: &Path, rows: &[SummaryRow], s: &ReportSett
             r.detector.clone(),
             r.classes.clone(),
             s.threshold.to_string(),
-            s.stride.to_string(),
+            s.sampling.clone(),
             r.accuracy.total.to_string(),
             r.accuracy.detected.to_string(),
             f(r.accuracy.rate()),
@@ -137,6 +142,7 @@ pub(crate) fn write_summary_csv(path: &Path, rows: &[SummaryRow], s: &ReportSett
             f(ci.map(|c| c.1)),
             r.decoded_frames.to_string(),
             r.declared_frames.to_string(),
+            r.videos.to_string(),
             r.status.clone(),
         ])
         .map_err(|e| csv_err(path, e))?;
@@ -181,10 +187,11 @@ pub(crate) fn summary_markdown(rows: &[SummaryRow], records: &[FrameRecord], s: 
     let _ = writeln!(md, "# A_physical (frames with the car detected / frames scored)\n");
     let _ = writeln!(
         md,
-        "Score threshold **{}**; target classes **{}**; every {} frame(s) scored.\n",
+        "Score threshold **{}**; target classes **{}**; {} scored.{}\n",
         s.threshold,
         classes.iter().map(|c| c.as_str()).collect::<Vec<_>>().join(", "),
-        if s.stride == 1 { "single".to_string() } else { format!("{}th", s.stride) }
+        s.sampling_text,
+        if rows.iter().any(|r| r.videos > 1) { " Videos that share a label are pooled into one row." } else { "" }
     );
     let _ = writeln!(md, "| Video | {} |", dets.iter().map(|d| d.as_str()).collect::<Vec<_>>().join(" | "));
     let _ = writeln!(md, "|---|{}", "---:|".repeat(dets.len()));
@@ -201,8 +208,8 @@ pub(crate) fn summary_markdown(rows: &[SummaryRow], records: &[FrameRecord], s: 
         let _ = writeln!(md, "| {v} | {} |", cells.join(" | "));
     }
     let _ = writeln!(md, "\nValues in %.\n\n## Details\n");
-    let _ = writeln!(md, "| Video | Detector | f_d | f_o | A_physical % | 95% CI (Wilson) | Status |");
-    let _ = writeln!(md, "|---|---|---:|---:|---:|---|---|");
+    let _ = writeln!(md, "| Video | Detector | Videos | f_d | f_o | A_physical % | 95% CI (Wilson) | Status |");
+    let _ = writeln!(md, "|---|---|---:|---:|---:|---:|---|---|");
     for r in rows {
         let ci = r
             .accuracy
@@ -211,9 +218,10 @@ pub(crate) fn summary_markdown(rows: &[SummaryRow], records: &[FrameRecord], s: 
             .unwrap_or_else(|| "n/a".into());
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} |",
             r.video,
             r.detector,
+            r.videos,
             r.accuracy.detected,
             r.accuracy.total,
             pct(r.accuracy.rate()),

@@ -30,13 +30,53 @@ pub struct VideoJob {
     pub sidecar: Option<PathBuf>,
 }
 
+/// Which frames of each video are scored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Frames {
+    /// Every N-th frame, from the first.
+    Stride(usize),
+    /// N frames evenly spaced over each video's declared length: the middle frame of each of N
+    /// equal stretches, so a turntable video at constant speed is sampled evenly in angle.
+    Even(usize),
+}
+
+impl Frames {
+    /// The frames to score in a video declaring `declared` frames: `None` for a stride (decided
+    /// per frame), the sorted indices for even sampling.
+    fn indices(self, declared: usize) -> Option<Vec<usize>> {
+        match self {
+            Frames::Stride(_) => None,
+            Frames::Even(n) if n >= declared => Some((0..declared).collect()),
+            Frames::Even(n) => Some((0..n).map(|k| ((2 * k + 1) * declared) / (2 * n)).collect()),
+        }
+    }
+
+    /// Short form for the reports' `sampling` column: `stride 4`, `even 44`.
+    pub fn tag(self) -> String {
+        match self {
+            Frames::Stride(n) => format!("stride {n}"),
+            Frames::Even(n) => format!("even {n}"),
+        }
+    }
+}
+
+impl std::fmt::Display for Frames {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            Frames::Stride(1) => write!(f, "every frame"),
+            Frames::Stride(n) => write!(f, "one frame in {n}"),
+            Frames::Even(n) => write!(f, "{n} evenly spaced frames per video"),
+        }
+    }
+}
+
 /// Evaluation settings.
 #[derive(Clone, Debug)]
 pub struct EvalOptions {
     /// A frame counts as "car detected" when a target-class score is ≥ this.
     pub threshold: f32,
-    /// Score every N-th frame.
-    pub stride: usize,
+    /// Which frames are scored.
+    pub frames: Frames,
     /// Seconds per turntable revolution, used when a video has no sidecar.
     pub rotation_period_s: f64,
     /// Angle at frame 0 when no sidecar.
@@ -112,6 +152,9 @@ impl EvalOptions {
         if self.angle_bins == 0 {
             return bad("the per-angle breakdown needs at least one sector".into());
         }
+        if matches!(self.frames, Frames::Stride(0) | Frames::Even(0)) {
+            return bad(format!("{}: at least one frame must be scored", self.frames.tag()));
+        }
         Ok(())
     }
 }
@@ -127,13 +170,16 @@ fn failed_rows(label: &str, detectors: &[Box<dyn Detector>], why: &str) -> Vec<S
             accuracy: Accuracy::default(),
             decoded_frames: 0,
             declared_frames: 0,
+            videos: 1,
             status: format!("failed: {why}"),
         })
         .collect()
 }
 
-/// Runs every detector over every frame of every video and writes the reports into `opts.out_dir`;
-/// each video is one stage of `progress`, in frames.
+/// Runs every detector over the chosen frames of every video and writes the reports into
+/// `opts.out_dir`; each video is one stage of `progress`, in frames. Videos that share a label
+/// are pooled into one cell (the paper pools its two polar angles): one summary row per label and
+/// detector, while `frames.csv` keeps each frame's file.
 pub fn evaluate(
     jobs: &[VideoJob],
     detectors: &mut [Box<dyn Detector>],
@@ -152,7 +198,6 @@ pub fn evaluate(
     };
     out.files.push(frames_path);
     let mut angle_sources = Vec::new();
-    let stride = opts.stride.max(1);
 
     'videos: for job in jobs {
         let angles = match job.sidecar.clone().or_else(|| Some(sidecar::sidecar_path(&job.path)).filter(|p| p.exists()))
@@ -186,9 +231,30 @@ pub fn evaluate(
             }
         };
         let info = reader.info().clone();
-        let mut frames = Prefetch::new(reader, stride, 4);
-        progress.begin(&job.label, info.declared_frames as u64);
+        let picks = opts.frames.indices(info.declared_frames);
         let mut status = "complete".to_string();
+        if let Some(p) = &picks {
+            if p.is_empty() {
+                let why = format!("{} declares no frame count, so frames cannot be spread over it", job.path.display());
+                out.failures.push(format!("{}: {why}", job.label));
+                out.rows.extend(failed_rows(&job.label, detectors, &why));
+                continue;
+            }
+            if let Frames::Even(n) = opts.frames {
+                if p.len() < n {
+                    status = format!("{n} frames asked, the video declares {}", info.declared_frames);
+                    out.failures.push(format!("{}: {status}", job.label));
+                }
+            }
+        }
+        let mut frames = match (opts.frames, picks) {
+            (Frames::Stride(n), _) => Prefetch::new(reader, move |i| i % n == 0, 4),
+            (Frames::Even(_), p) => {
+                let p = p.unwrap_or_default();
+                Prefetch::new(reader, move |i| p.binary_search(&i).is_ok(), 4)
+            }
+        };
+        progress.begin(&job.label, info.declared_frames as u64);
         let mut failed_det: Vec<Option<String>> = vec![None; detectors.len()];
         let mut decoded = 0usize;
         let mut no_angle = 0usize;
@@ -243,6 +309,7 @@ pub fn evaluate(
                 let best = props.best(det.target_classes());
                 let rec = FrameRecord {
                     video: job.label.clone(),
+                    file: file_name(&job.path),
                     frame: idx,
                     time_s,
                     angle_deg,
@@ -303,6 +370,7 @@ pub fn evaluate(
                 accuracy: Accuracy::of(recs.iter().filter(|r| r.detector == name)),
                 decoded_frames: decoded,
                 declared_frames: info.declared_frames,
+                videos: 1,
                 status: failed_det[k].clone().unwrap_or_else(|| status.clone()),
             });
         }
@@ -310,7 +378,14 @@ pub fn evaluate(
             break 'videos;
         }
     }
-    let settings = ReportSettings { threshold: opts.threshold, stride, angle_bins: opts.angle_bins, angle_sources };
+    out.rows = pool(std::mem::take(&mut out.rows));
+    let settings = ReportSettings {
+        threshold: opts.threshold,
+        sampling: opts.frames.tag(),
+        sampling_text: opts.frames.to_string(),
+        angle_bins: opts.angle_bins,
+        angle_sources,
+    };
     write_reports(&mut out, &settings, opts, detectors)?;
     out.timing.total_s = t_run.elapsed().as_secs_f64();
     Ok(out)
@@ -347,6 +422,44 @@ fn write_reports(
         out.files.push(p);
     }
     Ok(())
+}
+
+/// One row per (label, detector), in first-seen order: the counts of videos sharing a label add
+/// up, and a cell is `complete` only when each of its videos is (otherwise each video's status).
+fn pool(rows: Vec<SummaryRow>) -> Vec<SummaryRow> {
+    let mut cells: Vec<(SummaryRow, Vec<String>)> = Vec::new();
+    for r in rows {
+        match cells.iter_mut().find(|(c, _)| c.video == r.video && c.detector == r.detector) {
+            Some((c, statuses)) => {
+                c.accuracy.detected += r.accuracy.detected;
+                c.accuracy.total += r.accuracy.total;
+                c.decoded_frames += r.decoded_frames;
+                c.declared_frames += r.declared_frames;
+                c.videos += r.videos;
+                statuses.push(r.status);
+            }
+            None => {
+                let s = vec![r.status.clone()];
+                cells.push((r, s));
+            }
+        }
+    }
+    cells
+        .into_iter()
+        .map(|(mut c, statuses)| {
+            if statuses.len() > 1 && statuses.iter().any(|s| s != "complete") {
+                let each: Vec<String> =
+                    statuses.iter().enumerate().map(|(i, s)| format!("video {}: {s}", i + 1)).collect();
+                c.status = each.join("; ");
+            }
+            c
+        })
+        .collect()
+}
+
+/// The file name of a video, for `frames.csv`.
+fn file_name(p: &Path) -> String {
+    p.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| p.display().to_string())
 }
 
 /// Makes a label usable as part of a file name.

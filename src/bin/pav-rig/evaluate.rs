@@ -5,7 +5,7 @@ use crate::port::parse_seconds;
 use anyhow::{bail, Context, Result};
 use pav::detect::load::load_detectors;
 use pav::eval::report::summary_table;
-use pav::eval::run::{default_label, evaluate, EvalOptions, VideoJob};
+use pav::eval::run::{default_label, evaluate, EvalOptions, Frames, VideoJob};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -17,6 +17,7 @@ pub struct Args {
     #[arg(long = "detector", short = 'd', required = true)]
     detectors: Vec<PathBuf>,
     /// Label per video, in order (default: file stem), e.g. `--label original --label camouflaged`.
+    /// Videos given the same label are pooled into one row (e.g. the two polar angles of a texture).
     #[arg(long = "label")]
     labels: Vec<String>,
     /// Angle sidecar CSV (frame,timestamp_s,angle_deg), only with a single video.
@@ -25,6 +26,10 @@ pub struct Args {
     /// Score every N-th frame.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     stride: u64,
+    /// Score N frames evenly spaced over each video instead (the middle frame of each of N equal
+    /// stretches; the paper's Table V cells look like 44 per video, two videos pooled).
+    #[arg(long, value_name = "N", conflicts_with = "stride", value_parser = clap::value_parser!(u64).range(1..))]
+    sample: Option<u64>,
     /// A frame counts as "car detected" when a target-class score is at least this.
     #[arg(long, default_value_t = 0.5)]
     threshold: f32,
@@ -61,8 +66,9 @@ fn jobs(a: &Args) -> Result<Vec<VideoJob>> {
     let mut out: Vec<VideoJob> = Vec::new();
     for (i, v) in a.videos.iter().enumerate() {
         let label = a.labels.get(i).cloned().unwrap_or_else(|| default_label(v));
-        if out.iter().any(|j| j.label == label) {
-            bail!("two videos share the label `{label}`: use --label to tell them apart");
+        if a.labels.is_empty() && out.iter().any(|j| j.label == label) {
+            // Pooling is asked for with --label; two files that merely share a stem are not pooled.
+            bail!("two videos share the label `{label}`: use --label to tell them apart (or the same --label to pool them)");
         }
         out.push(VideoJob { path: v.clone(), label, sidecar: a.sidecar.clone() });
     }
@@ -86,9 +92,13 @@ pub fn run(a: &Args) -> Result<()> {
     }
     let jobs = jobs(a)?;
     let stop = ctrl_c_flag()?;
+    let frames = match a.sample {
+        Some(n) => Frames::Even(n as usize),
+        None => Frames::Stride(a.stride as usize),
+    };
     let opts = EvalOptions {
         threshold: a.threshold,
-        stride: a.stride as usize,
+        frames,
         rotation_period_s: a.rotation_period,
         start_angle_deg: a.start_angle,
         angle_bins: a.angle_bins as usize,
@@ -103,7 +113,7 @@ pub fn run(a: &Args) -> Result<()> {
         .inputs(jobs.iter().map(|j| j.path.as_path()).chain(sidecars.iter().map(|p| p.as_path())))
         .inputs(pav::detect::load::detector_inputs(&a.detectors).iter().map(|p| p.as_path()))
         .setting("threshold", a.threshold)
-        .setting("stride", a.stride)
+        .setting("sampling", frames.tag())
         .setting("rotation_period_s", a.rotation_period)
         .setting("start_angle_deg", a.start_angle)
         .tool("onnxruntime", pav::detect::onnx::runtime_version())
@@ -111,12 +121,12 @@ pub fn run(a: &Args) -> Result<()> {
     let record_path = a.out.join(pav::provenance::FILE);
     record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
     eprintln!(
-        "scoring {} video(s) with {} detector(s); threshold {}, classes {}, stride {}",
+        "scoring {} video(s) with {} detector(s); threshold {}, classes {}, {}",
         jobs.len(),
         detectors.len(),
         a.threshold,
         detectors.iter().map(|d| format!("{}={}", d.name(), d.target_label())).collect::<Vec<_>>().join(", "),
-        a.stride
+        frames
     );
     let out = evaluate(&jobs, &mut detectors, &opts, &Bar::default(), &stop)?;
     println!("{}", summary_table(&out.rows, a.threshold));
