@@ -254,3 +254,118 @@ fn the_optimizer_trains_on_rendered_views() {
     let e = Setup::load(&cfg, None).err().expect("a frame mismatch is refused").to_string();
     assert!(e.contains("normalized `bbox`, but this config optimizes"), "{e}");
 }
+
+/// Mean absolute RGB difference between two renders over the pixels at least 3 px from the car
+/// in both (pav's masks), i.e. the room behind it.
+fn background_difference(dir: &std::path::Path, a: &str, b: &str) -> (f64, usize) {
+    let load = |n: &str| pav::image::Rgb::load(&dir.join(format!("views/{n}.png"))).unwrap();
+    let mask = |n: &str| pav::image::Rgb::load(&dir.join(format!("views/{n}_mask.png"))).unwrap();
+    let (ia, ib, ma, mb) = (load(a), load(b), mask(a), mask(b));
+    let s = ia.width as i64;
+    let near_car = |i: i64| {
+        let (x, y) = (i % s, i / s);
+        (-3..=3).any(|dy| {
+            (-3..=3).any(|dx| {
+                let (u, v) = (x + dx, y + dy);
+                (0..s).contains(&u) && (0..s).contains(&v) && {
+                    let k = 3 * (v * s + u) as usize;
+                    ma.rgb[k] > 0.5 || mb.rgb[k] > 0.5
+                }
+            })
+        })
+    };
+    let bg: Vec<usize> = (0..s * s).filter(|&i| !near_car(i)).map(|i| i as usize).collect();
+    let sum: f64 =
+        bg.iter().map(|&i| (0..3).map(|c| (ia.rgb[3 * i + c] - ib.rgb[3 * i + c]).abs() as f64).sum::<f64>()).sum();
+    (sum / (3 * bg.len()) as f64, bg.len())
+}
+
+#[test]
+fn on_a_turntable_the_room_stays_put_and_the_videos_carry_the_angles() {
+    common::shared_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let cfg_text = |turntable: bool| {
+        format!(
+            "[mesh]\nobj = \"data:pav-camou/xfl_yxz.obj\"\nnormalize = \"pav\"\nup = \"+y\"\n\
+             [render]\nsize = 96\nsamples = 2\nturntable = {turntable}\n\
+             [[environments]]\nname = \"city\"\n\
+             [[poses]]\ndistances = [2.2]\nelevations = [10]\nazimuths = [0, 90, 200]\n"
+        )
+    };
+    let blender = Blender::find().expect("blender (scripts/setup.sh installs it)");
+    let mut diffs = Vec::new();
+    for turntable in [true, false] {
+        let path = tmp.path().join(format!("t{turntable}.toml"));
+        std::fs::write(&path, cfg_text(turntable)).unwrap();
+        let cfg = ViewsConfig::load(&path).unwrap();
+        let dir = tmp.path().join(format!("views_{turntable}"));
+        render_views(&cfg, &dir, None, &blender, &pav::progress::Silent).unwrap();
+        let names: Vec<String> = cfg.views().iter().map(|v| v.name.clone()).collect();
+        let d: Vec<(f64, usize)> = names[1..].iter().map(|n| background_difference(&dir, &names[0], n)).collect();
+        eprintln!("turntable {turntable}: background differences {d:?}");
+        assert!(d.iter().all(|x| x.1 > 4000), "{d:?}");
+        diffs.push(d);
+    }
+    // The camera went round by 90° and 200°: on a turntable the room behind the car is the same
+    // picture (Cycles' noise apart); with the room fixed it is another part of the city.
+    for k in 0..2 {
+        assert!(diffs[0][k].0 < 0.02, "turntable: the room moved: {:?}", diffs[0]);
+        assert!(diffs[1][k].0 > 5.0 * diffs[0][k].0 && diffs[1][k].0 > 0.05, "{diffs:?}");
+    }
+    // Videos: the turntable set makes one, frames in angle order, angles in its sidecar; the
+    // fixed-room set is refused.
+    let dir = tmp.path().join("views_true");
+    let videos = pav::scene::turntable::write_videos(&dir, 28.0).unwrap();
+    assert_eq!(videos.len(), 1);
+    assert_eq!(videos[0].frames, 3);
+    let mut r = pav::video::VideoReader::open(&videos[0].path).unwrap();
+    let mut n = 0;
+    while let Some((_, f)) = r.read().unwrap() {
+        assert_eq!((f.width, f.height), (96, 96));
+        n += 1;
+    }
+    assert_eq!(n, 3);
+    let rows = pav::sidecar::read(&pav::sidecar::sidecar_path(&videos[0].path)).unwrap();
+    let angles: Vec<f64> = rows.iter().map(|s| s.angle_deg).collect();
+    assert_eq!(angles, [0.0, 90.0, 200.0]);
+    let e = pav::scene::turntable::write_videos(&tmp.path().join("views_false"), 28.0).unwrap_err();
+    assert!(e.to_string().contains("not a car turned in it"), "{e}");
+    // `pav views turntable` turns the room itself, with another paint, and says what to run next;
+    // that paint cannot be resumed into a folder rendered with another.
+    let tex = common::shared_data().join("rauca-e2e/RAUCA_E2E.png");
+    let cli = tmp.path().join("cli");
+    let out = run_ok(
+        pav()
+            .args(["views", "turntable"])
+            .arg(tmp.path().join("tfalse.toml"))
+            .arg("-o")
+            .arg(&cli)
+            .arg("--texture")
+            .arg(&tex),
+    );
+    assert!(out.contains("city_d2.20_e10.mp4: 3 frames"), "{out}");
+    assert!(out.contains("pav-rig evaluate ") && out.contains("uncalibrated"), "{out}");
+    let o =
+        pav().args(["views", "turntable"]).arg(tmp.path().join("tfalse.toml")).arg("-o").arg(&cli).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("another texture or turntable setting"), "{err}");
+}
+
+#[test]
+fn every_shipped_views_config_loads() {
+    common::shared_data();
+    let mut n = 0;
+    for e in std::fs::read_dir(common::repo().join("configs/views")).unwrap() {
+        let p = e.unwrap().path();
+        let cfg = ViewsConfig::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+        let views = cfg.views();
+        assert!(!views.is_empty(), "{}", p.display());
+        assert!(views.iter().all(|v| v.env_turn_deg == if cfg.render.turntable { v.pose[2] } else { 0.0 }));
+        if p.ends_with("turntable.toml") {
+            // The paper's cells: two polar angles × 44 frames a turn.
+            assert_eq!(views.len(), 88);
+        }
+        n += 1;
+    }
+    assert!(n >= 5, "{n} configs");
+}

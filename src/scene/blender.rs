@@ -65,12 +65,21 @@ pub struct JobView {
     pub fov_deg: f32,
     /// Output PNG.
     pub out: PathBuf,
+    /// Degrees the environment turns about pav's +Y with the camera (0: it stays put).
+    pub env_turn_deg: f32,
 }
 
 impl JobView {
     /// The job entry for `camera`, written to `out`.
     pub fn new(name: &str, camera: &Camera, out: PathBuf) -> JobView {
-        JobView { name: name.into(), axes: camera.axes, eye: camera.eye, fov_deg: camera.fov_deg, out }
+        JobView {
+            name: name.into(),
+            axes: camera.axes,
+            eye: camera.eye,
+            fov_deg: camera.fov_deg,
+            out,
+            env_turn_deg: 0.0,
+        }
     }
 }
 

@@ -113,12 +113,18 @@ world = bpy.data.worlds.new("pav")
 scene.world = world
 world.use_nodes = True
 bg = world.node_tree.nodes["Background"]
+env_turn = None
 if job["mode"] == "uv" or job.get("environment") is None:
     bg.inputs["Strength"].default_value = 0.0
 else:
     env = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
     env.image = bpy.data.images.load(job["environment"])
     world.node_tree.links.new(env.outputs["Color"], bg.inputs["Color"])
+    # Turning the environment with the camera (per view, below) turns the car in a fixed room.
+    env_turn = world.node_tree.nodes.new("ShaderNodeMapping")
+    coords = world.node_tree.nodes.new("ShaderNodeTexCoord")
+    world.node_tree.links.new(coords.outputs["Generated"], env_turn.inputs["Vector"])
+    world.node_tree.links.new(env_turn.outputs["Vector"], env.inputs["Vector"])
     bg.inputs["Strength"].default_value = job.get("env_strength", 1.0)
 
 if job.get("shadows") and job["mode"] == "pbr":
@@ -149,6 +155,10 @@ for v in job["views"]:
         )
     )
     cam.matrix_world = PAV_TO_BLENDER @ m
+    if env_turn is not None:
+        # The camera went round pav's +Y (Blender's +Z) by env_turn_deg; the lookup vector turns
+        # back by as much, so the map appears turned with the camera.
+        env_turn.inputs["Rotation"].default_value = (0.0, 0.0, -math.radians(v.get("env_turn_deg", 0.0)))
     cam_data.angle = math.radians(v["fov_deg"])
     scene.render.filepath = v["out"]
     bpy.ops.render.render(write_still=True)

@@ -18,6 +18,7 @@
 pub mod align;
 pub mod blender;
 pub mod eot;
+pub mod turntable;
 pub mod views;
 
 use crate::render::shade::Lights;

@@ -66,6 +66,12 @@ pub enum ViewsError {
     /// An image could not be written.
     #[error(transparent)]
     Image(#[from] crate::image::ImageError),
+    /// A turntable video could not be written.
+    #[error(transparent)]
+    Video(#[from] crate::video::VideoError),
+    /// Its angle sidecar could not be written.
+    #[error(transparent)]
+    Sidecar(#[from] crate::sidecar::SidecarError),
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ViewsError + '_ {
@@ -126,6 +132,10 @@ pub struct RenderSettings {
     /// Effects to simulate.
     #[serde(default)]
     pub effects: Vec<PbrEffect>,
+    /// The environment turns with the camera, so each view shows the car turned on a turntable
+    /// in a fixed room, the table's angle being the view's azimuth (`pav views turntable`).
+    #[serde(default)]
+    pub turntable: bool,
 }
 
 /// A lighting environment.
@@ -197,6 +207,8 @@ pub struct View {
     pub target: [f32; 3],
     /// The camera, in pav's frame (+Y up), as Blender and the mask see it.
     pub camera: Camera,
+    /// Degrees the environment turns with the camera: the azimuth on a turntable, else 0.
+    pub env_turn_deg: f32,
 }
 
 /// `R^T·p`: a pav-frame vector in the mesh file's frame (the rotation is orthonormal).
@@ -297,7 +309,15 @@ impl ViewsConfig {
                             let eye = spherical(d, e, a);
                             let eye = [eye[0] + g.target[0], eye[1] + g.target[1], eye[2] + g.target[2]];
                             let camera = Camera::look_at(eye, g.target, [0.0, 1.0, 0.0], g.fov_deg);
-                            out.push(View { name, environment: ei, pose: [d, e, a], target: g.target, camera });
+                            let env_turn_deg = if self.render.turntable { a } else { 0.0 };
+                            out.push(View {
+                                name,
+                                environment: ei,
+                                pose: [d, e, a],
+                                target: g.target,
+                                camera,
+                                env_turn_deg,
+                            });
                         }
                     }
                 }
@@ -427,6 +447,12 @@ pub struct ViewSetInfo {
     pub normalize: String,
     /// Its up axis.
     pub up: String,
+    /// The body texture's sha256 (folders rendered before it was recorded lack it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub texture_sha256: Option<String>,
+    /// Whether the environment turned with the camera.
+    #[serde(default)]
+    pub turntable: bool,
 }
 
 impl ViewSetInfo {
@@ -532,6 +558,8 @@ pub fn render_views(
         obj_sha256: Some(crate::data::store::file_digest(&cfg.mesh.obj).map_err(io(&cfg.mesh.obj))?.1),
         normalize: format!("{:?}", cfg.mesh.normalize).to_lowercase(),
         up: cfg.mesh.up.clone(),
+        texture_sha256: Some(crate::data::store::file_digest(&texture).map_err(io(&texture))?.1),
+        turntable: cfg.render.turntable,
     };
     let info_path = dir.join("views.toml");
     let info_text = toml::to_string(&info).expect("view set info serializes");
@@ -544,6 +572,16 @@ pub fn render_views(
             let old: ViewSetInfo = toml::from_str(&old).map_err(|_| other())?;
             if !(old.shows(&cfg.mesh.obj) && old.normalize == info.normalize && old.up == info.up) {
                 return Err(other());
+            }
+            // Resuming would mix two paints, or cars turned and not turned, in one set.
+            if old.texture_sha256.as_ref().is_some_and(|t| Some(t) != info.texture_sha256.as_ref())
+                || old.turntable != info.turntable
+            {
+                return Err(ViewsError::Config {
+                    path: info_path.clone(),
+                    msg: "this folder holds views with another texture or turntable setting: use another output folder"
+                        .into(),
+                });
             }
         }
         Err(_) => std::fs::write(&info_path, &info_text).map_err(io(&info_path))?,
@@ -580,8 +618,13 @@ pub fn render_views(
         if effects.contains(&PbrEffect::Reflections) {
             (job.metallic, job.roughness, job.clearcoat) = (0.3, 0.35, 0.5);
         }
-        job.views =
-            todo.iter().map(|v| JobView::new(&v.name, &v.camera, views_dir.join(format!("{}.png", v.name)))).collect();
+        job.views = todo
+            .iter()
+            .map(|v| JobView {
+                env_turn_deg: v.env_turn_deg,
+                ..JobView::new(&v.name, &v.camera, views_dir.join(format!("{}.png", v.name)))
+            })
+            .collect();
         let mut failure = None;
         blender.run(&job, dir, |name, secs| {
             let Some(v) = todo.iter().find(|v| v.name == name) else { return };

@@ -3,6 +3,7 @@
 use crate::common::Bar;
 use anyhow::{bail, Context, Result};
 use pav::scene::blender::Blender;
+use pav::scene::turntable::write_videos;
 use pav::scene::views::{contact_sheet, merge_shards, render_views, ViewsConfig};
 use std::path::PathBuf;
 
@@ -10,6 +11,10 @@ use std::path::PathBuf;
 pub enum Cmd {
     /// Render a config's views with Blender Cycles (resumes where an earlier run stopped).
     Render(RenderArgs),
+    /// Simulated turntable videos: the config's views with the environment turning with the
+    /// camera (the car turned in a fixed room), one MP4 + angle sidecar per environment, distance
+    /// and elevation, for `pav-rig evaluate` (resumes like render).
+    Turntable(TurntableArgs),
     /// Join the shard manifests of a view folder into its manifest.csv.
     Merge {
         /// The view folder the shards wrote into.
@@ -28,6 +33,60 @@ pub struct RenderArgs {
     /// merge` joins the shards' manifests afterwards.
     #[arg(long, value_name = "K/N")]
     shard: Option<String>,
+    /// Body texture instead of the config's (e.g. an optimized texture.png).
+    #[arg(long, value_parser = crate::data::arg_path)]
+    texture: Option<PathBuf>,
+}
+
+#[derive(clap::Args)]
+pub struct TurntableArgs {
+    /// Views config (TOML): the camera's distances and elevations (the paper's polar angles), the
+    /// table's angles as azimuths, the room as environments; e.g. configs/views/turntable.toml.
+    config: PathBuf,
+    /// Output folder: views/, manifest.csv and videos/.
+    #[arg(long, short = 'o', default_value = "out/turntable")]
+    out: PathBuf,
+    /// Body texture instead of the config's (e.g. an optimized texture.png).
+    #[arg(long, value_parser = crate::data::arg_path)]
+    texture: Option<PathBuf>,
+    /// Seconds per turn in the videos' time stamps (the paper's table: 28 s).
+    #[arg(long, default_value = "28")]
+    period: f64,
+}
+
+/// Renders `cfg` into `out` with provenance, printing the summary.
+fn render(
+    cfg: &ViewsConfig,
+    config: &std::path::Path,
+    out: &std::path::Path,
+    shard: Option<(usize, usize)>,
+) -> Result<()> {
+    let blender = Blender::find()?;
+    let mut inputs = vec![cfg.mesh.obj.clone()];
+    inputs.extend(cfg.mesh.texture.clone());
+    let record = pav::provenance::Run::start()
+        .config(config)
+        .inputs(inputs.iter().map(|p| p.as_path()))
+        .setting("shard", shard.map_or("all".to_string(), |(k, n)| format!("{k}/{n}")))
+        .setting("turntable", cfg.render.turntable)
+        .tool("blender", blender.version());
+    let name = match shard {
+        Some((k, n)) => format!("run.{k}-of-{n}.toml"),
+        None => pav::provenance::FILE.to_string(),
+    };
+    record.write(&out.join(&name)).with_context(|| format!("writing {}", out.join(&name).display()))?;
+    let s = render_views(cfg, out, shard, &blender, &Bar::default())?;
+    println!(
+        "{} views: {} rendered now, {} from an earlier run; manifest {}",
+        s.total,
+        s.rendered,
+        s.resumed,
+        s.manifest.display()
+    );
+    if shard.is_none() {
+        println!("contact sheet {}", contact_sheet(out, 12)?.display());
+    }
+    Ok(())
 }
 
 fn shard(s: &str) -> Result<(usize, usize)> {
@@ -42,32 +101,31 @@ fn shard(s: &str) -> Result<(usize, usize)> {
 pub fn run(c: &Cmd) -> Result<()> {
     match c {
         Cmd::Render(a) => {
-            let cfg = ViewsConfig::load(&a.config)?;
-            let shard = a.shard.as_deref().map(shard).transpose()?;
-            let blender = Blender::find()?;
-            let mut inputs = vec![cfg.mesh.obj.clone()];
-            inputs.extend(cfg.mesh.texture.clone());
-            let record = pav::provenance::Run::start()
-                .config(&a.config)
-                .inputs(inputs.iter().map(|p| p.as_path()))
-                .setting("shard", a.shard.as_deref().unwrap_or("all"))
-                .tool("blender", blender.version());
-            let name = match shard {
-                Some((k, n)) => format!("run.{k}-of-{n}.toml"),
-                None => pav::provenance::FILE.to_string(),
-            };
-            record.write(&a.out.join(&name)).with_context(|| format!("writing {}", a.out.join(&name).display()))?;
-            let s = render_views(&cfg, &a.out, shard, &blender, &Bar::default())?;
-            println!(
-                "{} views: {} rendered now, {} from an earlier run; manifest {}",
-                s.total,
-                s.rendered,
-                s.resumed,
-                s.manifest.display()
-            );
-            if shard.is_none() {
-                println!("contact sheet {}", contact_sheet(&a.out, 12)?.display());
+            let mut cfg = ViewsConfig::load(&a.config)?;
+            cfg.mesh.texture = a.texture.clone().or(cfg.mesh.texture);
+            render(&cfg, &a.config, &a.out, a.shard.as_deref().map(shard).transpose()?)?;
+        }
+        Cmd::Turntable(a) => {
+            let mut cfg = ViewsConfig::load(&a.config)?;
+            cfg.mesh.texture = a.texture.clone().or(cfg.mesh.texture);
+            cfg.render.turntable = true;
+            render(&cfg, &a.config, &a.out, None)?;
+            let videos = write_videos(&a.out, a.period)?;
+            for v in &videos {
+                println!(
+                    "{}: {} frames, {} at distance {} and elevation {}°",
+                    v.path.display(),
+                    v.frames,
+                    v.environment,
+                    v.distance,
+                    v.elevation_deg
+                );
             }
+            println!(
+                "simulated A_physical (uncalibrated until compared with a real capture):\n  pav-rig evaluate {} --label NAME{} -d configs/detectors -o out/evaluate",
+                videos.iter().map(|v| v.path.display().to_string()).collect::<Vec<_>>().join(" "),
+                " --label NAME".repeat(videos.len().saturating_sub(1))
+            );
         }
         Cmd::Merge { dir } => {
             let n = merge_shards(dir)?;
