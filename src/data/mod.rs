@@ -84,6 +84,12 @@ pub enum DataError {
     },
 }
 
+/// clap's parser for path arguments: `data:NAME` becomes the entry's file in the store (an
+/// error saying how to fetch it when absent), any other path stays as given.
+pub fn arg_path(s: &str) -> Result<PathBuf, String> {
+    resolve(Path::new(""), Path::new(s)).map_err(|e| e.to_string())
+}
+
 /// Resolves a path from a config file in `dir`: `data:NAME` to the entry's file in the default
 /// store (refused when the manifest does not list it or the store lacks it), a relative path
 /// against `dir`, an absolute one as it is.

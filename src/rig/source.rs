@@ -3,6 +3,7 @@
 
 use super::sim::Truth;
 use crate::image::Frame;
+use crate::scene::turntable::CarScene;
 use crate::video::{frame_to_mat, mat_to_frame, MatError, VideoError, VideoReader};
 use opencv::core::{Mat, Point, Scalar};
 use opencv::prelude::*;
@@ -57,17 +58,28 @@ pub enum SourceFault {
 }
 
 /// Opens the frame source that a `--camera` value names: `v4l2:/dev/videoN`, `file:VIDEO`,
-/// `gst-test`, or `sim` (needs `sim`, the simulated table to film), asking for `width × height`
+/// `gst-test`, or `sim` (needs `sim`, the simulated table to film, and films `car` on it when
+/// given), asking for `width × height`
 /// at `fps` where the source takes requests.
 pub fn open_source(
     spec: &str,
     sim: Option<Truth>,
+    car: Option<CarScene>,
     (width, height): (usize, usize),
     fps: f64,
 ) -> Result<Box<dyn FrameSource>, CameraError> {
+    if car.is_some() && spec != "sim" {
+        return Err(CameraError::Spec("a simulated car is filmed by --camera sim only".into()));
+    }
     Ok(match spec {
         "sim" => match sim {
-            Some(truth) => Box::new(SimCamera::new(truth, width, height, fps)),
+            Some(truth) => {
+                let cam = SimCamera::new(truth, width, height, fps);
+                Box::new(match car {
+                    Some(c) => cam.with_car(c),
+                    None => cam,
+                })
+            }
             None => {
                 return Err(CameraError::Spec(
                     "--camera sim films the simulated turntable: use it with --port sim".into(),
@@ -260,9 +272,11 @@ impl FrameSource for FileSource {
     }
 }
 
-/// A camera filming the simulated turntable: a disc with a marker at the true angle.
+/// A camera filming the simulated turntable: a disc with a marker at the true angle, or, given a
+/// [`CarScene`], the textured car turned by it.
 pub struct SimCamera {
     truth: Truth,
+    car: Option<CarScene>,
     size: (usize, usize),
     fps: f64,
     due: Instant,
@@ -278,6 +292,7 @@ impl SimCamera {
     pub fn new(truth: Truth, width: usize, height: usize, fps: f64) -> Self {
         SimCamera {
             truth,
+            car: None,
             size: (width, height),
             fps,
             due: Instant::now(),
@@ -285,6 +300,12 @@ impl SimCamera {
             true_angles: Vec::new(),
             fail_at: None,
         }
+    }
+
+    /// Films `car` on the table instead of the disc.
+    pub fn with_car(mut self, car: CarScene) -> Self {
+        self.car = Some(car);
+        self
     }
 
     fn render(&self, angle: f64) -> opencv::Result<Mat> {
@@ -314,7 +335,13 @@ impl SimCamera {
 
 impl FrameSource for SimCamera {
     fn describe(&self) -> String {
-        "simulated camera".into()
+        match &self.car {
+            Some(c) => format!(
+                "simulated camera (pav's rasterizer, car at distance {}, elevation {}°)",
+                c.distance, c.elevation_deg
+            ),
+            None => "simulated camera".into(),
+        }
     }
     fn size(&self) -> (usize, usize) {
         self.size
@@ -337,8 +364,13 @@ impl FrameSource for SimCamera {
             frame: self.index,
             source,
         };
-        let m = self.render(angle).map_err(|e| err(e.into()))?;
-        let f = mat_to_frame(&m).map_err(|e| err(e.into()))?;
+        let f = match &self.car {
+            Some(car) => car.frame(angle as f32, self.size.0, self.size.1),
+            None => {
+                let m = self.render(angle).map_err(|e| err(e.into()))?;
+                mat_to_frame(&m).map_err(|e| err(e.into()))?
+            }
+        };
         self.true_angles.push(angle);
         self.index += 1;
         Ok(Some((f, at)))

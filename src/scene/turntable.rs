@@ -1,10 +1,17 @@
-//! Simulated turntable videos: views rendered with the environment turning with the camera
-//! (`render.turntable`), so each shows the car turned on a table in a fixed room, cut into one
-//! video per environment, distance and elevation, with the angle sidecar `pav-rig evaluate`
-//! reads. The result is simulated, not predicted: nothing here is calibrated against a capture.
+//! The simulated turntable, two back-ends. Offline: Blender views rendered with the environment
+//! turning with the camera (`render.turntable`), so each shows the car turned on a table in a
+//! fixed room, cut into one video per environment, distance and elevation with the angle sidecar
+//! `pav-rig evaluate` reads. Live: [`CarScene`] draws the car with pav's rasterizer at any table
+//! angle, fast enough for `pav-rig capture`'s simulated camera. Both are simulated, not
+//! predicted: nothing here is calibrated against a capture.
 
-use super::views::{read_manifest, ViewRecord, ViewSetInfo, ViewsError};
+use super::views::{read_manifest, ViewRecord, ViewSetInfo, ViewsConfig, ViewsError};
+use crate::geometry::camera::{spherical, Camera};
+use crate::geometry::mesh::Mesh;
 use crate::image::{to_u8, Frame, Rgb};
+use crate::render::raster::{GBuffer, EMPTY};
+use crate::render::shade::{vertex_normals, Lights, Shading};
+use crate::render::texture::Gather;
 use crate::sidecar::{self, AngleSample};
 use crate::video::VideoWriter;
 use std::path::{Path, PathBuf};
@@ -110,4 +117,97 @@ pub fn write_videos(dir: &Path, period_s: f64) -> Result<Vec<TurntableVideo>, Vi
         });
     }
     Ok(out)
+}
+
+/// The textured car on the table, seen by a fixed camera, drawn by pav's rasterizer with Phong
+/// shading under one light that stays in the room while the car turns.
+pub struct CarScene {
+    mesh: Mesh,
+    normals: Vec<[f32; 3]>,
+    texture: Rgb,
+    /// Camera distance (normalized mesh units).
+    pub distance: f32,
+    /// Camera elevation (the paper's polar angle), degrees.
+    pub elevation_deg: f32,
+    fov_deg: f32,
+    target: [f32; 3],
+    lights: Lights,
+    background: [f32; 3],
+}
+
+/// Room light: a key light from above the camera's left shoulder and some ambient. Of the few
+/// settings tried, this one's contrast got the rasterized car detected most (README).
+const ROOM: Lights = Lights { ambient: 0.35, diffuse: 0.8, specular: 0.3, direction: [0.6, 1.0, 0.8], shininess: 32.0 };
+
+impl CarScene {
+    /// The car of a views config, painted with `texture` (else the config's), filmed from the
+    /// config's first pose grid at its first distance and at `elevation_deg` (else its first).
+    pub fn new(cfg: &ViewsConfig, texture: Option<&Path>, elevation_deg: Option<f32>) -> Result<CarScene, ViewsError> {
+        let mesh = cfg.load_mesh()?;
+        let texture = match texture {
+            Some(t) => t.to_path_buf(),
+            None => cfg.texture(&mesh)?,
+        };
+        let g = &cfg.poses[0];
+        let elevation_deg = elevation_deg.unwrap_or(g.elevations[0]);
+        if !(elevation_deg.is_finite() && elevation_deg.abs() < 90.0) {
+            return Err(refuse(&texture, format!("elevation {elevation_deg}° must lie within (−90°, 90°)")));
+        }
+        Ok(CarScene {
+            normals: vertex_normals(&mesh),
+            texture: Rgb::load(&texture)?,
+            mesh,
+            distance: g.distances[0],
+            elevation_deg,
+            fov_deg: g.fov_deg,
+            target: g.target,
+            lights: ROOM,
+            background: [0.45, 0.45, 0.45],
+        })
+    }
+
+    /// The car turned by the table's `angle_deg` as the same camera sees it in the room
+    /// (`size × size` RGB in [0, 1]). As in Blender's turntable views, the camera goes round by
+    /// the angle and the room's light with it.
+    pub fn render(&self, angle_deg: f32, size: usize) -> Vec<f32> {
+        let eye = spherical(self.distance, self.elevation_deg, angle_deg);
+        let eye = [eye[0] + self.target[0], eye[1] + self.target[1], eye[2] + self.target[2]];
+        let cam = Camera::look_at(eye, self.target, [0.0, 1.0, 0.0], self.fov_deg);
+        let g = GBuffer::render(&self.mesh, &cam, size);
+        let mut rgb = vec![0.0f32; size * size * 3];
+        Gather::new(g.uv_samples(&self.mesh), self.texture.width, self.texture.height).apply(
+            &self.texture.rgb,
+            3,
+            &mut rgb,
+        );
+        let (s, c) = angle_deg.to_radians().sin_cos();
+        let [x, y, z] = self.lights.direction;
+        let lights = Lights { direction: [x * c + z * s, y, -x * s + z * c], ..self.lights };
+        Shading::new(&g, &self.mesh, &self.normals, &cam, &lights).apply(&mut rgb, 3);
+        for (i, f) in g.face.iter().enumerate() {
+            let px = &mut rgb[3 * i..3 * i + 3];
+            if *f == EMPTY {
+                px.copy_from_slice(&self.background);
+            } else {
+                px.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
+            }
+        }
+        rgb
+    }
+
+    /// The same as a `width × height` BGR frame: the centre of a square render of the larger
+    /// side, drawn at twice the resolution and averaged down, so edges are smooth as a lens makes them.
+    pub fn frame(&self, angle_deg: f32, width: usize, height: usize) -> Frame {
+        let side = width.max(height);
+        let rgb = crate::image::halve(&self.render(angle_deg, 2 * side), 2 * side, 2 * side);
+        let (x0, y0) = ((side - width) / 2, (side - height) / 2);
+        let mut bgr = Vec::with_capacity(width * height * 3);
+        for y in y0..y0 + height {
+            for x in x0..x0 + width {
+                let p = &rgb[3 * (y * side + x)..3 * (y * side + x) + 3];
+                bgr.extend([to_u8(p[2]), to_u8(p[1]), to_u8(p[0])]);
+            }
+        }
+        Frame { width, height, bgr }
+    }
 }

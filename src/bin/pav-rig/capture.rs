@@ -5,6 +5,8 @@ use crate::port::{connect, parse_signed_seconds, PortArgs};
 use anyhow::{bail, Context, Result};
 use pav::rig::capture::{capture, CaptureOptions};
 use pav::rig::source::open_source;
+use pav::scene::turntable::CarScene;
+use pav::scene::views::ViewsConfig;
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -41,6 +43,16 @@ pub struct Args {
     /// Fail (keeping the files) when the angles cannot be bounded to within this many degrees.
     #[arg(long, default_value_t = 0.5)]
     max_angle_error: f64,
+    /// With `--camera sim`: film the car of this views config (e.g. configs/views/turntable.toml)
+    /// on the simulated table, drawn live by pav's rasterizer, instead of a marked disc.
+    #[arg(long, value_parser = pav::data::arg_path)]
+    car: Option<PathBuf>,
+    /// With --car: its paint (e.g. an optimized texture.png) instead of the config's.
+    #[arg(long, requires = "car", value_parser = pav::data::arg_path)]
+    texture: Option<PathBuf>,
+    /// With --car: the camera's elevation (the paper's polar angle, 0 or 20) instead of the config's first.
+    #[arg(long, requires = "car", allow_hyphen_values = true)]
+    elevation: Option<f32>,
 }
 
 pub fn run(a: &Args) -> Result<()> {
@@ -54,8 +66,15 @@ pub fn run(a: &Args) -> Result<()> {
     if a.camera == "sim" && a.port.port != "sim" {
         bail!("--camera sim films the simulated turntable: use it with --port sim");
     }
+    let car = match &a.car {
+        Some(cfg) => {
+            let views = ViewsConfig::load(cfg)?;
+            Some(CarScene::new(&views, a.texture.as_deref(), a.elevation)?)
+        }
+        None => None,
+    };
     let (sim, mut table) = connect(&a.port)?;
-    let mut cam = open_source(&a.camera, sim.as_ref().map(|s| s.truth()), (a.width, a.height), a.fps)?;
+    let mut cam = open_source(&a.camera, sim.as_ref().map(|s| s.truth()), car, (a.width, a.height), a.fps)?;
     let (w, h) = cam.size();
     eprintln!("camera: {} {w}x{h} at {:.1} fps", cam.describe(), cam.fps());
     let opts = CaptureOptions {

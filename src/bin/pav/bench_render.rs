@@ -10,7 +10,7 @@ use std::path::PathBuf;
 #[derive(clap::Args)]
 pub struct Args {
     /// OBJ mesh with UVs.
-    #[arg(long, value_parser = crate::data::arg_path, default_value = "data:pav-camou/xfl_yxz.obj")]
+    #[arg(long, value_parser = pav::data::arg_path, default_value = "data:pav-camou/xfl_yxz.obj")]
     mesh: PathBuf,
     /// Image sizes.
     #[arg(long, value_delimiter = ',', default_value = "416,800")]

@@ -19,7 +19,7 @@ pub struct Args {
     random_seeds: u64,
     /// Fixed textures scored beside the optimized one on every fold (e.g. a peer's published
     /// texture, `data:rauca-e2e/RAUCA_E2E.png`); any size, resampled to the atlas. Repeatable.
-    #[arg(long = "reference", value_parser = crate::data::arg_path)]
+    #[arg(long = "reference", value_parser = pav::data::arg_path)]
     references: Vec<PathBuf>,
     #[command(flatten)]
     scoring: Scoring,

@@ -88,9 +88,3 @@ pub fn run(cmd: &Cmd) -> Result<()> {
     }
     Ok(())
 }
-
-/// clap's parser for path arguments: `data:NAME` becomes the entry's file in the store (an
-/// error saying how to fetch it when absent), any other path stays as given.
-pub fn arg_path(s: &str) -> Result<std::path::PathBuf, String> {
-    pav::data::resolve(std::path::Path::new(""), std::path::Path::new(s)).map_err(|e| e.to_string())
-}

@@ -12,7 +12,7 @@ pub struct Args {
     #[arg(long, default_value = "configs/optimize/paper.toml")]
     config: PathBuf,
     /// Texture PNGs to evaluate (named by their folder); `data:NAME` for a manifest entry.
-    #[arg(long = "texture", short = 't', value_parser = crate::data::arg_path)]
+    #[arg(long = "texture", short = 't', value_parser = pav::data::arg_path)]
     textures: Vec<PathBuf>,
     #[command(flatten)]
     scoring: Scoring,

@@ -11,13 +11,13 @@ use std::path::PathBuf;
 #[derive(clap::Args)]
 pub struct Args {
     /// OBJ mesh with UVs.
-    #[arg(long, value_parser = crate::data::arg_path, default_value = "data:pav-camou/xfl_yxz.obj")]
+    #[arg(long, value_parser = pav::data::arg_path, default_value = "data:pav-camou/xfl_yxz.obj")]
     mesh: PathBuf,
     /// UV texture (default: the body material's map_Kd).
-    #[arg(long, value_parser = crate::data::arg_path)]
+    #[arg(long, value_parser = pav::data::arg_path)]
     texture: Option<PathBuf>,
     /// Camera from a CARLA npz sample's cam_trans (PAV-Camou convention).
-    #[arg(long, conflicts_with = "orbit", value_parser = crate::data::arg_path)]
+    #[arg(long, conflicts_with = "orbit", value_parser = pav::data::arg_path)]
     pose: Option<PathBuf>,
     /// Camera at "dist,elev,azim" (normalized units, degrees) looking at the origin.
     #[arg(long)]

@@ -11,10 +11,10 @@ pub enum Cmd {
     /// (grey = none, purple = stretched, red = compressed, as MAYA shows them).
     Check {
         /// OBJ mesh with UVs.
-        #[arg(long, value_parser = crate::data::arg_path, default_value = "data:pav-camou/xfl_yxz.obj")]
+        #[arg(long, value_parser = pav::data::arg_path, default_value = "data:pav-camou/xfl_yxz.obj")]
         mesh: PathBuf,
         /// UV map whose pure-white texels mark the optimizable patch.
-        #[arg(long, value_parser = crate::data::arg_path, default_value = "data:pav-camou/half.png")]
+        #[arg(long, value_parser = pav::data::arg_path, default_value = "data:pav-camou/half.png")]
         mask: PathBuf,
         /// Output directory.
         #[arg(long, short = 'o', default_value = "out/uv")]
@@ -24,10 +24,10 @@ pub enum Cmd {
     /// adjusted OBJ, its UV mask, and before/after heat maps.
     Adjust {
         /// OBJ mesh with UVs.
-        #[arg(long, value_parser = crate::data::arg_path, default_value = "data:pav-camou/xfl_yxz.obj")]
+        #[arg(long, value_parser = pav::data::arg_path, default_value = "data:pav-camou/xfl_yxz.obj")]
         mesh: PathBuf,
         /// UV map whose pure-white texels mark the optimizable patch.
-        #[arg(long, value_parser = crate::data::arg_path, default_value = "data:pav-camou/half.png")]
+        #[arg(long, value_parser = pav::data::arg_path, default_value = "data:pav-camou/half.png")]
         mask: PathBuf,
         /// charts: cut by the 3D surface (a door is one piece) and pack into the free texels;
         /// islands: LSCM per original UV island, kept inside its original box.

@@ -34,7 +34,7 @@ pub struct RenderArgs {
     #[arg(long, value_name = "K/N")]
     shard: Option<String>,
     /// Body texture instead of the config's (e.g. an optimized texture.png).
-    #[arg(long, value_parser = crate::data::arg_path)]
+    #[arg(long, value_parser = pav::data::arg_path)]
     texture: Option<PathBuf>,
 }
 
@@ -47,7 +47,7 @@ pub struct TurntableArgs {
     #[arg(long, short = 'o', default_value = "out/turntable")]
     out: PathBuf,
     /// Body texture instead of the config's (e.g. an optimized texture.png).
-    #[arg(long, value_parser = crate::data::arg_path)]
+    #[arg(long, value_parser = pav::data::arg_path)]
     texture: Option<PathBuf>,
     /// Seconds per turn in the videos' time stamps (the paper's table: 28 s).
     #[arg(long, default_value = "28")]
