@@ -155,3 +155,46 @@ fn an_interrupted_optimize_saves_and_exits_non_zero() {
         Some("rauca-e2e/pytorch3d_Etron.obj")
     );
 }
+
+#[test]
+fn paint_puts_a_texture_on_the_region_and_keeps_the_car_paint_elsewhere() {
+    let data = common::shared_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("painted.png");
+    let o = pav()
+        .args(["paint", "--config", "configs/optimize/half-turns-ensemble-pbr.toml"])
+        .args(["--texture", "data:rauca-e2e/RAUCA_E2E.png", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    // The config's region: mask.png's white on the sides' middle and the top, at 256² texels.
+    assert!(text(&o).contains("over 14421 of 65536 region texels"), "{}", text(&o));
+    let (p, base, tex) = (
+        image::open(&out).unwrap().to_rgb8(),
+        image::open(data.join("rauca-e2e/img_optim.png")).unwrap().to_rgb8(),
+        image::open(data.join("rauca-e2e/RAUCA_E2E.png")).unwrap().to_rgb8(),
+    );
+    assert_eq!(p.dimensions(), base.dimensions());
+    let (mut kept, mut from_tex, mut other) = (0usize, 0usize, 0usize);
+    for (x, y, px) in p.enumerate_pixels() {
+        if px == base.get_pixel(x, y) {
+            kept += 1;
+        } else if px.0.iter().zip(tex.get_pixel(x, y).0).all(|(a, b)| a.abs_diff(b) <= 1) {
+            from_tex += 1; // Same-size texture: the bilinear read lands on the texel itself.
+        } else {
+            other += 1;
+        }
+    }
+    let n = (p.width() * p.height()) as usize;
+    eprintln!("kept {kept}, from the texture {from_tex}, other {other} of {n}");
+    // 14421/65536 of the atlas is region; every painted texel comes from the texture.
+    assert_eq!(other, 0);
+    assert!(from_tex > n / 6 && from_tex < n / 4, "{from_tex} of {n}");
+    let o = pav()
+        .args(["paint", "--config", "configs/optimize/half-turns-ensemble-pbr.toml", "--texture", "nope.png", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!o.status.success() && text(&o).contains("nope.png"), "{}", text(&o));
+}

@@ -5,7 +5,7 @@
 use crate::geometry::mesh::Mesh;
 use crate::geometry::uv::faces_in_mask;
 use crate::image::resize::{resize, Interpolation};
-use crate::image::{to_u8, Frame};
+use crate::image::{to_u8, Frame, Rgb};
 use std::path::Path;
 
 /// Print settings.
@@ -187,5 +187,54 @@ mod tests {
         let row = 1000 + 50;
         let dark = (0..1000).filter(|x| img.get_pixel(*x, row).0 == [0, 0, 0]).count();
         assert_eq!(dark, 100);
+    }
+}
+
+/// The car's paint with the sheet stuck on: `texture` (read bilinearly, as the sheet is printed)
+/// on the texels where the `n × n` `region` is on, `base` elsewhere, at the base's resolution.
+/// Every image spans the same UV square, so a texel's place is its position in its own image.
+pub fn on_the_car(base: &Rgb, texture: &Rgb, region: &[f32], n: usize) -> Rgb {
+    let at =
+        |i: usize, len: usize, to: usize| if len < 2 { 0.0 } else { i as f32 * (to - 1) as f32 / (len - 1) as f32 };
+    let (tw, th) = (texture.width, texture.height);
+    let tex = |x: usize, y: usize, c: usize| texture.rgb[(y * tw + x) * 3 + c];
+    let mut out = base.clone();
+    for y in 0..base.height {
+        let (ry, ty) = (at(y, base.height, n).round() as usize, at(y, base.height, th));
+        for x in 0..base.width {
+            if region[ry * n + at(x, base.width, n).round() as usize] < 0.5 {
+                continue;
+            }
+            let tx = at(x, base.width, tw);
+            let (x0, y0) = (tx.floor() as usize, ty.floor() as usize);
+            let (x1, y1) = ((x0 + 1).min(tw - 1), (y0 + 1).min(th - 1));
+            let (fx, fy) = (tx - x0 as f32, ty - y0 as f32);
+            for c in 0..3 {
+                let top = tex(x0, y0, c) * (1.0 - fx) + tex(x1, y0, c) * fx;
+                let bottom = tex(x0, y1, c) * (1.0 - fx) + tex(x1, y1, c) * fx;
+                out.rgb[(y * base.width + x) * 3 + c] = top * (1.0 - fy) + bottom * fy;
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod paint_tests {
+    use super::*;
+
+    #[test]
+    fn the_sheet_covers_the_region_only_and_reads_the_texture_where_it_lies() {
+        // A 5×5 base, a 2×2 region with its right column on, a 3×3 texture whose value is its column.
+        let base = Rgb { width: 5, height: 5, rgb: vec![0.25; 75] };
+        let region = [0.0, 1.0, 0.0, 1.0];
+        let texture = Rgb { width: 3, height: 3, rgb: (0..27).map(|i| ((i / 3) % 3) as f32).collect() };
+        let p = on_the_car(&base, &texture, &region, 2);
+        let v = |x: usize, y: usize| p.rgb[(y * 5 + x) * 3];
+        // Columns 0–1 map to region column 0 (off), columns 3–4 to column 1 (on); column 2
+        // (position 0.5) rounds to column 1.
+        assert_eq!([v(0, 0), v(1, 4)], [0.25, 0.25]);
+        // On, the texture's column at the same position: x = 4 → 2.0, x = 3 → 1.5, x = 2 → 1.0.
+        assert_eq!([v(4, 0), v(3, 2), v(2, 4)], [2.0, 1.5, 1.0]);
     }
 }

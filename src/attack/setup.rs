@@ -215,6 +215,36 @@ fn pbr_views(cfg: &OptimizeConfig, maker: &ViewMaker, mesh: &Mesh, region: &[f32
     Ok(out)
 }
 
+/// The config's mesh in its camera convention's frame, and its optimizable region at the
+/// texture size: the white texels of `mesh.region` on the faces of `mesh.parts` (1 or 0 per texel).
+pub fn mesh_and_region(cfg: &OptimizeConfig) -> Result<(Mesh, Vec<f32>), SetupError> {
+    let mut mesh = Mesh::load_obj(&cfg.mesh.obj)?;
+    match cfg.mesh.camera {
+        CameraConvention::Fca => mesh.normalize_bbox(),
+        CameraConvention::PavCamou => {
+            mesh.normalize();
+        }
+    }
+    let mask = Rgb::load(&cfg.mesh.region)?;
+    let ts = cfg.mesh.texture_size;
+    let mut region = resample_region(&mask.white_mask(), mask.width, mask.height, ts);
+    let parts = cfg.parts()?;
+    if !parts.is_empty() {
+        let up = match cfg.mesh.camera {
+            CameraConvention::Fca => 2,
+            CameraConvention::PavCamou => 1,
+        };
+        let faces = select_faces(&mesh, up, &parts, cfg.mesh.parts_min_cos);
+        // Conservative: a face thinner than a texel still keeps the texels its corners read.
+        for (r, on) in region.iter_mut().zip(faces_mask(&mesh, &faces, ts)) {
+            if !on {
+                *r = 0.0;
+            }
+        }
+    }
+    Ok((mesh, region))
+}
+
 impl Setup {
     /// Loads the config's mesh, region, scene and views, rendering views at `size` (default:
     /// the config's), with the synthetic views of its training photos.
@@ -229,31 +259,9 @@ impl Setup {
     /// cross-validation, which builds them per fold from [`Setup::turned_views`].
     pub fn load_photos(cfg: &OptimizeConfig, size: Option<usize>) -> Result<Setup, SetupError> {
         let scene = Scene::load(&cfg.scene)?;
-        let mut mesh = Mesh::load_obj(&cfg.mesh.obj)?;
-        match cfg.mesh.camera {
-            CameraConvention::Fca => mesh.normalize_bbox(),
-            CameraConvention::PavCamou => {
-                mesh.normalize();
-            }
-        }
+        let (mesh, region) = mesh_and_region(cfg)?;
         let normals = if scene.lighting.is_some() { vertex_normals(&mesh) } else { Vec::new() };
-        let mask = Rgb::load(&cfg.mesh.region)?;
-        let ts = cfg.mesh.texture_size;
-        let mut region = resample_region(&mask.white_mask(), mask.width, mask.height, ts);
-        let parts = cfg.parts()?;
-        if !parts.is_empty() {
-            let up = match cfg.mesh.camera {
-                CameraConvention::Fca => 2,
-                CameraConvention::PavCamou => 1,
-            };
-            let faces = select_faces(&mesh, up, &parts, cfg.mesh.parts_min_cos);
-            // Conservative: a face thinner than a texel still keeps the texels its corners read.
-            for (r, on) in region.iter_mut().zip(faces_mask(&mesh, &faces, ts)) {
-                if !on {
-                    *r = 0.0;
-                }
-            }
-        }
+        let (ts, parts) = (cfg.mesh.texture_size, cfg.parts()?);
         let region_values: Vec<u32> =
             (0..ts * ts).filter(|i| region[*i] > 0.5).flat_map(|i| (0..3).map(move |c| (i * 3 + c) as u32)).collect();
         if region_values.is_empty() {

@@ -5,18 +5,25 @@
 //! angle, fast enough for `pav-rig capture`'s simulated camera. Both are simulated, not
 //! predicted: nothing here is calibrated against a capture.
 
-use super::views::{read_manifest, ViewRecord, ViewSetInfo, ViewsConfig, ViewsError};
+#[cfg(feature = "video")]
+use super::views::{read_manifest, ViewRecord, ViewSetInfo};
+use super::views::{ViewsConfig, ViewsError};
 use crate::geometry::camera::{spherical, Camera};
 use crate::geometry::mesh::Mesh;
 use crate::image::{to_u8, Frame, Rgb};
 use crate::render::raster::{GBuffer, EMPTY};
 use crate::render::shade::{vertex_normals, Lights, Shading};
 use crate::render::texture::Gather;
+#[cfg(feature = "video")]
 use crate::sidecar::{self, AngleSample};
+#[cfg(feature = "video")]
 use crate::video::VideoWriter;
-use std::path::{Path, PathBuf};
+use std::path::Path;
+#[cfg(feature = "video")]
+use std::path::PathBuf;
 
 /// One video written.
+#[cfg(feature = "video")]
 #[derive(Clone, Debug, PartialEq)]
 pub struct TurntableVideo {
     /// The MP4; its sidecar is [`sidecar::sidecar_path`] of it.
@@ -31,6 +38,7 @@ pub struct TurntableVideo {
     pub frames: usize,
 }
 
+#[cfg(feature = "video")]
 fn io(p: &Path) -> impl Fn(std::io::Error) -> ViewsError + '_ {
     move |source| ViewsError::Io { path: p.into(), source }
 }
@@ -43,6 +51,7 @@ fn refuse(p: &Path, msg: String) -> ViewsError {
 /// group of views in `dir`'s manifest, frames in azimuth order, a turn taking `period_s`
 /// seconds (the table's angle is the view's azimuth). Refuses a view set whose environment did
 /// not turn with the camera: going round a car in a fixed room is not a turntable.
+#[cfg(feature = "video")]
 pub fn write_videos(dir: &Path, period_s: f64) -> Result<Vec<TurntableVideo>, ViewsError> {
     let info_path = dir.join("views.toml");
     let text = std::fs::read_to_string(&info_path).map_err(io(&info_path))?;

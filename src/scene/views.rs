@@ -67,6 +67,7 @@ pub enum ViewsError {
     #[error(transparent)]
     Image(#[from] crate::image::ImageError),
     /// A turntable video could not be written.
+    #[cfg(feature = "video")]
     #[error(transparent)]
     Video(#[from] crate::video::VideoError),
     /// Its angle sidecar could not be written.

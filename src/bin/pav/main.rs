@@ -16,6 +16,7 @@ mod data;
 mod eval_digital;
 #[cfg(feature = "optimize")]
 mod optimize;
+mod paint;
 mod render;
 mod uv;
 mod views;
@@ -57,6 +58,9 @@ enum Cmd {
     BenchStep(bench_step::Args),
     /// Render the mesh with its UV texture (flat, unlit) and the textured-region mask as PNGs.
     Render(render::Args),
+    /// The car's paint with a texture's sheet stuck on (the texture over the config's region, the
+    /// car's own paint elsewhere), for `pav views` and the simulated turntable.
+    Paint(paint::Args),
     /// Physically based views of the car by Blender Cycles (headless): photos, masks, manifest.
     #[command(subcommand)]
     Views(views::Cmd),
@@ -98,6 +102,7 @@ fn main() -> Result<()> {
         #[cfg(feature = "optimize")]
         Cmd::BenchStep(a) => bench_step::run(&a),
         Cmd::Render(a) => render::run(&a),
+        Cmd::Paint(a) => paint::run(&a),
         Cmd::Views(c) => views::run(&c),
         Cmd::Data(c) => data::run(&c),
     }

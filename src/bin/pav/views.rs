@@ -3,6 +3,7 @@
 use crate::common::Bar;
 use anyhow::{bail, Context, Result};
 use pav::scene::blender::Blender;
+#[cfg(feature = "video")]
 use pav::scene::turntable::write_videos;
 use pav::scene::views::{contact_sheet, merge_shards, render_views, ViewsConfig};
 use std::path::PathBuf;
@@ -14,6 +15,7 @@ pub enum Cmd {
     /// Simulated turntable videos: the config's views with the environment turning with the
     /// camera (the car turned in a fixed room), one MP4 + angle sidecar per environment, distance
     /// and elevation, for `pav-rig evaluate` (resumes like render).
+    #[cfg(feature = "video")]
     Turntable(TurntableArgs),
     /// Join the shard manifests of a view folder into its manifest.csv.
     Merge {
@@ -38,6 +40,7 @@ pub struct RenderArgs {
     texture: Option<PathBuf>,
 }
 
+#[cfg(feature = "video")]
 #[derive(clap::Args)]
 pub struct TurntableArgs {
     /// Views config (TOML): the camera's distances and elevations (the paper's polar angles), the
@@ -105,6 +108,7 @@ pub fn run(c: &Cmd) -> Result<()> {
             cfg.mesh.texture = a.texture.clone().or(cfg.mesh.texture);
             render(&cfg, &a.config, &a.out, a.shard.as_deref().map(shard).transpose()?)?;
         }
+        #[cfg(feature = "video")]
         Cmd::Turntable(a) => {
             let mut cfg = ViewsConfig::load(&a.config)?;
             cfg.mesh.texture = a.texture.clone().or(cfg.mesh.texture);

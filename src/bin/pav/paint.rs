@@ -1,0 +1,50 @@
+//! `pav paint`.
+
+use anyhow::{Context, Result};
+use pav::attack::config::OptimizeConfig;
+use pav::attack::export::on_the_car;
+use pav::attack::setup::mesh_and_region;
+use pav::image::{save_rgb, Rgb};
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// The optimize config whose car and region the texture belongs to.
+    #[arg(long)]
+    config: PathBuf,
+    /// The texture (an optimize or crossval texture.png, or a peer's, e.g. data:rauca-e2e/RAUCA_E2E.png).
+    #[arg(long, value_parser = pav::data::arg_path)]
+    texture: PathBuf,
+    /// The car's paint outside the region (default: the mesh's own map_Kd).
+    #[arg(long, value_parser = pav::data::arg_path)]
+    base: Option<PathBuf>,
+    /// Output PNG, at the base's resolution.
+    #[arg(long, short = 'o')]
+    out: PathBuf,
+}
+
+pub fn run(a: &Args) -> Result<()> {
+    let cfg = OptimizeConfig::load(&a.config)?;
+    let (mesh, region) = mesh_and_region(&cfg)?;
+    let base =
+        match &a.base {
+            Some(b) => b.clone(),
+            None => mesh.materials.iter().find_map(|m| m.map_kd.clone()).with_context(|| {
+                format!("{} names no map_Kd: give the car's paint with --base", cfg.mesh.obj.display())
+            })?,
+        };
+    let (base_img, texture) = (Rgb::load(&base)?, Rgb::load(&a.texture)?);
+    let painted = on_the_car(&base_img, &texture, &region, cfg.mesh.texture_size);
+    save_rgb(&a.out, painted.width, painted.height, &painted.rgb)?;
+    let on = region.iter().filter(|r| **r > 0.5).count();
+    println!(
+        "wrote {} ({}x{}): {} over {on} of {} region texels, {} elsewhere",
+        a.out.display(),
+        painted.width,
+        painted.height,
+        a.texture.display(),
+        region.len(),
+        base.display()
+    );
+    Ok(())
+}
