@@ -332,9 +332,9 @@ impl Drop for VideoWriter {
 }
 
 /// What the prefetching decoder hands over next.
-pub enum Step {
-    /// A decoded frame with its index.
-    Frame(usize, Frame),
+pub enum Step<T = Frame> {
+    /// A decoded frame with its index (or what the decoder thread made of it).
+    Frame(usize, T),
     /// A frame skipped by the stride (grabbed, not converted).
     Skipped,
     /// End of stream.
@@ -343,17 +343,30 @@ pub enum Step {
     Error(VideoError),
 }
 
-/// Decodes on a background thread a few frames ahead, so decoding overlaps inference.
-pub struct Prefetch {
-    rx: std::sync::mpsc::Receiver<Step>,
+/// Decodes on a background thread a few frames ahead, so decoding overlaps inference; the
+/// thread can also turn each frame into what its consumer needs (model inputs), off its thread.
+pub struct Prefetch<T: Send + 'static = Frame> {
+    rx: std::sync::mpsc::Receiver<Step<T>>,
     stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
-impl Prefetch {
+impl Prefetch<Frame> {
     /// Starts decoding `reader`, converting the frames `keep` picks by index (the others are
     /// only skipped over), at most `depth` frames ahead.
-    pub fn new(mut reader: VideoReader, keep: impl Fn(usize) -> bool + Send + 'static, depth: usize) -> Self {
+    pub fn new(reader: VideoReader, keep: impl Fn(usize) -> bool + Send + 'static, depth: usize) -> Self {
+        Prefetch::with(reader, keep, depth, |f| f)
+    }
+}
+
+impl<T: Send + 'static> Prefetch<T> {
+    /// As [`Prefetch::new`], handing over `make(frame)` for each kept frame.
+    pub fn with(
+        mut reader: VideoReader,
+        keep: impl Fn(usize) -> bool + Send + 'static,
+        depth: usize,
+        make: impl Fn(Frame) -> T + Send + 'static,
+    ) -> Self {
         let (tx, rx) = std::sync::mpsc::sync_channel(depth.max(1));
         let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         let flag = stop.clone();
@@ -362,7 +375,7 @@ impl Prefetch {
             while !flag.load(std::sync::atomic::Ordering::Relaxed) {
                 let step = if keep(n) {
                     match reader.read() {
-                        Ok(Some((i, f))) => Step::Frame(i, f),
+                        Ok(Some((i, f))) => Step::Frame(i, make(f)),
                         Ok(None) => Step::End,
                         Err(e) => Step::Error(e),
                     }
@@ -384,12 +397,12 @@ impl Prefetch {
     }
 
     /// The next step; `End` once the decoder thread has finished.
-    pub fn next_step(&mut self) -> Step {
+    pub fn next_step(&mut self) -> Step<T> {
         self.rx.recv().unwrap_or(Step::End)
     }
 }
 
-impl Drop for Prefetch {
+impl<T: Send + 'static> Drop for Prefetch<T> {
     fn drop(&mut self) {
         self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
         // Unblock a sender waiting on a full queue, then wait for the thread.

@@ -52,7 +52,15 @@ pub trait Detector {
     /// Short name used in reports.
     fn name(&self) -> &str;
     /// Runs the model and returns every proposal in frame coordinates.
-    fn propose(&mut self, frame: &Frame) -> Result<Proposals, DetectError>;
+    fn propose(&mut self, frame: &Frame) -> Result<Proposals, DetectError> {
+        let (input, map) = preprocess::prepare(frame, self.input());
+        self.propose_prepared(input, map)
+    }
+    /// How a frame becomes the model's input; [`preprocess::prepare`] with it can run on any
+    /// thread (evaluate prepares the next frames while the model runs).
+    fn input(&self) -> &config::InputConfig;
+    /// [`Detector::propose`] on a frame already prepared for [`Detector::input`].
+    fn propose_prepared(&mut self, input: Vec<f32>, map: preprocess::InputMap) -> Result<Proposals, DetectError>;
     /// Class indices that count as the vehicle.
     fn target_classes(&self) -> &[usize];
     /// Those classes' names joined by `+`, for reports.

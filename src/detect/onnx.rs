@@ -1,10 +1,10 @@
 //! ONNX Runtime backend: any ONNX detector described by a [`DetectorConfig`].
 
+use super::config::InputConfig;
 use super::config::{DetectorConfig, OutputLayout};
 use super::decode::{decode, LayoutError, Proposals, RawOutput};
-use super::preprocess::prepare;
+use super::preprocess::InputMap;
 use super::{DetectError, Detector};
-use crate::image::Frame;
 use ort::session::builder::{GraphOptimizationLevel, SessionBuilder};
 use ort::session::Session;
 use ort::value::{Tensor, TensorElementType, ValueType};
@@ -207,8 +207,11 @@ impl Detector for OnnxDetector {
         self.cfg.target_names()
     }
 
-    fn propose(&mut self, frame: &Frame) -> Result<Proposals, DetectError> {
-        let (input, map) = prepare(frame, &self.cfg.input);
+    fn input(&self) -> &InputConfig {
+        &self.cfg.input
+    }
+
+    fn propose_prepared(&mut self, input: Vec<f32>, map: InputMap) -> Result<Proposals, DetectError> {
         let raw = self.infer(input)?;
         let c = &self.cfg;
         decode(&c.output, &raw, c.input.width, c.input.height, c.class_names.len(), &map)

@@ -9,7 +9,10 @@ use super::report::{
     summary_markdown, write_angles_csv, write_summary_csv, write_text, FrameCsv, ReportError, ReportSettings,
     SummaryRow,
 };
+use crate::detect::config::InputConfig;
+use crate::detect::preprocess::prepare;
 use crate::detect::Detector;
+use crate::image::Frame;
 use crate::progress::Progress;
 use crate::sidecar::{self, AngleSample};
 use crate::table::unique;
@@ -247,11 +250,14 @@ pub fn evaluate(
                 }
             }
         }
+        // The decoder thread also prepares every detector's input, so this thread only runs models.
+        let inputs: Vec<InputConfig> = detectors.iter().map(|d| d.input().clone()).collect();
+        let make = move |f: Frame| inputs.iter().map(|c| Some(prepare(&f, c))).collect::<Vec<_>>();
         let mut frames = match (opts.frames, picks) {
-            (Frames::Stride(n), _) => Prefetch::new(reader, move |i| i % n == 0, 4),
+            (Frames::Stride(n), _) => Prefetch::with(reader, move |i| i % n == 0, 4, make),
             (Frames::Even(_), p) => {
                 let p = p.unwrap_or_default();
-                Prefetch::new(reader, move |i| p.binary_search(&i).is_ok(), 4)
+                Prefetch::with(reader, move |i| p.binary_search(&i).is_ok(), 4, make)
             }
         };
         progress.begin(&job.label, info.declared_frames as u64);
@@ -270,7 +276,7 @@ pub fn evaluate(
             let t0 = Instant::now();
             let step = frames.next_step();
             out.timing.decode_s += t0.elapsed().as_secs_f64();
-            let (idx, frame) = match step {
+            let (idx, mut prepared) = match step {
                 Step::End => break,
                 Step::Error(e) => {
                     status = format!("stopped: {e}");
@@ -296,7 +302,8 @@ pub fn evaluate(
                     continue;
                 }
                 let t1 = Instant::now();
-                let result = det.propose(&frame);
+                let (input, map) = prepared[k].take().expect("one input per detector");
+                let result = det.propose_prepared(input, map);
                 out.timing.detector_s[k] += t1.elapsed().as_secs_f64();
                 let props = match result {
                     Ok(p) => p,
