@@ -17,7 +17,7 @@ pub struct Args {
     /// Strides for the trade-off.
     #[arg(long, value_delimiter = ',', default_value = "1,2,4,8")]
     strides: Vec<usize>,
-    /// Second input size, for models that accept any input size.
+    /// Second input size, for models that accept any input size (0: none).
     #[arg(long, default_value_t = 320)]
     alt_size: usize,
     /// ONNX Runtime intra-op threads (0 = runtime default).
@@ -43,7 +43,7 @@ pub fn run(b: &Args) -> Result<()> {
         video: b.video.clone(),
         detectors: expand_configs(&given)?,
         strides: b.strides.clone(),
-        alt_size: Some(b.alt_size),
+        alt_size: Some(b.alt_size).filter(|&s| s > 0),
         threads: b.threads,
         repeats: b.repeats,
         threshold: b.threshold,
