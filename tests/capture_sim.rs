@@ -254,7 +254,10 @@ fn reply_latency_is_bounded_and_too_much_of_it_is_flagged() {
             }
             Err(CaptureError::Uncertain { summary, reason, .. }) => {
                 eprintln!("{ms} ms: {reason}");
-                assert!(ms >= 50, "{ms} ms flagged: {reason}");
+                // 10 ms may be flagged only when a loaded host made even the fastest round trip
+                // more than twice the delay the simulator adds to each reply; then the flag is right.
+                let host_slow = summary.round_trip_ms.is_some_and(|rt| rt > 2.0 * ms as f64);
+                assert!(ms >= 50 || host_slow, "{ms} ms flagged: {reason}");
                 assert!(reason.contains("round trip"), "{reason}");
                 *summary
             }
@@ -325,7 +328,10 @@ fn fault_matrix_loses_no_frame_and_flags_every_doubtful_angle() {
                     cam.fail_at = fail_at;
                     let mut o = opts(&video);
                     o.home = false;
-                    o.no_progress = Duration::from_secs(5);
+                    // In a full-suite run under four busy loops, all five links of a batch once
+                    // went without a report for over 5 s at the same moment, faults or none: host
+                    // starvation, not a fault of the link. The hang and stall cases still stop.
+                    o.no_progress = Duration::from_secs(15);
                     let stop = std::sync::Arc::new(AtomicBool::new(false));
                     if let Some(t) = stop_ms {
                         let flag = stop.clone();
