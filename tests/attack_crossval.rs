@@ -79,7 +79,7 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     assert_eq!((cell("original", "held-out"), cell("optimized", "held-out"), cell("random", "held-out")), (3, 3, 6));
     assert_eq!((cell("RAUCA_E2E", "held-out"), cell("random32", "held-out")), (3, 6));
     // Optimized against each other texture, paired by view: three held-out views each.
-    let pairs = paired(&recs, &opts.white_box);
+    let pairs = paired(&recs, &opts.white_box, "optimized");
     let against: Vec<(&str, usize)> = pairs.iter().map(|p| (p.against.as_str(), p.views)).collect();
     assert_eq!(against, [("original", 3), ("random", 3), ("random32", 3), ("RAUCA_E2E", 3)], "{pairs:?}");
     assert!(pairs.iter().all(|p| p.lo <= p.mean && p.mean <= p.hi && p.white_box));

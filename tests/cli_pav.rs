@@ -81,7 +81,7 @@ fn eval_digital_resamples_a_texture_of_another_size() {
             "-d",
             "configs/detectors/yolov3-tiny.toml",
         ])
-        .args(["-t", "data:rauca-e2e/RAUCA_E2E.png", "-o"])
+        .args(["-t", "data:rauca-e2e/RAUCA_E2E.png", "--random-seeds", "2", "-o"])
         .arg(tmp.path())
         .output()
         .unwrap();
@@ -118,6 +118,32 @@ fn eval_digital_resamples_a_texture_of_another_size() {
     let (asr, asr_detected) = (column("rauca-e2e", "asr"), column("rauca-e2e", "asr_detected"));
     eprintln!("RAUCA-E2E ASR {asr:.3}, over detected originals {asr_detected:.3}");
     assert!(asr_detected >= 0.9, "{csv}");
+    // Every view's score per texture and seed, and RAUCA-E2E paired against each other texture
+    // on the 5 held-out views: recomputed here from the per-view rows.
+    let views = std::fs::read_to_string(tmp.path().join("digital_views.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = views.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    // fold,role,view,texture,seed,detector,score
+    let held = |tex: &str, seed: &str| -> Vec<(String, f64)> {
+        rows.iter()
+            .filter(|r| r[1] == "held-out" && r[3] == tex && r[4] == seed)
+            .map(|r| (r[2].to_string(), r[6].parse().unwrap()))
+            .collect()
+    };
+    let (mine, orig, r1, r2) =
+        (held("rauca-e2e", "0"), held("original", "0"), held("random32", "1"), held("random32", "2"));
+    assert_eq!([mine.len(), orig.len(), r1.len(), r2.len()], [5; 4], "{views}");
+    let paired = std::fs::read_to_string(tmp.path().join("digital_paired.csv")).unwrap();
+    let mean_vs = |against: &str| -> f64 {
+        let line = paired.lines().find(|l| l.starts_with(&format!("rauca-e2e,yolov3-tiny,true,{against},"))).unwrap();
+        assert!(line.ends_with(",5"), "{line}");
+        line.split(',').nth(4).unwrap().parse().unwrap()
+    };
+    let d_orig: f64 = mine.iter().zip(&orig).map(|(m, o)| m.1 - o.1).sum::<f64>() / 5.0;
+    let d_rand: f64 = mine.iter().zip(r1.iter().zip(&r2)).map(|(m, (a, b))| m.1 - (a.1 + b.1) / 2.0).sum::<f64>() / 5.0;
+    eprintln!("RAUCA-E2E − original {d_orig:.3}, − random32 (2 seeds) {d_rand:.3}");
+    assert!((mean_vs("original") - d_orig).abs() < 1e-5 && (mean_vs("random32") - d_rand).abs() < 1e-5, "{paired}");
+    assert!(d_orig < -0.3, "RAUCA-E2E hides the car on held-out views: {d_orig}");
+    assert!(text(&o).contains("rauca-e2e against each other texture"), "{}", text(&o));
 }
 
 /// Ctrl-C during `pav optimize` saves the state and exits non-zero, so a following command in

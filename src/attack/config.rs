@@ -76,7 +76,8 @@ impl Default for Init {
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct ViewsConfig {
-    /// Training npz files (FCA format).
+    /// Training npz files (FCA format); may be empty when `pbr` lists rendered views.
+    #[serde(default)]
     pub train: Vec<PathBuf>,
     /// Held-out npz files.
     #[serde(default)]
@@ -95,6 +96,15 @@ pub struct ViewsConfig {
     /// on real photos.
     #[serde(default)]
     pub pbr: Vec<PathBuf>,
+    /// Keep a rendered view only when some white-box detector finds a car in it as rendered
+    /// (before any texture) at this score or above (`eval::detected`): a view whose unattacked
+    /// car goes unseen gives L1 and L2 nothing to push on. Default: keep every view.
+    #[serde(default)]
+    pub pbr_min_score: Option<f32>,
+    /// Folders rendered by `pav views render` whose views are held out: scored like `test`
+    /// photos (their box is the silhouette's), never trained on. For a car without photos.
+    #[serde(default)]
+    pub pbr_test: Vec<PathBuf>,
 }
 
 /// One white-box detector of the ensemble.
@@ -235,6 +245,7 @@ impl OptimizeConfig {
         c.views.train.iter_mut().for_each(&mut fix);
         c.views.test.iter_mut().for_each(&mut fix);
         c.views.pbr.iter_mut().for_each(&mut fix);
+        c.views.pbr_test.iter_mut().for_each(&mut fix);
         if let Some(l) = c.views.labels.as_mut() {
             fix(l);
         }
@@ -257,7 +268,9 @@ impl OptimizeConfig {
         if let Init::File(p) = &self.mesh.init {
             v.push(p.clone());
         }
-        v.extend(self.views.train.iter().chain(&self.views.test).chain(&self.views.pbr).cloned());
+        v.extend(
+            self.views.train.iter().chain(&self.views.test).chain(&self.views.pbr).chain(&self.views.pbr_test).cloned(),
+        );
         v.extend(self.views.labels.clone());
         let boxes: Vec<PathBuf> = self.white_box.iter().map(|w| w.detector.clone()).collect();
         v.extend(crate::detect::load::detector_inputs(&boxes));
@@ -280,14 +293,17 @@ impl OptimizeConfig {
         if !(0.0 <= o.clamp[0] && o.clamp[0] < o.clamp[1] && o.clamp[1] <= 1.0) {
             return Err(format!("optimizer.clamp must satisfy 0 ≤ lo < hi ≤ 1, got {:?}", o.clamp));
         }
-        if self.views.train.is_empty() {
-            return Err("views.train lists no npz file".into());
+        if self.views.train.is_empty() && self.views.pbr.is_empty() {
+            return Err("views.train lists no npz file and views.pbr no rendered views: nothing to train on".into());
         }
         if !(32..=4096).contains(&self.views.size) {
             return Err(format!("views.size must be in 32..=4096, got {}", self.views.size));
         }
         if let Some(t) = self.views.turns.iter().find(|t| !(t.is_finite() && **t != 0.0 && t.abs() < 180.0)) {
             return Err(format!("views.turns must be non-zero angles within ±180°, got {t}"));
+        }
+        if let Some(t) = self.views.pbr_min_score.filter(|t| !(*t > 0.0 && *t < 1.0)) {
+            return Err(format!("views.pbr_min_score must be in (0, 1), got {t}"));
         }
         if !(16..=8192).contains(&self.mesh.texture_size) {
             return Err(format!("mesh.texture_size must be in 16..=8192, got {}", self.mesh.texture_size));

@@ -3,6 +3,8 @@
 
 use super::config::{CameraConvention, Init, InitName, OptimizeConfig};
 use super::view::View;
+#[cfg(feature = "optimize")]
+use super::whitebox::{Ensemble, WhiteBoxError};
 use crate::dataset::fca::CarlaSample;
 use crate::detect::BBox;
 use crate::geometry::camera::{fca, pav_camou, Camera};
@@ -112,6 +114,33 @@ pub struct Setup {
     maker: ViewMaker,
 }
 
+/// What [`Setup::keep_detected_pbr`] kept.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PbrKept {
+    /// Rendered views kept.
+    pub kept: usize,
+    /// Rendered views before the filter.
+    pub total: usize,
+    /// The score a car needed.
+    pub min_score: f32,
+    /// Per white box: in how many of the `total` views it found the car.
+    pub seen_by: Vec<(String, usize)>,
+}
+
+impl std::fmt::Display for PbrKept {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let by: Vec<String> = self.seen_by.iter().map(|(n, k)| format!("{n} {k}")).collect();
+        write!(
+            f,
+            "kept {} of {} rendered views, those with a car scored ≥ {} by some white box as rendered (seen by {})",
+            self.kept,
+            self.total,
+            self.min_score,
+            by.join(", ")
+        )
+    }
+}
+
 /// What turns a CARLA sample into a [`View`].
 #[derive(Clone)]
 struct ViewMaker {
@@ -176,15 +205,24 @@ fn read_boxes(path: &Path) -> Result<HashMap<String, BBox>, SetupError> {
     Ok(out)
 }
 
-/// The views of every `views.pbr` folder, after checking it was rendered from this config's
-/// mesh in the normalization its camera convention uses (the cameras are in that frame).
-fn pbr_views(cfg: &OptimizeConfig, maker: &ViewMaker, mesh: &Mesh, region: &[f32]) -> Result<Vec<View>, SetupError> {
+/// The views of the rendered folders `dirs` (`views.pbr` or `views.pbr_test`), after checking
+/// each was rendered from this config's mesh in the normalization its camera convention uses
+/// (the cameras are in that frame). Views that do not show the region are left out. With
+/// `boxes`, each kept view's car box (its silhouette's, in view pixels) goes in there.
+fn pbr_views(
+    cfg: &OptimizeConfig,
+    dirs: &[PathBuf],
+    maker: &ViewMaker,
+    mesh: &Mesh,
+    region: &[f32],
+    mut boxes: Option<&mut HashMap<String, BBox>>,
+) -> Result<Vec<View>, SetupError> {
     let mut out = Vec::new();
     let normalize = match cfg.mesh.camera {
         CameraConvention::Fca => "bbox",
         CameraConvention::PavCamou => "pav",
     };
-    for dir in &cfg.views.pbr {
+    for dir in dirs {
         let (info, rows) = crate::scene::views::read_view_set(dir)?;
         if !info.shows(&cfg.mesh.obj) || info.normalize != normalize {
             return Err(SetupError::Views(format!(
@@ -206,13 +244,37 @@ fn pbr_views(cfg: &OptimizeConfig, maker: &ViewMaker, mesh: &Mesh, region: &[f32
             let v = maker
                 .view(&name, mesh, &r.camera(), &photo, region, cfg.mesh.texture_size)
                 .map_err(|source| SetupError::Mask { view: name.clone(), source })?;
-            // A pose that hides the region teaches nothing.
-            if !v.active.is_empty() {
-                out.push(v);
+            // A pose that hides the region teaches nothing, and no texture can change its score.
+            if v.active.is_empty() {
+                continue;
             }
+            if let Some(b) = boxes.as_deref_mut() {
+                let mask = Rgb::load(&dir.join(&r.mask))?;
+                if let Some(bb) = silhouette_box(&mask, v.size) {
+                    b.insert(name.clone(), bb);
+                }
+            }
+            out.push(v);
         }
     }
     Ok(out)
+}
+
+/// The box around a silhouette mask's lit pixels, scaled to a `size × size` view (None when
+/// the mask is empty).
+fn silhouette_box(mask: &Rgb, size: usize) -> Option<BBox> {
+    let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+    for (i, c) in mask.rgb.chunks(3).enumerate() {
+        if c[0] > 0.5 {
+            let (x, y) = (i % mask.width, i / mask.width);
+            (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x + 1), y1.max(y + 1));
+        }
+    }
+    if x0 == usize::MAX {
+        return None;
+    }
+    let (sx, sy) = (size as f32 / mask.width as f32, size as f32 / mask.height as f32);
+    Some([x0 as f32 * sx, y0 as f32 * sy, x1 as f32 * sx, y1 as f32 * sy])
 }
 
 /// The config's mesh in its camera convention's frame, and its optimizable region at the
@@ -311,8 +373,9 @@ impl Setup {
             Ok(out)
         };
         let train = views(&cfg.views.train)?;
-        let test = views(&cfg.views.test)?;
-        let pbr = pbr_views(cfg, &maker, &mesh, &region)?;
+        let mut test = views(&cfg.views.test)?;
+        let pbr = pbr_views(cfg, &cfg.views.pbr, &maker, &mesh, &region, None)?;
+        test.extend(pbr_views(cfg, &cfg.views.pbr_test, &maker, &mesh, &region, Some(&mut boxes))?);
         Ok(Setup {
             mesh,
             tex_size: ts,
@@ -388,6 +451,30 @@ impl Setup {
             n[(count[i] as usize).min(2)] += 1;
         }
         n.map(|k| k as f64 / texels.len().max(1) as f64)
+    }
+
+    /// Drops the rendered views in which no white box of `wb` finds a car at `min_score` as they
+    /// were rendered (`views.pbr_min_score`); the photos are kept whatever they score.
+    #[cfg(feature = "optimize")]
+    pub fn keep_detected_pbr(&mut self, wb: &Ensemble, min_score: f32) -> Result<PbrKept, WhiteBoxError> {
+        let total = self.pbr.len();
+        let mut seen_by = vec![0usize; wb.members.len()];
+        let mut kept = Vec::with_capacity(total);
+        for v in self.pbr.drain(..) {
+            let mut any = false;
+            for (k, (m, _)) in wb.members.iter().enumerate() {
+                if crate::detect::detected(m.loss(&v.photo, v.size)?.max_score, min_score) {
+                    seen_by[k] += 1;
+                    any = true;
+                }
+            }
+            if any {
+                kept.push(v);
+            }
+        }
+        self.pbr = kept;
+        let seen_by = wb.members.iter().map(|(m, _)| m.name().to_string()).zip(seen_by).collect();
+        Ok(PbrKept { kept: self.pbr.len(), total, min_score, seen_by })
     }
 
     /// The same problem over other views (cross-validation folds).

@@ -22,6 +22,13 @@ pub use decode::Proposals;
 
 use crate::image::Frame;
 
+/// The one detection rule of every metric (A_physical, ASR, the white-box reports): a car counts
+/// as detected when its score reaches the threshold. The paper uses 0.5; the authors' code counts
+/// `score > 0.6`, which differs from `score ≥ 0.6` only for a score of exactly 0.6.
+pub fn detected(score: f32, threshold: f32) -> bool {
+    score >= threshold
+}
+
 /// An axis-aligned box `[x1, y1, x2, y2]` in frame pixels.
 pub type BBox = [f32; 4];
 

@@ -180,6 +180,8 @@ pub fn crossval(
 /// car better), with its paired-bootstrap interval.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Paired {
+    /// The texture compared.
+    pub texture: String,
     /// Detector.
     pub detector: String,
     /// Whether it was a white box.
@@ -196,18 +198,19 @@ pub struct Paired {
     pub views: usize,
 }
 
-/// The paired comparisons of the optimized texture with every other texture of `records`,
-/// per detector, over held-out views (10,000 bootstrap resamples).
-pub fn paired(records: &[ViewRecord], white_box: &[String]) -> Vec<Paired> {
+/// The paired comparisons of texture `mine` with every other texture of `records`, per
+/// detector, over held-out views (10,000 bootstrap resamples; a texture with several seeds
+/// counts as each view's mean over them).
+pub fn paired(records: &[ViewRecord], white_box: &[String], mine: &str) -> Vec<Paired> {
     let held: Vec<&ViewRecord> = records.iter().filter(|r| r.role == "held-out").collect();
     let mut out = Vec::new();
     for det in unique(held.iter().map(|r| r.detector.clone())) {
-        let mine: Vec<&&ViewRecord> = held.iter().filter(|r| r.detector == det).collect();
-        let others = unique(mine.iter().map(|r| r.texture.clone()).filter(|t| t != "optimized"));
+        let rows: Vec<&&ViewRecord> = held.iter().filter(|r| r.detector == det).collect();
+        let others = unique(rows.iter().map(|r| r.texture.clone()).filter(|t| t != mine));
         for other in others {
             let mut d = Vec::new();
-            for o in mine.iter().filter(|r| r.texture == "optimized") {
-                let theirs: Vec<f64> = mine
+            for o in rows.iter().filter(|r| r.texture == mine) {
+                let theirs: Vec<f64> = rows
                     .iter()
                     .filter(|r| r.texture == other && r.fold == o.fold && r.view == o.view)
                     .map(|r| r.score as f64)
@@ -218,6 +221,7 @@ pub fn paired(records: &[ViewRecord], white_box: &[String]) -> Vec<Paired> {
             }
             if let Some(iv) = paired_bootstrap(&d, 10_000, 7) {
                 out.push(Paired {
+                    texture: mine.to_string(),
                     detector: det.clone(),
                     white_box: white_box.contains(&det),
                     against: other,
@@ -272,7 +276,7 @@ pub fn conditional_asr(records: &[ViewRecord], threshold: f32) -> Vec<Conditiona
 }
 
 /// The paired comparisons as a Markdown table: a row per detector, a column per other texture.
-fn markdown_paired(p: &[Paired]) -> String {
+pub fn markdown_paired(p: &[Paired]) -> String {
     let against = unique(p.iter().map(|r| r.against.clone()));
     let mut s = format!(
         "| detector | {} |\n|---|{}\n",
@@ -309,8 +313,18 @@ pub fn crossval_report(
 ) -> Result<String, ExperimentError> {
     let threshold = scoring.threshold;
     let cfg = OptimizeConfig::load(config)?;
-    let setup = Setup::load_photos(&cfg, None)?;
+    if !cfg.views.pbr_test.is_empty() {
+        return Err(ExperimentError::Invalid(format!(
+            "{}: crossval holds out photos fold by fold; views.pbr_test is for `pav optimize` and `pav eval-digital`",
+            config.display()
+        )));
+    }
+    let mut setup = Setup::load_photos(&cfg, None)?;
     let wb = Ensemble::load(&cfg, cfg.views.size)?;
+    let pbr_kept = cfg.views.pbr_min_score.map(|t| setup.keep_detected_pbr(&wb, t)).transpose()?;
+    if let Some(k) = &pbr_kept {
+        progress.note(&format!("views.pbr: {k}"));
+    }
     let mut dets = load_detectors(&scoring.detectors, &[], 1)?;
     let n = setup.train.len() + setup.test.len();
     let k = folds.unwrap_or(n);
@@ -335,7 +349,7 @@ pub fn crossval_report(
     let (rows, records) = crossval(config, &cfg, &setup, &wb, &mut dets, &opts, progress, stop)?;
     write_csv(&out.join("crossval.csv"), &rows)?;
     write_csv(&out.join("crossval_views.csv"), &records)?;
-    let pairs = paired(&records, &opts.white_box);
+    let pairs = paired(&records, &opts.white_box, "optimized");
     write_csv(&out.join("crossval_paired.csv"), &pairs)?;
     let mut md = format!(
         "# Cross-validation, {k} folds over {n} views ({:.0} s)\n\nEach texture is optimized on the other folds' views{} ({}, {} epochs) and scored on its held-out views; \"random\" pools {random_seeds} random textures of {}-texel blocks per fold, \"random32\" as many of the paper's kind (a 32×32 random image scaled up){}. Car detected at score ≥ {threshold}; P@0.5 over boxes from score {AP_MIN_SCORE}; * = white-box.\n",
@@ -350,6 +364,9 @@ pub fn crossval_report(
         setup.random_block(),
         opts.references.iter().map(|r| format!("; reference texture {}", r.0)).collect::<String>(),
     );
+    if let Some(k) = &pbr_kept {
+        md.push_str(&format!("\nRendered training views (`views.pbr`): {k}.\n"));
+    }
     for (split, title) in
         [("held-out", "held-out views"), ("train", "training views (each view once per fold it trained in)")]
     {

@@ -6,7 +6,7 @@ use super::{create_dir, ExperimentError};
 use crate::attack::config::OptimizeConfig;
 use crate::attack::export::{atlas_side_m, write_sheet, PrintSpec, Sheet};
 use crate::attack::optimize::{optimize_texture, Finish, RunOptions, StepLog};
-use crate::attack::setup::Setup;
+use crate::attack::setup::{PbrKept, Setup};
 use crate::attack::view::View;
 use crate::attack::whitebox::{Ensemble, WhiteBox, WhiteBoxError};
 use crate::image::{halve, save_rgb, tile, ImageError};
@@ -91,6 +91,8 @@ pub struct Prepared {
     pub setup: Setup,
     /// The white-box detectors.
     pub wb: Ensemble,
+    /// What `views.pbr_min_score` kept of the rendered views (None: the config sets none).
+    pub pbr_kept: Option<PbrKept>,
     /// Seconds the preparation took.
     pub seconds: f64,
 }
@@ -102,9 +104,10 @@ impl Prepared {
         let mut cfg = OptimizeConfig::load(config)?;
         cfg.views.size = size.unwrap_or(cfg.views.size);
         let t = Instant::now();
-        let setup = Setup::load(&cfg, None)?;
+        let mut setup = Setup::load(&cfg, None)?;
         let wb = Ensemble::load(&cfg, cfg.views.size)?;
-        Ok(Prepared { path: config.into(), cfg, setup, wb, seconds: t.elapsed().as_secs_f64() })
+        let pbr_kept = cfg.views.pbr_min_score.map(|t| setup.keep_detected_pbr(&wb, t)).transpose()?;
+        Ok(Prepared { path: config.into(), cfg, setup, wb, pbr_kept, seconds: t.elapsed().as_secs_f64() })
     }
 
     /// Share of the atlas's values that are optimized.

@@ -2,6 +2,7 @@
 //! texture (lit, no EoT), quantized to 8 bits as a saved image would be, and scored by every
 //! ONNX detector; the white-box model is marked.
 
+use super::crossval::{markdown_paired, paired, Paired, ViewRecord};
 use super::{create_dir, write_markdown, ExperimentError, Scoring};
 use crate::attack::config::OptimizeConfig;
 use crate::attack::setup::Setup;
@@ -104,49 +105,89 @@ pub fn aggregate(
     })
 }
 
-/// Scores every (detector, texture, split) of `setup`; `textures` pairs a name with a texture
-/// (`None` = the unmodified photo); `progress` counts composites.
+/// One scored view: its split, its detections, and whether the original paint is detected there.
+type Scored = (&'static str, ImageDetections, bool);
+
+/// One texture condition of [`score_textures`].
+pub struct Condition {
+    /// Texture name; conditions of one name (a random kind's seeds) pool into one row.
+    pub name: String,
+    /// Random seed (0 for the others).
+    pub seed: u64,
+    /// The texture (`None` = the unmodified photo).
+    pub texture: Option<Vec<f32>>,
+}
+
+/// Scores every (detector, texture, split) of `setup`, pooling the conditions of one name, and
+/// returns the rows and every view's best score per condition (fold 0; role "train" or
+/// "held-out"); `progress` counts composites. The first condition must be the original.
 pub fn score_textures(
     setup: &Setup,
     detectors: &mut [Box<dyn Detector>],
-    textures: &[(String, Option<Vec<f32>>)],
+    conditions: &[Condition],
     threshold: f32,
     white_box: &[String],
     progress: &dyn Progress,
-) -> Result<Vec<DigitalRow>, crate::detect::DetectError> {
-    progress.begin("composites", (textures.len() * (setup.train.len() + setup.test.len())) as u64);
-    let mut rows = Vec::new();
+) -> Result<(Vec<DigitalRow>, Vec<ViewRecord>), crate::detect::DetectError> {
+    progress.begin("composites", (conditions.len() * (setup.train.len() + setup.test.len())) as u64);
+    let mut records = Vec::new();
+    // Per name, per detector: every view it was scored on.
+    let mut pooled: Vec<(String, Vec<Vec<Scored>>)> = Vec::new();
     // Per detector, whether the unmodified photo of each view (in view order) is detected.
     let mut original: Option<Vec<Vec<bool>>> = None;
-    for (tname, tex) in textures {
+    for c in conditions {
         let mut per: Vec<Vec<(&'static str, ImageDetections)>> = vec![Vec::new(); detectors.len()];
         for (split, views) in [("train", &setup.train), ("test", &setup.test)] {
             for v in views.iter() {
-                for (d, im) in detect_view(v, tex.as_deref(), setup, detectors)?.into_iter().enumerate() {
+                for (d, im) in detect_view(v, c.texture.as_deref(), setup, detectors)?.into_iter().enumerate() {
+                    records.push(ViewRecord {
+                        fold: 0,
+                        role: if split == "test" { "held-out" } else { "train" },
+                        view: v.name.clone(),
+                        texture: c.name.clone(),
+                        seed: c.seed,
+                        detector: detectors[d].name().to_string(),
+                        score: im.best_score(),
+                    });
                     per[d].push((split, im));
                 }
                 progress.advance(1);
             }
         }
-        if tex.is_none() && original.is_none() {
+        if c.texture.is_none() && original.is_none() {
             original = Some(per.iter().map(|p| p.iter().map(|(_, i)| i.car_detected(threshold)).collect()).collect());
         }
+        let seen = original.as_ref();
+        let k = match pooled.iter().position(|(n, _)| n == &c.name) {
+            Some(k) => k,
+            None => {
+                pooled.push((c.name.clone(), vec![Vec::new(); detectors.len()]));
+                pooled.len() - 1
+            }
+        };
+        for (d, ims) in per.into_iter().enumerate() {
+            for (i, (split, im)) in ims.into_iter().enumerate() {
+                pooled[k].1[d].push((split, im, seen.is_some_and(|o| o[d][i])));
+            }
+        }
+    }
+    let mut rows = Vec::new();
+    for (name, per) in &pooled {
         for (d, det) in detectors.iter().enumerate() {
             for split in ["train", "test", "all"] {
                 let keep = |s: &str| split == "all" || s == split;
                 let ims: Vec<ImageDetections> =
-                    per[d].iter().filter(|(s, _)| keep(s)).map(|(_, i)| i.clone()).collect();
+                    per[d].iter().filter(|(s, _, _)| keep(s)).map(|(_, i, _)| i.clone()).collect();
                 let mut row =
-                    aggregate(det.name(), white_box.iter().any(|w| w == det.name()), tname, split, &ims, threshold);
-                if let (Some(r), Some(o)) = (row.as_mut(), original.as_ref()) {
-                    let seen: Vec<bool> = per[d]
+                    aggregate(det.name(), white_box.iter().any(|w| w == det.name()), name, split, &ims, threshold);
+                if let (Some(r), true) = (row.as_mut(), original.is_some()) {
+                    let missed: Vec<bool> = per[d]
                         .iter()
-                        .zip(&o[d])
-                        .filter(|((s, _), &o)| keep(s) && o)
-                        .map(|((_, i), _)| !i.car_detected(threshold))
+                        .filter(|(s, _, o)| keep(s) && *o)
+                        .map(|(_, i, _)| !i.car_detected(threshold))
                         .collect();
-                    if !seen.is_empty() {
-                        r.asr_detected = Some(seen.iter().filter(|&&x| x).count() as f64 / seen.len() as f64);
+                    if !missed.is_empty() {
+                        r.asr_detected = Some(missed.iter().filter(|&&x| x).count() as f64 / missed.len() as f64);
                     }
                 }
                 rows.extend(row);
@@ -154,15 +195,17 @@ pub fn score_textures(
         }
     }
     progress.end(None);
-    Ok(rows)
+    Ok((rows, records))
 }
 
-/// `pav eval-digital`: the original paint, one random texture of each kind and each texture file in
-/// `textures` (named by its folder) on the views of `config`; writes `digital.csv` and
-/// `digital.md` into `out` and returns the Markdown.
+/// `pav eval-digital`: the original paint, `random_seeds` random textures of each kind and each
+/// texture file in `textures` (named by its folder) on the views of `config`; writes
+/// `digital.csv`, every view's scores (`digital_views.csv`), each file's paired comparisons on
+/// held-out views (`digital_paired.csv`) and `digital.md` into `out`, and returns the Markdown.
 pub fn eval_digital(
     config: &Path,
     textures: &[PathBuf],
+    random_seeds: u64,
     scoring: &Scoring,
     out: &Path,
     progress: &dyn Progress,
@@ -170,11 +213,13 @@ pub fn eval_digital(
     let threshold = scoring.threshold;
     let cfg = OptimizeConfig::load(config)?;
     let setup = Setup::load_photos(&cfg, None)?;
-    let mut conditions: Vec<(String, Option<Vec<f32>>)> = vec![
-        ("original".into(), None),
-        ("random".into(), Some(setup.random_texture(setup.random_block(), 1))),
-        ("random32".into(), Some(setup.random_texture(setup.paper_random_block(), 1))),
-    ];
+    let mut conditions = vec![Condition { name: "original".into(), seed: 0, texture: None }];
+    for seed in 1..=random_seeds.max(1) {
+        for (name, block) in [("random", setup.random_block()), ("random32", setup.paper_random_block())] {
+            conditions.push(Condition { name: name.into(), seed, texture: Some(setup.random_texture(block, seed)) });
+        }
+    }
+    let mut mine = Vec::new();
     for t in textures {
         let tex = setup.load_texture(t)?;
         let name = t
@@ -183,12 +228,17 @@ pub fn eval_digital(
             .or(t.file_stem())
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| t.display().to_string());
-        conditions.push((name, Some(tex)));
+        mine.push(name.clone());
+        conditions.push(Condition { name, seed: 0, texture: Some(tex) });
     }
     let mut dets = load_detectors(&scoring.detectors, &[], 1)?;
-    let rows = score_textures(&setup, &mut dets, &conditions, threshold, &cfg.white_box_names()?, progress)?;
+    let white_box = cfg.white_box_names()?;
+    let (rows, records) = score_textures(&setup, &mut dets, &conditions, threshold, &white_box, progress)?;
     create_dir(out)?;
     write_csv(&out.join("digital.csv"), &rows)?;
+    write_csv(&out.join("digital_views.csv"), &records)?;
+    let pairs: Vec<Paired> = mine.iter().flat_map(|m| paired(&records, &white_box, m)).collect();
+    write_csv(&out.join("digital_paired.csv"), &pairs)?;
     let mut md = format!(
         "# Digital evaluation (ASR / P@0.5 in %, * = white-box)\n\nCar = COCO `car`; detected at score ≥ {threshold}; P@0.5 is car AP at IoU 0.5 over boxes from score {AP_MIN_SCORE}. Views composited at {}² (lit, no EoT), 8-bit. Config: {}.\n",
         cfg.views.size,
@@ -203,6 +253,16 @@ pub fn eval_digital(
                 table(&rows, split, |r, star| r
                     .asr_detected
                     .map_or("–".into(), |a| format!("{:.1}{star}", 100.0 * a)))
+            ));
+        }
+    }
+    for m in &mine {
+        let p: Vec<Paired> = pairs.iter().filter(|p| &p.texture == m).cloned().collect();
+        if !p.is_empty() {
+            md.push_str(&format!(
+                "\n## {m} against each other texture, held-out views: mean difference of the best car score [95 % paired-bootstrap interval over views; random kinds: each view's mean over {} seeds]\n\n{}",
+                random_seeds.max(1),
+                markdown_paired(&p)
             ));
         }
     }

@@ -14,6 +14,9 @@ pub struct Args {
     /// Texture PNGs to evaluate (named by their folder); `data:NAME` for a manifest entry.
     #[arg(long = "texture", short = 't', value_parser = pav::data::arg_path)]
     textures: Vec<PathBuf>,
+    /// Random textures of each kind (blocks, the paper's 32×32), pooled per row and per view.
+    #[arg(long, default_value_t = 1)]
+    random_seeds: u64,
     #[command(flatten)]
     scoring: Scoring,
     /// Output folder.
@@ -28,11 +31,12 @@ pub fn run(a: &Args) -> Result<()> {
         .inputs(cfg.inputs().iter().chain(&a.textures).map(|p| p.as_path()))
         .inputs(pav::detect::load::detector_inputs(&a.scoring.detectors).iter().map(|p| p.as_path()))
         .setting("threshold", a.scoring.threshold)
+        .setting("random_seeds", a.random_seeds)
         .tool("onnxruntime", pav::detect::onnx::runtime_version());
     let record_path = a.out.join(pav::provenance::FILE);
     record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
-    let md = eval_digital(&a.config, &a.textures, &a.scoring.to_lib(), &a.out, &Bar::default())?;
+    let md = eval_digital(&a.config, &a.textures, a.random_seeds, &a.scoring.to_lib(), &a.out, &Bar::default())?;
     println!("{md}");
-    eprintln!("wrote {}/digital.csv and digital.md", a.out.display());
+    eprintln!("wrote {}/digital.csv, digital_views.csv, digital_paired.csv and digital.md", a.out.display());
     Ok(())
 }

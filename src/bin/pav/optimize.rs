@@ -48,6 +48,9 @@ pub fn run(a: &Args) -> Result<()> {
         s.scene.describe(),
         p.seconds
     );
+    if let Some(k) = &p.pbr_kept {
+        eprintln!("views.pbr: {k}");
+    }
     let [none, one, more] = s.region_views_shares();
     eprintln!(
         "region texels read by no training view {:.1} %, by one {:.1} %, by two or more {:.1} %",
