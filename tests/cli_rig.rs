@@ -224,7 +224,7 @@ fn the_simulated_car_is_filmed_at_the_angles_its_sidecar_states() {
         .unwrap();
     let out = text(&o);
     assert!(o.status.success(), "{out}");
-    assert!(out.contains("pav's rasterizer, car at distance 2.6, elevation 20°"), "{out}");
+    assert!(out.contains("pav's rasterizer, car at distance 5, elevation 20°"), "{out}");
     let rows = pav::sidecar::read(&pav::sidecar::sidecar_path(&video)).unwrap();
     assert!(rows.len() >= 10, "{} frames", rows.len());
     let views = pav::scene::views::ViewsConfig::load(&cfg).unwrap();
@@ -232,7 +232,8 @@ fn the_simulated_car_is_filmed_at_the_angles_its_sidecar_states() {
     let diff =
         |a: &[u8], b: &[u8]| a.iter().zip(b).map(|(x, y)| (*x as f64 - *y as f64).abs()).sum::<f64>() / a.len() as f64;
     // Each recorded frame is the car drawn at its sidecar angle, not 20° off it. H.264's 4:2:0
-    // colour and compression leave about 3 per byte even at the right angle (measured 2.8–3.2).
+    // colour and compression leave about 3 per byte even at the right angle (measured 2.7–2.8);
+    // at distance 5 the car fills less of the frame, so 20° off adds about 2 (measured 4.8–5.9).
     let mut r = pav::video::VideoReader::open(&video).unwrap();
     let (mut at, mut off) = (Vec::new(), Vec::new());
     while let Some((i, f)) = r.read().unwrap() {
@@ -244,7 +245,7 @@ fn the_simulated_car_is_filmed_at_the_angles_its_sidecar_states() {
     let worst = at.iter().cloned().fold(0.0, f64::max);
     let closest_off = off.iter().cloned().fold(f64::INFINITY, f64::min);
     eprintln!("mean |Δ| per byte: at the sidecar angle ≤ {worst:.2}, 20° off ≥ {closest_off:.2}");
-    assert!(worst < 4.5 && closest_off > 2.5 * worst, "at {at:?}\noff {off:?}");
+    assert!(worst < 3.5 && closest_off > worst + 1.2, "at {at:?}\noff {off:?}");
     // The car needs the simulated camera; its paint and elevation need the car.
     let o = pav_rig()
         .args(["capture", "--port", "sim", "--camera", "gst-test", "--car"])
