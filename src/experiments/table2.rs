@@ -244,8 +244,10 @@ pub fn eval_digital(
         cfg.views.size,
         config.display()
     );
+    // "all" repeats the other table when a split is empty (a config with rendered test views only).
+    let both = ["train", "test"].iter().all(|s| rows.iter().any(|r| r.split == *s));
     for (split, title) in [("train", "training views"), ("test", "held-out views"), ("all", "all views")] {
-        if rows.iter().any(|r| r.split == split) {
+        if rows.iter().any(|r| r.split == split) && (split != "all" || both) {
             let n = rows.iter().find(|r| r.split == split).map(|r| r.images).unwrap_or(0);
             md.push_str(&format!("\n## {title} ({n})\n\n{}", markdown(&rows, split)));
             md.push_str(&format!(
