@@ -17,7 +17,14 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 use turntable_proto::text::Milli;
 
-struct Qemu(Child);
+/// A running QEMU; it holds [`ONE_AT_A_TIME`] until it is killed.
+struct Qemu(Child, #[allow(dead_code)] std::sync::MutexGuard<'static, ()>);
+
+/// One firmware at a time: the loaded-clock test's busy threads beside another test's QEMU and
+/// video encoder starved the emulated core for seconds (its clock ran at 0.57 of host speed, and
+/// the capture beside it saw its clock contradict itself by 1.75 s), in 4 of 11 runs of this file
+/// on an otherwise idle host. Each test brings its own load; they must not add up.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 impl Drop for Qemu {
     fn drop(&mut self) {
@@ -30,6 +37,7 @@ impl Drop for Qemu {
 fn boot() -> (Qemu, String) {
     let elf = common::repo().join("target/thumbv7m-none-eabi/release/turntable-fw-qemu");
     assert!(elf.exists(), "{} is missing: run scripts/setup.sh (it builds firmware/qemu)", elf.display());
+    let turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let child = Command::new("qemu-system-arm")
         .args(["-M", "lm3s6965evb", "-display", "none", "-monitor", "none", "-serial", "pty", "-kernel"])
         .arg(&elf)
@@ -37,7 +45,7 @@ fn boot() -> (Qemu, String) {
         .stderr(Stdio::piped())
         .spawn()
         .expect("qemu-system-arm (installed by scripts/setup.sh)");
-    let mut q = Qemu(child);
+    let mut q = Qemu(child, turn);
     // QEMU announces "char device redirected to /dev/pts/N (label serial0)" on stdout. Read it on
     // a thread so a QEMU that never says it fails the test instead of hanging it.
     let (tx, rx) = std::sync::mpsc::channel();
