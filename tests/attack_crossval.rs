@@ -6,7 +6,8 @@
 mod common;
 
 use pav::attack::config::OptimizeConfig;
-use pav::experiments::crossval::{conditional_asr, crossval, paired, CrossvalOptions};
+use pav::experiments::crossval::{crossval, CrossvalOptions};
+use pav::experiments::per_view::{conditional_asr, paired};
 use pav::progress::{Progress, Silent};
 use std::cell::RefCell;
 

@@ -97,7 +97,7 @@ pub struct ViewsConfig {
     #[serde(default)]
     pub pbr: Vec<PathBuf>,
     /// Keep a rendered view only when some white-box detector finds a car in it as rendered
-    /// (before any texture) at this score or above (`eval::detected`): a view whose unattacked
+    /// (before any texture) at this score or above (`detect::detected`): a view whose unattacked
     /// car goes unseen gives L1 and L2 nothing to push on. Default: keep every view.
     #[serde(default)]
     pub pbr_min_score: Option<f32>,

@@ -22,9 +22,9 @@ impl ImageDetections {
         self.cars.iter().map(|c| c.0).fold(0.0, f32::max)
     }
 
-    /// Whether a car is detected at `threshold` (`eval::detected`).
+    /// Whether a car is detected at `threshold` (`detect::detected`).
     pub fn car_detected(&self, threshold: f32) -> bool {
-        self.cars.iter().any(|(s, _)| super::detected(*s, threshold))
+        self.cars.iter().any(|(s, _)| crate::detect::detected(*s, threshold))
     }
 }
 
@@ -128,7 +128,7 @@ mod tests {
     #[test]
     fn asr_counts_images_with_a_car_at_or_above_threshold() {
         let b = [0.0, 0.0, 10.0, 10.0];
-        // A score equal to the threshold is a detection (`eval::detected`), as in A_physical.
+        // A score equal to the threshold is a detection (`detect::detected`), as in A_physical.
         let ims = [im(b, &[(0.7, b)]), im(b, &[(0.4, b)]), im(b, &[]), im(b, &[(0.5, b)])];
         assert_eq!(asr(&ims, 0.5), Some(0.5));
         assert_eq!(asr(&ims, 0.3), Some(0.25));

@@ -1,8 +1,6 @@
 //! Scoring detectors: recorded videos (decode, detect, A_physical, reports, charts), the metrics
 //! of digital composites (ASR, P@0.5), and what evaluation costs in time.
 
-pub use crate::detect::detected;
-
 #[cfg(feature = "eval")]
 pub mod bench;
 #[cfg(feature = "eval")]

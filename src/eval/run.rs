@@ -321,7 +321,7 @@ pub fn evaluate(
                     time_s,
                     angle_deg,
                     detector: det.name().to_string(),
-                    detected: best.is_some_and(|b| super::detected(b.score, opts.threshold)),
+                    detected: best.is_some_and(|b| crate::detect::detected(b.score, opts.threshold)),
                     max_score: best.map(|b| b.score).unwrap_or(0.0),
                     x1: best.map(|b| b.bbox[0]),
                     y1: best.map(|b| b.bbox[1]),

@@ -3,6 +3,7 @@
 
 pub mod crossval;
 pub mod outputs;
+pub mod per_view;
 pub mod table2;
 
 use std::path::{Path, PathBuf};
@@ -72,7 +73,7 @@ impl From<crate::attack::optimize::OptimizeError> for ExperimentError {
 pub struct Scoring {
     /// Detector configs or folders of them.
     pub detectors: Vec<PathBuf>,
-    /// A car counts as detected when its score reaches this (`eval::detected`).
+    /// A car counts as detected when its score reaches this (`detect::detected`).
     pub threshold: f32,
 }
 

@@ -2,7 +2,7 @@
 //! texture (lit, no EoT), quantized to 8 bits as a saved image would be, and scored by every
 //! ONNX detector; the white-box model is marked.
 
-use super::crossval::{markdown_paired, paired, Paired, ViewRecord};
+use super::per_view::{markdown_paired, paired, Paired, ViewRecord};
 use super::{create_dir, write_markdown, ExperimentError, Scoring};
 use crate::attack::config::OptimizeConfig;
 use crate::attack::setup::Setup;
