@@ -33,8 +33,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Cmd {
-    /// Optimize an adversarial texture (PAV-Camou, paper Algorithm 1) against the white-box
-    /// YOLOv3-tiny; writes the texture, a printable sheet, loss curves, previews and scores.
+    /// Optimize an adversarial texture (PAV-Camou, paper Algorithm 1) against the config's
+    /// white-box detectors; writes the texture, a printable sheet, loss curves, previews and scores.
     #[cfg(feature = "optimize")]
     Optimize(optimize::Args),
     /// Digital evaluation in the shape of the paper's Table 2: ASR and P@0.5 of every detector on
