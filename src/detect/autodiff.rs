@@ -146,7 +146,7 @@ fn window(n: &Node, kernel: Option<[i64; 2]>) -> Result<Window, AutodiffError> {
 fn const_ints(n: &Node, consts: &HashMap<&str, &Initializer>, i: usize) -> Option<Vec<i64>> {
     n.inputs.get(i).filter(|s| !s.is_empty()).and_then(|s| consts.get(s.as_str())).and_then(|c| match &c.data {
         InitData::I64(v) => Some(v.clone()),
-        InitData::F32(_) => None,
+        _ => None,
     })
 }
 

@@ -16,6 +16,7 @@ pub mod onnx_proto;
 #[cfg(feature = "eval")]
 pub mod ortgrad;
 pub mod preprocess;
+pub mod surrogate;
 
 pub use config::DetectorConfig;
 pub use decode::Proposals;

@@ -6,6 +6,10 @@
 
 /// ONNX tensor element type codes (TensorProto.DataType).
 pub const FLOAT: i32 = 1;
+/// ONNX uint8 element type code.
+pub const UINT8: i32 = 2;
+/// ONNX int8 element type code.
+pub const INT8: i32 = 3;
 /// ONNX int64 element type code.
 pub const INT64: i32 = 7;
 
@@ -94,6 +98,27 @@ pub enum InitData {
     F32(Vec<f32>),
     /// int64 values.
     I64(Vec<i64>),
+    /// uint8 values (quantized weights and zero points).
+    U8(Vec<u8>),
+    /// int8 values (quantized weights and zero points).
+    I8(Vec<i8>),
+}
+
+impl InitData {
+    /// Number of values.
+    pub fn len(&self) -> usize {
+        match self {
+            InitData::F32(v) => v.len(),
+            InitData::I64(v) => v.len(),
+            InitData::U8(v) => v.len(),
+            InitData::I8(v) => v.len(),
+        }
+    }
+
+    /// Whether it holds no value.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
 }
 
 /// A graph input or output: name, element type and shape (`None` = symbolic dimension).
@@ -199,6 +224,8 @@ fn encode_init(t: &Initializer) -> Buf {
     let (code, raw): (i32, Vec<u8>) = match &t.data {
         InitData::F32(v) => (FLOAT, v.iter().flat_map(|x| x.to_le_bytes()).collect()),
         InitData::I64(v) => (INT64, v.iter().flat_map(|x| x.to_le_bytes()).collect()),
+        InitData::U8(v) => (UINT8, v.clone()),
+        InitData::I8(v) => (INT8, v.iter().map(|x| *x as u8).collect()),
     };
     b.int(2, code as i64);
     b.str(8, &t.name);
@@ -437,10 +464,14 @@ fn decode_init(b: &[u8]) -> Result<Initializer, ProtoError> {
             (1, v) => push_ints(&mut dims, v)?,
             (2, Field::Varint(x)) => ty = x,
             (4, v) => push_floats(&mut floats, v)?,
-            (7, v) => push_ints(&mut ints, v)?,
+            // int32_data holds 8-bit tensors written without raw_data.
+            (5 | 7, v) => push_ints(&mut ints, v)?,
             (8, Field::Bytes(x)) => name = utf8(x)?,
             (9, Field::Bytes(x)) => raw = Some(x),
-            (13 | 14, _) => return Err(ProtoError::Unsupported("tensors stored outside the file".into())),
+            // external_data, or data_location = EXTERNAL (a writer may state DEFAULT, 0, explicitly).
+            (13, _) | (14, Field::Varint(1)) => {
+                return Err(ProtoError::Unsupported("tensors stored outside the file".into()))
+            }
             _ => {}
         }
         Ok(())
@@ -454,12 +485,13 @@ fn decode_init(b: &[u8]) -> Result<Initializer, ProtoError> {
             InitData::I64(r.chunks_exact(8).map(|c| i64::from_le_bytes(c.try_into().unwrap_or([0; 8]))).collect())
         }
         (INT64, None) => InitData::I64(ints),
+        (UINT8, Some(r)) => InitData::U8(r.to_vec()),
+        (UINT8, None) => InitData::U8(ints.iter().map(|&i| i as u8).collect()),
+        (INT8, Some(r)) => InitData::I8(r.iter().map(|&b| b as i8).collect()),
+        (INT8, None) => InitData::I8(ints.iter().map(|&i| i as i8).collect()),
         (t, _) => return Err(ProtoError::Unsupported(format!("initializer `{name}` of element type {t}"))),
     };
-    let n = match &data {
-        InitData::F32(v) => v.len(),
-        InitData::I64(v) => v.len(),
-    };
+    let n = data.len();
     if dims.iter().product::<i64>() != n as i64 {
         return Err(ProtoError::Unsupported(format!("initializer `{name}`: {n} values for dims {dims:?}")));
     }
@@ -618,6 +650,8 @@ mod tests {
             initializers: vec![
                 Initializer { name: "w".into(), dims: vec![1, 3, 1, 1], data: InitData::F32(vec![1.0, -2.5, 3.0]) },
                 Initializer { name: "s".into(), dims: vec![2], data: InitData::I64(vec![-1, 1 << 40]) },
+                Initializer { name: "q".into(), dims: vec![3], data: InitData::U8(vec![0, 128, 255]) },
+                Initializer { name: "z".into(), dims: vec![2], data: InitData::I8(vec![-128, 127]) },
             ],
             inputs: vec![ValueInfo {
                 name: "x".into(),

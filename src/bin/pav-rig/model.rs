@@ -1,8 +1,11 @@
 //! `pav-rig model`.
 
+use anyhow::Context;
 use anyhow::Result;
 use clap::Subcommand;
 use pav::detect::darknet::to_onnx::convert;
+use pav::detect::onnx_proto::Model;
+use pav::detect::surrogate::dequantize;
 use std::path::PathBuf;
 
 #[derive(Subcommand)]
@@ -19,11 +22,43 @@ pub enum Cmd {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Write the float surrogate of a dynamically quantized ONNX model (ConvInteger chains become
+    /// float Convs with dequantized weights): differentiable, but not the evaluated model.
+    Surrogate {
+        /// The quantized model, e.g. yolov8n_int8.onnx.
+        model: PathBuf,
+        /// Output .onnx path.
+        #[arg(short, long)]
+        out: PathBuf,
+    },
 }
 
 pub fn run(c: &Cmd) -> Result<()> {
-    let Cmd::Darknet2onnx { cfg, weights, out } = c;
-    let r = convert(cfg, weights, out)?;
-    eprintln!("wrote {} ({} layers, {} heads, {:.1} MB)", out.display(), r.layers, r.heads, r.bytes as f64 / 1e6);
+    match c {
+        Cmd::Darknet2onnx { cfg, weights, out } => {
+            let r = convert(cfg, weights, out)?;
+            eprintln!(
+                "wrote {} ({} layers, {} heads, {:.1} MB)",
+                out.display(),
+                r.layers,
+                r.heads,
+                r.bytes as f64 / 1e6
+            );
+        }
+        Cmd::Surrogate { model, out } => {
+            let bytes = std::fs::read(model).with_context(|| format!("reading {}", model.display()))?;
+            let m = Model::from_bytes(&bytes).with_context(|| format!("parsing {}", model.display()))?;
+            let (s, r) = dequantize(&m).with_context(|| model.display().to_string())?;
+            let b = s.to_bytes();
+            std::fs::write(out, &b).with_context(|| format!("writing {}", out.display()))?;
+            eprintln!(
+                "wrote {} ({} quantized convolutions made float, {} nodes removed, {:.1} MB): a surrogate, not the evaluated model",
+                out.display(),
+                r.convs,
+                r.nodes_removed,
+                b.len() as f64 / 1e6
+            );
+        }
+    }
     Ok(())
 }

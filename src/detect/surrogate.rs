@@ -1,0 +1,160 @@
+//! A float surrogate of a dynamically quantized ONNX model: every
+//! `DynamicQuantizeLinear → ConvInteger → Cast → Mul(scale)` chain becomes one float `Conv` on
+//! the unquantized input with the dequantized weights `(w − zero_point)·scale`.
+//!
+//! ONNX Runtime's dynamic int8 models (`yolov8n_int8.onnx`) cannot be differentiated: their
+//! activations are rounded to 8 bits at every layer. The surrogate is the float network their
+//! weights came from, up to the weights' own rounding. It is **not** the evaluated model; how far
+//! its scores lie from the int8 model's must be measured and reported wherever it is used.
+
+use super::onnx_proto::{InitData, Initializer, Model, Node};
+use std::collections::{HashMap, HashSet};
+
+/// Why a model cannot be turned into a float surrogate.
+#[derive(Debug, thiserror::Error)]
+pub enum SurrogateError {
+    /// A quantized convolution that is not in the form ONNX Runtime's dynamic quantizer writes.
+    #[error("ConvInteger `{node}`: {why}")]
+    Pattern {
+        /// The node.
+        node: String,
+        /// What was expected.
+        why: String,
+    },
+    /// Integer operators the rewrite does not cover are left in the graph.
+    #[error("the surrogate still holds integer operators: {0}")]
+    Leftover(String),
+}
+
+/// What [`dequantize`] changed.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SurrogateReport {
+    /// `ConvInteger` chains replaced by float `Conv`s.
+    pub convs: usize,
+    /// Nodes removed in all (chains and the quantizers nothing reads any more).
+    pub nodes_removed: usize,
+}
+
+fn pattern(node: &Node, why: impl Into<String>) -> SurrogateError {
+    SurrogateError::Pattern { node: node.name.clone(), why: why.into() }
+}
+
+/// Values of a scalar or per-output-channel initializer as f32 (zero points and scales).
+fn values(init: &Initializer) -> Vec<f32> {
+    match &init.data {
+        InitData::F32(v) => v.clone(),
+        InitData::I64(v) => v.iter().map(|&x| x as f32).collect(),
+        InitData::U8(v) => v.iter().map(|&x| x as f32).collect(),
+        InitData::I8(v) => v.iter().map(|&x| x as f32).collect(),
+    }
+}
+
+/// The float surrogate of `model` (see the module doc), with what changed.
+pub fn dequantize(model: &Model) -> Result<(Model, SurrogateReport), SurrogateError> {
+    let inits: HashMap<&str, &Initializer> = model.initializers.iter().map(|i| (i.name.as_str(), i)).collect();
+    let producer: HashMap<&str, &Node> =
+        model.nodes.iter().flat_map(|n| n.outputs.iter().map(move |o| (o.as_str(), n))).collect();
+    let mut readers: HashMap<&str, Vec<&Node>> = HashMap::new();
+    for n in &model.nodes {
+        for i in &n.inputs {
+            readers.entry(i.as_str()).or_default().push(n);
+        }
+    }
+    let only_reader = |value: &str, op: &str, n: &Node| -> Result<&Node, SurrogateError> {
+        match readers.get(value).map(|r| r.as_slice()) {
+            Some([r]) if r.op_type == op => Ok(r),
+            _ => Err(pattern(n, format!("its output must feed exactly one {op}"))),
+        }
+    };
+    // Node name → replacement (None: drop it).
+    let mut replace: HashMap<String, Option<Node>> = HashMap::new();
+    let mut new_inits = Vec::new();
+    for n in model.nodes.iter().filter(|n| n.op_type == "ConvInteger") {
+        let [xq, wq, _xzp, wzp] = n.inputs.as_slice() else {
+            return Err(pattern(n, "expected inputs (x, w, x_zero_point, w_zero_point)"));
+        };
+        let quantizer = producer
+            .get(xq.as_str())
+            .filter(|p| p.op_type == "DynamicQuantizeLinear")
+            .ok_or_else(|| pattern(n, "its input must come from DynamicQuantizeLinear"))?;
+        let x = &quantizer.inputs[0];
+        let w = inits.get(wq.as_str()).ok_or_else(|| pattern(n, "its weight must be an initializer"))?;
+        let zp = inits.get(wzp.as_str()).map(|z| values(z)).ok_or_else(|| pattern(n, "no weight zero point"))?;
+        let cast = only_reader(&n.outputs[0], "Cast", n)?;
+        let mul = only_reader(&cast.outputs[0], "Mul", n)?;
+        let scale_value = mul.inputs.iter().find(|i| **i != cast.outputs[0]).ok_or_else(|| pattern(n, "no scale"))?;
+        // The scale is x_scale·w_scale, computed by a Mul of the quantizer's scale and an initializer.
+        let scale_mul = producer
+            .get(scale_value.as_str())
+            .filter(|p| p.op_type == "Mul")
+            .ok_or_else(|| pattern(n, "its scale must be a Mul of the input's and the weight's scales"))?;
+        let w_scale = scale_mul
+            .inputs
+            .iter()
+            .find_map(|i| inits.get(i.as_str()))
+            .map(|s| values(s))
+            .ok_or_else(|| pattern(n, "the weight scale must be an initializer"))?;
+        let oc = *w.dims.first().ok_or_else(|| pattern(n, "weight without dims"))? as usize;
+        let per = w.data.len() / oc.max(1);
+        let pick = |v: &[f32], c: usize| if v.len() == oc { v[c] } else { v[0] };
+        if !(zp.len() == 1 || zp.len() == oc) || !(w_scale.len() == 1 || w_scale.len() == oc) {
+            return Err(pattern(n, "zero point and scale must be per tensor or per output channel"));
+        }
+        let wv = values(w);
+        let deq: Vec<f32> =
+            wv.iter().enumerate().map(|(k, &q)| (q - pick(&zp, k / per)) * pick(&w_scale, k / per)).collect();
+        let name = format!("{}_dequantized", w.name);
+        new_inits.push(Initializer { name: name.clone(), dims: w.dims.clone(), data: InitData::F32(deq) });
+        let conv = Node {
+            op_type: "Conv".into(),
+            name: format!("{}_float", n.name),
+            inputs: vec![x.clone(), name],
+            outputs: mul.outputs.clone(),
+            attrs: n.attrs.clone(),
+            domain: String::new(),
+        };
+        replace.insert(n.name.clone(), Some(conv));
+        replace.insert(cast.name.clone(), None);
+        replace.insert(mul.name.clone(), None);
+    }
+    let mut nodes: Vec<Node> = model
+        .nodes
+        .iter()
+        .filter_map(|n| match replace.get(&n.name) {
+            Some(r) => r.clone(),
+            None => Some(n.clone()),
+        })
+        .collect();
+    // Drop what nothing reads any more (the quantizers, the scale products), back from the outputs.
+    loop {
+        let read: HashSet<&str> = nodes
+            .iter()
+            .flat_map(|n| n.inputs.iter().map(|s| s.as_str()))
+            .chain(model.outputs.iter().map(|o| o.name.as_str()))
+            .collect();
+        let keep: Vec<bool> = nodes.iter().map(|n| n.outputs.iter().any(|o| read.contains(o.as_str()))).collect();
+        if keep.iter().all(|&k| k) {
+            break;
+        }
+        let mut k = keep.into_iter();
+        nodes.retain(|_| k.next().unwrap_or(true));
+    }
+    let read: HashSet<String> = nodes.iter().flat_map(|n| n.inputs.iter().cloned()).collect();
+    let initializers: Vec<Initializer> =
+        model.initializers.iter().cloned().chain(new_inits).filter(|i| read.contains(&i.name)).collect();
+    let leftover: Vec<String> = nodes
+        .iter()
+        .filter(|n| matches!(n.op_type.as_str(), "ConvInteger" | "MatMulInteger" | "DynamicQuantizeLinear"))
+        .map(|n| n.op_type.clone())
+        .collect::<HashSet<_>>()
+        .into_iter()
+        .collect();
+    if !leftover.is_empty() {
+        return Err(SurrogateError::Leftover(leftover.join(", ")));
+    }
+    let report = SurrogateReport {
+        convs: replace.values().filter(|r| r.is_some()).count(),
+        nodes_removed: model.nodes.len() - nodes.len(),
+    };
+    Ok((Model { nodes, initializers, producer: "pav surrogate".into(), ..model.clone() }, report))
+}
