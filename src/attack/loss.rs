@@ -6,6 +6,13 @@
 //! predicted box, and where each came from), so one loss serves every YOLO-style layout:
 //! darknet heads (logits; the sigmoid is applied here) and YOLOX rows (probabilities already).
 //!
+//! A head without objectness (Ultralytics YOLOv8: class probabilities only) has no "is there an
+//! object" output. There a prediction's objectness is its largest class probability, the
+//! confidence the detector ranks and thresholds its boxes by, so L1 pushes down every object the
+//! detector sees, whatever its class; and the detection score is the target class probability
+//! itself (not objectness × confidence, which would square it when the car is the best class).
+//! The gradient of that objectness goes to the class that holds the maximum.
+//!
 //! [`Reduce::Mean`] is the paper's: "boxes" are the predictions whose objectness reaches
 //! `box_threshold`, "proposals" are those boxes whose most likely class is a target class; L1 is
 //! the mean objectness over the boxes, L2 the mean target confidence over the proposals. The sets
@@ -58,7 +65,8 @@ pub struct LossTerms {
     pub boxes: usize,
     /// Number of target proposals (n_c: boxes whose best class is a target).
     pub proposals: usize,
-    /// Highest objectness × target confidence over all predictions (the detection score).
+    /// Highest detection score over all predictions (objectness × target confidence; the target
+    /// probability alone for a head without objectness).
     pub max_score: f32,
 }
 
@@ -91,6 +99,9 @@ pub struct Predictions {
     obj: Vec<f32>,
     cls: Vec<f32>,
     at: Vec<At>,
+    /// Whether the head has objectness (false: objectness is the largest class probability and
+    /// the detection score is the target probability alone).
+    objectness: bool,
 }
 
 impl Predictions {
@@ -99,7 +110,7 @@ impl Predictions {
         if maps.len() != anchors.len() {
             return Err(HeadShapeError(format!("{} head maps for {} heads", maps.len(), anchors.len())));
         }
-        let mut p = Predictions { classes, raw: Raw::Logit, obj: vec![], cls: vec![], at: vec![] };
+        let mut p = Predictions { classes, raw: Raw::Logit, obj: vec![], cls: vec![], at: vec![], objectness: true };
         for (output, ((map, (h, w)), &a)) in maps.iter().zip(anchors).enumerate() {
             let hw = h * w;
             if map.len() != a * (5 + classes) * hw {
@@ -125,11 +136,39 @@ impl Predictions {
         if out.len() % cols != 0 {
             return Err(HeadShapeError(format!("{} values are not rows of 5 + {classes}", out.len())));
         }
-        let mut p = Predictions { classes, raw: Raw::Probability, obj: vec![], cls: vec![], at: vec![] };
+        let mut p =
+            Predictions { classes, raw: Raw::Probability, obj: vec![], cls: vec![], at: vec![], objectness: true };
         for r in 0..out.len() / cols {
             p.push(out, At { output: 0, obj: r * cols + 4, cls0: r * cols + 5, stride: 1 });
         }
         Ok(p)
+    }
+
+    /// Ultralytics scores `[C, N]` (class probabilities of N predictions, class-major), without
+    /// objectness: see the module doc.
+    pub fn ultralytics(scores: &[f32], classes: usize) -> Result<Self, HeadShapeError> {
+        if classes == 0 || scores.len() % classes != 0 {
+            return Err(HeadShapeError(format!("{} values are not {classes} class rows", scores.len())));
+        }
+        let n = scores.len() / classes;
+        let mut p =
+            Predictions { classes, raw: Raw::Probability, obj: vec![], cls: vec![], at: vec![], objectness: false };
+        for i in 0..n {
+            // The largest class probability stands for objectness; ties go to the first class.
+            let k = (0..classes).fold(0, |m, k| if scores[k * n + i] > scores[m * n + i] { k } else { m });
+            p.push(scores, At { output: 0, obj: k * n + i, cls0: i, stride: n });
+        }
+        Ok(p)
+    }
+
+    /// The detection score of prediction `i` for a target probability `car`, and its derivatives
+    /// with respect to objectness and that probability.
+    fn score(&self, i: usize, car: f32) -> (f32, f32, f32) {
+        if self.objectness {
+            (self.obj[i] * car, car, self.obj[i])
+        } else {
+            (car, 0.0, 1.0)
+        }
     }
 
     fn push(&mut self, raw: &[f32], at: At) {
@@ -236,7 +275,7 @@ impl DetectionLoss {
         let mut max_score = 0f32;
         let (mut boxes, mut proposals) = (Vec::new(), Vec::new());
         for (i, (&o, &(_, car))) in p.obj.iter().zip(&tk).enumerate() {
-            max_score = max_score.max(o * car);
+            max_score = max_score.max(p.score(i, car).0);
             if o >= self.box_threshold && o.is_finite() {
                 boxes.push(i);
                 let b = best(i).0;
@@ -258,12 +297,13 @@ impl DetectionLoss {
             how => {
                 let (l1, w1) = reduce(&p.obj, how);
                 w1.iter().enumerate().for_each(|(i, &w)| dobj[i] += w);
-                let scores: Vec<f32> = (0..n).map(|i| p.obj[i] * tk[i].1).collect();
+                let scores: Vec<f32> = (0..n).map(|i| p.score(i, tk[i].1).0).collect();
                 let (l2, w2) = reduce(&scores, how);
                 for (i, &w) in w2.iter().enumerate() {
                     if w != 0.0 {
-                        dobj[i] += beta * w * tk[i].1;
-                        dcls.push((i, tk[i].0, beta * w * p.obj[i]));
+                        let (_, d_obj, d_car) = p.score(i, tk[i].1);
+                        dobj[i] += beta * w * d_obj;
+                        dcls.push((i, tk[i].0, beta * w * d_car));
                     }
                 }
                 (l1, l2)
@@ -385,6 +425,64 @@ mod tests {
         let p = Predictions::yolox(&[], 3).unwrap();
         let (t, _) = loss(Reduce::TopK(1)).terms(&p, &[&[]], 1.0).unwrap();
         assert_eq!((t.l1, t.l2), (0.0, 0.0));
+    }
+
+    /// Ultralytics scores `[3 classes, 4 predictions]`, class-major.
+    fn v8_scores() -> Vec<f32> {
+        vec![
+            0.10, 0.70, 0.20, 0.05, // class 0
+            0.20, 0.10, 0.30, 0.02, // class 1
+            0.80, 0.15, 0.60, 0.01, // class 2 (the car)
+        ]
+    }
+
+    #[test]
+    fn a_head_without_objectness_uses_its_best_class_and_the_car_probability() {
+        let s = v8_scores();
+        let p = Predictions::ultralytics(&s, 3).unwrap();
+        // Objectness = best class: 0.8, 0.7, 0.6, 0.05. Boxes ≥ 0.5: predictions 0, 1, 2; their
+        // best classes are car, class 0, car.
+        let (t, g) = loss(Reduce::Mean).terms(&p, &[&s], 2.0).unwrap();
+        assert_eq!((t.boxes, t.proposals), (3, 2));
+        assert!((t.l1 - (0.8 + 0.7 + 0.6) / 3.0).abs() < 1e-6 && (t.l2 - 0.7).abs() < 1e-6, "{t:?}");
+        // The detection score is the car probability itself.
+        assert!((t.max_score - 0.8).abs() < 1e-6, "{t:?}");
+        // L1's gradient goes to each box's best class, L2's to the car entries of the proposals.
+        let third = 1.0 / 3.0;
+        assert!((g[0][8] - (third + 2.0 * 0.5)).abs() < 1e-6 && (g[0][1] - third).abs() < 1e-6, "{:?}", g[0]);
+        assert_eq!((g[0][3], g[0][9], g[0][4]), (0.0, 0.0, 0.0));
+        // Top-1: the largest best-class probability, and the largest car probability.
+        let (t, g) = loss(Reduce::TopK(1)).terms(&p, &[&s], 1.0).unwrap();
+        assert!((t.l1 - 0.8).abs() < 1e-6 && (t.l2 - 0.8).abs() < 1e-6, "{t:?}");
+        assert!((g[0][8] - 2.0).abs() < 1e-6 && g[0].iter().filter(|v| **v != 0.0).count() == 1, "{:?}", g[0]);
+        assert!(Predictions::ultralytics(&s[..11], 3).is_err());
+    }
+
+    #[test]
+    fn a_head_without_objectness_has_exact_gradients_and_stays_finite() {
+        // Distinct probabilities, away from ties and from the box threshold.
+        let s = v8_scores();
+        let beta = 0.7;
+        for how in [Reduce::Mean, Reduce::TopK(2), Reduce::Softmax(0.2)] {
+            let l = loss(how);
+            let total = |v: &[f32]| {
+                let (t, _) = l.terms(&Predictions::ultralytics(v, 3).unwrap(), &[v], beta).unwrap();
+                t.l1 as f64 + beta as f64 * t.l2 as f64
+            };
+            let (_, g) = l.terms(&Predictions::ultralytics(&s, 3).unwrap(), &[&s], beta).unwrap();
+            for i in 0..s.len() {
+                let (mut a, mut b) = (s.clone(), s.clone());
+                a[i] += 1e-3;
+                b[i] -= 1e-3;
+                let fd = (total(&a) - total(&b)) / 2e-3;
+                assert!((fd - g[0][i] as f64).abs() < 1e-3, "{how:?} value {i}: {} vs {fd}", g[0][i]);
+            }
+            // Saturated (0 and 1 exactly), all-equal and empty outputs.
+            for v in [vec![1.0; 12], vec![0.0; 12], vec![0.5; 12], vec![]] {
+                let (t, g) = l.terms(&Predictions::ultralytics(&v, 3).unwrap(), &[&v], beta).unwrap();
+                assert!(t.l1.is_finite() && t.l2.is_finite() && g[0].iter().all(|x| x.is_finite()), "{how:?} {t:?}");
+            }
+        }
     }
 
     #[test]
