@@ -20,9 +20,11 @@ fn the_yolov8n_surrogate_is_float_and_scores_like_the_int8_model() {
     let cfg = DetectorConfig::load(&common::detector_config("yolov8n_int8")).unwrap();
     let int8 = Model::from_bytes(&std::fs::read(&cfg.model).unwrap()).unwrap();
     let (float, report) = dequantize(&int8).unwrap();
-    // 64 ConvInteger chains; 59 input quantizers, 64 casts, 64 rescales and 64 scale products go.
-    assert_eq!((report.convs, report.nodes_removed), (64, 251));
+    // 64 ConvInteger chains; 59 input quantizers, 64 casts, 64 rescales, 64 scale products, and 63
+    // bias Adds with their Reshapes go (the box decoder's convolution has no bias).
+    assert_eq!((report.convs, report.nodes_removed), (64, 377));
     let integer = ["ConvInteger", "DynamicQuantizeLinear", "Cast"];
+    assert_eq!(float.nodes.iter().filter(|n| n.op_type == "Conv" && n.inputs.len() == 3).count(), 63);
     assert!(float.nodes.iter().all(|n| !integer.contains(&n.op_type.as_str())));
     assert_eq!(float.nodes.iter().filter(|n| n.op_type == "Conv").count(), 64);
     let tmp = tempfile::tempdir().unwrap();

@@ -1,6 +1,7 @@
 //! A float surrogate of a dynamically quantized ONNX model: every
-//! `DynamicQuantizeLinear → ConvInteger → Cast → Mul(scale)` chain becomes one float `Conv` on
-//! the unquantized input with the dequantized weights `(w − zero_point)·scale`.
+//! `DynamicQuantizeLinear → ConvInteger → Cast → Mul(scale) [→ Add(bias)]` chain becomes one
+//! float `Conv` on the unquantized input with the dequantized weights `(w − zero_point)·scale`
+//! and the bias.
 //!
 //! ONNX Runtime's dynamic int8 models (`yolov8n_int8.onnx`) cannot be differentiated: their
 //! activations are rounded to 8 bits at every layer. The surrogate is the float network their
@@ -105,11 +106,28 @@ pub fn dequantize(model: &Model) -> Result<(Model, SurrogateReport), SurrogateEr
             wv.iter().enumerate().map(|(k, &q)| (q - pick(&zp, k / per)) * pick(&w_scale, k / per)).collect();
         let name = format!("{}_dequantized", w.name);
         new_inits.push(Initializer { name: name.clone(), dims: w.dims.clone(), data: InitData::F32(deq) });
+        let mut inputs = vec![x.clone(), name];
+        let mut outputs = mul.outputs.clone();
+        // A bias added after the rescale (`Add(conv, Reshape(bias, [C, 1, 1]))`) goes into the
+        // Conv, so no broadcasting Add is left for the gradient graph.
+        if let Some([add]) = readers.get(mul.outputs[0].as_str()).map(|r| r.as_slice()) {
+            let other = add.inputs.iter().find(|i| **i != mul.outputs[0]);
+            let bias = other
+                .and_then(|o| producer.get(o.as_str()))
+                .filter(|r| r.op_type == "Reshape")
+                .and_then(|r| inits.get(r.inputs[0].as_str()))
+                .filter(|b| add.op_type == "Add" && b.data.len() == oc && matches!(b.data, InitData::F32(_)));
+            if let Some(b) = bias {
+                inputs.push(b.name.clone());
+                outputs = add.outputs.clone();
+                replace.insert(add.name.clone(), None);
+            }
+        }
         let conv = Node {
             op_type: "Conv".into(),
             name: format!("{}_float", n.name),
-            inputs: vec![x.clone(), name],
-            outputs: mul.outputs.clone(),
+            inputs,
+            outputs,
             attrs: n.attrs.clone(),
             domain: String::new(),
         };
