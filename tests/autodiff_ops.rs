@@ -162,6 +162,39 @@ fn activations_products_sums_concat_and_resize() {
 }
 
 #[test]
+fn splits_by_sizes_and_equal_parts_with_an_unread_output() {
+    // YOLOv8's C2f: a Split along channels whose parts are read (or not) further on.
+    let split = |inputs: &[&str], outs: &[&str]| Node {
+        outputs: outs.iter().map(|o| o.to_string()).collect(),
+        ..node("Split", inputs, outs[0], vec![("axis", Attr::Int(1))])
+    };
+    let sizes = init("sizes", vec![2], InitData::I64(vec![1, 3]));
+    let graphs = vec![
+        // Sizes as an input; both parts read, one of them twice.
+        model(
+            vec![
+                split(&["x", "sizes"], &["a", "b"]),
+                node("Sigmoid", &["b"], "s", vec![]),
+                node("Mul", &["b", "s"], "m", vec![]),
+                node("Concat", &["m", "a"], "y", vec![("axis", Attr::Int(1))]),
+            ],
+            vec![sizes],
+            &["y", "a"],
+        ),
+        // Equal parts; the second part is read by nothing, so its gradient is zero.
+        model(vec![split(&["x"], &["a", "b"]), node("Sigmoid", &["a"], "y", vec![])], vec![], &["y"]),
+    ];
+    for m in graphs {
+        check(m, [1, 4, 3, 3], 2e-3);
+    }
+    // Sizes that do not add up are refused by name.
+    let bad = init("sizes", vec![2], InitData::I64(vec![1, 1]));
+    let m = model(vec![split(&["x", "sizes"], &["a", "b"]), node("Sigmoid", &["a"], "y", vec![])], vec![bad], &["y"]);
+    let e = differentiate(&m, &[1, 4, 3, 3]).unwrap_err().to_string();
+    assert!(e.contains("Split") && e.contains("sizes [1, 1]"), "{e}");
+}
+
+#[test]
 fn max_pool_ties_go_to_the_first_maximum() {
     common::require_setup();
     // Every window of a constant image ties: only its first (top-left) position gets gradient.

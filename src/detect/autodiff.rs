@@ -11,6 +11,8 @@
 //!   window's maximum, as PyTorch routes it; padded positions never win.
 //! - `LeakyRelu`, `Relu`, `Sigmoid`, `Add`, `Mul`, `Concat`, nearest `Resize` by an integer factor,
 //!   `Identity`: their derivatives, element by element.
+//! - `Split` (constant sizes or equal parts): the outputs' gradients concatenated back, zeros for
+//!   an output nothing reads.
 //! - `Slice` (constant bounds, positive steps): the gradient spread back to the positions read and
 //!   zero elsewhere; `Reshape` (constant shape) and `Transpose`: the inverse reshape and
 //!   permutation.
@@ -62,7 +64,7 @@ pub enum Kernels {
 
 /// The operators with a backward rule.
 pub const SUPPORTED: &str =
-    "Conv, MaxPool, LeakyRelu, Relu, Sigmoid, Add, Mul, Concat, Resize (nearest), Slice, Reshape, Transpose, Identity";
+    "Conv, MaxPool, LeakyRelu, Relu, Sigmoid, Add, Mul, Concat, Split, Resize (nearest), Slice, Reshape, Transpose, Identity";
 
 /// A graph and its gradient graphs.
 #[derive(Clone, Debug)]
@@ -189,6 +191,29 @@ fn slice_ranges(
     Ok(out)
 }
 
+/// A `Split`'s axis and the sizes of its outputs along it, against the input shape `x`.
+fn split_sizes(n: &Node, consts: &HashMap<&str, &Initializer>, x: &[i64]) -> Result<(usize, Vec<i64>), AutodiffError> {
+    let bad = |msg: String| AutodiffError::Settings { node: n.name.clone(), op: "Split".into(), msg };
+    let axis = int(n, "axis").unwrap_or(0);
+    let axis = if axis < 0 { axis + x.len() as i64 } else { axis };
+    if axis < 0 || axis as usize >= x.len() {
+        return Err(bad(format!("axis {axis} for rank {}", x.len())));
+    }
+    let len = x[axis as usize];
+    let parts = n.outputs.len() as i64;
+    // Opset ≥ 13 gives the sizes as an input, older opsets as an attribute; none: equal parts.
+    let sizes = match const_ints(n, consts, 1).or_else(|| ints(n, "split")) {
+        Some(s) => s,
+        None if n.inputs.get(1).is_some_and(|i| !i.is_empty()) => return Err(bad("sizes must be a constant".into())),
+        None if parts > 0 && len % parts == 0 => vec![len / parts; parts as usize],
+        None => return Err(bad(format!("{len} does not split into {parts} equal parts"))),
+    };
+    if sizes.len() != n.outputs.len() || sizes.iter().sum::<i64>() != len || sizes.iter().any(|&s| s < 0) {
+        return Err(bad(format!("sizes {sizes:?} for an axis of {len} and {parts} outputs")));
+    }
+    Ok((axis as usize, sizes))
+}
+
 /// The target shape of a `Reshape` with a constant shape (0 copies, −1 takes the rest).
 fn reshape_target(n: &Node, consts: &HashMap<&str, &Initializer>, x: &[i64]) -> Result<Vec<i64>, AutodiffError> {
     let bad = |msg: String| AutodiffError::Settings { node: n.name.clone(), op: "Reshape".into(), msg };
@@ -288,7 +313,8 @@ fn infer(
     let bad = |msg: String| AutodiffError::Settings { node: n.name.clone(), op: n.op_type.clone(), msg };
     let x = get(0)?;
     Ok(match n.op_type.as_str() {
-        "Identity" | "LeakyRelu" | "Relu" | "Sigmoid" => x,
+        // Split: the input's shape here; each output's is cut from it by `split_sizes`.
+        "Identity" | "LeakyRelu" | "Relu" | "Sigmoid" | "Split" => x,
         "Add" | "Mul" => {
             let y = get(1)?;
             if x != y && !y.is_empty() && y.iter().product::<i64>() != 1 {
@@ -406,8 +432,14 @@ pub fn differentiate_with(
     for n in &model.nodes {
         let s = infer(n, &shape, &consts)?;
         let depends = n.inputs.iter().any(|i| live.contains(i));
-        for o in &n.outputs {
-            shape.insert(o.clone(), s.clone());
+        let each: Vec<Vec<i64>> = if n.op_type == "Split" {
+            let (axis, sizes) = split_sizes(n, &consts, &s)?;
+            sizes.iter().map(|&k| s.iter().enumerate().map(|(i, &d)| if i == axis { k } else { d }).collect()).collect()
+        } else {
+            vec![s; n.outputs.len()]
+        };
+        for (o, s) in n.outputs.iter().zip(each) {
+            shape.insert(o.clone(), s);
             if depends {
                 live.insert(o.clone());
             }
@@ -437,6 +469,26 @@ pub fn differentiate_with(
         add_grad(&mut grad, &mut tape, &o.name, grad_name(&o.name));
     }
     for n in model.nodes.iter().rev() {
+        if n.op_type == "Split" {
+            let gs: Vec<Option<String>> = n.outputs.iter().map(|o| grad.remove(o)).collect();
+            if gs.iter().all(|g| g.is_none()) {
+                continue;
+            }
+            let (axis, _) = split_sizes(n, &consts, &shape[&n.inputs[0]])?;
+            let mut parts = Vec::new();
+            for (o, g) in n.outputs.iter().zip(gs) {
+                parts.push(match g {
+                    Some(g) => g,
+                    None => {
+                        let (zero, dims) = (tape.scalar(0.0), tape.i64s(shape[o].clone()));
+                        tape.node("Expand", vec![zero, dims], vec![])
+                    }
+                });
+            }
+            let gx = tape.node("Concat", parts, vec![("axis", Attr::Int(axis as i64))]);
+            add_grad(&mut grad, &mut tape, &n.inputs[0], gx);
+            continue;
+        }
         let Some(g) = n.outputs.first().and_then(|o| grad.remove(o)) else { continue };
         let x = n.inputs[0].clone();
         let bad = |msg: &str| AutodiffError::Settings { node: n.name.clone(), op: n.op_type.clone(), msg: msg.into() };
