@@ -2,6 +2,8 @@
 //! convolution made float, and its car scores on FCA's real CARLA photos measured against the
 //! int8 model it stands in for.
 
+#![cfg(feature = "eval")]
+
 mod common;
 
 use pav::dataset::fca::CarlaSample;

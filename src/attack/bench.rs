@@ -56,7 +56,7 @@ pub fn time_step(
     let mut rows = Vec::new();
     for &size in sizes {
         let loss = DetectionLoss { box_threshold: 0.05, target: detector.target_classes.clone(), reduce: Reduce::Mean };
-        let o = WhiteBoxOptions { composite: size, input: Some(size), threads };
+        let o = WhiteBoxOptions { composite: size, input: Some(size), threads, surrogate: false };
         let wb = WhiteBox::with_options(detector, loss, o)?;
         let img = composite(size);
         for _ in 0..3 {

@@ -117,6 +117,10 @@ pub struct WhiteBoxEntry {
     /// Weight of its L1 + β·L2 in the sum.
     #[serde(default = "one")]
     pub weight: f32,
+    /// Differentiate the float surrogate of a dynamically quantized model (`detect::surrogate`)
+    /// instead of refusing it; scoring still runs the quantized model the config names.
+    #[serde(default)]
+    pub surrogate: bool,
 }
 
 fn one() -> f32 {

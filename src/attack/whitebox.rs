@@ -11,8 +11,9 @@ use super::config::OptimizeConfig;
 use super::loss::{DetectionLoss, HeadShapeError, Predictions};
 use crate::detect::autodiff::{differentiate_with, AutodiffError, Kernels};
 use crate::detect::config::{ChannelOrder, DetectorConfig, OutputLayout};
-use crate::detect::onnx_proto::{Dim, Model, ProtoError};
+use crate::detect::onnx_proto::{Dim, Model, ProtoError, ValueInfo, FLOAT};
 use crate::detect::ortgrad::{GradSession, Pass};
+use crate::detect::surrogate::dequantize;
 use crate::detect::DetectError;
 use crate::image::resize::{Interpolation, Resampler};
 use std::path::PathBuf;
@@ -40,6 +41,8 @@ enum Heads {
     Darknet { anchors: Vec<usize>, classes: usize },
     /// YOLOX rows `[R, 5 + C]`.
     Yolox { classes: usize },
+    /// Ultralytics class probabilities `[C, N]` (the graph cut to its class branch).
+    Ultralytics { classes: usize },
 }
 
 /// A detector with the paper's loss and its input gradient.
@@ -105,12 +108,34 @@ pub struct WhiteBoxOptions {
     pub input: Option<usize>,
     /// ONNX Runtime threads per pass (0 = the runtime's default, the physical cores).
     pub threads: usize,
+    /// Differentiate the float surrogate of a dynamically quantized model.
+    pub surrogate: bool,
+}
+
+/// An Ultralytics graph cut to its class branch: its output is `Concat(boxes [4], classes [C])` on
+/// axis 1, and L1 and L2 read the class probabilities only, so the box decoder (a softmax over
+/// distance bins) needs no gradient and is dropped.
+pub fn class_branch(mut model: Model) -> Result<Model, String> {
+    let out = match model.outputs.as_slice() {
+        [o] => o.clone(),
+        _ => return Err(format!("{} graph outputs, expected one [1, 4 + C, N]", model.outputs.len())),
+    };
+    let concat = model
+        .nodes
+        .iter()
+        .find(|n| n.outputs.contains(&out.name))
+        .filter(|n| n.op_type == "Concat" && n.inputs.len() == 2)
+        .ok_or("the output is not a Concat of boxes and class probabilities")?;
+    let classes = concat.inputs[1].clone();
+    model.outputs = vec![ValueInfo { name: classes, elem_type: FLOAT, dims: vec![] }];
+    model.prune();
+    Ok(model)
 }
 
 impl WhiteBox {
     /// Loads the detector of `cfg` for composites of `size × size` pixels.
     pub fn load(cfg: &DetectorConfig, loss: DetectionLoss, size: usize) -> Result<Self, WhiteBoxError> {
-        Self::with_options(cfg, loss, WhiteBoxOptions { composite: size, input: None, threads: 0 })
+        Self::with_options(cfg, loss, WhiteBoxOptions { composite: size, input: None, threads: 0, surrogate: false })
     }
 
     /// Loads the detector of `cfg` as `o` says.
@@ -127,8 +152,20 @@ impl WhiteBox {
             what: format!("the model {}", cfg.model.display()),
             source,
         })?;
-        let model =
+        let mut model =
             Model::from_bytes(&bytes).map_err(|source| WhiteBoxError::Model { path: cfg.model.clone(), source })?;
+        let quantized = model.nodes.iter().any(|n| n.op_type == "ConvInteger" || n.op_type == "DynamicQuantizeLinear");
+        if quantized && !o.surrogate {
+            return Err(unsupported(
+                "a dynamically quantized model has no gradient; set `surrogate = true` on its [[white_box]] to train against its float surrogate".into(),
+            ));
+        }
+        if quantized {
+            model = dequantize(&model).map_err(|e| unsupported(e.to_string()))?.0;
+        }
+        if matches!(cfg.output, OutputLayout::Ultralytics { .. }) {
+            model = class_branch(model).map_err(|why| unsupported(why))?;
+        }
         if let Some(x) = model.inputs.first() {
             if x.dims.len() == 4 && x.dims[2..].iter().any(|d| matches!(d, Dim::Fixed(v) if *v != side as i64)) {
                 return Err(unsupported(format!("the graph's input is fixed at {:?}, not {side}²", x.dims)));
@@ -150,6 +187,7 @@ impl WhiteBox {
                 Heads::Darknet { anchors, classes }
             }
             OutputLayout::Yolox { .. } if d.outputs.len() == 1 => Heads::Yolox { classes },
+            OutputLayout::Ultralytics { .. } => Heads::Ultralytics { classes },
             other => {
                 return Err(unsupported(format!(
                     "no white-box loss for the {} layout (objectness-based losses need darknet or yolox outputs)",
@@ -230,6 +268,7 @@ impl WhiteBox {
                 Predictions::darknet(&maps, anchors, *classes)?
             }
             Heads::Yolox { classes } => Predictions::yolox(&outs[0], *classes)?,
+            Heads::Ultralytics { classes } => Predictions::ultralytics(&outs[0], *classes)?,
         };
         let raw: Vec<&[f32]> = outs.iter().map(|v| v.as_slice()).collect();
         Ok(self.loss.terms(&p, &raw, beta)?)
@@ -287,7 +326,8 @@ impl Ensemble {
                     target: d.target_classes.clone(),
                     reduce: cfg.loss.reduce,
                 };
-                Ok((WhiteBox::load(&d, loss, size)?, e.weight))
+                let o = WhiteBoxOptions { composite: size, input: None, threads: 0, surrogate: e.surrogate };
+                Ok((WhiteBox::with_options(&d, loss, o)?, e.weight))
             })
             .collect::<Result<_, WhiteBoxError>>()?;
         Ok(Ensemble { members })

@@ -257,6 +257,21 @@ fn encode_value_info(v: &ValueInfo) -> Buf {
 }
 
 impl Model {
+    /// Drops the nodes no graph output depends on, then the initializers no node reads.
+    pub fn prune(&mut self) {
+        let mut needed: std::collections::HashSet<String> = self.outputs.iter().map(|o| o.name.clone()).collect();
+        let mut keep = vec![false; self.nodes.len()];
+        for (i, n) in self.nodes.iter().enumerate().rev() {
+            if n.outputs.iter().any(|o| needed.contains(o)) {
+                keep[i] = true;
+                needed.extend(n.inputs.iter().cloned());
+            }
+        }
+        let mut k = keep.into_iter();
+        self.nodes.retain(|_| k.next().unwrap_or(true));
+        self.initializers.retain(|i| needed.contains(&i.name));
+    }
+
     /// Serializes the model to ONNX protobuf bytes.
     pub fn to_bytes(&self) -> Vec<u8> {
         // GraphProto: node=1, name=2, initializer=5, input=11, output=12

@@ -135,32 +135,23 @@ pub fn dequantize(model: &Model) -> Result<(Model, SurrogateReport), SurrogateEr
         replace.insert(cast.name.clone(), None);
         replace.insert(mul.name.clone(), None);
     }
-    let mut nodes: Vec<Node> = model
-        .nodes
-        .iter()
-        .filter_map(|n| match replace.get(&n.name) {
-            Some(r) => r.clone(),
-            None => Some(n.clone()),
-        })
-        .collect();
-    // Drop what nothing reads any more (the quantizers, the scale products), back from the outputs.
-    loop {
-        let read: HashSet<&str> = nodes
+    let mut out = Model {
+        nodes: model
+            .nodes
             .iter()
-            .flat_map(|n| n.inputs.iter().map(|s| s.as_str()))
-            .chain(model.outputs.iter().map(|o| o.name.as_str()))
-            .collect();
-        let keep: Vec<bool> = nodes.iter().map(|n| n.outputs.iter().any(|o| read.contains(o.as_str()))).collect();
-        if keep.iter().all(|&k| k) {
-            break;
-        }
-        let mut k = keep.into_iter();
-        nodes.retain(|_| k.next().unwrap_or(true));
-    }
-    let read: HashSet<String> = nodes.iter().flat_map(|n| n.inputs.iter().cloned()).collect();
-    let initializers: Vec<Initializer> =
-        model.initializers.iter().cloned().chain(new_inits).filter(|i| read.contains(&i.name)).collect();
-    let leftover: Vec<String> = nodes
+            .filter_map(|n| match replace.get(&n.name) {
+                Some(r) => r.clone(),
+                None => Some(n.clone()),
+            })
+            .collect(),
+        initializers: model.initializers.iter().cloned().chain(new_inits).collect(),
+        producer: "pav surrogate".into(),
+        ..model.clone()
+    };
+    // The quantizers and scale products nothing reads any more go, with the integer weights.
+    out.prune();
+    let leftover: Vec<String> = out
+        .nodes
         .iter()
         .filter(|n| matches!(n.op_type.as_str(), "ConvInteger" | "MatMulInteger" | "DynamicQuantizeLinear"))
         .map(|n| n.op_type.clone())
@@ -172,7 +163,7 @@ pub fn dequantize(model: &Model) -> Result<(Model, SurrogateReport), SurrogateEr
     }
     let report = SurrogateReport {
         convs: replace.values().filter(|r| r.is_some()).count(),
-        nodes_removed: model.nodes.len() - nodes.len(),
+        nodes_removed: model.nodes.len() - out.nodes.len(),
     };
-    Ok((Model { nodes, initializers, producer: "pav surrogate".into(), ..model.clone() }, report))
+    Ok((out, report))
 }
