@@ -164,7 +164,7 @@ impl WhiteBox {
             model = dequantize(&model).map_err(|e| unsupported(e.to_string()))?.0;
         }
         if matches!(cfg.output, OutputLayout::Ultralytics { .. }) {
-            model = class_branch(model).map_err(|why| unsupported(why))?;
+            model = class_branch(model).map_err(&unsupported)?;
         }
         if let Some(x) = model.inputs.first() {
             if x.dims.len() == 4 && x.dims[2..].iter().any(|d| matches!(d, Dim::Fixed(v) if *v != side as i64)) {
