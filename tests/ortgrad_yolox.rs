@@ -75,17 +75,10 @@ fn gradient_matches_central_differences_along_directions() {
             .collect();
         let grad = g.backward(&pass, vec![w.clone()]).unwrap();
         assert!(grad.iter().all(|v| v.is_finite()));
-        // Σ w·(f(x + εd) − f(x − εd)), differenced output by output before the sum, which would
-        // otherwise cancel most of f32's digits.
-        let mut diff = |p: Vec<f32>, q: Vec<f32>| -> f64 {
-            let (a, _) = g.forward(p).unwrap();
-            let (b, _) = g.forward(q).unwrap();
-            a[0].iter().zip(&b[0]).zip(&w).map(|((a, b), w)| (*a as f64 - *b as f64) * *w as f64).sum()
-        };
         let plane = 416 * 416;
         // The whole image, and one channel's 24×24 patch over the car.
         let dirs: Vec<Vec<f32>> = vec![
-            (0..3 * plane).map(|i| ((i * 7919 % 101) as f32 / 50.0) - 1.0).collect(),
+            common::whole_image_direction(3 * plane),
             (0..3 * plane)
                 .map(|i| {
                     if i / plane == 1 && (200..224).contains(&(i % plane / 416)) && (190..214).contains(&(i % 416)) {
@@ -101,13 +94,7 @@ fn gradient_matches_central_differences_along_directions() {
         // extrapolated to ε → 0 from two steps. On the patch, f32 rounding dominates small steps,
         // so it takes a larger one.
         for (k, d, eps, tol) in [(0, &dirs[0], 0.01f32, 1e-2), (1, &dirs[1], 0.3, 3e-2)] {
-            let step = |s: f32| input.iter().zip(d).map(|(x, v)| x + s * v).collect::<Vec<_>>();
-            let fd1 = diff(step(eps), step(-eps)) / (2.0 * eps as f64);
-            let fd = if k == 0 {
-                (3.0 * fd1 - diff(step(3.0 * eps), step(-3.0 * eps)) / (6.0 * eps as f64)) / 2.0
-            } else {
-                fd1
-            };
+            let fd = common::central_difference(&mut g, &w, &input, d, eps, k == 0);
             let an: f64 = grad.iter().zip(d).map(|(a, b)| *a as f64 * *b as f64).sum();
             eprintln!("{kernels:?} direction {k}: analytic {an:e}, central difference {fd:e}");
             assert!((an - fd).abs() <= tol * an.abs().max(fd.abs()), "{kernels:?} direction {k}: {an} vs {fd}");

@@ -109,3 +109,39 @@ pub fn record_input<'a>(v: &'a toml::Value, suffix: &str) -> &'a toml::Value {
         .and_then(|a| a.iter().find(|i| i["path"].as_str().is_some_and(|p| p.ends_with(suffix))))
         .unwrap_or_else(|| panic!("no input ending in {suffix}: {v}"))
 }
+
+/// The derivative of Σ w·f(x) along `dir` by central differences of the graph's first output at
+/// step `eps`, each output differenced before the weighted sum (which would otherwise cancel most
+/// of f32's digits). `extrapolate`: also at 3·eps, and the two combined to cancel the error that
+/// is first order in the step (where max-pool and SiLU kinks make it so).
+#[cfg(feature = "eval")]
+pub fn central_difference(
+    g: &mut pav::detect::ortgrad::GradSession,
+    w: &[f32],
+    x: &[f32],
+    dir: &[f32],
+    eps: f32,
+    extrapolate: bool,
+) -> f64 {
+    let mut at = |s: f32| -> f64 {
+        let step = |s: f32| x.iter().zip(dir).map(|(x, v)| x + s * v).collect::<Vec<_>>();
+        let (a, _) = g.forward(step(s)).unwrap();
+        let (b, _) = g.forward(step(-s)).unwrap();
+        let d: f64 = a[0].iter().zip(&b[0]).zip(w).map(|((a, b), w)| (*a as f64 - *b as f64) * *w as f64).sum();
+        d / (2.0 * s as f64)
+    };
+    let fd1 = at(eps);
+    if extrapolate {
+        (3.0 * fd1 - at(3.0 * eps)) / 2.0
+    } else {
+        fd1
+    }
+}
+
+/// A direction that moves every input value by a different amount in (−3, 1]. The index arithmetic
+/// wraps in i32 on purpose: the gradient tests were measured along exactly this direction (their
+/// `7919·i` once overflowed an inferred i32 silently in release builds), and YOLOv8n's agreement
+/// depends on it (see `tests/ortgrad_yolov8n.rs`).
+pub fn whole_image_direction(n: usize) -> Vec<f32> {
+    (0..n as i32).map(|i| (i.wrapping_mul(7919) % 101) as f32 / 50.0 - 1.0).collect()
+}
