@@ -2,18 +2,9 @@
 
 use super::loss::Reduce;
 use super::smooth::SmoothNorm;
+use crate::geometry::camera::CameraConvention;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
-
-/// How the mesh is normalized, which fixes the camera convention that fits it.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
-#[serde(rename_all = "kebab-case")]
-pub enum CameraConvention {
-    /// FCA/DAS: neural_renderer's bbox normalization, 90° FoV (FCA's CARLA samples).
-    Fca,
-    /// PAV-Camou: vertex-mean centring, max-abs scaling, 60° FoV.
-    PavCamou,
-}
 
 /// The car and its optimizable region.
 #[derive(Clone, Debug, Deserialize, PartialEq)]

@@ -1,13 +1,14 @@
 //! Everything an optimization or a digital evaluation reads once: the normalized mesh, the
 //! optimizable texels, the scene and the prepared views.
 
-use super::config::{CameraConvention, Init, InitName, OptimizeConfig};
+use super::config::{Init, InitName, OptimizeConfig};
 use super::view::View;
 #[cfg(feature = "optimize")]
 use super::whitebox::{Ensemble, WhiteBoxError};
 use crate::dataset::fca::CarlaSample;
 use crate::detect::BBox;
-use crate::geometry::camera::{fca, pav_camou, Camera};
+use crate::geometry::camera::Camera;
+use crate::geometry::camera::CameraConvention;
 use crate::geometry::mesh::Mesh;
 use crate::geometry::parts::select_faces;
 use crate::geometry::uv::faces_mask;
@@ -109,6 +110,8 @@ pub struct Setup {
     pub test: Vec<View>,
     /// Ground-truth car boxes by view name, in view pixels.
     pub boxes: HashMap<String, BBox>,
+    /// Rendered views laid over a photo's background plate: view name → the photo's stem.
+    pub plates: HashMap<String, String>,
     /// The photos behind `train` and `test` by view name, for synthetic views of any subset.
     samples: Arc<HashMap<String, CarlaSample>>,
     maker: ViewMaker,
@@ -154,12 +157,7 @@ struct ViewMaker {
 impl ViewMaker {
     /// The camera of `s` with the car turned in place by `turn_deg`.
     fn camera(&self, s: &CarlaSample, turn_deg: f64) -> Camera {
-        let mut veh = s.veh_trans;
-        veh[1][1] += turn_deg;
-        match self.camera {
-            CameraConvention::Fca => fca(s.cam_trans, veh),
-            CameraConvention::PavCamou => pav_camou(s.cam_trans, veh[1][1]),
-        }
+        self.camera.camera(s.cam_trans, s.veh_trans, turn_deg)
     }
 
     fn view(
@@ -216,6 +214,7 @@ fn pbr_views(
     mesh: &Mesh,
     region: &[f32],
     mut boxes: Option<&mut HashMap<String, BBox>>,
+    plates: &mut HashMap<String, String>,
 ) -> Result<Vec<View>, SetupError> {
     let mut out = Vec::new();
     let normalize = match cfg.mesh.camera {
@@ -247,6 +246,10 @@ fn pbr_views(
             // A pose that hides the region teaches nothing, and no texture can change its score.
             if v.active.is_empty() {
                 continue;
+            }
+            if !r.plate.is_empty() {
+                let stem = Path::new(&r.plate).file_stem().map(|s| s.to_string_lossy().into_owned());
+                plates.insert(name.clone(), stem.unwrap_or_default());
             }
             if let Some(b) = boxes.as_deref_mut() {
                 let mask = Rgb::load(&dir.join(&r.mask))?;
@@ -374,8 +377,9 @@ impl Setup {
         };
         let train = views(&cfg.views.train)?;
         let mut test = views(&cfg.views.test)?;
-        let pbr = pbr_views(cfg, &cfg.views.pbr, &maker, &mesh, &region, None)?;
-        test.extend(pbr_views(cfg, &cfg.views.pbr_test, &maker, &mesh, &region, Some(&mut boxes))?);
+        let mut plates = HashMap::new();
+        let pbr = pbr_views(cfg, &cfg.views.pbr, &maker, &mesh, &region, None, &mut plates)?;
+        test.extend(pbr_views(cfg, &cfg.views.pbr_test, &maker, &mesh, &region, Some(&mut boxes), &mut plates)?);
         Ok(Setup {
             mesh,
             tex_size: ts,
@@ -387,6 +391,7 @@ impl Setup {
             pbr,
             test,
             boxes,
+            plates,
             samples: Arc::new(samples),
             maker,
         })
@@ -431,9 +436,19 @@ impl Setup {
     }
 
     /// The views an optimization steps through: the photos, the synthetic views, the rendered
-    /// views.
+    /// views, less those laid over a held-out photo's background (its street and camera must
+    /// not be trained on).
     pub fn training_views(&self) -> Vec<&View> {
-        self.train.iter().chain(&self.synthetic).chain(&self.pbr).collect()
+        self.train.iter().chain(&self.synthetic).chain(self.pbr.iter().filter(|v| !self.over_held_out(v))).collect()
+    }
+
+    /// Rendered training views left out because they lie over a held-out photo's background.
+    pub fn plates_held_out(&self) -> usize {
+        self.pbr.iter().filter(|v| self.over_held_out(v)).count()
+    }
+
+    fn over_held_out(&self, v: &View) -> bool {
+        self.plates.get(&v.name).is_some_and(|p| self.test.iter().any(|t| t.name == *p))
     }
 
     /// Shares of the optimizable texels that 0, 1 and 2 or more training views read: a texel
@@ -490,6 +505,7 @@ impl Setup {
             pbr: self.pbr.clone(),
             test,
             boxes: self.boxes.clone(),
+            plates: self.plates.clone(),
             samples: self.samples.clone(),
             maker: self.maker.clone(),
         }

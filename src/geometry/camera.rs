@@ -104,6 +104,28 @@ pub fn fca(cam_trans: [[f64; 3]; 2], veh_trans: [[f64; 3]; 2]) -> Camera {
     Camera::look_at(eye, at, to_mesh(up), 90.0)
 }
 
+/// How a mesh is normalized, which fixes the camera convention that fits a CARLA pose.
+#[derive(Clone, Copy, Debug, serde::Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum CameraConvention {
+    /// FCA/DAS: neural_renderer's bbox normalization, 90° FoV (FCA's CARLA samples).
+    Fca,
+    /// PAV-Camou: vertex-mean centring, max-abs scaling, 60° FoV.
+    PavCamou,
+}
+
+impl CameraConvention {
+    /// The camera of a CARLA pose with the car turned in place by `turn_deg` (its yaw).
+    pub fn camera(self, cam_trans: [[f64; 3]; 2], veh_trans: [[f64; 3]; 2], turn_deg: f64) -> Camera {
+        let mut veh = veh_trans;
+        veh[1][1] += turn_deg;
+        match self {
+            CameraConvention::Fca => fca(cam_trans, veh),
+            CameraConvention::PavCamou => pav_camou(cam_trans, veh[1][1]),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

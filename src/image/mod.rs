@@ -79,6 +79,32 @@ impl Rgb {
     }
 }
 
+/// Reads an RGBA image as straight (not premultiplied) RGB and alpha, both in [0, 1], as
+/// Blender writes PNGs with a transparent film.
+pub fn load_rgba(path: &Path) -> Result<(Rgb, Vec<f32>), ImageError> {
+    let img = image::open(path).map_err(|source| ImageError::Read { path: path.into(), source })?.to_rgba8();
+    let (w, h) = img.dimensions();
+    let raw = img.into_raw();
+    let rgb = raw.chunks(4).flat_map(|p| [p[0], p[1], p[2]]).map(|v| v as f32 / 255.0).collect();
+    let alpha = raw.chunks(4).map(|p| p[3] as f32 / 255.0).collect();
+    Ok((Rgb { width: w as usize, height: h as usize, rgb }, alpha))
+}
+
+/// `fg` with straight `alpha` laid over `bg` (the same size): `a·fg + (1 − a)·bg` per channel.
+pub fn over(fg: &Rgb, alpha: &[f32], bg: &Frame) -> Frame {
+    assert!(fg.width == bg.width && fg.height == bg.height && alpha.len() == fg.width * fg.height, "sizes differ");
+    let bgr = (0..alpha.len())
+        .flat_map(|i| {
+            let a = alpha[i];
+            [2, 1, 0].map(|c| {
+                let v = a * fg.rgb[i * 3 + c] * 255.0 + (1.0 - a) * bg.bgr[i * 3 + (2 - c)] as f32;
+                v.round().clamp(0.0, 255.0) as u8
+            })
+        })
+        .collect();
+    Frame { width: bg.width, height: bg.height, bgr }
+}
+
 /// A value in [0, 1] as an 8-bit channel (clamped, rounded), as every saved image stores it.
 pub fn to_u8(v: f32) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0).round() as u8

@@ -117,6 +117,15 @@ impl Plate {
         Ok(Plate { n, bgr })
     }
 
+    /// The plate itself.
+    pub fn frame(&self) -> Frame {
+        Frame {
+            width: self.n,
+            height: self.n,
+            bgr: self.bgr.iter().map(|v| v.round().clamp(0.0, 255.0) as u8).collect(),
+        }
+    }
+
     /// The plate with the baked car drawn as `to` sees it.
     pub fn with_car(&self, mesh: &Mesh, app: &Appearance, to: &Camera) -> Frame {
         let n = self.n;

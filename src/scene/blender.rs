@@ -119,6 +119,9 @@ pub struct Job {
     /// Raw 16-bit RGBA out, no view transform, every sample at its pixel's centre (for codes
     /// compared value by value; the uv mode always is).
     pub raw: bool,
+    /// A transparent film: 8-bit RGBA out, the car opaque and its caught shadow as alpha over
+    /// transparent black, for laying over a background plate.
+    pub transparent: bool,
     /// Views.
     pub views: Vec<JobView>,
 }
@@ -143,6 +146,7 @@ impl Job {
             clearcoat: 0.0,
             interpolation: "Linear".into(),
             raw: false,
+            transparent: false,
             views: Vec::new(),
         }
     }

@@ -43,6 +43,10 @@ if RAW:
     scene.cycles.max_bounces = 0
 else:
     scene.view_settings.view_transform = "Standard"
+    if job.get("transparent"):
+        # The car and its caught shadow over nothing: pav lays them over a background plate.
+        scene.render.film_transparent = True
+        scene.render.image_settings.color_mode = "RGBA"
     scene.cycles.max_bounces = job.get("max_bounces", 4)
     scene.cycles.caustics_reflective = False
     scene.cycles.caustics_refractive = False

@@ -24,15 +24,28 @@
 //! distances = [2.2]
 //! elevations = [10, 30]
 //! azimuth_step = 90            # or azimuths = [...]
+//!
+//! [plates]                     # and/or: the car over real photos with their car painted out
+//! photos = ["data:fca/carla_dataset/train/data1.npz"]
+//! camera = "fca"               # the convention that fits the mesh to the photos' CARLA poses
+//! turns = [-30, 0, 30]         # the car turned in place on the plate's ground, degrees
 //! ```
+//!
+//! A plate view is Cycles' car with its caught shadow on a transparent film (`<name>_car.png`),
+//! laid over the photo's [`crate::render::bake::Plate`] at the photo's own camera with the car
+//! turned, so background, camera and ground are real and only the car is rendered. The
+//! environment then only lights the car; the photo's own car shadow stays on the plate.
 
 use super::blender::{Blender, BlenderError, Job, JobView, Mode};
-use crate::geometry::camera::{spherical, Camera};
+use crate::geometry::camera::{spherical, Camera, CameraConvention};
 use crate::geometry::mesh::{Mesh, MeshError};
+use crate::image::resize::{resize, Interpolation};
+use crate::image::Frame;
 use crate::progress::Progress;
+use crate::render::bake::Plate;
 use crate::render::raster::{GBuffer, EMPTY};
 use serde::Deserialize;
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 /// Where Debian's `blender` package puts its HDR environments.
@@ -181,6 +194,28 @@ fn sixty() -> f32 {
     60.0
 }
 
+/// Background plates: real photos with their car painted out, the rendered car laid over them.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Plates {
+    /// FCA-format CARLA samples (`.npz`: photo and poses).
+    pub photos: Vec<PathBuf>,
+    /// The camera convention that fits the mesh to the samples' poses.
+    pub camera: CameraConvention,
+    /// Turns of the car in place, degrees (0: the photo's own pose).
+    pub turns: Vec<f32>,
+    /// Pixels the painted-out hole extends past the car's silhouette (default: size / 50),
+    /// since the fitted cameras are off by a few pixels at the edge.
+    #[serde(default)]
+    pub grow_px: Option<usize>,
+    /// Each photo's (camera, vehicle) CARLA poses, read by [`ViewsConfig::load`].
+    #[serde(skip)]
+    pub poses: Vec<[[[f64; 3]; 2]; 2]>,
+    /// The photos as the config names them (`data:` paths stay machine-independent).
+    #[serde(skip)]
+    pub sources: Vec<String>,
+}
+
 /// A `pav views render` config.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -192,7 +227,11 @@ pub struct ViewsConfig {
     /// Lighting environments (every pose is rendered in each).
     pub environments: Vec<Environment>,
     /// Camera grids.
+    #[serde(default)]
     pub poses: Vec<PoseGrid>,
+    /// Background plates.
+    #[serde(default)]
+    pub plates: Option<Plates>,
 }
 
 /// One view to render.
@@ -210,6 +249,13 @@ pub struct View {
     pub camera: Camera,
     /// Degrees the environment turns with the camera: the azimuth on a turntable, else 0.
     pub env_turn_deg: f32,
+    /// Index into the plates' photos of the background it is laid over, if any.
+    pub plate: Option<usize>,
+}
+
+/// `R·p`: a mesh-file-frame vector in pav's frame.
+fn rotate(r: &[[f32; 3]; 3], p: [f32; 3]) -> [f32; 3] {
+    [0, 1, 2].map(|k| r[k][0] * p[0] + r[k][1] * p[1] + r[k][2] * p[2])
 }
 
 /// `R^T·p`: a pav-frame vector in the mesh file's frame (the rotation is orthonormal).
@@ -232,6 +278,14 @@ impl ViewsConfig {
                 e.name = resolve(Path::new(&e.name))?.display().to_string();
             }
         }
+        if let Some(pl) = &mut c.plates {
+            for p in &mut pl.photos {
+                pl.sources.push(p.display().to_string());
+                *p = resolve(p)?;
+                let sample = crate::dataset::fca::CarlaSample::load(p).map_err(|e| err(e.to_string()))?;
+                pl.poses.push([sample.cam_trans, sample.veh_trans]);
+            }
+        }
         c.check().map_err(err)?;
         Ok(c)
     }
@@ -244,8 +298,19 @@ impl ViewsConfig {
                 self.render.size, self.render.samples
             ));
         }
-        if self.environments.is_empty() || self.poses.is_empty() {
-            return Err("list at least one [[environments]] and one [[poses]]".into());
+        if self.environments.is_empty() || (self.poses.is_empty() && self.plates.is_none()) {
+            return Err("list at least one [[environments]] and one [[poses]] or [plates]".into());
+        }
+        if let Some(pl) = &self.plates {
+            if pl.photos.is_empty() || pl.turns.is_empty() {
+                return Err("plates: list at least one photo and one turn".into());
+            }
+            if pl.poses.len() != pl.photos.len() {
+                return Err("plates: the photos' poses are not read (load the config with ViewsConfig::load)".into());
+            }
+            if pl.turns.iter().any(|t| !t.is_finite()) {
+                return Err("plates: turns must be finite".into());
+            }
         }
         up_rotation(&self.mesh.up)?;
         for (i, p) in self.poses.iter().enumerate() {
@@ -318,10 +383,48 @@ impl ViewsConfig {
                                 target: g.target,
                                 camera,
                                 env_turn_deg,
+                                plate: None,
                             });
                         }
                     }
                 }
+            }
+            out.extend(self.plate_views(ei));
+        }
+        out
+    }
+
+    /// The camera of plate `pi` with the car turned by `turn` degrees, in pav's frame.
+    pub fn plate_camera(&self, pi: usize, turn: f32) -> Camera {
+        let pl = self.plates.as_ref().expect("plate_camera needs plates");
+        let r = up_rotation(&self.mesh.up).expect("checked by load");
+        let [cam, veh] = pl.poses[pi];
+        let c = pl.camera.camera(cam, veh, turn as f64);
+        Camera { axes: c.axes.map(|a| rotate(&r, a)), eye: rotate(&r, c.eye), ..c }
+    }
+
+    /// The plate views in environment `ei`: every photo, every turn, at the photo's camera.
+    fn plate_views(&self, ei: usize) -> Vec<View> {
+        let Some(pl) = &self.plates else { return Vec::new() };
+        let env_name = self.environment_name(ei);
+        let mut out = Vec::new();
+        for (pi, photo) in pl.photos.iter().enumerate() {
+            let stem = photo.file_stem().map_or_else(|| format!("plate{pi}"), |s| s.to_string_lossy().into());
+            for &turn in &pl.turns {
+                let camera = self.plate_camera(pi, turn);
+                let e = camera.eye;
+                let d = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
+                // A look-at point on the optical axis, as far as the car's centre.
+                let target = [0, 1, 2].map(|k| e[k] + camera.axes[2][k] * d);
+                out.push(View {
+                    name: format!("{env_name}_{stem}_t{turn:+.0}"),
+                    environment: ei,
+                    pose: [d, (e[1] / d).asin().to_degrees(), e[0].atan2(e[2]).to_degrees().rem_euclid(360.0)],
+                    target,
+                    camera,
+                    env_turn_deg: 0.0,
+                    plate: Some(pi),
+                });
             }
         }
         out
@@ -375,7 +478,7 @@ pub fn up_rotation(up: &str) -> Result<[[f32; 3]; 3], String> {
 /// The manifest's columns. The camera (`eye`, `target`, `up`, `fov_deg`: `Camera::look_at` of
 /// them) is in the normalized mesh file's own frame, the frame `pav optimize` loads it in.
 pub const MANIFEST_HEADER: &str = "name,environment,image,mask,distance,elevation_deg,azimuth_deg,eye_x,eye_y,eye_z,\
-target_x,target_y,target_z,up_x,up_y,up_z,fov_deg,size,samples,seconds";
+target_x,target_y,target_z,up_x,up_y,up_z,fov_deg,size,samples,seconds,plate";
 
 /// One manifest row.
 #[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
@@ -420,6 +523,10 @@ pub struct ViewRecord {
     pub samples: u32,
     /// Blender's render time, seconds.
     pub seconds: f64,
+    /// The photo whose background plate the car is laid over; empty over the environment
+    /// (manifests written before plates lack the column).
+    #[serde(default)]
+    pub plate: String,
 }
 
 impl ViewRecord {
@@ -509,14 +616,22 @@ fn append_row(path: &Path, row: &ViewRecord) -> Result<(), ViewsError> {
 
 /// Names in a manifest whose image exists (what a resumed run skips). A manifest missing is an
 /// empty one; a row cut short by a kill in mid-write is dropped first, so the next row does not
-/// run into it.
+/// run into it, and an older header is brought up to date.
 pub fn rendered(manifest: &Path, dir: &Path) -> Result<HashSet<String>, ViewsError> {
     let Ok(text) = std::fs::read_to_string(manifest) else { return Ok(HashSet::new()) };
     if !text.ends_with('\n') {
         let keep = text.rfind('\n').map_or(0, |i| i + 1);
         std::fs::write(manifest, &text[..keep]).map_err(io(manifest))?;
     }
-    Ok(read_manifest(manifest)?.into_iter().filter(|r| dir.join(&r.image).exists()).map(|r| r.name).collect())
+    let rows = read_manifest(manifest)?;
+    if text.lines().next().is_some_and(|h| h != MANIFEST_HEADER) {
+        // Written before a column was added: rewritten under today's header so new rows fit.
+        std::fs::write(manifest, format!("{MANIFEST_HEADER}\n")).map_err(io(manifest))?;
+        for r in &rows {
+            append_row(manifest, r)?;
+        }
+    }
+    Ok(rows.into_iter().filter(|r| dir.join(&r.image).exists()).map(|r| r.name).collect())
 }
 
 /// What a `render_views` run did.
@@ -604,77 +719,127 @@ pub fn render_views(
     progress.set_position(resumed as u64);
     let ground_y = mesh.bounds().0[1];
     let effects: HashSet<PbrEffect> = cfg.render.effects.iter().copied().collect();
+    let n = cfg.render.size;
+    let mut plates: HashMap<usize, Frame> = HashMap::new();
     let mut rendered_now = 0;
     for (ei, env) in envs.iter().enumerate() {
-        let todo: Vec<&&View> = mine.iter().filter(|v| v.environment == ei && !done.contains(&v.name)).collect();
-        if todo.is_empty() {
-            continue;
-        }
-        let mut job = Job::new(Mode::Pbr, obj.clone(), cfg.render.size, cfg.render.samples, ground_y);
-        job.texture = Some(std::fs::canonicalize(&texture).map_err(io(&texture))?);
-        job.tex_size = [tex.width, tex.height];
-        job.environment = Some(env.clone());
-        job.env_strength = cfg.environments[ei].strength;
-        job.shadows = effects.contains(&PbrEffect::Shadows);
-        if effects.contains(&PbrEffect::Reflections) {
-            (job.metallic, job.roughness, job.clearcoat) = (0.3, 0.35, 0.5);
-        }
-        job.views = todo
-            .iter()
-            .map(|v| JobView {
-                env_turn_deg: v.env_turn_deg,
-                ..JobView::new(&v.name, &v.camera, views_dir.join(format!("{}.png", v.name)))
-            })
-            .collect();
-        let mut failure = None;
-        blender.run(&job, dir, |name, secs| {
-            let Some(v) = todo.iter().find(|v| v.name == name) else { return };
-            let g = GBuffer::render(&mesh, &v.camera, cfg.render.size);
-            let mask: Vec<f32> = g.face.iter().flat_map(|f| [if *f == EMPTY { 0.0 } else { 1.0 }; 3]).collect();
-            let mask_path = views_dir.join(format!("{name}_mask.png"));
-            if let Err(e) = crate::image::save_rgb(&mask_path, cfg.render.size, cfg.render.size, &mask) {
-                failure.get_or_insert(ViewsError::Image(e));
-                return;
+        // Grid views over the environment, then plate views on a transparent film.
+        for on_plates in [false, true] {
+            let todo: Vec<&&View> = mine
+                .iter()
+                .filter(|v| v.environment == ei && v.plate.is_some() == on_plates && !done.contains(&v.name))
+                .collect();
+            if todo.is_empty() {
+                continue;
             }
-            let [d, e, a] = v.pose;
-            let (eye, target, up) =
-                (unrotate(&rot, v.camera.eye), unrotate(&rot, v.target), unrotate(&rot, [0.0, 1.0, 0.0]));
-            let row = ViewRecord {
-                name: name.into(),
-                environment: cfg.environment_name(ei),
-                image: format!("views/{name}.png").into(),
-                mask: format!("views/{name}_mask.png").into(),
-                distance: d,
-                elevation_deg: e,
-                azimuth_deg: a,
-                eye_x: eye[0],
-                eye_y: eye[1],
-                eye_z: eye[2],
-                target_x: target[0],
-                target_y: target[1],
-                target_z: target[2],
-                up_x: up[0],
-                up_y: up[1],
-                up_z: up[2],
-                fov_deg: v.camera.fov_deg,
-                size: cfg.render.size,
-                samples: cfg.render.samples,
-                seconds: (secs * 1000.0).round() / 1000.0,
-            };
-            if let Err(e) = append_row(&manifest, &row) {
-                failure.get_or_insert(e);
-                return;
+            let mut job = Job::new(Mode::Pbr, obj.clone(), n, cfg.render.samples, ground_y);
+            job.texture = Some(std::fs::canonicalize(&texture).map_err(io(&texture))?);
+            job.tex_size = [tex.width, tex.height];
+            job.environment = Some(env.clone());
+            job.env_strength = cfg.environments[ei].strength;
+            job.shadows = effects.contains(&PbrEffect::Shadows);
+            job.transparent = on_plates;
+            if effects.contains(&PbrEffect::Reflections) {
+                (job.metallic, job.roughness, job.clearcoat) = (0.3, 0.35, 0.5);
             }
-            rendered_now += 1;
-            progress.advance(1);
-            progress.status(&format!("{name}: {secs:.1} s"));
-        })?;
-        if let Some(e) = failure {
-            return Err(e);
+            let out_name = |v: &View| if on_plates { format!("{}_car.png", v.name) } else { format!("{}.png", v.name) };
+            job.views = todo
+                .iter()
+                .map(|v| JobView {
+                    env_turn_deg: v.env_turn_deg,
+                    ..JobView::new(&v.name, &v.camera, views_dir.join(out_name(v)))
+                })
+                .collect();
+            let mut failure = None;
+            blender.run(&job, dir, |name, secs| {
+                let Some(v) = todo.iter().find(|v| v.name == name) else { return };
+                let mut done_one = || -> Result<(), ViewsError> {
+                    if let Some(pi) = v.plate {
+                        let plate = match plates.entry(pi) {
+                            std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+                            std::collections::hash_map::Entry::Vacant(e) => e.insert(plate_frame(cfg, &mesh, pi)?),
+                        };
+                        let car = views_dir.join(out_name(v));
+                        let (rgb, alpha) = crate::image::load_rgba(&car)?;
+                        let out = crate::image::over(&rgb, &alpha, plate);
+                        let path = views_dir.join(format!("{name}.png"));
+                        let px: Vec<u8> = out.bgr.chunks(3).flat_map(|p| [p[2], p[1], p[0]]).collect();
+                        crate::image::save_rgb8(&path, n, n, px)?;
+                    }
+                    let g = GBuffer::render(&mesh, &v.camera, n);
+                    let mask: Vec<f32> = g.face.iter().flat_map(|f| [if *f == EMPTY { 0.0 } else { 1.0 }; 3]).collect();
+                    crate::image::save_rgb(&views_dir.join(format!("{name}_mask.png")), n, n, &mask)?;
+                    let [d, e, a] = v.pose;
+                    let up = if v.plate.is_some() { v.camera.axes[1] } else { [0.0, 1.0, 0.0] };
+                    let (eye, target, up) =
+                        (unrotate(&rot, v.camera.eye), unrotate(&rot, v.target), unrotate(&rot, up));
+                    let row = ViewRecord {
+                        name: name.into(),
+                        environment: cfg.environment_name(ei),
+                        image: format!("views/{name}.png").into(),
+                        mask: format!("views/{name}_mask.png").into(),
+                        distance: d,
+                        elevation_deg: e,
+                        azimuth_deg: a,
+                        eye_x: eye[0],
+                        eye_y: eye[1],
+                        eye_z: eye[2],
+                        target_x: target[0],
+                        target_y: target[1],
+                        target_z: target[2],
+                        up_x: up[0],
+                        up_y: up[1],
+                        up_z: up[2],
+                        fov_deg: v.camera.fov_deg,
+                        size: n,
+                        samples: cfg.render.samples,
+                        seconds: (secs * 1000.0).round() / 1000.0,
+                        plate: v.plate.map_or_else(String::new, |pi| {
+                            let pl = cfg.plates.as_ref().expect("a plate view has plates");
+                            pl.sources.get(pi).cloned().unwrap_or_else(|| pl.photos[pi].display().to_string())
+                        }),
+                    };
+                    append_row(&manifest, &row)
+                };
+                match done_one() {
+                    Ok(()) => {
+                        rendered_now += 1;
+                        progress.advance(1);
+                        progress.status(&format!("{name}: {secs:.1} s"));
+                    }
+                    Err(e) => {
+                        failure.get_or_insert(e);
+                    }
+                }
+            })?;
+            if let Some(e) = failure {
+                return Err(e);
+            }
         }
     }
     progress.end(None);
     Ok(RenderSummary { total, resumed, rendered: rendered_now, manifest })
+}
+
+/// Plate `pi` of the config at the render size: the photo, resized if it is not already, with
+/// its car (as the plates' camera sees the mesh) painted out.
+fn plate_frame(cfg: &ViewsConfig, mesh: &Mesh, pi: usize) -> Result<Frame, ViewsError> {
+    let pl = cfg.plates.as_ref().expect("a plate view has plates");
+    let path = &pl.photos[pi];
+    let bad = |msg: String| ViewsError::Config { path: path.clone(), msg };
+    let sample = crate::dataset::fca::CarlaSample::load(path).map_err(|e| bad(e.to_string()))?;
+    let n = cfg.render.size;
+    let mut photo = sample.image;
+    if photo.width != photo.height {
+        return Err(bad(format!("a plate must be square; this photo is {}x{}", photo.width, photo.height)));
+    }
+    if photo.width != n {
+        let bgr = resize(&photo, n, n, Interpolation::Antialias);
+        photo = Frame { width: n, height: n, bgr: bgr.iter().map(|v| v.round().clamp(0.0, 255.0) as u8).collect() };
+    }
+    let plate = Plate::new(mesh, &photo, &cfg.plate_camera(pi, 0.0), pl.grow_px.unwrap_or(n / 50))
+        .map_err(|e| bad(format!("painting the car out: {e}")))?;
+    Ok(plate.frame())
 }
 
 /// Joins the shard manifests `manifest.K-of-N.csv` in `dir` into `manifest.csv`, refusing a
@@ -747,6 +912,13 @@ mod tests {
     fn shipped_configs_give_the_views_they_promise() {
         assert_eq!(shipped("ci.toml").views().len(), 6);
         assert_eq!(shipped("etron-64.toml").views().len(), 64);
+        // Plates: 2 environments × 11 photos × 5 turns, each at its photo's camera.
+        let plates = shipped("etron-plates.toml");
+        let views = plates.views();
+        assert_eq!(views.len(), 110);
+        assert!(views.iter().all(|v| v.plate.is_some()));
+        let (a, b) = (&views[0].camera, &plates.plate_camera(0, -40.0));
+        assert_eq!((a.eye, a.axes), (b.eye, b.axes));
         // The paper's grid: 4 distances × (3 elevations × 20 azimuths + 2 × 8) per environment.
         let grid = shipped("paper-grid.toml");
         assert_eq!(grid.views().len(), 304 * grid.environments.len());
@@ -754,6 +926,43 @@ mod tests {
         // A camera on the grid looks at the target from its distance.
         let d = v.camera.to_view(v.target);
         assert!(d[0].abs() < 1e-4 && d[1].abs() < 1e-4 && (d[2] - v.pose[0]).abs() < 1e-4, "{d:?}");
+    }
+
+    #[test]
+    fn a_manifest_from_before_the_plate_column_reads_and_is_brought_up_to_date() {
+        let dir = tempfile::tempdir().unwrap();
+        let old_header = MANIFEST_HEADER.trim_end_matches(",plate");
+        let row = "v1,city,views/v1.png,views/v1_mask.png,2.2,15,0,0,1,2,0,0,0,0,1,0,60,64,4,1.5";
+        let manifest = dir.path().join("manifest.csv");
+        std::fs::write(&manifest, format!("{old_header}\n{row}\n")).unwrap();
+        std::fs::create_dir_all(dir.path().join("views")).unwrap();
+        std::fs::write(dir.path().join("views/v1.png"), b"").unwrap();
+        let done = rendered(&manifest, dir.path()).unwrap();
+        assert!(done.contains("v1"));
+        let text = std::fs::read_to_string(&manifest).unwrap();
+        assert_eq!(text.lines().next(), Some(MANIFEST_HEADER));
+        let rows = read_manifest(&manifest).unwrap();
+        assert_eq!((rows.len(), rows[0].plate.as_str(), rows[0].seconds), (1, "", 1.5));
+    }
+
+    #[test]
+    fn plates_without_turns_or_unread_poses_are_refused() {
+        let text = |turns: &str| {
+            format!(
+                "[mesh]\nobj = \"m.obj\"\n[render]\nsize = 64\nsamples = 1\n[[environments]]\nname = \"city\"\n\
+                 [plates]\nphotos = [\"a.npz\"]\ncamera = \"fca\"\nturns = [{turns}]\n"
+            )
+        };
+        let no_turns: ViewsConfig = toml::from_str(&text("")).unwrap();
+        assert!(no_turns.check().unwrap_err().contains("one turn"));
+        // Parsed but not loaded: the photos' poses were never read.
+        let unread: ViewsConfig = toml::from_str(&text("0")).unwrap();
+        assert!(unread.check().unwrap_err().contains("poses are not read"));
+        let missing = tempfile::tempdir().unwrap();
+        let path = missing.path().join("v.toml");
+        std::fs::write(&path, text("0").replace("m.obj", "/dev/null")).unwrap();
+        let e = ViewsConfig::load(&path).unwrap_err().to_string();
+        assert!(e.contains("a.npz"), "{e}");
     }
 
     #[test]
