@@ -130,6 +130,17 @@ impl Run {
     }
 }
 
+/// The config recorded in the `run.toml` of `dir` or of its parent (a crossval fold's texture
+/// sits one folder below its run), resolved against the run's working directory; None when
+/// there is none or it no longer exists.
+pub fn recorded_config(dir: &Path) -> Option<PathBuf> {
+    let run = [Some(dir), dir.parent()].into_iter().flatten().map(|d| d.join(FILE)).find(|p| p.exists())?;
+    let v: toml::Value = toml::from_str(&std::fs::read_to_string(run).ok()?).ok()?;
+    let path = Path::new(v.get("config")?.get("path")?.as_str()?);
+    let full = Path::new(v.get("cwd")?.as_str()?).join(path);
+    full.exists().then_some(full)
+}
+
 /// First line of `program args…`'s output (stdout, else stderr), when it runs.
 pub fn tool_version(program: &str, args: &[&str]) -> Option<String> {
     let out = std::process::Command::new(program).args(args).output().ok()?;

@@ -73,6 +73,16 @@ fn bad_meshes_are_clear_errors() {
 fn eval_digital_resamples_a_texture_of_another_size() {
     let shared = common::real_data();
     let tmp = tempfile::tempdir().unwrap();
+    // A texture whose run recorded a YOLOX-only config: starred for that config, not this one's.
+    let yolox_run = tmp.path().join("yolox_run");
+    std::fs::create_dir_all(&yolox_run).unwrap();
+    std::fs::copy(shared.join("rauca-e2e/RAUCA_E2E.png"), yolox_run.join("texture.png")).unwrap();
+    let record = format!(
+        "cwd = {:?}\n[config]\npath = \"configs/optimize/half-turns-yolox.toml\"\n",
+        common::repo().display().to_string()
+    );
+    std::fs::write(yolox_run.join("run.toml"), record).unwrap();
+    let out_dir = tmp.path().join("out");
     let o = pav()
         .args([
             "eval-digital",
@@ -81,14 +91,17 @@ fn eval_digital_resamples_a_texture_of_another_size() {
             "-d",
             "configs/detectors/yolov3-tiny.toml",
         ])
-        .args(["-t", "data:rauca-e2e/RAUCA_E2E.png", "--random-seeds", "2", "-o"])
-        .arg(tmp.path())
+        .args(["-t", "data:rauca-e2e/RAUCA_E2E.png", "-t"])
+        .arg(yolox_run.join("texture.png"))
+        .args(["--random-seeds", "2", "-o"])
+        .arg(&out_dir)
         .output()
         .unwrap();
     let out = text(&o);
     assert!(o.status.success(), "{out}");
+
     // The run's record names the texture by manifest entry and hash, and the models it ran.
-    let run = common::run_record(&tmp.path().join("run.toml"));
+    let run = common::run_record(&out_dir.join("run.toml"));
     let texture = common::record_input(&run, "rauca-e2e/RAUCA_E2E.png");
     assert_eq!(texture["data"].as_str(), Some("rauca-e2e/RAUCA_E2E.png"), "{run}");
     let entry = pav::data::manifest::Manifest::builtin().get("rauca-e2e/RAUCA_E2E.png").unwrap();
@@ -97,7 +110,7 @@ fn eval_digital_resamples_a_texture_of_another_size() {
     common::record_input(&run, "yolov3-tiny.onnx");
     assert!(run["config"]["path"].as_str().unwrap().ends_with("half-turns.toml"), "{run}");
     assert!(run["tools"]["onnxruntime"].as_str().unwrap().contains("libonnxruntime.so.1.31"), "{run}");
-    let csv = std::fs::read_to_string(tmp.path().join("digital.csv")).unwrap();
+    let csv = std::fs::read_to_string(out_dir.join("digital.csv")).unwrap();
     let column = |texture: &str, name: &str| -> f64 {
         let line = csv
             .lines()
@@ -115,12 +128,18 @@ fn eval_digital_resamples_a_texture_of_another_size() {
     // ASR over the views whose original paint is detected: 0 for the original itself; RAUCA-E2E's
     // texture hides the car on every one of them (measured 1.000).
     assert_eq!(column("original", "asr_detected"), 0.0);
+    let white = |texture: &str| {
+        let line = csv.lines().find(|l| l.contains(&format!(",{texture},all,"))).unwrap();
+        let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+        line.split(',').nth(header.iter().position(|h| *h == "white_box").unwrap()).unwrap().to_string()
+    };
+    assert_eq!((white("rauca-e2e").as_str(), white("yolox_run").as_str()), ("true", "false"), "{csv}");
     let (asr, asr_detected) = (column("rauca-e2e", "asr"), column("rauca-e2e", "asr_detected"));
     eprintln!("RAUCA-E2E ASR {asr:.3}, over detected originals {asr_detected:.3}");
     assert!(asr_detected >= 0.9, "{csv}");
     // Every view's score per texture and seed, and RAUCA-E2E paired against each other texture
     // on the 5 held-out views: recomputed here from the per-view rows.
-    let views = std::fs::read_to_string(tmp.path().join("digital_views.csv")).unwrap();
+    let views = std::fs::read_to_string(out_dir.join("digital_views.csv")).unwrap();
     let rows: Vec<Vec<&str>> = views.lines().skip(1).map(|l| l.split(',').collect()).collect();
     // fold,role,view,texture,seed,detector,score
     let held = |tex: &str, seed: &str| -> Vec<(String, f64)> {
@@ -132,7 +151,7 @@ fn eval_digital_resamples_a_texture_of_another_size() {
     let (mine, orig, r1, r2) =
         (held("rauca-e2e", "0"), held("original", "0"), held("random32", "1"), held("random32", "2"));
     assert_eq!([mine.len(), orig.len(), r1.len(), r2.len()], [5; 4], "{views}");
-    let paired = std::fs::read_to_string(tmp.path().join("digital_paired.csv")).unwrap();
+    let paired = std::fs::read_to_string(out_dir.join("digital_paired.csv")).unwrap();
     let mean_vs = |against: &str| -> f64 {
         let line = paired.lines().find(|l| l.starts_with(&format!("rauca-e2e,yolov3-tiny,true,{against},"))).unwrap();
         assert!(line.ends_with(",5"), "{line}");

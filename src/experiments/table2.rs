@@ -13,6 +13,7 @@ use crate::eval::digital::{ap50, asr, ImageDetections};
 use crate::image::{to_u8, Frame};
 use crate::progress::Progress;
 use crate::table::{unique, write_csv};
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 /// Lowest car score kept for P@0.5 (COCO evaluations keep low-scoring boxes for the PR curve).
@@ -126,7 +127,7 @@ pub fn score_textures(
     detectors: &mut [Box<dyn Detector>],
     conditions: &[Condition],
     threshold: f32,
-    white_box: &[String],
+    white_box: &dyn Fn(&str) -> Vec<String>,
     progress: &dyn Progress,
 ) -> Result<(Vec<DigitalRow>, Vec<ViewRecord>), crate::detect::DetectError> {
     progress.begin("composites", (conditions.len() * (setup.train.len() + setup.test.len())) as u64);
@@ -178,8 +179,14 @@ pub fn score_textures(
                 let keep = |s: &str| split == "all" || s == split;
                 let ims: Vec<ImageDetections> =
                     per[d].iter().filter(|(s, _, _)| keep(s)).map(|(_, i, _)| i.clone()).collect();
-                let mut row =
-                    aggregate(det.name(), white_box.iter().any(|w| w == det.name()), name, split, &ims, threshold);
+                let mut row = aggregate(
+                    det.name(),
+                    white_box(name).iter().any(|w| w == det.name()),
+                    name,
+                    split,
+                    &ims,
+                    threshold,
+                );
                 if let (Some(r), true) = (row.as_mut(), original.is_some()) {
                     let missed: Vec<bool> = per[d]
                         .iter()
@@ -220,6 +227,10 @@ pub fn eval_digital(
         }
     }
     let mut mine = Vec::new();
+    // A texture whose folder records the config it was optimized with is starred for that
+    // config's white boxes; any other texture for this config's.
+    let config_wb = cfg.white_box_names()?;
+    let mut own_wb: HashMap<String, Vec<String>> = HashMap::new();
     for t in textures {
         let tex = setup.load_texture(t)?;
         let name = t
@@ -228,16 +239,20 @@ pub fn eval_digital(
             .or(t.file_stem())
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| t.display().to_string());
+        let recorded = t.parent().and_then(crate::provenance::recorded_config);
+        if let Some(wb) = recorded.and_then(|c| OptimizeConfig::load(&c).ok()?.white_box_names().ok()) {
+            own_wb.insert(name.clone(), wb);
+        }
         mine.push(name.clone());
         conditions.push(Condition { name, seed: 0, texture: Some(tex) });
     }
     let mut dets = load_detectors(&scoring.detectors, &[], 1)?;
-    let white_box = cfg.white_box_names()?;
+    let white_box = |name: &str| own_wb.get(name).cloned().unwrap_or_else(|| config_wb.clone());
     let (rows, records) = score_textures(&setup, &mut dets, &conditions, threshold, &white_box, progress)?;
     create_dir(out)?;
     write_csv(&out.join("digital.csv"), &rows)?;
     write_csv(&out.join("digital_views.csv"), &records)?;
-    let pairs: Vec<Paired> = mine.iter().flat_map(|m| paired(&records, &white_box, m)).collect();
+    let pairs: Vec<Paired> = mine.iter().flat_map(|m| paired(&records, &white_box(m), m)).collect();
     write_csv(&out.join("digital_paired.csv"), &pairs)?;
     let mut md = format!(
         "# Digital evaluation (ASR / P@0.5 in %, * = white-box)\n\nCar = COCO `car`; detected at score ≥ {threshold}; P@0.5 is car AP at IoU 0.5 over boxes from score {AP_MIN_SCORE}. Views composited at {}² (lit, no EoT), 8-bit. Config: {}.\n",
@@ -285,10 +300,12 @@ pub fn markdown_scores(rows: &[DigitalRow], split: &str) -> String {
 
 fn table(rows: &[DigitalRow], split: &str, cell: impl Fn(&DigitalRow, &str) -> String) -> String {
     let textures = unique(rows.iter().map(|r| r.texture.clone()));
-    let detectors = unique(rows.iter().map(|r| (r.detector.clone(), r.white_box)));
+    let detectors = unique(rows.iter().map(|r| r.detector.clone()));
     let mut s = format!("| detector | {} |\n|---|{}\n", textures.join(" | "), "---|".repeat(textures.len()));
-    for (d, wb) in &detectors {
-        s.push_str(&format!("| {d}{} |", if *wb { " (white-box)" } else { "" }));
+    for d in &detectors {
+        // Labelled white-box when every texture was trained against it; else the cells say.
+        let wb = rows.iter().filter(|r| &r.detector == d).all(|r| r.white_box);
+        s.push_str(&format!("| {d}{} |", if wb { " (white-box)" } else { "" }));
         for t in &textures {
             match rows.iter().find(|r| &r.detector == d && &r.texture == t && r.split == split) {
                 Some(r) => {
