@@ -61,6 +61,8 @@ pub enum Attr {
     Ints(Vec<i64>),
     /// A list of floats.
     Floats(Vec<f32>),
+    /// A tensor (a `Constant` node's value).
+    Tensor(Initializer),
 }
 
 /// A graph node: `op_type(inputs) -> outputs` with attributes.
@@ -190,6 +192,10 @@ fn encode_attr(name: &str, a: &Attr) -> Buf {
                 b.float(7, *f);
             }
             b.int(20, 6);
+        }
+        Attr::Tensor(t) => {
+            b.msg(5, encode_init(t));
+            b.int(20, 4);
         }
     }
     b
@@ -416,10 +422,11 @@ fn push_floats(out: &mut Vec<f32>, f: Field) -> Result<(), ProtoError> {
 fn decode_attr(b: &[u8]) -> Result<(String, Attr), ProtoError> {
     let (mut name, mut ty) = (String::new(), 0u64);
     let (mut f, mut i, mut s) = (None, None, None);
-    let (mut ints, mut floats) = (Vec::new(), Vec::new());
+    let (mut ints, mut floats, mut tensor) = (Vec::new(), Vec::new(), None);
     each(b, |n, v| {
         match (n, v) {
             (1, Field::Bytes(x)) => name = utf8(x)?,
+            (5, Field::Bytes(x)) => tensor = Some(decode_init(x)?),
             (2, Field::Fixed32(x)) => f = Some(f32::from_le_bytes(x)),
             (3, Field::Varint(x)) => i = Some(x as i64),
             (4, Field::Bytes(x)) => s = Some(utf8(x)?),
@@ -430,14 +437,15 @@ fn decode_attr(b: &[u8]) -> Result<(String, Attr), ProtoError> {
         }
         Ok(())
     })?;
-    // AttributeType: FLOAT=1, INT=2, STRING=3, FLOATS=6, INTS=7.
+    // AttributeType: FLOAT=1, INT=2, STRING=3, TENSOR=4, FLOATS=6, INTS=7.
     let a = match ty {
+        4 => Attr::Tensor(tensor.ok_or(ProtoError::Wire("a tensor attribute without its tensor"))?),
         1 => Attr::Float(f.unwrap_or(0.0)),
         2 => Attr::Int(i.unwrap_or(0)),
         3 => Attr::Str(s.unwrap_or_default()),
         6 => Attr::Floats(floats),
         7 => Attr::Ints(ints),
-        t => return Err(ProtoError::Unsupported(format!("attribute `{name}` of type {t} (tensors, graphs)"))),
+        t => return Err(ProtoError::Unsupported(format!("attribute `{name}` of type {t} (graphs, lists of tensors)"))),
     };
     Ok((name, a))
 }
