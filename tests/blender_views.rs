@@ -8,7 +8,7 @@ use pav::dataset::fca::CarlaSample;
 use pav::geometry::camera::{spherical, Camera};
 use pav::geometry::mesh::Mesh;
 use pav::render::raster::GBuffer;
-use pav::scene::align::{compare, compare_texels, pav_uv, read_uv_png, texel_code};
+use pav::scene::align::{compare, compare_texels, pav_uv, read_uv_png, silhouettes, texel_code};
 use pav::scene::blender::{Blender, Job, JobView, Mode};
 use pav::scene::views::{render_views, ViewsConfig};
 
@@ -448,25 +448,6 @@ fn load_view(dir: &std::path::Path, name: &str) -> (image::RgbImage, Vec<f32>, V
     let mask =
         image::open(v.join(format!("{name}_mask.png"))).unwrap().to_luma8().pixels().map(|p| p[0] > 127).collect();
     (img, alpha, mask)
-}
-
-/// IoU of two silhouettes, and the pixels where exactly one covers per outline pixel of `a`.
-fn silhouettes(a: &[bool], b: &[bool], n: usize) -> (f64, f64) {
-    let inter = a.iter().zip(b).filter(|(x, y)| **x && **y).count();
-    let union = a.iter().zip(b).filter(|(x, y)| **x || **y).count();
-    let outline = (0..n * n)
-        .filter(|&i| {
-            let (x, y) = (i % n, i / n);
-            a[i] && [(0, 1), (2, 1), (1, 0), (1, 2)].iter().any(|&(dx, dy)| {
-                let (xx, yy) = ((x + dx).checked_sub(1), (y + dy).checked_sub(1));
-                match (xx, yy) {
-                    (Some(xx), Some(yy)) if xx < n && yy < n => !a[yy * n + xx],
-                    _ => true,
-                }
-            })
-        })
-        .count();
-    (inter as f64 / union.max(1) as f64, (union - inter) as f64 / outline.max(1) as f64)
 }
 
 /// Plates: Cycles' e-tron laid over FCA's photos with their car painted out. At the photo's own

@@ -16,6 +16,13 @@ pub struct Frame {
     pub bgr: Vec<u8>,
 }
 
+impl Frame {
+    /// A frame from BGR levels on the 0–255 scale, each rounded and clamped to a byte.
+    pub fn from_levels(width: usize, height: usize, bgr: &[f32]) -> Frame {
+        Frame { width, height, bgr: bgr.iter().map(|v| v.round().clamp(0.0, 255.0) as u8).collect() }
+    }
+}
+
 /// An RGB image with values in [0, 1], row-major from the top-left, 3 floats per pixel.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Rgb {

@@ -119,11 +119,7 @@ impl Plate {
 
     /// The plate itself.
     pub fn frame(&self) -> Frame {
-        Frame {
-            width: self.n,
-            height: self.n,
-            bgr: self.bgr.iter().map(|v| v.round().clamp(0.0, 255.0) as u8).collect(),
-        }
+        Frame::from_levels(self.n, self.n, &self.bgr)
     }
 
     /// The plate with the baked car drawn as `to` sees it.
@@ -132,7 +128,7 @@ impl Plate {
         let mut img = self.bgr.clone();
         let g = GBuffer::render(mesh, to, n);
         Gather::new(g.uv_samples(mesh), app.size, app.size).apply(&app.bgr, 3, &mut img);
-        Frame { width: n, height: n, bgr: img.iter().map(|v| v.round().clamp(0.0, 255.0) as u8).collect() }
+        Frame::from_levels(n, n, &img)
     }
 }
 

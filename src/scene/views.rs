@@ -435,11 +435,8 @@ impl ViewsConfig {
         // The loader refuses a face corner without a UV index.
         let mut m = Mesh::load_obj(&self.mesh.obj)?;
         let r = up_rotation(&self.mesh.up).expect("checked by load");
-        for p in &mut m.positions {
-            *p = [0, 1, 2].map(|k| r[k][0] * p[0] + r[k][1] * p[1] + r[k][2] * p[2]);
-        }
-        for n in &mut m.normals {
-            *n = [0, 1, 2].map(|k| r[k][0] * n[0] + r[k][1] * n[1] + r[k][2] * n[2]);
+        for p in m.positions.iter_mut().chain(m.normals.iter_mut()) {
+            *p = rotate(&r, *p);
         }
         match self.mesh.normalize {
             Normalize::Pav => {
@@ -834,8 +831,7 @@ fn plate_frame(cfg: &ViewsConfig, mesh: &Mesh, pi: usize) -> Result<Frame, Views
         return Err(bad(format!("a plate must be square; this photo is {}x{}", photo.width, photo.height)));
     }
     if photo.width != n {
-        let bgr = resize(&photo, n, n, Interpolation::Antialias);
-        photo = Frame { width: n, height: n, bgr: bgr.iter().map(|v| v.round().clamp(0.0, 255.0) as u8).collect() };
+        photo = Frame::from_levels(n, n, &resize(&photo, n, n, Interpolation::Antialias));
     }
     let plate = Plate::new(mesh, &photo, &cfg.plate_camera(pi, 0.0), pl.grow_px.unwrap_or(n / 50))
         .map_err(|e| bad(format!("painting the car out: {e}")))?;

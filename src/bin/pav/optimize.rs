@@ -51,8 +51,9 @@ pub fn run(a: &Args) -> Result<()> {
     if let Some(k) = &p.pbr_kept {
         eprintln!("views.pbr: {k}");
     }
-    if s.plates_held_out() > 0 {
-        eprintln!("views.pbr: {} views over held-out photos' backgrounds left out of training", s.plates_held_out());
+    let held_out = s.plates_held_out();
+    if held_out > 0 {
+        eprintln!("views.pbr: {held_out} views over held-out photos' backgrounds left out of training");
     }
     let [none, one, more] = s.region_views_shares();
     eprintln!(
