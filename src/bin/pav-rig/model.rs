@@ -22,8 +22,8 @@ pub enum Cmd {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Write the float surrogate of a dynamically quantized ONNX model (ConvInteger chains become
-    /// float Convs with dequantized weights): differentiable, but not the evaluated model.
+    /// Write the float surrogate of a dynamically quantized ONNX model (ConvInteger and MatMulInteger
+    /// chains become float Convs and MatMuls with dequantized weights): not the evaluated model.
     Surrogate {
         /// The quantized model, e.g. yolov8n_int8.onnx.
         model: PathBuf,
@@ -52,9 +52,10 @@ pub fn run(c: &Cmd) -> Result<()> {
             let b = s.to_bytes();
             std::fs::write(out, &b).with_context(|| format!("writing {}", out.display()))?;
             eprintln!(
-                "wrote {} ({} quantized convolutions made float, {} nodes removed, {:.1} MB): a surrogate, not the evaluated model",
+                "wrote {} ({} quantized convolutions and {} matrix products made float, {} nodes removed, {:.1} MB): a surrogate, not the evaluated model",
                 out.display(),
                 r.convs,
+                r.matmuls,
                 r.nodes_removed,
                 b.len() as f64 / 1e6
             );
