@@ -20,8 +20,8 @@ pub struct Checkpoint {
     pub steps_done: u64,
     /// EoT generator state.
     pub rng_state: u64,
-    /// Texture values.
-    pub texture: Vec<f32>,
+    /// The optimized values: the texture's, or its pyramid's levels (`attack::pyramid`).
+    pub params: Vec<f32>,
     /// Optimizer state.
     pub adam: Adam,
 }
@@ -62,7 +62,7 @@ impl Checkpoint {
     /// Writes to `path` atomically.
     pub fn save(&self, path: &Path) -> Result<(), CheckpointError> {
         let io = |source| CheckpointError::Io { path: path.display().to_string(), source };
-        let n = self.texture.len();
+        let n = self.params.len();
         let mut b = Vec::with_capacity(64 + 12 * n);
         b.extend_from_slice(MAGIC);
         for v in [self.config_hash, self.steps_done, self.rng_state, self.adam.t, n as u64] {
@@ -71,7 +71,7 @@ impl Checkpoint {
         for v in [self.adam.lr, self.adam.beta1, self.adam.beta2, self.adam.eps] {
             b.extend_from_slice(&v.to_le_bytes());
         }
-        put_f32s(&mut b, &self.texture);
+        put_f32s(&mut b, &self.params);
         put_f32s(&mut b, &self.adam.m);
         put_f32s(&mut b, &self.adam.v);
         let sum = fingerprint(&b);
@@ -118,7 +118,7 @@ impl Checkpoint {
             config_hash: u(0),
             steps_done: u(1),
             rng_state: u(2),
-            texture: arr(0),
+            params: arr(0),
             adam: Adam { lr: f(0), beta1: f(1), beta2: f(2), eps: f(3), t: u(3), m: arr(1), v: arr(2) },
         })
     }
@@ -140,7 +140,7 @@ mod tests {
             config_hash: 99,
             steps_done: 12,
             rng_state: 0xdead_beef,
-            texture: vec![0.5, 0.25, 1e-4, 0.9999],
+            params: vec![0.5, 0.25, 1e-4, 0.9999],
             adam,
         };
         c.save(&p).unwrap();

@@ -154,6 +154,14 @@ pub struct OptimizerConfig {
     /// Texture values are kept in this range.
     #[serde(default = "clamp_default")]
     pub clamp: [f32; 2],
+    /// The texture as a sum of this many resolutions (side n, n/2, …; `attack::pyramid`): more
+    /// than 1 biases the optimization towards large structures. 1 (the default) optimizes texels.
+    #[serde(default = "one_level")]
+    pub levels: usize,
+}
+
+fn one_level() -> usize {
+    1
 }
 
 fn clamp_default() -> [f32; 2] {
@@ -303,6 +311,9 @@ impl OptimizeConfig {
         if !(16..=8192).contains(&self.mesh.texture_size) {
             return Err(format!("mesh.texture_size must be in 16..=8192, got {}", self.mesh.texture_size));
         }
+        if let Err(e) = super::pyramid::Pyramid::new(self.mesh.texture_size, self.optimizer.levels) {
+            return Err(format!("optimizer.levels: {e}"));
+        }
         if let Init::Grey(g) = self.mesh.init {
             if !(0.0..=1.0).contains(&g) {
                 return Err(format!("mesh.init must be in [0, 1] or \"random\", got {g}"));
@@ -419,6 +430,11 @@ mod tests {
         assert_eq!(variant("init = 0.5", "init = \"random\"").unwrap().mesh.init, Init::Named(InitName::Random));
         let e = variant("weight = 1.0", "weight = 0.0").unwrap_err().to_string();
         assert!(e.contains("white_box weights"), "{e}");
+        // Levels default to one (texels); more must halve the atlas evenly (256 → 8 at 6 levels).
+        assert_eq!(variant("seed = 0", "seed = 0").unwrap().optimizer.levels, 1);
+        assert_eq!(variant("seed = 0", "seed = 0\nlevels = 6").unwrap().optimizer.levels, 6);
+        let e = variant("seed = 0", "seed = 0\nlevels = 9").unwrap_err().to_string();
+        assert!(e.contains("optimizer.levels") && e.contains("halve"), "{e}");
     }
 
     #[test]

@@ -10,6 +10,7 @@ pub mod export;
 pub mod loss;
 #[cfg(feature = "optimize")]
 pub mod optimize;
+pub mod pyramid;
 pub mod setup;
 pub mod smooth;
 pub mod uv;

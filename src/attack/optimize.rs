@@ -8,6 +8,7 @@
 use super::adam::Adam;
 use super::checkpoint::{fingerprint, Checkpoint};
 use super::config::OptimizeConfig;
+use super::pyramid::Pyramid;
 use super::setup::Setup;
 use super::smooth::smoothness;
 use super::view::View;
@@ -130,6 +131,9 @@ pub enum OptimizeError {
     /// The initial texture's file.
     #[error(transparent)]
     Init(#[from] crate::image::ImageError),
+    /// The config's `optimizer.levels` do not fit its texture size.
+    #[error(transparent)]
+    Pyramid(#[from] super::pyramid::PyramidError),
     /// Writing `loss.csv`.
     #[error("writing {path}: {source}")]
     Log {
@@ -291,7 +295,10 @@ pub fn optimize_texture(
         fingerprint(&std::fs::read(cfg_path).map_err(|source| OptimizeError::Io { path: cfg_path.into(), source })?);
     let ckpt_path = opts.out.join("checkpoint.bin");
     let n_values = setup.tex_size * setup.tex_size * 3;
-    let (mut tex, mut adam, mut rng, start, mut log) = if opts.resume && ckpt_path.exists() {
+    let pyramid = Pyramid::new(setup.tex_size, cfg.optimizer.levels)?;
+    // The start is needed after a resume too: the pyramid's projection restores it off the region.
+    let start_tex = setup.initial_texture(&cfg.mesh.init, cfg.optimizer.seed)?;
+    let (mut params, mut adam, mut rng, start, mut log) = if opts.resume && ckpt_path.exists() {
         let c = Checkpoint::load(&ckpt_path)?;
         let refuse = |why: String| OptimizeError::Resume { checkpoint: ckpt_path.clone(), why };
         if c.config_hash != hash {
@@ -300,12 +307,12 @@ pub fn optimize_texture(
                 cfg_path.display()
             )));
         }
-        if c.texture.len() != n_values {
-            return Err(refuse("its texture size does not match the config's".into()));
+        if c.params.len() != pyramid.len() {
+            return Err(refuse("its parameter count does not match the config's texture size and levels".into()));
         }
         let log = read_log(&opts.out, c.steps_done);
         progress.note(&format!("resuming from step {} ({})", c.steps_done, ckpt_path.display()));
-        (c.texture, c.adam, Rng { state: c.rng_state }, c.steps_done, log)
+        (c.params, c.adam, Rng { state: c.rng_state }, c.steps_done, log)
     } else {
         if ckpt_path.exists() {
             return Err(OptimizeError::Resume {
@@ -313,19 +320,22 @@ pub fn optimize_texture(
                 why: "exists: pass --resume to continue it, or choose another --out".into(),
             });
         }
-        let tex = setup.initial_texture(&cfg.mesh.init, cfg.optimizer.seed)?;
-        (tex, Adam::new(n_values, cfg.optimizer.lr), Rng::new(cfg.optimizer.seed), 0, Vec::new())
+        let p = pyramid.from_texture(&start_tex);
+        (p, Adam::new(pyramid.len(), cfg.optimizer.lr), Rng::new(cfg.optimizer.seed), 0, Vec::new())
     };
+    let active = pyramid.active(&setup.region_values);
+    let clamp = (cfg.optimizer.clamp[0], cfg.optimizer.clamp[1]);
+    let mut tex = pyramid.compose(&params);
     let views = setup.training_views();
     let n = views.len() as u64;
     let epochs = opts.epochs.unwrap_or(cfg.optimizer.epochs) as u64;
     let total = n * epochs;
-    let save = |tex: &[f32], adam: &Adam, rng: &Rng, done: u64, log: &[StepLog]| -> Result<(), OptimizeError> {
+    let save = |params: &[f32], adam: &Adam, rng: &Rng, done: u64, log: &[StepLog]| -> Result<(), OptimizeError> {
         Checkpoint {
             config_hash: hash,
             steps_done: done,
             rng_state: rng.state,
-            texture: tex.to_vec(),
+            params: params.to_vec(),
             adam: adam.clone(),
         }
         .save(&ckpt_path)?;
@@ -338,7 +348,7 @@ pub fn optimize_texture(
     let mut order = epoch_order(n as usize, cfg.optimizer.seed, start / n.max(1));
     for s in start..total {
         if stop.load(Ordering::SeqCst) {
-            save(&tex, &adam, &rng, s, &log)?;
+            save(&params, &adam, &rng, s, &log)?;
             progress.end(Some("stopped; continue with --resume"));
             return Ok(Outcome { texture: tex, log, finish: Finish::Stopped });
         }
@@ -354,7 +364,14 @@ pub fn optimize_texture(
         let finite = rec.total.is_finite() && setup.region_values.iter().all(|&i| grad[i as usize].is_finite());
         if finite {
             let t = Instant::now();
-            adam.step(&mut tex, &grad, &setup.region_values, (cfg.optimizer.clamp[0], cfg.optimizer.clamp[1]));
+            if pyramid.sides.len() == 1 {
+                adam.step(&mut params, &grad, &setup.region_values, clamp);
+            } else {
+                // Unclamped on the levels; the projection then clamps the composed texture.
+                adam.step(&mut params, &pyramid.pullback(&grad), &active, (f32::NEG_INFINITY, f32::INFINITY));
+                pyramid.project(&mut params, &setup.region_values, &start_tex, clamp);
+            }
+            tex = pyramid.compose(&params);
             rec.optimizer_ms += t.elapsed().as_secs_f64() * 1e3;
             skips = 0;
         } else {
@@ -362,7 +379,7 @@ pub fn optimize_texture(
             skips += 1;
             progress.note(&format!("step {s} ({}): non-finite loss or gradient, step skipped", view.name));
             if skips >= opts.max_skips {
-                save(&tex, &adam, &rng, s, &log)?;
+                save(&params, &adam, &rng, s, &log)?;
                 progress.end(None);
                 return Err(OptimizeError::NotFinite {
                     skips,
@@ -377,7 +394,7 @@ pub fn optimize_texture(
         log.push(rec);
         let done = s + 1;
         if done % n == 0 || done % opts.checkpoint_every.max(1) == 0 || done == total {
-            save(&tex, &adam, &rng, done, &log)?;
+            save(&params, &adam, &rng, done, &log)?;
         }
     }
     progress.end(None);
