@@ -16,10 +16,21 @@
 //! - `Slice` (constant bounds, positive steps): the gradient spread back to the positions read and
 //!   zero elsewhere; `Reshape` (constant shape) and `Transpose`: the inverse reshape and
 //!   permutation.
+//! - For transformers (DETR): `Sub`, `Div` and broadcasting in every binary operator (the gradient
+//!   summed back over the broadcast axes), `MatMul` (G·Bᵀ and Aᵀ·G), `Pow` by a constant, `Sqrt`,
+//!   `Log`, `Neg`, `Clip`, `Softmax`, `ReduceMean`, `ReduceSum`, `ReduceMax` (to the maximum),
+//!   `Flatten`, `(Un)Squeeze`, `Cast` to float, constant `Pad`, `AveragePool` (a transposed
+//!   uniform convolution), `GlobalAveragePool`, `Expand`.
+//! - Selections: `TopK`'s values, `GatherElements` and `Gather` (constant indices) scatter the
+//!   gradient back to where they read (`ScatterElements` with `reduction = add`, opset 16); the
+//!   indices themselves carry none.
+//! - `GridSample` (bilinear, zero padding, align_corners = 0), which has no gradient operator in
+//!   ONNX: both gradients written out from the four corners of every sample (`grid_sample_grad`).
 //!
-//! Shapes are fixed at differentiation time (batch 1, the given input size).
+//! Shapes are fixed at differentiation time (batch 1, the given input size); a graph that computes
+//! its shapes at run time is folded first (`detect::fold`).
 
-use super::onnx_proto::{Attr, Dim, InitData, Initializer, Model, Node, ValueInfo, FLOAT};
+use super::onnx_proto::{Attr, Dim, InitData, Initializer, Model, Node, ValueInfo, FLOAT, INT64};
 use std::collections::{HashMap, HashSet};
 
 /// Why a graph cannot be differentiated.
@@ -63,8 +74,11 @@ pub enum Kernels {
 }
 
 /// The operators with a backward rule.
-pub const SUPPORTED: &str =
-    "Conv, MaxPool, LeakyRelu, Relu, Sigmoid, Add, Mul, Concat, Split, Resize (nearest), Slice, Reshape, Transpose, Identity";
+pub const SUPPORTED: &str = "Conv, MaxPool, LeakyRelu, Relu, Sigmoid, Add, Sub, Mul, Div (broadcasting), MatMul, \
+     Pow (constant exponent), Sqrt, Log, Neg, Clip, Softmax, ReduceMean, ReduceSum, Concat, Split, Resize (nearest), Slice, \
+     Reshape, Flatten, Squeeze, Unsqueeze, Transpose, Cast (to float), Identity, Pad (constant), AveragePool, \
+     GlobalAveragePool, ReduceMax, TopK (values), Gather (constant indices), GatherElements, Expand, \
+     GridSample (bilinear, zeros)";
 
 /// A graph and its gradient graphs.
 #[derive(Clone, Debug)]
@@ -138,8 +152,8 @@ fn window(n: &Node, kernel: Option<[i64; 2]>) -> Result<Window, AutodiffError> {
     if ints(n, "dilations").is_some_and(|d| d.iter().any(|&v| v != 1)) {
         return Err(bad("dilations other than 1".into()));
     }
-    if string(n, "auto_pad").is_some_and(|a| a != "NOTSET") || int(n, "ceil_mode").is_some_and(|c| c != 0) {
-        return Err(bad("auto_pad and ceil_mode are not covered; give explicit pads".into()));
+    if string(n, "auto_pad").is_some_and(|a| a != "NOTSET") {
+        return Err(bad("auto_pad is not covered; give explicit pads".into()));
     }
     Ok((k, [s[0], s[1]], [p[0], p[1], p[2], p[3]]))
 }
@@ -242,11 +256,49 @@ fn transpose_perm(n: &Node, rank: usize) -> Vec<i64> {
     ints(n, "perm").unwrap_or_else(|| (0..rank as i64).rev().collect())
 }
 
+/// Numpy broadcasting of two shapes, or `None` when they do not broadcast.
+fn broadcast(a: &[i64], b: &[i64]) -> Option<Vec<i64>> {
+    let r = a.len().max(b.len());
+    let at = |s: &[i64], i: usize| if i + s.len() >= r { s[i + s.len() - r] } else { 1 };
+    (0..r)
+        .map(|i| match (at(a, i), at(b, i)) {
+            (x, y) if x == y || y == 1 => Some(x),
+            (1, y) => Some(y),
+            _ => None,
+        })
+        .collect()
+}
+
+/// A reduction's axes (attribute, or constant input 1 from opset 13 on), normalized and sorted;
+/// none given: every axis.
+fn reduce_axes(n: &Node, consts: &HashMap<&str, &Initializer>, rank: usize) -> Vec<usize> {
+    let axes = ints(n, "axes").or_else(|| const_ints(n, consts, 1));
+    let mut a: Vec<usize> = match axes {
+        Some(v) if !v.is_empty() => v.iter().map(|&a| if a < 0 { a + rank as i64 } else { a } as usize).collect(),
+        _ => (0..rank).collect(),
+    };
+    a.sort_unstable();
+    a.dedup();
+    a
+}
+
+/// A reduction's output shape: the axes kept as 1 (`keepdims`, the default) or dropped.
+fn reduced(x: &[i64], axes: &[usize], keep: bool) -> Vec<i64> {
+    (0..x.len()).filter(|i| keep || !axes.contains(i)).map(|i| if axes.contains(&i) { 1 } else { x[i] }).collect()
+}
+
+/// The axes an `Unsqueeze` or `Squeeze` names (attribute before opset 13, constant input after).
+fn squeeze_axes(n: &Node, consts: &HashMap<&str, &Initializer>) -> Option<Vec<i64>> {
+    ints(n, "axes").or_else(|| const_ints(n, consts, 1))
+}
+
 /// Builds the backward graph node by node, with unique names and its own constants.
 struct Tape {
     nodes: Vec<Node>,
     inits: Vec<Initializer>,
     count: usize,
+    /// The opset the backward's operators need (ScatterElements' `reduction`: 16).
+    opset: i64,
 }
 
 impl Tape {
@@ -294,6 +346,86 @@ impl Tape {
         let (p, v) = (self.i64s(pads), self.scalar(value));
         self.node("Pad", vec![x.into(), p, v], vec![])
     }
+    /// `g` of shape `from` summed down to `to`: the adjoint of numpy broadcasting.
+    fn unbroadcast(&mut self, g: String, from: &[i64], to: &[i64]) -> String {
+        if from == to {
+            return g;
+        }
+        let lead = from.len() - to.len();
+        let axes: Vec<i64> =
+            (0..from.len()).filter(|&i| i < lead || (to[i - lead] == 1 && from[i] != 1)).map(|i| i as i64).collect();
+        let summed = if axes.is_empty() {
+            g
+        } else {
+            let a = self.i64s(axes);
+            self.node("ReduceSum", vec![g, a], vec![("keepdims", Attr::Int(1))])
+        };
+        let t = self.i64s(to.to_vec());
+        self.node("Reshape", vec![summed, t], vec![])
+    }
+    /// `g` reshaped to `to` (the adjoint of every pure reshape: Reshape, Flatten, (Un)squeeze).
+    fn reshape(&mut self, g: String, to: &[i64]) -> String {
+        let t = self.i64s(to.to_vec());
+        self.node("Reshape", vec![g, t], vec![])
+    }
+    /// Zeros of `dims`.
+    fn zeros(&mut self, dims: &[i64]) -> String {
+        let (z, d) = (self.scalar(0.0), self.i64s(dims.to_vec()));
+        self.node("Expand", vec![z, d], vec![])
+    }
+    /// `updates` added into zeros of `dims` at `indices` along `axis` (repeated indices sum).
+    fn scatter_add(&mut self, dims: &[i64], indices: String, updates: String, axis: i64) -> String {
+        self.opset = self.opset.max(16);
+        let z = self.zeros(dims);
+        self.node(
+            "ScatterElements",
+            vec![z, indices, updates],
+            vec![("axis", Attr::Int(axis)), ("reduction", Attr::Str("add".into()))],
+        )
+    }
+    /// A constant int64 tensor.
+    fn i64_tensor(&mut self, dims: Vec<i64>, v: Vec<i64>) -> String {
+        let name = self.fresh("const");
+        self.inits.push(Initializer { name: name.clone(), dims, data: InitData::I64(v) });
+        name
+    }
+    /// `a · bᵀ` over the last two axes.
+    fn matmul_t(&mut self, a: String, b: String, b_rank: usize, transpose_a: bool, a_rank: usize) -> String {
+        let t = |tape: &mut Tape, v: String, r: usize| {
+            let mut perm: Vec<i64> = (0..r as i64).collect();
+            perm.swap(r - 1, r - 2);
+            tape.node("Transpose", vec![v], vec![("perm", Attr::Ints(perm))])
+        };
+        if transpose_a {
+            let at = t(self, a, a_rank);
+            self.node("MatMul", vec![at, b], vec![])
+        } else {
+            let bt = t(self, b, b_rank);
+            self.node("MatMul", vec![a, bt], vec![])
+        }
+    }
+}
+
+/// A value the backward reads: saved from the forward when it depends on the input, copied into
+/// the backward's constants when it is one; `None` for a value computed from constants alone.
+fn reuse(
+    v: &str,
+    live: &HashSet<String>,
+    consts: &HashMap<&str, &Initializer>,
+    tape: &mut Tape,
+    saved: &mut Vec<String>,
+) -> Option<String> {
+    if live.contains(v) {
+        if !saved.iter().any(|s| s == v) {
+            saved.push(v.to_string());
+        }
+    } else {
+        let c = consts.get(v)?;
+        if !tape.inits.iter().any(|i| i.name == v) {
+            tape.inits.push((*c).clone());
+        }
+    }
+    Some(v.to_string())
 }
 
 /// Static output shapes of `n` from its input shapes.
@@ -314,13 +446,95 @@ fn infer(
     let x = get(0)?;
     Ok(match n.op_type.as_str() {
         // Split: the input's shape here; each output's is cut from it by `split_sizes`.
-        "Identity" | "LeakyRelu" | "Relu" | "Sigmoid" | "Split" => x,
-        "Add" | "Mul" => {
+        "Identity" | "LeakyRelu" | "Relu" | "Sigmoid" | "Split" | "Pow" | "Sqrt" | "Log" | "Softmax" | "Cast"
+        | "Clip" | "Neg" => x,
+        "Add" | "Mul" | "Sub" | "Div" => {
             let y = get(1)?;
-            if x != y && !y.is_empty() && y.iter().product::<i64>() != 1 {
-                return Err(bad(format!("operands {x:?} and {y:?}: only equal shapes or a scalar")));
+            broadcast(&x, &y).ok_or_else(|| bad(format!("operands {x:?} and {y:?} do not broadcast")))?
+        }
+        "MatMul" if get(1)?.len() == 1 => {
+            let y = get(1)?;
+            if x.len() < 2 || x[x.len() - 1] != y[0] {
+                return Err(bad(format!("operands {x:?} and {y:?} do not multiply")));
             }
-            x
+            x[..x.len() - 1].to_vec()
+        }
+        "MatMul" => {
+            let y = get(1)?;
+            let (r, q) = (x.len(), y.len());
+            if r < 2 || q < 2 || x[r - 1] != y[q - 2] {
+                return Err(bad(format!("operands {x:?} and {y:?}: only matrices (rank ≥ 2) that multiply")));
+            }
+            let mut out =
+                broadcast(&x[..r - 2], &y[..q - 2]).ok_or_else(|| bad("batch axes do not broadcast".into()))?;
+            out.extend([x[r - 2], y[q - 1]]);
+            out
+        }
+        "ReduceMean" | "ReduceSum" => {
+            reduced(&x, &reduce_axes(n, consts, x.len()), int(n, "keepdims").unwrap_or(1) != 0)
+        }
+        "Unsqueeze" => {
+            let axes = squeeze_axes(n, consts).ok_or_else(|| bad("axes must be constants".into()))?;
+            let rank = (x.len() + axes.len()) as i64;
+            let mut at: Vec<i64> = axes.iter().map(|&a| if a < 0 { a + rank } else { a }).collect();
+            at.sort_unstable();
+            let mut out = x.clone();
+            for a in at {
+                out.insert(a as usize, 1);
+            }
+            out
+        }
+        "Squeeze" => {
+            let r = x.len() as i64;
+            let axes: Vec<i64> = squeeze_axes(n, consts)
+                .map(|v| v.iter().map(|&a| if a < 0 { a + r } else { a }).collect())
+                .unwrap_or_else(|| (0..r).filter(|&i| x[i as usize] == 1).collect());
+            (0..r).filter(|i| !axes.contains(i)).map(|i| x[i as usize]).collect()
+        }
+        "Pad" => {
+            let p = const_ints(n, consts, 1)
+                .or_else(|| ints(n, "pads"))
+                .ok_or_else(|| bad("pads must be constants".into()))?;
+            if p.len() != 2 * x.len() || string(n, "mode").is_some_and(|m| m != "constant") {
+                return Err(bad("only constant-mode pads on every axis".into()));
+            }
+            (0..x.len()).map(|i| x[i] + p[i] + p[i + x.len()]).collect()
+        }
+        "GlobalAveragePool" => vec![x[0], x[1], 1, 1],
+        "ReduceMax" => reduced(&x, &reduce_axes(n, consts, x.len()), int(n, "keepdims").unwrap_or(1) != 0),
+        "TopK" => {
+            let k = const_ints(n, consts, 1)
+                .and_then(|k| k.first().copied())
+                .ok_or_else(|| bad("k must be a constant".into()))?;
+            let a = int(n, "axis").unwrap_or(-1);
+            let a = if a < 0 { a + x.len() as i64 } else { a } as usize;
+            let mut out = x.clone();
+            out[a] = k;
+            out
+        }
+        "Gather" => {
+            let ind = get(1)?;
+            let a = int(n, "axis").unwrap_or(0);
+            let a = if a < 0 { a + x.len() as i64 } else { a } as usize;
+            x[..a].iter().chain(&ind).chain(&x[a + 1..]).copied().collect()
+        }
+        "GatherElements" => get(1)?,
+        "Expand" => {
+            let to = const_ints(n, consts, 1).ok_or_else(|| bad("the shape must be a constant".into()))?;
+            broadcast(&x, &to).ok_or_else(|| bad(format!("{x:?} does not expand to {to:?}")))?
+        }
+        "Tile" => {
+            let r = const_ints(n, consts, 1).ok_or_else(|| bad("repeats must be constants".into()))?;
+            x.iter().zip(&r).map(|(a, b)| a * b).collect()
+        }
+        "GridSample" => {
+            let grid = get(1)?;
+            vec![x[0], x[1], grid[1], grid[2]]
+        }
+        "Flatten" => {
+            let a = int(n, "axis").unwrap_or(1);
+            let a = if a < 0 { a + x.len() as i64 } else { a } as usize;
+            vec![x[..a].iter().product(), x[a..].iter().product()]
         }
         "Conv" => {
             let w = get(1)?;
@@ -328,8 +542,13 @@ fn infer(
             let out = |i: usize| (x[2 + i] + p[i] + p[i + 2] - k[i]) / s[i] + 1;
             vec![x[0], w[0], out(0), out(1)]
         }
-        "MaxPool" => {
+        "MaxPool" | "AveragePool" => {
             let (k, s, p) = window(n, None)?;
+            // ceil_mode only where it agrees with floor: the windows end exactly at the edge.
+            let fits = |i: usize| (x[2 + i] + p[i] + p[i + 2] - k[i]) % s[i] == 0;
+            if int(n, "ceil_mode").is_some_and(|c| c != 0) && !(fits(0) && fits(1)) {
+                return Err(bad("ceil_mode where it adds a partial window".into()));
+            }
             let out = |i: usize| (x[2 + i] + p[i] + p[i + 2] - k[i]) / s[i] + 1;
             vec![x[0], x[1], out(0), out(1)]
         }
@@ -412,6 +631,86 @@ fn tiled_pool_grad(tape: &mut Tape, x: &str, y: &str, g: &str, b: i64, ys: &[i64
     tape.node("DepthToSpace", vec![routed], vec![("blocksize", Attr::Int(b)), ("mode", Attr::Str("DCR".into()))])
 }
 
+/// The gradients of a bilinear, zero-padded `GridSample` (align_corners = 0) with respect to its
+/// input `x` (`xs` = [N, C, H, W]) and its grid (`gs` = [N, Ho, Wo, 2]), from the output's `g`.
+/// For each of the four corners around a sample: its weight, whether it lies inside the input,
+/// its flat index; the input's gradient scatters g·weight onto the corners, the grid's sums
+/// g·x(corner) times the weight's derivative, scaled by W/2 and H/2 (the grid spans [−1, 1]).
+fn grid_sample_grad(tape: &mut Tape, x: &str, grid: &str, g: &str, xs: &[i64], gs: &[i64]) -> (String, String) {
+    let (n, c, h, w) = (xs[0], xs[1], xs[2], xs[3]);
+    let p = gs[1] * gs[2];
+    let coord = |tape: &mut Tape, axis: i64, size: i64| {
+        let sl = tape.slice(grid, vec![axis], vec![axis + 1], vec![3], vec![1]);
+        let flat = tape.reshape(sl, &[n, 1, p]);
+        let (one, half_size, half) = (tape.scalar(1.0), tape.scalar(size as f32 / 2.0), tape.scalar(0.5));
+        let shifted = tape.node("Add", vec![flat, one], vec![]);
+        let scaled = tape.node("Mul", vec![shifted, half_size], vec![]);
+        let i = tape.node("Sub", vec![scaled, half], vec![]);
+        let i0 = tape.node("Floor", vec![i.clone()], vec![]);
+        let w1 = tape.node("Sub", vec![i, i0.clone()], vec![]);
+        let one = tape.scalar(1.0);
+        let w0 = tape.node("Sub", vec![one.clone(), w1.clone()], vec![]);
+        let i1 = tape.node("Add", vec![i0.clone(), one], vec![]);
+        [(i0, w0, -1.0f32), (i1, w1, 1.0f32)]
+    };
+    let xc = coord(tape, 0, w);
+    let yc = coord(tape, 1, h);
+    let inside = |tape: &mut Tape, v: &str, size: i64| {
+        let (lo, hi) = (tape.scalar(-0.5), tape.scalar(size as f32 - 0.5));
+        let a = tape.node("Greater", vec![v.into(), lo], vec![]);
+        let b = tape.node("Less", vec![v.into(), hi], vec![]);
+        tape.node("And", vec![a, b], vec![])
+    };
+    let gflat = tape.reshape(g.into(), &[n, c, p]);
+    let xflat = tape.reshape(x.into(), &[n, c, h * w]);
+    let cp = tape.i64s(vec![n, c, p]);
+    let (mut idx_all, mut upd_all, mut dgx, mut dgy) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for (yi, wy, sy) in &yc {
+        for (xi, wx, sx) in &xc {
+            let ok_x = inside(tape, xi, w);
+            let ok_y = inside(tape, yi, h);
+            let ok = tape.node("And", vec![ok_x, ok_y], vec![]);
+            let okf = tape.node("Cast", vec![ok], vec![("to", Attr::Int(FLOAT as i64))]);
+            let (z, wm1, hm1) = (tape.scalar(0.0), tape.scalar((w - 1) as f32), tape.scalar((h - 1) as f32));
+            let xcl = tape.node("Clip", vec![xi.clone(), z.clone(), wm1], vec![]);
+            let ycl = tape.node("Clip", vec![yi.clone(), z, hm1], vec![]);
+            let wf = tape.scalar(w as f32);
+            let row = tape.node("Mul", vec![ycl, wf], vec![]);
+            let flat = tape.node("Add", vec![row, xcl], vec![]);
+            let idx = tape.node("Cast", vec![flat], vec![("to", Attr::Int(INT64 as i64))]);
+            let idx = tape.node("Expand", vec![idx, cp.clone()], vec![]);
+            let wxy = tape.node("Mul", vec![wx.clone(), wy.clone()], vec![]);
+            let weight = tape.node("Mul", vec![wxy, okf.clone()], vec![]);
+            upd_all.push(tape.node("Mul", vec![gflat.clone(), weight], vec![]));
+            idx_all.push(idx.clone());
+            // Σ_c g·x(corner), then each coordinate's weight derivative (±1 times the other weight).
+            let v = tape.node("GatherElements", vec![xflat.clone(), idx], vec![("axis", Attr::Int(2))]);
+            let gv = tape.node("Mul", vec![gflat.clone(), v], vec![]);
+            let one = tape.i64s(vec![1]);
+            let sum = tape.node("ReduceSum", vec![gv, one], vec![("keepdims", Attr::Int(1))]);
+            let s = tape.node("Mul", vec![sum, okf], vec![]);
+            let (ksx, ksy) = (tape.scalar(*sx), tape.scalar(*sy));
+            let ax = tape.node("Mul", vec![wy.clone(), ksx], vec![]);
+            dgx.push(tape.node("Mul", vec![s.clone(), ax], vec![]));
+            let ay = tape.node("Mul", vec![wx.clone(), ksy], vec![]);
+            dgy.push(tape.node("Mul", vec![s, ay], vec![]));
+        }
+    }
+    let idx = tape.node("Concat", idx_all, vec![("axis", Attr::Int(2))]);
+    let upd = tape.node("Concat", upd_all, vec![("axis", Attr::Int(2))]);
+    let gx = tape.scatter_add(&[n, c, h * w], idx, upd, 2);
+    let gx = tape.reshape(gx, xs);
+    let mut parts = Vec::new();
+    for (d, size) in [(dgx, w), (dgy, h)] {
+        let total = tape.node("Sum", d, vec![]);
+        let k = tape.scalar(size as f32 / 2.0);
+        let scaled = tape.node("Mul", vec![total, k], vec![]);
+        parts.push(tape.reshape(scaled, &[n, gs[1], gs[2], 1]));
+    }
+    let ggrid = tape.node("Concat", parts, vec![("axis", Attr::Int(3))]);
+    (gx, ggrid)
+}
+
 /// Differentiates `model` (batch 1, input of `input_shape`) with respect to its first input, with
 /// standard ONNX operators.
 pub fn differentiate(model: &Model, input_shape: &[i64]) -> Result<Differentiated, AutodiffError> {
@@ -427,14 +726,44 @@ pub fn differentiate_with(
     let input = model.inputs.first().ok_or_else(|| AutodiffError::Graph("no input".into()))?.name.clone();
     let consts: HashMap<&str, &Initializer> = model.initializers.iter().map(|i| (i.name.as_str(), i)).collect();
     let mut shape: HashMap<String, Vec<i64>> = HashMap::from([(input.clone(), input_shape.to_vec())]);
-    // Values that depend on the input (only those need a gradient).
+    // Values that depend on the input (only those need a gradient, and the float ones get one).
     let mut live: HashSet<String> = HashSet::from([input.clone()]);
+    // Element types of the values that are not float (index tensors a backward may read).
+    let mut elem: HashMap<String, i32> = HashMap::new();
     for n in &model.nodes {
         let s = infer(n, &shape, &consts)?;
         let depends = n.inputs.iter().any(|i| live.contains(i));
+        let first = n.inputs.first().and_then(|i| {
+            elem.get(i)
+                .copied()
+                .or_else(|| consts.get(i.as_str()).filter(|c| matches!(c.data, InitData::I64(_))).map(|_| INT64))
+        });
+        match n.op_type.as_str() {
+            "TopK" => {
+                elem.insert(n.outputs[1].clone(), INT64);
+            }
+            "Cast" => {
+                let to = int(n, "to").unwrap_or(FLOAT as i64) as i32;
+                if to != FLOAT {
+                    elem.insert(n.outputs[0].clone(), to);
+                }
+            }
+            "Shape" | "Size" | "ArgMax" | "ArgMin" => {
+                elem.insert(n.outputs[0].clone(), INT64);
+            }
+            _ => {
+                if let Some(t) = first {
+                    for o in &n.outputs {
+                        elem.insert(o.clone(), t);
+                    }
+                }
+            }
+        }
         let each: Vec<Vec<i64>> = if n.op_type == "Split" {
             let (axis, sizes) = split_sizes(n, &consts, &s)?;
             sizes.iter().map(|&k| s.iter().enumerate().map(|(i, &d)| if i == axis { k } else { d }).collect()).collect()
+        } else if n.op_type == "TopK" {
+            vec![s; 2]
         } else {
             vec![s; n.outputs.len()]
         };
@@ -445,7 +774,7 @@ pub fn differentiate_with(
             }
         }
     }
-    let mut tape = Tape { nodes: Vec::new(), inits: Vec::new(), count: 0 };
+    let mut tape = Tape { nodes: Vec::new(), inits: Vec::new(), count: 0, opset: 13 };
     let mut saved: Vec<String> = Vec::new();
     let save = |v: &str, saved: &mut Vec<String>| {
         if !saved.iter().any(|s| s == v) {
@@ -491,6 +820,12 @@ pub fn differentiate_with(
         }
         let Some(g) = n.outputs.first().and_then(|o| grad.remove(o)) else { continue };
         let x = n.inputs[0].clone();
+        // Ops whose gradient goes to their first input only: none when it is a constant (anchors
+        // gathered by live indices) or not float (indices cast to float).
+        let several = matches!(n.op_type.as_str(), "Add" | "Sub" | "Mul" | "Div" | "MatMul" | "GridSample" | "Concat");
+        if !several && (!live.contains(&x) || elem.contains_key(&x)) {
+            continue;
+        }
         let bad = |msg: &str| AutodiffError::Settings { node: n.name.clone(), op: n.op_type.clone(), msg: msg.into() };
         match n.op_type.as_str() {
             "Identity" => add_grad(&mut grad, &mut tape, &x, g),
@@ -525,31 +860,327 @@ pub fn differentiate_with(
                 let gx = tape.node("Mul", vec![g, d], vec![]);
                 add_grad(&mut grad, &mut tape, &x, gx);
             }
-            "Add" => {
-                for v in &n.inputs {
+            "Add" | "Sub" => {
+                let ys = shape[&n.outputs[0]].clone();
+                for (i, v) in n.inputs.iter().enumerate() {
                     if live.contains(v) {
-                        add_grad(&mut grad, &mut tape, v, g.clone());
+                        let gi = if i == 1 && n.op_type == "Sub" {
+                            tape.node("Neg", vec![g.clone()], vec![])
+                        } else {
+                            g.clone()
+                        };
+                        let gv = tape.unbroadcast(gi, &ys, &shape[v]);
+                        add_grad(&mut grad, &mut tape, v, gv);
                     }
                 }
             }
             "Mul" => {
+                let ys = shape[&n.outputs[0]].clone();
                 for (i, v) in n.inputs.iter().enumerate() {
                     if live.contains(v) {
-                        let other = n.inputs[1 - i].clone();
-                        if live.contains(&other) {
-                            save(&other, &mut saved);
-                        } else if let Some(c) = consts.get(other.as_str()) {
-                            // The backward graph has its own constants.
-                            if !tape.inits.iter().any(|i| i.name == other) {
-                                tape.inits.push((*c).clone());
-                            }
-                        } else {
-                            return Err(bad("a factor computed from constants alone; fold it into an initializer"));
-                        }
+                        let other =
+                            reuse(&n.inputs[1 - i], &live, &consts, &mut tape, &mut saved).ok_or_else(|| {
+                                bad("a factor computed from constants alone; fold it into an initializer")
+                            })?;
                         let gx = tape.node("Mul", vec![g.clone(), other], vec![]);
-                        add_grad(&mut grad, &mut tape, v, gx);
+                        let gv = tape.unbroadcast(gx, &ys, &shape[v]);
+                        add_grad(&mut grad, &mut tape, v, gv);
                     }
                 }
+            }
+            "Div" => {
+                // y = a / b: ∂a = g / b, ∂b = −g·y / b.
+                let ys = shape[&n.outputs[0]].clone();
+                let (a, b) = (&n.inputs[0], &n.inputs[1]);
+                let bv = reuse(b, &live, &consts, &mut tape, &mut saved)
+                    .ok_or_else(|| bad("a divisor computed from constants alone; fold it into an initializer"))?;
+                let gb = tape.node("Div", vec![g.clone(), bv.clone()], vec![]);
+                if live.contains(a) {
+                    let ga = tape.unbroadcast(gb.clone(), &ys, &shape[a]);
+                    add_grad(&mut grad, &mut tape, a, ga);
+                }
+                if live.contains(b) {
+                    let y = n.outputs[0].clone();
+                    save(&y, &mut saved);
+                    let gy = tape.node("Mul", vec![gb, y], vec![]);
+                    let neg = tape.node("Neg", vec![gy], vec![]);
+                    let gv = tape.unbroadcast(neg, &ys, &shape[b]);
+                    add_grad(&mut grad, &mut tape, b, gv);
+                }
+            }
+            "MatMul" => {
+                // Y = A·B: ∂A = G·Bᵀ, ∂B = Aᵀ·G, each summed over the batch axes it was broadcast on.
+                let ys = shape[&n.outputs[0]].clone();
+                let (a, b) = (&n.inputs[0], &n.inputs[1]);
+                let dims =
+                    |v: &str| shape.get(v).or_else(|| consts.get(v).map(|c| &c.dims)).cloned().unwrap_or_default();
+                let (sa, sb) = (dims(a), dims(b));
+                let (ra, rb) = (sa.len(), sb.len());
+                if rb == 1 {
+                    // A vector on the right: y[..] = Σ_k a[.., k]·b[k].
+                    let k = sb[0];
+                    let mut gk = ys.clone();
+                    gk.push(1);
+                    let g1 = tape.reshape(g.clone(), &gk);
+                    if live.contains(a) {
+                        let bv = reuse(b, &live, &consts, &mut tape, &mut saved).ok_or_else(|| {
+                            bad("an operand computed from constants alone; fold it into an initializer")
+                        })?;
+                        let row = tape.reshape(bv, &[1, k]);
+                        let ga = tape.node("MatMul", vec![g1.clone(), row], vec![]);
+                        add_grad(&mut grad, &mut tape, a, ga);
+                    }
+                    if live.contains(b) {
+                        let av = reuse(a, &live, &consts, &mut tape, &mut saved).ok_or_else(|| {
+                            bad("an operand computed from constants alone; fold it into an initializer")
+                        })?;
+                        let m: i64 = sa[..ra - 1].iter().product();
+                        let af = tape.reshape(av, &[m, k]);
+                        let gf = tape.reshape(g1, &[m, 1]);
+                        let gb = tape.matmul_t(af, gf, 0, true, 2);
+                        let gb = tape.reshape(gb, &[k]);
+                        add_grad(&mut grad, &mut tape, b, gb);
+                    }
+                    continue;
+                }
+                if live.contains(a) {
+                    let bv = reuse(b, &live, &consts, &mut tape, &mut saved)
+                        .ok_or_else(|| bad("an operand computed from constants alone; fold it into an initializer"))?;
+                    let ga = tape.matmul_t(g.clone(), bv, rb, false, 0);
+                    let mut gs = ys.clone();
+                    gs[ys.len() - 1] = sa[ra - 1];
+                    let ga = tape.unbroadcast(ga, &gs, &sa);
+                    add_grad(&mut grad, &mut tape, a, ga);
+                }
+                if live.contains(b) {
+                    let av = reuse(a, &live, &consts, &mut tape, &mut saved)
+                        .ok_or_else(|| bad("an operand computed from constants alone; fold it into an initializer"))?;
+                    let gb = tape.matmul_t(av, g.clone(), 0, true, ra);
+                    let mut gs = broadcast(&sa[..ra - 2], &sb[..rb - 2]).unwrap_or_default();
+                    gs.extend([sb[rb - 2], sb[rb - 1]]);
+                    let gb = tape.unbroadcast(gb, &gs, &sb);
+                    add_grad(&mut grad, &mut tape, b, gb);
+                }
+            }
+            "Pow" => {
+                let c = consts
+                    .get(n.inputs[1].as_str())
+                    .and_then(|c| match &c.data {
+                        InitData::F32(v) if v.len() == 1 => Some(v[0]),
+                        _ => None,
+                    })
+                    .ok_or_else(|| bad("only a constant scalar float exponent"))?;
+                save(&x, &mut saved);
+                let d = if c == 2.0 {
+                    let two = tape.scalar(2.0);
+                    tape.node("Mul", vec![x.clone(), two], vec![])
+                } else {
+                    let (e, k) = (tape.scalar(c - 1.0), tape.scalar(c));
+                    let p = tape.node("Pow", vec![x.clone(), e], vec![]);
+                    tape.node("Mul", vec![p, k], vec![])
+                };
+                let gx = tape.node("Mul", vec![g, d], vec![]);
+                add_grad(&mut grad, &mut tape, &x, gx);
+            }
+            "Sqrt" => {
+                let y = n.outputs[0].clone();
+                save(&y, &mut saved);
+                let half = tape.scalar(0.5);
+                let h = tape.node("Mul", vec![g, half], vec![]);
+                let gx = tape.node("Div", vec![h, y], vec![]);
+                add_grad(&mut grad, &mut tape, &x, gx);
+            }
+            "Log" => {
+                save(&x, &mut saved);
+                let gx = tape.node("Div", vec![g, x.clone()], vec![]);
+                add_grad(&mut grad, &mut tape, &x, gx);
+            }
+            "Neg" => {
+                let gx = tape.node("Neg", vec![g], vec![]);
+                add_grad(&mut grad, &mut tape, &x, gx);
+            }
+            "Clip" => {
+                // The gradient passes where the input lies strictly inside the bounds.
+                save(&x, &mut saved);
+                let bound = |i: usize| n.inputs.get(i).filter(|v| !v.is_empty()).cloned();
+                let mut keep: Option<String> = None;
+                for (i, op) in [(1, "Greater"), (2, "Less")] {
+                    if let Some(v) = bound(i) {
+                        let c = reuse(&v, &live, &consts, &mut tape, &mut saved)
+                            .ok_or_else(|| bad("bounds must be constants"))?;
+                        let m = tape.node(op, vec![x.clone(), c], vec![]);
+                        keep = Some(match keep {
+                            Some(k) => tape.node("And", vec![k, m], vec![]),
+                            None => m,
+                        });
+                    }
+                }
+                let gx = match keep {
+                    Some(k) => {
+                        let zero = tape.scalar(0.0);
+                        tape.node("Where", vec![k, g, zero], vec![])
+                    }
+                    None => g,
+                };
+                add_grad(&mut grad, &mut tape, &x, gx);
+            }
+            "Softmax" => {
+                // ∂x = y ⊙ (g − Σ_axis g ⊙ y).
+                let r = shape[&x].len() as i64;
+                let axis = int(n, "axis").unwrap_or(-1);
+                let axis = if axis < 0 { axis + r } else { axis };
+                if model.opset < 13 && axis != r - 1 {
+                    return Err(bad("before opset 13 only the last axis"));
+                }
+                let y = n.outputs[0].clone();
+                save(&y, &mut saved);
+                let gy = tape.node("Mul", vec![g.clone(), y.clone()], vec![]);
+                let a = tape.i64s(vec![axis]);
+                let s = tape.node("ReduceSum", vec![gy, a], vec![("keepdims", Attr::Int(1))]);
+                let d = tape.node("Sub", vec![g, s], vec![]);
+                let gx = tape.node("Mul", vec![y, d], vec![]);
+                add_grad(&mut grad, &mut tape, &x, gx);
+            }
+            "ReduceMean" | "ReduceSum" => {
+                let xs = shape[&x].clone();
+                let axes = reduce_axes(n, &consts, xs.len());
+                let kept = tape.reshape(g, &reduced(&xs, &axes, true));
+                let dims = tape.i64s(xs.clone());
+                let mut gx = tape.node("Expand", vec![kept, dims], vec![]);
+                if n.op_type == "ReduceMean" {
+                    let count: i64 = axes.iter().map(|&a| xs[a]).product();
+                    let k = tape.scalar(1.0 / count as f32);
+                    gx = tape.node("Mul", vec![gx, k], vec![]);
+                }
+                add_grad(&mut grad, &mut tape, &x, gx);
+            }
+            "Pad" => {
+                let xs = shape[&x].clone();
+                let p = const_ints(n, &consts, 1).or_else(|| ints(n, "pads")).unwrap_or_default();
+                let r = xs.len();
+                if p.iter().any(|&v| v < 0) {
+                    return Err(bad("only non-negative pads"));
+                }
+                let ends: Vec<i64> = (0..r).map(|i| p[i] + xs[i]).collect();
+                let gx = tape.slice(&g, p[..r].to_vec(), ends, (0..r as i64).collect(), vec![1; r]);
+                add_grad(&mut grad, &mut tape, &x, gx);
+            }
+            "AveragePool" => {
+                let (k, st, p) = window(n, None)?;
+                if int(n, "count_include_pad").unwrap_or(0) == 0 && p.iter().any(|&v| v != 0) {
+                    return Err(bad("padded windows must count the padding (count_include_pad = 1)"));
+                }
+                let (xs, ys) = (shape[&x].clone(), shape[&n.outputs[0]].clone());
+                let c = xs[1];
+                let w = tape.f32s(vec![c, 1, k[0], k[1]], vec![1.0 / (k[0] * k[1]) as f32; (c * k[0] * k[1]) as usize]);
+                let op = |i: usize| xs[2 + i] - (st[i] * (ys[2 + i] - 1) + k[i] - p[i] - p[i + 2]);
+                let gx = tape.node(
+                    "ConvTranspose",
+                    vec![g, w],
+                    vec![
+                        ("kernel_shape", Attr::Ints(k.to_vec())),
+                        ("strides", Attr::Ints(st.to_vec())),
+                        ("pads", Attr::Ints(p.to_vec())),
+                        ("group", Attr::Int(c)),
+                        ("output_padding", Attr::Ints(vec![op(0), op(1)])),
+                    ],
+                );
+                add_grad(&mut grad, &mut tape, &x, gx);
+            }
+            "GlobalAveragePool" => {
+                let xs = shape[&x].clone();
+                let dims = tape.i64s(xs.clone());
+                let e = tape.node("Expand", vec![g, dims], vec![]);
+                let k = tape.scalar(1.0 / (xs[2] * xs[3]) as f32);
+                let gx = tape.node("Mul", vec![e, k], vec![]);
+                add_grad(&mut grad, &mut tape, &x, gx);
+            }
+            "Expand" => {
+                let gx = tape.unbroadcast(g, &shape[&n.outputs[0]], &shape[&x]);
+                add_grad(&mut grad, &mut tape, &x, gx);
+            }
+            "ReduceMax" => {
+                // The gradient goes to the positions equal to the maximum (ties, of measure zero
+                // for real inputs, each get it whole).
+                let xs = shape[&x].clone();
+                let keep = reduced(&xs, &reduce_axes(n, &consts, xs.len()), true);
+                let y = n.outputs[0].clone();
+                save(&x, &mut saved);
+                save(&y, &mut saved);
+                let yk = tape.reshape(y, &keep);
+                let at = tape.node("Equal", vec![x.clone(), yk], vec![]);
+                let gk = tape.reshape(g, &keep);
+                let dims = tape.i64s(xs);
+                let ge = tape.node("Expand", vec![gk, dims], vec![]);
+                let zero = tape.scalar(0.0);
+                let gx = tape.node("Where", vec![at, ge, zero], vec![]);
+                add_grad(&mut grad, &mut tape, &x, gx);
+            }
+            "TopK" => {
+                // The values' gradient goes back to where they were taken from.
+                let xs = shape[&x].clone();
+                let a = int(n, "axis").unwrap_or(-1);
+                let a = if a < 0 { a + xs.len() as i64 } else { a };
+                let idx = n.outputs[1].clone();
+                save(&idx, &mut saved);
+                let gx = tape.scatter_add(&xs, idx, g, a);
+                add_grad(&mut grad, &mut tape, &x, gx);
+            }
+            "GatherElements" => {
+                let xs = shape[&x].clone();
+                let a = int(n, "axis").unwrap_or(0);
+                let a = if a < 0 { a + xs.len() as i64 } else { a };
+                let idx = reuse(&n.inputs[1], &live, &consts, &mut tape, &mut saved)
+                    .ok_or_else(|| bad("indices computed from constants alone; fold them into an initializer"))?;
+                let gx = tape.scatter_add(&xs, idx, g, a);
+                add_grad(&mut grad, &mut tape, &x, gx);
+            }
+            "Gather" => {
+                let xs = shape[&x].clone();
+                let a = int(n, "axis").unwrap_or(0);
+                let a = (if a < 0 { a + xs.len() as i64 } else { a }) as usize;
+                let ind = const_ints(n, &consts, 1).ok_or_else(|| bad("only constant indices"))?;
+                let m = ind.len() as i64;
+                let ind: Vec<i64> = ind.iter().map(|&i| if i < 0 { i + xs[a] } else { i }).collect();
+                // The index axes as one of length m, then an index tensor broadcast along it.
+                let mut gs = xs.clone();
+                gs[a] = m;
+                let g2 = tape.reshape(g, &gs);
+                let mut small = vec![1; xs.len()];
+                small[a] = m;
+                let idx = tape.i64_tensor(small, ind);
+                let dims = tape.i64s(gs);
+                let idx = tape.node("Expand", vec![idx, dims], vec![]);
+                let gx = tape.scatter_add(&xs, idx, g2, a as i64);
+                add_grad(&mut grad, &mut tape, &x, gx);
+            }
+            "GridSample" => {
+                let mode = string(n, "mode").unwrap_or("bilinear".into());
+                let padding = string(n, "padding_mode").unwrap_or("zeros".into());
+                if mode != "bilinear" || padding != "zeros" || int(n, "align_corners").unwrap_or(0) != 0 {
+                    return Err(bad("only bilinear sampling, zero padding and align_corners = 0"));
+                }
+                let grid = n.inputs[1].clone();
+                save(&x, &mut saved);
+                save(&grid, &mut saved);
+                let (xs, gsh) = (shape[&x].clone(), shape[&grid].clone());
+                let (gx, ggrid) = grid_sample_grad(&mut tape, &x, &grid, &g, &xs, &gsh);
+                if live.contains(&x) {
+                    add_grad(&mut grad, &mut tape, &x, gx);
+                }
+                if live.contains(&grid) {
+                    add_grad(&mut grad, &mut tape, &grid, ggrid);
+                }
+            }
+            "Cast" => {
+                if int(n, "to") != Some(FLOAT as i64) {
+                    return Err(bad("a cast to anything but float carries no gradient"));
+                }
+                add_grad(&mut grad, &mut tape, &x, g);
+            }
+            "Flatten" | "Squeeze" | "Unsqueeze" => {
+                let gx = tape.reshape(g, &shape[&x]);
+                add_grad(&mut grad, &mut tape, &x, gx);
             }
             "Concat" => {
                 let xs = &shape[&x];
@@ -779,7 +1410,7 @@ pub fn differentiate_with(
     let gx = grad.remove(&input).ok_or_else(|| AutodiffError::Graph("no output depends on the input".into()))?;
     let fixed = |name: &str, s: &[i64]| ValueInfo {
         name: name.into(),
-        elem_type: FLOAT,
+        elem_type: elem.get(name).copied().unwrap_or(FLOAT),
         dims: s.iter().map(|&d| Dim::Fixed(d)).collect(),
     };
     let saves_input = saved.contains(&input);
@@ -807,7 +1438,7 @@ pub fn differentiate_with(
     let backward = Model {
         graph_name: format!("{}_input_gradient", model.graph_name),
         producer: "pav autodiff".into(),
-        opset: model.opset.max(13),
+        opset: model.opset.max(tape.opset),
         domains: if kernels == Kernels::Fused { vec![(PAV_DOMAIN.into(), 1)] } else { vec![] },
         nodes: tape.nodes,
         initializers: tape.inits,

@@ -6,6 +6,8 @@ pub mod config;
 pub mod darknet;
 pub mod decode;
 #[cfg(feature = "eval")]
+pub mod fold;
+#[cfg(feature = "eval")]
 pub mod gradops;
 #[cfg(feature = "eval")]
 pub mod load;

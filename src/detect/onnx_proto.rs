@@ -128,7 +128,7 @@ impl InitData {
 pub struct ValueInfo {
     /// Value name.
     pub name: String,
-    /// Element type code (`FLOAT`, `INT64`).
+    /// Element type code (`FLOAT`, `INT64`; 0: untyped, for an output the runtime types).
     pub elem_type: i32,
     /// Dimensions.
     pub dims: Vec<Dim>,
@@ -251,14 +251,17 @@ fn encode_value_info(v: &ValueInfo) -> Buf {
         }
         shape.msg(1, dim);
     }
-    let mut tensor = Buf::default();
-    tensor.int(1, v.elem_type as i64);
-    tensor.msg(2, shape);
-    let mut ty = Buf::default();
-    ty.msg(1, tensor);
     let mut b = Buf::default();
     b.str(1, &v.name);
-    b.msg(2, ty);
+    // Element type 0 (unknown) writes the name alone: ONNX Runtime then types the value itself.
+    if v.elem_type != 0 {
+        let mut tensor = Buf::default();
+        tensor.int(1, v.elem_type as i64);
+        tensor.msg(2, shape);
+        let mut ty = Buf::default();
+        ty.msg(1, tensor);
+        b.msg(2, ty);
+    }
     b
 }
 
