@@ -161,6 +161,22 @@ impl Predictions {
         Ok(p)
     }
 
+    /// DETR class logits `[Q, C]` (query-major; sigmoid per class, as DEIM and RT-DETR score
+    /// them), without objectness: a query's objectness is its largest class probability, its
+    /// detection score the target probability, as for [`Predictions::ultralytics`].
+    pub fn detr(logits: &[f32], classes: usize) -> Result<Self, HeadShapeError> {
+        if classes == 0 || logits.len() % classes != 0 {
+            return Err(HeadShapeError(format!("{} values are not queries of {classes} classes", logits.len())));
+        }
+        let mut p = Predictions { classes, raw: Raw::Logit, obj: vec![], cls: vec![], at: vec![], objectness: false };
+        for q in 0..logits.len() / classes {
+            let row = &logits[q * classes..(q + 1) * classes];
+            let k = (0..classes).fold(0, |m, k| if row[k] > row[m] { k } else { m });
+            p.push(logits, At { output: 0, obj: q * classes + k, cls0: q * classes, stride: 1 });
+        }
+        Ok(p)
+    }
+
     /// The detection score of prediction `i` for a target probability `car`, and its derivatives
     /// with respect to objectness and that probability.
     fn score(&self, i: usize, car: f32) -> (f32, f32, f32) {
@@ -496,5 +512,40 @@ mod tests {
         assert!((t.l1 - 0.9).abs() < 1e-6 && (t.l2 - 0.7).abs() < 1e-6);
         assert!((t.max_score - 0.63).abs() < 1e-6);
         assert_eq!((g[0][4], g[0][7], g[0][12]), (1.0, 2.0, 0.0));
+    }
+
+    #[test]
+    fn detr_queries_are_logits_without_objectness_with_exact_gradients() {
+        // Four queries, 3 classes, query-major logits: the same probabilities as `v8_scores`
+        // would give through the sigmoid, laid out per query.
+        let logits: Vec<f32> = vec![0.3, -2.0, 1.4, 0.9, -1.1, 0.2, -0.6, 0.4, 0.1, -3.0, -2.5, -2.9];
+        let p = Predictions::detr(&logits, 3).unwrap();
+        let prob = |x: f32| sigmoid(x).0;
+        let (t, _) = loss(Reduce::Mean).terms(&p, &[&logits], 1.0).unwrap();
+        // Best class per query: car (1.4), class 0 (0.9), class 1 (0.4), class 1 (−2.5).
+        assert_eq!((t.boxes, t.proposals), (3, 1));
+        assert!((t.max_score - prob(1.4)).abs() < 1e-6, "{t:?}");
+        let beta = 0.7;
+        for how in [Reduce::Mean, Reduce::TopK(2), Reduce::Softmax(0.2)] {
+            let l = loss(how);
+            let total = |v: &[f32]| {
+                let (t, _) = l.terms(&Predictions::detr(v, 3).unwrap(), &[v], beta).unwrap();
+                t.l1 as f64 + beta as f64 * t.l2 as f64
+            };
+            let (_, g) = l.terms(&p, &[&logits], beta).unwrap();
+            for i in 0..logits.len() {
+                let (mut a, mut b) = (logits.clone(), logits.clone());
+                a[i] += 1e-3;
+                b[i] -= 1e-3;
+                let fd = (total(&a) - total(&b)) / 2e-3;
+                assert!((fd - g[0][i] as f64).abs() < 1e-3, "{how:?} value {i}: {} vs {fd}", g[0][i]);
+            }
+            // Saturated logits (±1e4: probabilities 0 and 1 exactly), all-equal and empty outputs.
+            for v in [vec![1e4; 12], vec![-1e4; 12], vec![0.0; 12], vec![]] {
+                let (t, g) = l.terms(&Predictions::detr(&v, 3).unwrap(), &[&v], beta).unwrap();
+                assert!(t.l1.is_finite() && t.l2.is_finite() && g[0].iter().all(|x| x.is_finite()), "{how:?} {t:?}");
+            }
+        }
+        assert!(Predictions::detr(&logits[..11], 3).is_err());
     }
 }

@@ -5,17 +5,19 @@
 //! one `evaluate` runs), differentiated as a graph (`detect::autodiff`) and run by ONNX Runtime
 //! (`detect::ortgrad`). The input transform the config describes (resize, channel order, scale,
 //! mean and std) is applied here with its exact adjoint. Outputs are read by their layout:
-//! darknet heads and YOLOX rows, both with objectness (see `attack::loss`).
+//! darknet heads and YOLOX rows with objectness, Ultralytics class scores and DETR class logits
+//! without (see `attack::loss`).
 
 use super::config::OptimizeConfig;
 use super::loss::{DetectionLoss, HeadShapeError, Predictions};
 use crate::detect::autodiff::{differentiate_with, AutodiffError, Kernels};
 use crate::detect::config::{ChannelOrder, DetectorConfig, OutputLayout};
+use crate::detect::fold::fold_shapes;
 use crate::detect::onnx_proto::{Dim, Model, ProtoError, ValueInfo, FLOAT};
 use crate::detect::ortgrad::{GradSession, Pass};
 use crate::detect::surrogate::dequantize;
 use crate::detect::DetectError;
-use crate::image::resize::{Interpolation, Resampler};
+use crate::image::resize::Resampler;
 use std::path::PathBuf;
 use std::sync::Mutex;
 use std::time::Instant;
@@ -43,6 +45,8 @@ enum Heads {
     Yolox { classes: usize },
     /// Ultralytics class probabilities `[C, N]` (the graph cut to its class branch).
     Ultralytics { classes: usize },
+    /// DETR class logits `[Q, C]` (the graph cut before its post-processor, shapes folded).
+    Detr { classes: usize },
 }
 
 /// A detector with the paper's loss and its input gradient.
@@ -166,6 +170,19 @@ impl WhiteBox {
         if matches!(cfg.output, OutputLayout::Ultralytics { .. }) {
             model = class_branch(model).map_err(&unsupported)?;
         }
+        if let OutputLayout::Detr { logits, .. } = &cfg.output {
+            let logits = logits.clone().ok_or_else(|| {
+                unsupported("a DETR white box needs `logits` in the config's [output]: the class logits before the post-processor".into())
+            })?;
+            if !model.nodes.iter().any(|n| n.outputs.contains(&logits)) {
+                return Err(unsupported(format!("no value `{logits}` (the config's `logits`) in the graph")));
+            }
+            model.outputs = vec![ValueInfo { name: logits, elem_type: FLOAT, dims: vec![] }];
+            model.prune();
+            // The exported graph computes its reshapes from run-time shapes: fixed here.
+            let x = model.inputs.first().map(|i| i.name.clone()).unwrap_or_default();
+            model = fold_shapes(&model, &[(x.as_str(), vec![1, 3, side as i64, side as i64])], &cfg.name)?.0;
+        }
         if let Some(x) = model.inputs.first() {
             if x.dims.len() == 4 && x.dims[2..].iter().any(|d| matches!(d, Dim::Fixed(v) if *v != side as i64)) {
                 return Err(unsupported(format!("the graph's input is fixed at {:?}, not {side}²", x.dims)));
@@ -188,6 +205,7 @@ impl WhiteBox {
             }
             OutputLayout::Yolox { .. } if d.outputs.len() == 1 => Heads::Yolox { classes },
             OutputLayout::Ultralytics { .. } => Heads::Ultralytics { classes },
+            OutputLayout::Detr { .. } => Heads::Detr { classes },
             other => {
                 return Err(unsupported(format!(
                     "no white-box loss for the {} layout (objectness-based losses need darknet or yolox outputs)",
@@ -210,7 +228,8 @@ impl WhiteBox {
             head_sizes,
             loss,
             input: side,
-            resample: Resampler::new(o.composite, side, Interpolation::Bilinear),
+            // The config's filter, as evaluate resizes (without its 8-bit rounding, which has no gradient).
+            resample: Resampler::new(o.composite, side, i.interpolation),
             channel,
             gain,
             offset,
@@ -269,6 +288,7 @@ impl WhiteBox {
             }
             Heads::Yolox { classes } => Predictions::yolox(&outs[0], *classes)?,
             Heads::Ultralytics { classes } => Predictions::ultralytics(&outs[0], *classes)?,
+            Heads::Detr { classes } => Predictions::detr(&outs[0], *classes)?,
         };
         let raw: Vec<&[f32]> = outs.iter().map(|v| v.as_slice()).collect();
         Ok(self.loss.terms(&p, &raw, beta)?)

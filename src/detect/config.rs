@@ -126,6 +126,11 @@ pub enum OutputLayout {
         scores: String,
         /// Int64 input `[N, 2]` that receives the target size (w, h); we pass the input size.
         size_input: Option<String>,
+        /// The raw class logits `[1, Q, C]` the post-processor turns into scores: what a white box
+        /// differentiates (the post-processor's top-k selection has no gradient). Optional; only
+        /// `pav optimize` reads it.
+        #[serde(default)]
+        logits: Option<String>,
     },
 }
 

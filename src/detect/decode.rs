@@ -316,7 +316,13 @@ mod tests {
             RawOutput { name: "b".into(), shape: vec![1, 2, 4], data: vec![0., 0., 1., 1., 2., 2., 3., 3.] },
             RawOutput { name: "s".into(), shape: vec![1, 2], data: vec![0.9, 0.2] },
         ];
-        let l = OutputLayout::Detr { labels: "l".into(), boxes: "b".into(), scores: "s".into(), size_input: None };
+        let l = OutputLayout::Detr {
+            labels: "l".into(),
+            boxes: "b".into(),
+            scores: "s".into(),
+            size_input: None,
+            logits: None,
+        };
         let p = decode(&l, &outs, 32, 32, 2, &ID).unwrap();
         assert_eq!(p.best(&[1]).unwrap().score, 0.9);
         assert_eq!(p.best(&[0]).unwrap().bbox, [2.0, 2.0, 3.0, 3.0]);

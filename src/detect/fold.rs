@@ -34,10 +34,14 @@ fn read(name: &str, v: &DynValue) -> Result<Initializer, DetectError> {
     Ok(Initializer { name: name.into(), dims: shape, data })
 }
 
-/// `model` with its inputs fixed to `sizes` (every input, by name) and every value computed
-/// without any input's values folded into an initializer; `what` names the model in errors.
+/// `model` with its inputs fixed to `sizes` (every input some node reads, by name; the others are
+/// dropped) and every value computed without any input's values folded into an initializer;
+/// `what` names the model in errors.
 pub fn fold_shapes(model: &Model, sizes: &[(&str, Vec<i64>)], what: &str) -> Result<(Model, FoldReport), DetectError> {
     let mut fixed = model.clone();
+    // Inputs nothing reads any more (a post-processor's, once the graph is cut before it) go.
+    let consumed: HashSet<&str> = model.nodes.iter().flat_map(|n| n.inputs.iter().map(|i| i.as_str())).collect();
+    fixed.inputs.retain(|i| consumed.contains(i.name.as_str()));
     for input in &mut fixed.inputs {
         let (_, dims) = sizes
             .iter()
