@@ -100,4 +100,28 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     eprintln!("resumed in {:.1} s", t.elapsed().as_secs_f64());
     assert_eq!(recs.iter().map(|r| r.score).collect::<Vec<_>>(), recs2.iter().map(|r| r.score).collect::<Vec<_>>());
     assert_eq!(rows.len(), rows2.len());
+
+    // The transfer table reads the run back from its CSVs: the optimized row carries the run's
+    // held-out cells, the baselines come once, and the differences are the run's own pairs.
+    pav::table::write_csv(&dir.path().join("crossval.csv"), &rows).unwrap();
+    pav::table::write_csv(&dir.path().join("crossval_views.csv"), &recs).unwrap();
+    let runs = [("tiny".to_string(), dir.path().to_path_buf()), ("again".to_string(), dir.path().to_path_buf())];
+    let t = pav::experiments::table1::table1(&runs).unwrap();
+    let held = |t: &str| rows.iter().find(|r| r.texture == t && r.split == "held-out").unwrap();
+    let cell = |row: &str| t.cells.iter().find(|c| c.row == row).unwrap();
+    assert_eq!(
+        t.cells.iter().map(|c| c.row.as_str()).collect::<Vec<_>>(),
+        ["original", "random", "random32", "RAUCA_E2E", "tiny", "again"]
+    );
+    assert_eq!((cell("tiny").mean_score, cell("tiny").p50), (held("optimized").mean_score, held("optimized").p50));
+    assert_eq!(cell("RAUCA_E2E").mean_score, held("RAUCA_E2E").mean_score);
+    assert!(cell("tiny").white_box && !cell("random").white_box);
+    assert_eq!(t.baseline_spread, 0.0);
+    let mine: Vec<(&str, f64)> = t.differences[..3].iter().map(|d| (d.against.as_str(), d.mean)).collect();
+    let want: Vec<(&str, f64)> = pairs[1..].iter().map(|p| (p.against.as_str(), p.mean)).collect();
+    assert_eq!(mine, want, "the run against random, random32 and RAUCA_E2E, as crossval paired them");
+    let md = t.markdown();
+    assert!(md.contains(&format!("**{:.3} / ", held("optimized").mean_score)), "{md}");
+    let e = pav::experiments::table1::table1(&[("x".into(), dir.path().join("fold0of2"))]).unwrap_err();
+    assert!(e.to_string().contains("pav crossval"), "{e}");
 }

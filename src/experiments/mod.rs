@@ -4,6 +4,7 @@
 pub mod crossval;
 pub mod outputs;
 pub mod per_view;
+pub mod table1;
 pub mod table2;
 
 use std::path::{Path, PathBuf};

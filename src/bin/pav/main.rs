@@ -18,6 +18,8 @@ mod eval_digital;
 mod optimize;
 mod paint;
 mod render;
+#[cfg(feature = "optimize")]
+mod table1;
 mod uv;
 mod views;
 
@@ -46,6 +48,10 @@ enum Cmd {
     /// photo and several random textures (a Table 2 in which no texture has seen its test views).
     #[cfg(feature = "optimize")]
     Crossval(crossval::Args),
+    /// The paper's Table I from crossval runs: held-out car score and P@0.5 per texture and
+    /// detector, and each run against every baseline with paired 95 % intervals.
+    #[cfg(feature = "optimize")]
+    Table1(table1::Args),
     /// UV map tools.
     #[command(subcommand)]
     Uv(uv::Cmd),
@@ -97,6 +103,8 @@ fn main() -> Result<()> {
         Cmd::EvalDigital(a) => eval_digital::run(&a),
         #[cfg(feature = "optimize")]
         Cmd::Crossval(a) => crossval::run(&a),
+        #[cfg(feature = "optimize")]
+        Cmd::Table1(a) => table1::run(&a),
         Cmd::Uv(c) => uv::run(&c),
         Cmd::BenchRender(a) => bench_render::run(&a),
         #[cfg(feature = "optimize")]

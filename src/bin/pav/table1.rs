@@ -1,0 +1,38 @@
+//! `pav table1`.
+
+use anyhow::{bail, Result};
+use pav::experiments::table1::table1_report;
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Output folders of `pav crossval`, one row each, in this order.
+    #[arg(required = true)]
+    runs: Vec<PathBuf>,
+    /// A row's label (default: its folder's name); give one per run or none.
+    #[arg(long = "label")]
+    labels: Vec<String>,
+    /// Output folder.
+    #[arg(long, short = 'o', default_value = "out/table1")]
+    out: PathBuf,
+}
+
+pub fn run(a: &Args) -> Result<()> {
+    if !a.labels.is_empty() && a.labels.len() != a.runs.len() {
+        bail!("{} labels for {} runs: give one per run or none", a.labels.len(), a.runs.len());
+    }
+    let runs: Vec<(String, PathBuf)> = a
+        .runs
+        .iter()
+        .enumerate()
+        .map(|(i, d)| {
+            let name = a.labels.get(i).cloned().unwrap_or_else(|| {
+                d.file_name().map_or_else(|| d.display().to_string(), |n| n.to_string_lossy().into_owned())
+            });
+            (name, d.clone())
+        })
+        .collect();
+    println!("{}", table1_report(&runs, &a.out)?);
+    eprintln!("wrote table1.md, table1.csv and table1_paired.csv in {}", a.out.display());
+    Ok(())
+}
