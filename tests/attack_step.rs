@@ -1,5 +1,5 @@
 //! One optimization step on real data: FCA's CARLA photos, the UV-mapped e-tron and each white-box
-//! detector (YOLOv3-tiny, YOLOX-Nano). The texture gradient (the differentiated ONNX graph, the
+//! detector (YOLOv3-tiny, YOLOX-Nano), with and without the scene's zoom. The texture gradient (the differentiated ONNX graph, the
 //! input transform's and the renderer's exact adjoints) must match finite differences of the
 //! whole composite → detector → loss chain, and be zero off the region.
 #![cfg(feature = "optimize")]
@@ -12,7 +12,7 @@ use pav::attack::setup::Setup;
 use pav::attack::whitebox::WhiteBox;
 use pav::detect::DetectorConfig;
 use pav::rng::Rng;
-use pav::scene::Scene;
+use pav::scene::{self, Effect, Scene};
 
 fn setup(size: usize, detector: &str) -> (OptimizeConfig, Setup, WhiteBox) {
     common::real_data();
@@ -28,15 +28,21 @@ fn setup(size: usize, detector: &str) -> (OptimizeConfig, Setup, WhiteBox) {
 
 #[test]
 fn texture_gradient_matches_finite_differences_through_yolov3_tiny() {
-    check_chain("yolov3-tiny");
+    check_chain("yolov3-tiny", None);
 }
 
 #[test]
 fn texture_gradient_matches_finite_differences_through_yolox_nano() {
-    check_chain("yolox_nano");
+    check_chain("yolox_nano", None);
 }
 
-fn check_chain(detector: &str) {
+#[test]
+fn texture_gradient_matches_finite_differences_through_a_zoom_out_and_yolov3_tiny() {
+    check_chain("yolov3-tiny", Some(0.8));
+}
+
+/// The chain texture → composite → (zoom by `zoom` at a fixed place) → detector → loss.
+fn check_chain(detector: &str, zoom: Option<f32>) {
     let (_, s, wb) = setup(416, detector);
     let v = &s.train[1];
     eprintln!(
@@ -57,7 +63,17 @@ fn check_chain(detector: &str) {
         })
         .collect();
     let lit = Scene { lighting: s.scene.lighting, effects: vec![] };
-    let (img, tape) = v.render(&tex, &lit, &mut rng);
+    let zoomed = Scene { lighting: None, effects: zoom.map(|f| Effect::Zoom { min: f, max: f }).into_iter().collect() };
+    // The same draw (scale and place) every time the chain is evaluated.
+    let compose = |tex: &[f32], rng: &mut Rng| {
+        let (mut img, tape) = v.render(tex, &lit, rng);
+        let z = scene::zoom::apply(&zoomed, &mut img, v.size, &mut Rng::new(11));
+        (img, tape, z)
+    };
+    let (img, tape, z) = compose(&tex, &mut rng);
+    if let Some(z) = &z {
+        eprintln!("zoomed to {}² of {}²", z.scaled(), v.size);
+    }
     let g = wb.loss_and_grad(&img, v.size, 1.0).unwrap();
 
     eprintln!("{:?}, forward {:.0} ms, backward {:.0} ms", g.loss, g.forward_ms, g.backward_ms);
@@ -67,7 +83,10 @@ fn check_chain(detector: &str) {
         g.loss
     );
     let mut grad = vec![0f32; tex.len()];
-    v.backward(&tape, &g.grad, &mut grad);
+    match &z {
+        Some(z) => v.backward(&tape, &scene::zoom::backward(z, &g.grad, v.size), &mut grad),
+        None => v.backward(&tape, &g.grad, &mut grad),
+    }
     assert!(grad.iter().all(|x| x.is_finite()));
     let region: std::collections::HashSet<u32> = s.region_values.iter().copied().collect();
     let off = grad.iter().enumerate().filter(|(i, x)| **x != 0.0 && !region.contains(&(*i as u32))).count();
@@ -82,7 +101,7 @@ fn check_chain(detector: &str) {
     let norm = dir.iter().map(|x| (*x as f64).powi(2)).sum::<f64>().sqrt();
     let loss_at = |t: f64| {
         let tt: Vec<f32> = tex.iter().zip(&dir).map(|(a, d)| a + (t * *d as f64 / norm) as f32).collect();
-        let (im, _) = v.render(&tt, &lit, &mut Rng::new(0));
+        let (im, _, _) = compose(&tt, &mut Rng::new(0));
         let l = wb.loss(&im, v.size).unwrap();
         (l.l1 as f64 + l.l2 as f64, (l.boxes, l.proposals))
     };

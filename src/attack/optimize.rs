@@ -1,5 +1,5 @@
 //! The optimization loop (paper Algorithm 1): for each epoch and each training view, render the
-//! texture, apply EoT, composite, run the white-box detector, and take an Adam step on
+//! texture, apply EoT, composite (zoomed when the scene lists `zoom`), run the white-box detector, and take an Adam step on
 //! L = L1 + β·L2 + γ·Ls over the optimizable texels only.
 //!
 //! Checkpoints are written every epoch and every `checkpoint_every` steps (and on a stop
@@ -15,7 +15,7 @@ use super::view::View;
 use super::whitebox::{Ensemble, EnsembleGrad};
 use crate::progress::Progress;
 use crate::rng::Rng;
-use crate::scene::eot;
+use crate::scene::{eot, zoom};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -202,10 +202,14 @@ pub fn step(
     let render_ms = ms(t);
     let t = Instant::now();
     let tape = eot::apply(&setup.scene, &mut img, 3, &view.active, rng);
+    let zoomed = zoom::apply(&setup.scene, &mut img, view.size, rng);
     let eot_ms = ms(t);
     let EnsembleGrad { sum: g, per_detector } = wb.loss_and_grad(&img, view.size, cfg.loss.beta)?;
     let t = Instant::now();
-    view.backward(&tape, &g.grad, grad);
+    match &zoomed {
+        Some(z) => view.backward(&tape, &zoom::backward(z, &g.grad, view.size), grad),
+        None => view.backward(&tape, &g.grad, grad),
+    }
     let adjoint_ms = ms(t);
     let t = Instant::now();
     let ls = smoothness(tex, setup.tex_size, setup.tex_size, cfg.loss.smoothness, cfg.loss.gamma, grad);

@@ -41,6 +41,8 @@ pub fn apply(scene: &Scene, img: &mut [f32], c: usize, active: &[u32], rng: &mut
                     *v += amplitude * rng.uniform(-1.0, 1.0);
                 }
             }
+            // Moves pixels, not values: `scene::zoom`, on the whole composite.
+            Effect::Zoom { .. } => {}
         }
     }
     for (i, (v, g)) in vals.iter().zip(gain.iter_mut()).enumerate() {

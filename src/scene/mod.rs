@@ -13,6 +13,11 @@
 //! min = 0.8
 //! max = 1.2
 //! per = "pixel"         # or "image": one draw for the whole render
+//!
+//! [[effects]]           # the whole composite rescaled by U(min, max) at a random place
+//! kind = "zoom"         # (after the pixel effects): the car nearer or farther
+//! min = 0.7
+//! max = 1.1
 //! ```
 
 pub mod align;
@@ -20,6 +25,7 @@ pub mod blender;
 pub mod eot;
 pub mod turntable;
 pub mod views;
+pub mod zoom;
 
 use crate::render::shade::Lights;
 use serde::Deserialize;
@@ -64,6 +70,14 @@ pub enum Effect {
     Noise {
         /// Noise amplitude.
         amplitude: f32,
+    },
+    /// Rescale the whole composite by U(min, max) at a random place (`scene::zoom`): the car
+    /// nearer or farther. Applied after the pixel effects, whatever its place in the list.
+    Zoom {
+        /// Smallest factor (> 0).
+        min: f32,
+        /// Largest factor.
+        max: f32,
     },
 }
 
@@ -124,9 +138,15 @@ impl Scene {
                 Effect::Contrast { min, max, .. } => min.is_finite() && max.is_finite() && 0.0 <= min && min <= max,
                 Effect::Brightness { min, max, .. } => min.is_finite() && max.is_finite() && min <= max,
                 Effect::Noise { amplitude } => amplitude.is_finite() && amplitude >= 0.0,
+                Effect::Zoom { min, max } => {
+                    min.is_finite() && max.is_finite() && 0.0 < min && min <= max && max <= 4.0
+                }
             };
             if !ok {
-                return Err(bad(format!("effect {} ({e:?}) needs finite values with min ≤ max (contrast ≥ 0)", i + 1)));
+                return Err(bad(format!(
+                    "effect {} ({e:?}) needs finite values with min ≤ max (contrast ≥ 0, zoom in (0, 4])",
+                    i + 1
+                )));
             }
         }
         if let Some(l) = &s.lighting {
@@ -150,6 +170,7 @@ impl Scene {
                     Effect::Contrast { .. } => "contrast",
                     Effect::Brightness { .. } => "brightness",
                     Effect::Noise { .. } => "noise",
+                    Effect::Zoom { .. } => "zoom",
                 }
                 .into(),
             );
@@ -197,6 +218,8 @@ mod tests {
         assert_eq!(Scene::parse("", "t").unwrap().describe(), "none");
         let e = Scene::parse("[[effects]]\nkind = \"contrast\"\nmin = 1.2\nmax = 0.8\n", "s.toml").unwrap_err();
         assert!(e.to_string().contains("scene s.toml: effect 1"), "{e}");
+        let e = Scene::parse("[[effects]]\nkind = \"zoom\"\nmin = 0.0\nmax = 1.0\n", "s.toml").unwrap_err();
+        assert!(e.to_string().contains("zoom in (0, 4]"), "{e}");
         let e = Scene::parse("[[effects]]\nkind = \"blur\"\n", "s.toml").unwrap_err();
         assert!(e.to_string().contains("blur"), "{e}");
     }
