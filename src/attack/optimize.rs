@@ -48,7 +48,7 @@ pub struct StepLog {
     pub skipped: bool,
     /// Texture → composite (gather + shading), ms.
     pub render_ms: f64,
-    /// EoT, ms.
+    /// EoT (and the zoom, when the scene lists it), ms.
     pub eot_ms: f64,
     /// Detector forward and loss, ms.
     pub forward_ms: f64,
