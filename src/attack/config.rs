@@ -389,6 +389,20 @@ mod tests {
     }
 
     #[test]
+    fn every_shipped_config_and_its_scene_load() {
+        let mut n = 0;
+        for e in std::fs::read_dir(shipped("")).unwrap() {
+            let p = e.unwrap().path();
+            if p.extension().is_some_and(|x| x == "toml") {
+                let c = OptimizeConfig::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+                crate::scene::Scene::load(&c.scene).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+                n += 1;
+            }
+        }
+        assert!(n >= 17, "{n} configs");
+    }
+
+    #[test]
     fn a_zero_or_full_turn_is_refused() {
         let mut c = OptimizeConfig::load(&shipped("half-turns.toml")).unwrap();
         for bad in [0.0, 180.0, f64::NAN] {
