@@ -226,27 +226,26 @@ fn reply_latency_is_bounded_and_too_much_of_it_is_flagged() {
     // angle 3.9° / 10.3° / 23.2° late at 50 / 100 / 200 ms, with exit 0. Round trips bound the
     // offset from the other side; the angles' error stays within that bound, and a bound wider
     // than the limit fails the capture with its files complete. At 4x, the table turns 51°/s.
+    // One capture at a time, as on a rig: four real-time captures at once on two loaded cores
+    // starved each other's report reader (a 2 s silence at 10 ms, angles past their bound at 50).
     let runs: Vec<_> = [10u64, 50, 100, 200]
         .into_iter()
         .map(|ms| {
-            std::thread::spawn(move || {
-                let tmp = tempfile::tempdir().unwrap();
-                let video = tmp.path().join("late.mp4");
-                let (s, mut table) = rig(4.0, Faults { delay: Duration::from_millis(ms), ..Faults::default() });
-                let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
-                let mut o = opts(&video);
-                o.home = false;
-                o.max_angle_error_deg = 0.5;
-                let r = capture(&mut table, &mut cam, &o, &Silent, &AtomicBool::new(false));
-                let rows = sidecar::read(&sidecar::sidecar_path(&video)).unwrap();
-                let worst = worst_angle_error(&rows, &cam.true_angles, if ms == 100 { 2.69 } else { 90.0 });
-                let frames = decoded_frames(&video);
-                (ms, r, rows.len(), frames, worst)
-            })
+            let tmp = tempfile::tempdir().unwrap();
+            let video = tmp.path().join("late.mp4");
+            let (s, mut table) = rig(4.0, Faults { delay: Duration::from_millis(ms), ..Faults::default() });
+            let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
+            let mut o = opts(&video);
+            o.home = false;
+            o.max_angle_error_deg = 0.5;
+            let r = capture(&mut table, &mut cam, &o, &Silent, &AtomicBool::new(false));
+            let rows = sidecar::read(&sidecar::sidecar_path(&video)).unwrap();
+            let worst = worst_angle_error(&rows, &cam.true_angles, if ms == 100 { 2.69 } else { 90.0 });
+            let frames = decoded_frames(&video);
+            (ms, r, rows.len(), frames, worst)
         })
         .collect();
-    for run in runs {
-        let (ms, r, rows, frames, worst) = run.join().unwrap();
+    for (ms, r, rows, frames, worst) in runs {
         let sum = match r {
             Ok(sum) => {
                 assert_eq!(ms, 10, "{ms} ms of latency was not flagged");
