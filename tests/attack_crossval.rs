@@ -64,7 +64,8 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     };
     let never = AtomicBool::new(false);
     let stages = Stages::default();
-    let (rows, recs) = crossval(&path, &cfg, &setup, &wb, &mut dets, &opts, &stages, &never).unwrap();
+    let cv = crossval(&path, &cfg, &setup, &wb, &mut dets, &opts, &stages, &never).unwrap();
+    let (rows, recs) = (&cv.rows, &cv.records);
     assert_eq!(
         *stages.seen.borrow(),
         ["folds/4", "fold 1/2: optimizing", "fold 1/2: scoring", "+1", "fold 1/2: done", "+1"]
@@ -80,12 +81,12 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     assert_eq!((cell("original", "held-out"), cell("optimized", "held-out"), cell("random", "held-out")), (3, 3, 6));
     assert_eq!((cell("RAUCA_E2E", "held-out"), cell("random32", "held-out")), (3, 6));
     // Optimized against each other texture, paired by view: three held-out views each.
-    let pairs = paired(&recs, &opts.white_box, "optimized");
+    let pairs = paired(recs, &opts.white_box, "optimized");
     let against: Vec<(&str, usize)> = pairs.iter().map(|p| (p.against.as_str(), p.views)).collect();
     assert_eq!(against, [("original", 3), ("random", 3), ("random32", 3), ("RAUCA_E2E", 3)], "{pairs:?}");
     assert!(pairs.iter().all(|p| p.lo <= p.mean && p.mean <= p.hi && p.white_box));
     // ASR over the held-out views the original paint is detected on: those views only.
-    let cond = conditional_asr(&recs, 0.5);
+    let cond = conditional_asr(recs, 0.5);
     let detected = recs.iter().filter(|r| r.role == "held-out" && r.texture == "original" && r.score >= 0.5).count();
     assert_eq!(cond.len(), 4);
     assert!(cond.iter().all(|c| c.views == detected && (0.0..=1.0).contains(&c.asr)), "{cond:?}");
@@ -96,17 +97,46 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
         assert!(dir.path().join(format!("fold{f}of2/texture.png")).is_file());
     }
     let t = std::time::Instant::now();
-    let (rows2, recs2) = crossval(&path, &cfg, &setup, &wb, &mut dets, &opts, &Silent, &never).unwrap();
+    let cv2 = crossval(&path, &cfg, &setup, &wb, &mut dets, &opts, &Silent, &never).unwrap();
+    let (rows2, recs2) = (&cv2.rows, &cv2.records);
     eprintln!("resumed in {:.1} s", t.elapsed().as_secs_f64());
     assert_eq!(recs.iter().map(|r| r.score).collect::<Vec<_>>(), recs2.iter().map(|r| r.score).collect::<Vec<_>>());
     assert_eq!(rows.len(), rows2.len());
 
+    // The held-out boxes: each view's best box is its recorded best score, every IoU is in
+    // [0, 1] against the view's ground truth, and the anatomy counts each image once.
+    assert!(!cv.boxes.is_empty());
+    for r in recs.iter().filter(|r| r.role == "held-out") {
+        let best = cv
+            .boxes
+            .iter()
+            .filter(|b| {
+                b.fold == r.fold
+                    && b.view == r.view
+                    && b.texture == r.texture
+                    && b.seed == r.seed
+                    && b.detector == r.detector
+            })
+            .map(|b| b.score)
+            .fold(0.0, f32::max);
+        assert_eq!(best, r.score, "{r:?}");
+    }
+    assert!(cv.boxes.iter().all(|b| (0.0..=1.0).contains(&b.iou) && b.x0 < b.x1 && b.y0 < b.y1));
+    let an = |t: &str| cv.anatomies.iter().find(|a| a.texture == t).unwrap();
+    assert_eq!((an("original").images, an("random").images, an("RAUCA_E2E").images), (3, 6, 3));
+    for a in &cv.anatomies {
+        assert!((0.0..=1.0).contains(&a.on_car) && a.on_score <= a.on_car && a.off_boxes >= 0.0, "{a:?}");
+    }
+    // The original paint leaves a box on the car in every held-out view (it is detected in all three).
+    assert_eq!(an("original").on_car, 1.0, "{:?}", an("original"));
+
     // The transfer table reads the run back from its CSVs: the optimized row carries the run's
     // held-out cells, the baselines come once, and the differences are the run's own pairs.
-    pav::table::write_csv(&dir.path().join("crossval.csv"), &rows).unwrap();
-    pav::table::write_csv(&dir.path().join("crossval_views.csv"), &recs).unwrap();
+    pav::table::write_csv(&dir.path().join("crossval.csv"), rows).unwrap();
+    pav::table::write_csv(&dir.path().join("crossval_views.csv"), recs).unwrap();
+    pav::table::write_csv(&dir.path().join("crossval_anatomy.csv"), &cv.anatomies).unwrap();
     let runs = [("tiny".to_string(), dir.path().to_path_buf()), ("again".to_string(), dir.path().to_path_buf())];
-    let t = pav::experiments::table1::table1(&runs).unwrap();
+    let t = pav::experiments::table1::table1(&runs, &[]).unwrap();
     let held = |t: &str| rows.iter().find(|r| r.texture == t && r.split == "held-out").unwrap();
     let cell = |row: &str| t.cells.iter().find(|c| c.row == row).unwrap();
     assert_eq!(
@@ -122,6 +152,29 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     assert_eq!(mine, want, "the run against random, random32 and RAUCA_E2E, as crossval paired them");
     let md = t.markdown();
     assert!(md.contains(&format!("**{:.3} / ", held("optimized").mean_score)), "{md}");
-    let e = pav::experiments::table1::table1(&[("x".into(), dir.path().join("fold0of2"))]).unwrap_err();
+    let e = pav::experiments::table1::table1(&[("x".into(), dir.path().join("fold0of2"))], &[]).unwrap_err();
     assert!(e.to_string().contains("pav crossval"), "{e}");
+
+    // Two runs under one label make one row, averaged per view; paired with another label's
+    // row, the same run differs from itself by exactly zero.
+    let d = dir.path().to_path_buf();
+    let runs = [("seeds".to_string(), d.clone()), ("seeds".to_string(), d.clone()), ("one".to_string(), d.clone())];
+    let g = pav::experiments::table1::table1(&runs, &["one".to_string()]).unwrap();
+    let seeds = g.cells.iter().find(|c| c.row == "seeds").unwrap();
+    assert_eq!(
+        (seeds.runs, seeds.mean_score, seeds.p50_min, seeds.p50_max),
+        (2, held("optimized").mean_score, held("optimized").p50, held("optimized").p50)
+    );
+    let vs_one = g.differences.iter().find(|x| x.row == "seeds" && x.against == "one").unwrap();
+    assert_eq!((vs_one.mean, vs_one.lo, vs_one.hi, vs_one.views), (0.0, 0.0, 0.0, 3), "{vs_one:?}");
+    let vs_rauca = |row: &str| g.differences.iter().find(|x| x.row == row && x.against == "RAUCA_E2E").unwrap().mean;
+    assert_eq!(vs_rauca("seeds"), vs_rauca("one"));
+    assert!(g.markdown().contains("| seeds |") && !g.differences.iter().any(|x| x.row == "one" && x.against == "one"));
+    // The box anatomy reads back: baselines as crossval wrote them, a label's runs averaged.
+    let a = |t: &str| g.anatomy.iter().find(|a| a.texture == t).unwrap();
+    assert_eq!(a("RAUCA_E2E"), an("RAUCA_E2E"));
+    let opt = an("optimized");
+    assert_eq!((a("seeds").images, a("seeds").on_car, a("seeds").best_off), (2 * opt.images, opt.on_car, opt.best_off));
+    let e = pav::experiments::table1::table1(&runs, &["none".to_string()]).unwrap_err();
+    assert!(e.to_string().contains("no run has that label"), "{e}");
 }

@@ -4,6 +4,7 @@
 //! other folds and scored on the held-out views by every detector, next to the photo and
 //! several random textures.
 
+use super::boxes::{anatomy, box_records, markdown_anatomy, BoxRecord};
 use super::per_view::{conditional_asr, markdown_paired, paired, ViewRecord};
 use super::table2::{aggregate, detect_view, markdown, markdown_scores, DigitalRow, AP_MIN_SCORE};
 use super::{create_dir, write_markdown, ExperimentError, Scoring};
@@ -47,6 +48,19 @@ pub fn fold_split(n: usize, k: usize, f: usize) -> (Vec<usize>, Vec<usize>) {
     (0..n).partition(|i| i % k != f)
 }
 
+/// What a cross-validation scored.
+#[derive(Clone, Debug)]
+pub struct Crossval {
+    /// The pooled table rows (splits "held-out" and "train").
+    pub rows: Vec<DigitalRow>,
+    /// Every view's best car score under every texture and detector.
+    pub records: Vec<ViewRecord>,
+    /// Every car box on a held-out view.
+    pub boxes: Vec<BoxRecord>,
+    /// Where those boxes sit, per detector and texture.
+    pub anatomies: Vec<super::boxes::BoxAnatomy>,
+}
+
 /// Runs every fold; returns the pooled table rows (splits "held-out" and "train") and the
 /// per-view records. `progress` counts two units per fold (scored, done) and shows the stage.
 #[allow(clippy::too_many_arguments)]
@@ -59,7 +73,7 @@ pub fn crossval(
     opts: &CrossvalOptions,
     progress: &dyn Progress,
     stop: &AtomicBool,
-) -> Result<(Vec<DigitalRow>, Vec<ViewRecord>), ExperimentError> {
+) -> Result<Crossval, ExperimentError> {
     let all: Vec<&View> = setup.train.iter().chain(&setup.test).collect();
     let k = opts.folds;
     if k < 2 || k > all.len() {
@@ -73,6 +87,7 @@ pub fn crossval(
     // (role, texture, detector index) → detections, pooled over folds and seeds.
     let mut pooled: HashMap<(&'static str, String, usize), Vec<ImageDetections>> = HashMap::new();
     let mut records = Vec::new();
+    let mut boxes = Vec::new();
     for f in 0..k {
         let (tr, te) = fold_split(all.len(), k, f);
         // Synthetic views come from this fold's training photos only.
@@ -118,6 +133,9 @@ pub fn crossval(
                 for (tname, seed, tex) in &textures {
                     let dets = detect_view(v, *tex, &fs, detectors)?;
                     for (d, im) in dets.into_iter().enumerate() {
+                        if role == "held-out" {
+                            boxes.extend(box_records(f, &v.name, tname, *seed, detectors[d].name(), &im));
+                        }
                         records.push(ViewRecord {
                             fold: f,
                             role,
@@ -137,9 +155,13 @@ pub fn crossval(
     }
     progress.end(None);
     let mut rows = Vec::new();
+    let mut anatomies = Vec::new();
     let names = ["original", "random", "random32", "optimized"].map(String::from).into_iter();
     for tname in names.chain(opts.references.iter().map(|r| r.0.clone())) {
         for (d, det) in detectors.iter().enumerate() {
+            if let Some(ims) = pooled.get(&("held-out", tname.clone(), d)) {
+                anatomies.extend(anatomy(det.name(), &tname, ims));
+            }
             for role in ["held-out", "train"] {
                 let ims = pooled.get(&(role, tname.clone(), d)).map(Vec::as_slice).unwrap_or_default();
                 rows.extend(aggregate(
@@ -153,12 +175,12 @@ pub fn crossval(
             }
         }
     }
-    Ok((rows, records))
+    Ok(Crossval { rows, records, boxes, anatomies })
 }
 
 /// `pav crossval`: cross-validates `config` with `folds` folds (default: leave-one-out) and
 /// `random_seeds` random textures per fold; writes `crossval.csv`, `crossval_views.csv`,
-/// `crossval.md` and a folder per fold into `out` (finished folds resume), and returns the
+/// `crossval_boxes.csv`, `crossval_anatomy.csv`, `crossval.md` and a folder per fold into `out` (finished folds resume), and returns the
 /// Markdown.
 #[allow(clippy::too_many_arguments)]
 pub fn crossval_report(
@@ -206,9 +228,12 @@ pub fn crossval_report(
             .collect::<Result<_, _>>()?,
     };
     let t = Instant::now();
-    let (rows, records) = crossval(config, &cfg, &setup, &wb, &mut dets, &opts, progress, stop)?;
+    let Crossval { rows, records, boxes, anatomies } =
+        crossval(config, &cfg, &setup, &wb, &mut dets, &opts, progress, stop)?;
     write_csv(&out.join("crossval.csv"), &rows)?;
     write_csv(&out.join("crossval_views.csv"), &records)?;
+    write_csv(&out.join("crossval_boxes.csv"), &boxes)?;
+    write_csv(&out.join("crossval_anatomy.csv"), &anatomies)?;
     let pairs = paired(&records, &opts.white_box, "optimized");
     write_csv(&out.join("crossval_paired.csv"), &pairs)?;
     let mut md = format!(
@@ -255,6 +280,10 @@ pub fn crossval_report(
     md.push_str(&format!(
         "\n## Optimized against each other texture, held-out views: mean difference of the best car score [95 % paired-bootstrap interval over views]\n\nBelow zero: the optimized texture leaves the car a lower score. An interval entirely below zero is a win with error bars.\n\n{}",
         markdown_paired(&pairs)
+    ));
+    md.push_str(&format!(
+        "\n## Where the car boxes sit on held-out views (what P@0.5 reads)\n\nP@0.5 ranks every car box from score {AP_MIN_SCORE} over all held-out views: a box on the car (IoU ≥ 0.5) counts as a hit however low its score, and one off the car as a false positive. A texture lowers P@0.5 by leaving no box on the car, or boxes off the car that outrank the hits; it lowers the mean best car score by lowering scores. Boxes per view: `crossval_boxes.csv`.\n\n{}",
+        markdown_anatomy(&anatomies)
     ));
     write_markdown(out, "crossval.md", &md)?;
     Ok(md)

@@ -2,6 +2,7 @@
 //! run: what it was trained against), a column per detector it is scored on, every cell over
 //! held-out views; then each run's paired difference against every baseline, with its interval.
 
+use super::boxes::{markdown_anatomy, mean_anatomy, BoxAnatomy};
 use super::per_view::{paired, Paired, ViewRecord};
 use super::ExperimentError;
 use crate::table::unique;
@@ -21,18 +22,24 @@ pub struct Cell {
     pub white_box: bool,
     /// Mean over held-out views of the best car score.
     pub mean_score: f64,
-    /// Car AP at IoU 0.5 over the held-out views.
+    /// Car AP at IoU 0.5 over the held-out views (a row of several runs: their mean).
     pub p50: f64,
-    /// Held-out images scored (random textures count each seed).
+    /// The lowest P@0.5 of the row's runs.
+    pub p50_min: f64,
+    /// The highest P@0.5 of the row's runs.
+    pub p50_max: f64,
+    /// Runs averaged in this row.
+    pub runs: usize,
+    /// Held-out images scored per run (random textures count each seed).
     pub images: usize,
 }
 
 /// A run's optimized texture against a baseline, per detector, paired over held-out views.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Difference {
-    /// The run's label.
+    /// The row's label.
     pub row: String,
-    /// The baseline.
+    /// The baseline, or another row's label.
     pub against: String,
     /// The detector scored.
     pub detector: String,
@@ -52,13 +59,16 @@ pub struct Difference {
 /// The transfer table of several runs.
 #[derive(Clone, Debug)]
 pub struct Table1 {
-    /// Baseline rows (from the first run), then one row per run.
+    /// Baseline rows (from the first run), then one row per label.
     pub cells: Vec<Cell>,
-    /// Every run against every baseline.
+    /// Every label against every baseline and every `against` label.
     pub differences: Vec<Difference>,
     /// The largest difference of a baseline's held-out mean between runs: zero when the runs
     /// scored the same baselines on the same views.
     pub baseline_spread: f64,
+    /// Where the car boxes sit on held-out views: the first run's baselines, then each label's
+    /// optimized texture averaged over its runs (labels whose runs all have them).
+    pub anatomy: Vec<BoxAnatomy>,
 }
 
 /// One row of `crossval.csv`, as read back.
@@ -93,70 +103,181 @@ fn read<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Vec<T>, Experimen
     r.deserialize().collect::<Result<Vec<T>, _>>().map_err(bad)
 }
 
-/// Builds the table from `runs` (a label and a `pav crossval` output folder each).
-pub fn table1(runs: &[(String, PathBuf)]) -> Result<Table1, ExperimentError> {
+/// One run read back: its held-out table rows, view records and box anatomies (empty for a
+/// run written before crossval wrote them).
+struct Run {
+    held: Vec<CrossvalRow>,
+    records: Vec<ViewRecord>,
+    anatomy: Vec<BoxAnatomy>,
+}
+
+fn read_run(dir: &Path) -> Result<Run, ExperimentError> {
+    let rows: Vec<CrossvalRow> = read(&dir.join("crossval.csv"))?;
+    let held: Vec<CrossvalRow> = rows.into_iter().filter(|r| r.split == "held-out").collect();
+    if !held.iter().any(|r| r.texture == OPTIMIZED) {
+        return Err(ExperimentError::Invalid(format!(
+            "{}: no held-out scores of an optimized texture",
+            dir.join("crossval.csv").display()
+        )));
+    }
+    let views: Vec<ViewRow> = read(&dir.join("crossval_views.csv"))?;
+    let records = views
+        .into_iter()
+        .filter(|v| v.role == "held-out")
+        .map(|v| ViewRecord {
+            fold: v.fold,
+            role: "held-out",
+            view: v.view,
+            texture: v.texture,
+            seed: v.seed,
+            detector: v.detector,
+            score: v.score,
+        })
+        .collect();
+    let path = dir.join("crossval_anatomy.csv");
+    let anatomy = if path.is_file() { read(&path)? } else { Vec::new() };
+    Ok(Run { held, records, anatomy })
+}
+
+/// The optimized texture's held-out records of several runs of one label, each (fold, view,
+/// detector) averaged over the runs, renamed to `texture`. The runs must hold out the same views.
+fn averaged(runs: &[&Run], dirs: &[&Path], texture: &str) -> Result<Vec<ViewRecord>, ExperimentError> {
+    let mine = |r: &Run| -> Vec<(usize, String, String, f32)> {
+        let mut v: Vec<_> = r
+            .records
+            .iter()
+            .filter(|x| x.texture == OPTIMIZED)
+            .map(|x| (x.fold, x.view.clone(), x.detector.clone(), x.score))
+            .collect();
+        v.sort_by(|a, b| (a.0, &a.1, &a.2).cmp(&(b.0, &b.1, &b.2)));
+        v
+    };
+    let first = mine(runs[0]);
+    let mut sum: Vec<f64> = first.iter().map(|x| x.3 as f64).collect();
+    for (r, dir) in runs.iter().zip(dirs).skip(1) {
+        let other = mine(r);
+        let same =
+            other.len() == first.len() && other.iter().zip(&first).all(|(a, b)| (a.0, &a.1, &a.2) == (b.0, &b.1, &b.2));
+        if !same {
+            return Err(ExperimentError::Invalid(format!(
+                "{} holds out other views, folds or detectors than {}: runs of one label must differ only in what was trained",
+                dir.display(),
+                dirs[0].display()
+            )));
+        }
+        sum.iter_mut().zip(&other).for_each(|(s, o)| *s += o.3 as f64);
+    }
+    Ok(first
+        .into_iter()
+        .zip(sum)
+        .map(|((fold, view, detector, _), s)| ViewRecord {
+            fold,
+            role: "held-out",
+            view,
+            texture: texture.to_string(),
+            seed: 0,
+            detector,
+            score: (s / runs.len() as f64) as f32,
+        })
+        .collect())
+}
+
+/// Builds the table from `runs` (a label and a `pav crossval` output folder each). Runs that
+/// share a label (seeds of one config) make one row: each held-out view's score is averaged
+/// over them before the paired bootstrap, so the row compares the method rather than one draw
+/// of it. `against` names labels whose rows every other row is also paired with (a variant
+/// against the config it varies).
+pub fn table1(runs: &[(String, PathBuf)], against: &[String]) -> Result<Table1, ExperimentError> {
     if runs.is_empty() {
         return Err(ExperimentError::Invalid("name at least one `pav crossval` output folder".into()));
     }
-    let mut cells = Vec::new();
-    let mut differences = Vec::new();
+    let read: Vec<Run> = runs.iter().map(|(_, d)| read_run(d)).collect::<Result<_, _>>()?;
+    let labels = unique(runs.iter().map(|r| r.0.clone()));
+    if let Some(a) = against.iter().find(|a| !labels.contains(a)) {
+        return Err(ExperimentError::Invalid(format!(
+            "--against {a}: no run has that label (labels: {})",
+            labels.join(", ")
+        )));
+    }
     let mut baselines: Vec<Cell> = Vec::new();
     let mut spread = 0f64;
-    for (i, (label, dir)) in runs.iter().enumerate() {
-        let rows: Vec<CrossvalRow> = read(&dir.join("crossval.csv"))?;
-        let held: Vec<&CrossvalRow> = rows.iter().filter(|r| r.split == "held-out").collect();
-        if !held.iter().any(|r| r.texture == OPTIMIZED) {
-            return Err(ExperimentError::Invalid(format!(
-                "{}: no held-out scores of an optimized texture",
-                dir.join("crossval.csv").display()
-            )));
-        }
-        for r in &held {
-            let cell = |row: &str| Cell {
-                row: row.to_string(),
-                detector: r.detector.clone(),
-                white_box: r.white_box,
-                mean_score: r.mean_score,
-                p50: r.p50,
-                images: r.images,
-            };
-            if r.texture == OPTIMIZED {
-                cells.push(cell(label));
-            } else if i == 0 {
-                baselines.push(Cell { white_box: false, ..cell(&r.texture) });
+    for (i, run) in read.iter().enumerate() {
+        for r in run.held.iter().filter(|r| r.texture != OPTIMIZED) {
+            if i == 0 {
+                baselines.push(Cell {
+                    row: r.texture.clone(),
+                    detector: r.detector.clone(),
+                    white_box: false,
+                    mean_score: r.mean_score,
+                    p50: r.p50,
+                    p50_min: r.p50,
+                    p50_max: r.p50,
+                    runs: 1,
+                    images: r.images,
+                });
             } else if let Some(b) = baselines.iter().find(|b| b.row == r.texture && b.detector == r.detector) {
                 spread = spread.max((b.mean_score - r.mean_score).abs());
             }
         }
-        let views: Vec<ViewRow> = read(&dir.join("crossval_views.csv"))?;
-        let records: Vec<ViewRecord> = views
-            .into_iter()
-            .map(|v| ViewRecord {
-                fold: v.fold,
-                role: if v.role == "held-out" { "held-out" } else { "train" },
-                view: v.view,
-                texture: v.texture,
-                seed: v.seed,
-                detector: v.detector,
-                score: v.score,
-            })
-            .collect();
-        let white: Vec<String> = unique(held.iter().filter(|r| r.white_box).map(|r| r.detector.clone()));
-        differences.extend(paired(&records, &white, OPTIMIZED).into_iter().filter(|p| p.against != "original").map(
-            |p: Paired| Difference {
+    }
+    let mut anatomy: Vec<BoxAnatomy> = read[0].anatomy.iter().filter(|a| a.texture != OPTIMIZED).cloned().collect();
+    let mut cells = Vec::new();
+    let mut groups: Vec<(String, Vec<ViewRecord>, Vec<String>)> = Vec::new();
+    for label in &labels {
+        let idx: Vec<usize> = (0..runs.len()).filter(|&i| &runs[i].0 == label).collect();
+        let group: Vec<&Run> = idx.iter().map(|&i| &read[i]).collect();
+        let dirs: Vec<&Path> = idx.iter().map(|&i| runs[i].1.as_path()).collect();
+        for r in group[0].held.iter().filter(|r| r.texture == OPTIMIZED) {
+            let of_det: Vec<&CrossvalRow> = group
+                .iter()
+                .filter_map(|g| g.held.iter().find(|x| x.texture == OPTIMIZED && x.detector == r.detector))
+                .collect();
+            let n = of_det.len() as f64;
+            cells.push(Cell {
                 row: label.clone(),
-                against: p.against,
-                detector: p.detector,
-                white_box: p.white_box,
-                mean: p.mean,
-                lo: p.lo,
-                hi: p.hi,
-                views: p.views,
-            },
-        ));
+                detector: r.detector.clone(),
+                white_box: r.white_box,
+                mean_score: of_det.iter().map(|x| x.mean_score).sum::<f64>() / n,
+                p50: of_det.iter().map(|x| x.p50).sum::<f64>() / n,
+                p50_min: of_det.iter().map(|x| x.p50).fold(f64::INFINITY, f64::min),
+                p50_max: of_det.iter().map(|x| x.p50).fold(f64::NEG_INFINITY, f64::max),
+                runs: of_det.len(),
+                images: r.images,
+            });
+        }
+        if group.iter().all(|g| !g.anatomy.is_empty()) {
+            for det in unique(group[0].anatomy.iter().map(|a| a.detector.clone())) {
+                let of: Vec<&BoxAnatomy> = group
+                    .iter()
+                    .flat_map(|g| g.anatomy.iter().filter(|a| a.texture == OPTIMIZED && a.detector == det))
+                    .collect();
+                anatomy.extend(mean_anatomy(label, &of));
+            }
+        }
+        let white = unique(group[0].held.iter().filter(|r| r.white_box).map(|r| r.detector.clone()));
+        groups.push((label.clone(), averaged(&group, &dirs, OPTIMIZED)?, white));
+    }
+    let mut differences = Vec::new();
+    for (label, mine, white) in &groups {
+        let mut records = mine.clone();
+        records.extend(read[0].records.iter().filter(|r| r.texture != OPTIMIZED && r.texture != "original").cloned());
+        for a in against.iter().filter(|a| *a != label) {
+            let theirs = &groups.iter().find(|g| &g.0 == a).expect("checked above").1;
+            records.extend(theirs.iter().map(|r| ViewRecord { texture: a.clone(), ..r.clone() }));
+        }
+        differences.extend(paired(&records, white, OPTIMIZED).into_iter().map(|p: Paired| Difference {
+            row: label.clone(),
+            against: p.against,
+            detector: p.detector,
+            white_box: p.white_box,
+            mean: p.mean,
+            lo: p.lo,
+            hi: p.hi,
+            views: p.views,
+        }));
     }
     baselines.extend(cells);
-    Ok(Table1 { cells: baselines, differences, baseline_spread: spread })
+    Ok(Table1 { cells: baselines, differences, baseline_spread: spread, anatomy })
 }
 
 impl Table1 {
@@ -172,7 +293,12 @@ impl Table1 {
                 match self.cells.iter().find(|c| c.row == row && &c.detector == d) {
                     Some(c) => {
                         let b = if c.white_box { "**" } else { "" };
-                        s.push_str(&format!(" {b}{:.3} / {:.0} %{b} |", c.mean_score, 100.0 * c.p50));
+                        let range = if c.runs > 1 {
+                            format!(" ({:.0}–{:.0})", 100.0 * c.p50_min, 100.0 * c.p50_max)
+                        } else {
+                            String::new()
+                        };
+                        s.push_str(&format!(" {b}{:.3} / {:.0} %{range}{b} |", c.mean_score, 100.0 * c.p50));
                     }
                     None => s.push_str(" – |"),
                 }
@@ -202,20 +328,33 @@ impl Table1 {
     }
 }
 
-/// `pav table1`: builds the table of `runs` and writes `table1.md`, `table1.csv` and
-/// `table1_paired.csv` into `out`; returns the Markdown.
-pub fn table1_report(runs: &[(String, PathBuf)], out: &Path) -> Result<String, ExperimentError> {
-    let t = table1(runs)?;
+/// `pav table1`: builds the table of `runs` (paired also with the rows labelled `against`) and
+/// writes `table1.md`, `table1.csv`, `table1_paired.csv` and (when the runs have box anatomies)
+/// `table1_anatomy.csv` into `out`; returns the Markdown.
+pub fn table1_report(runs: &[(String, PathBuf)], against: &[String], out: &Path) -> Result<String, ExperimentError> {
+    let t = table1(runs, against)?;
     super::create_dir(out)?;
     crate::table::write_csv(&out.join("table1.csv"), &t.cells)?;
     crate::table::write_csv(&out.join("table1_paired.csv"), &t.differences)?;
     let sources: Vec<String> = runs.iter().map(|(l, d)| format!("{l} = `{}`", d.display())).collect();
     let md = format!(
-        "# Transfer over held-out views (the paper's Table I)\n\nRows: what the texture was trained against; columns: the detector it is scored on. A cell is the mean best car score / P@0.5 over the held-out views of every fold (bold: the row trained against that detector). Baseline rows come from the first run; across runs their means differ by at most {:.4}. Differences: optimized − baseline per held-out view, mean [95 % paired-bootstrap interval]; an interval entirely below zero is a win with error bars.\n\nRuns: {}.\n\n{}",
+        "# Transfer over held-out views (the paper's Table I)\n\nRows: what the texture was trained against; columns: the detector it is scored on. A cell is the mean best car score / P@0.5 over the held-out views of every fold (bold: the row trained against that detector); runs sharing a label are averaged (P@0.5: their mean, lowest–highest in brackets). Baseline rows come from the first run; across runs their means differ by at most {:.4}. Differences: optimized − baseline per held-out view (runs of one label averaged per view first), mean [95 % paired-bootstrap interval]; an interval entirely below zero is a win with error bars.\n\nRuns: {}.\n\n{}",
         t.baseline_spread,
         sources.join("; "),
         t.markdown()
     );
+    let mut md = md;
+    if !t.anatomy.is_empty() {
+        crate::table::write_csv(&out.join("table1_anatomy.csv"), &t.anatomy)?;
+        let mut a = t.anatomy.clone();
+        // Grouped by detector, rows in table order (a stable sort keeps it).
+        let dets = unique(a.iter().map(|x| x.detector.clone()));
+        a.sort_by_key(|x| dets.iter().position(|d| *d == x.detector));
+        md.push_str(&format!(
+            "\n## Where the car boxes sit on held-out views (what P@0.5 reads)\n\nP@0.5 ranks every car box from score 0.05 over the held-out views: a box on the car (IoU ≥ 0.5) is a hit however low its score, one off the car a false positive. Rows of several runs are their mean; images are pooled.\n\n{}",
+            markdown_anatomy(&a)
+        ));
+    }
     super::write_markdown(out, "table1.md", &md)?;
     Ok(md)
 }

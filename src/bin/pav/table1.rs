@@ -6,12 +6,17 @@ use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Output folders of `pav crossval`, one row each, in this order.
+    /// Output folders of `pav crossval`, one row each (or one per label), in this order.
     #[arg(required = true)]
     runs: Vec<PathBuf>,
-    /// A row's label (default: its folder's name); give one per run or none.
+    /// A run's label (default: its folder's name); give one per run or none. Runs sharing a
+    /// label (seeds of one config) make one row, averaged per held-out view.
     #[arg(long = "label")]
     labels: Vec<String>,
+    /// Also pair every row with the row of this label (a variant against the config it varies).
+    /// Repeatable.
+    #[arg(long)]
+    against: Vec<String>,
     /// Output folder.
     #[arg(long, short = 'o', default_value = "out/table1")]
     out: PathBuf,
@@ -32,7 +37,7 @@ pub fn run(a: &Args) -> Result<()> {
             (name, d.clone())
         })
         .collect();
-    println!("{}", table1_report(&runs, &a.out)?);
+    println!("{}", table1_report(&runs, &a.against, &a.out)?);
     eprintln!("wrote table1.md, table1.csv and table1_paired.csv in {}", a.out.display());
     Ok(())
 }
