@@ -306,8 +306,9 @@ impl Table1 {
             s.push('\n');
         }
         for against in unique(self.differences.iter().map(|d| d.against.clone())) {
-            s.push_str(&format!("\n| optimized − {against} | {} |\n{header}", dets.join(" | ")));
-            for row in unique(self.differences.iter().map(|d| d.row.clone())) {
+            let what = if self.differences.iter().any(|d| d.row == against) { "row" } else { "optimized" };
+            s.push_str(&format!("\n| {what} − {against} | {} |\n{header}", dets.join(" | ")));
+            for row in unique(self.differences.iter().filter(|d| d.against == against).map(|d| d.row.clone())) {
                 s.push_str(&format!("| {row} |"));
                 for d in &dets {
                     let hit =
