@@ -7,7 +7,7 @@
 mod common;
 
 use pav::attack::config::OptimizeConfig;
-use pav::attack::loss::{DetectionLoss, Reduce};
+use pav::attack::loss::{DetectionLoss, Proposals, Reduce};
 use pav::attack::setup::Setup;
 use pav::attack::whitebox::WhiteBox;
 use pav::detect::DetectorConfig;
@@ -21,7 +21,12 @@ fn setup(size: usize, detector: &str) -> (OptimizeConfig, Setup, WhiteBox) {
     cfg.views.test.clear();
     let s = Setup::load(&cfg, Some(size)).unwrap();
     let d = DetectorConfig::load(&common::detector_config(detector)).unwrap();
-    let loss = DetectionLoss { box_threshold: 0.05, target: d.target_classes.clone(), reduce: Reduce::Mean };
+    let loss = DetectionLoss {
+        box_threshold: 0.05,
+        target: d.target_classes.clone(),
+        reduce: Reduce::Mean,
+        proposals: Proposals::ArgMax,
+    };
     let wb = WhiteBox::load(&d, loss, size).unwrap();
     (cfg, s, wb)
 }

@@ -6,7 +6,7 @@
 
 mod common;
 
-use pav::attack::loss::{DetectionLoss, Reduce};
+use pav::attack::loss::{DetectionLoss, Proposals, Reduce};
 use pav::attack::whitebox::{WhiteBox, WhiteBoxOptions};
 use pav::dataset::fca::CarlaSample;
 use pav::detect::onnx::OnnxDetector;
@@ -40,7 +40,12 @@ fn int8_car(det: &mut OnnxDetector, img: &[f32], size: usize) -> f32 {
 fn deimv2_trains_as_a_named_surrogate_and_descent_hides_the_car() {
     let shared = common::real_data();
     let cfg = DetectorConfig::load(&common::detector_config("deimv2_atto_int8")).unwrap();
-    let loss = DetectionLoss { box_threshold: 0.05, target: cfg.target_classes.clone(), reduce: Reduce::Mean };
+    let loss = DetectionLoss {
+        box_threshold: 0.05,
+        target: cfg.target_classes.clone(),
+        reduce: Reduce::Mean,
+        proposals: Proposals::ArgMax,
+    };
     let e = WhiteBox::load(&cfg, loss.clone(), 416).err().expect("refused").to_string();
     assert!(e.contains("surrogate = true"), "{e}");
     let o = WhiteBoxOptions { composite: 416, input: None, threads: 2, surrogate: true };

@@ -6,7 +6,7 @@
 
 mod common;
 
-use pav::attack::loss::{DetectionLoss, Reduce};
+use pav::attack::loss::{DetectionLoss, Proposals, Reduce};
 use pav::attack::whitebox::{class_branch, WhiteBox, WhiteBoxOptions};
 use pav::dataset::fca::CarlaSample;
 use pav::detect::autodiff::{differentiate_with, Kernels};
@@ -84,7 +84,12 @@ fn the_class_branch_gradient_matches_central_differences() {
 
 #[test]
 fn the_int8_model_trains_only_as_a_named_surrogate() {
-    let loss = DetectionLoss { box_threshold: 0.05, target: config().target_classes.clone(), reduce: Reduce::Mean };
+    let loss = DetectionLoss {
+        box_threshold: 0.05,
+        target: config().target_classes.clone(),
+        reduce: Reduce::Mean,
+        proposals: Proposals::ArgMax,
+    };
     let e = WhiteBox::load(&config(), loss.clone(), 416).err().expect("refused").to_string();
     assert!(e.contains("surrogate = true"), "{e}");
     let o = WhiteBoxOptions { composite: 416, input: None, threads: 2, surrogate: true };

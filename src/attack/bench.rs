@@ -1,7 +1,7 @@
 //! What the white-box step costs in time (`pav bench-step`): the detector's forward with the loss,
 //! and forward + backward to its input, at several network input sizes.
 
-use super::loss::{DetectionLoss, Reduce};
+use super::loss::{DetectionLoss, Proposals, Reduce};
 use super::whitebox::{WhiteBox, WhiteBoxError, WhiteBoxOptions};
 use crate::detect::config::DetectorConfig;
 use crate::progress::Progress;
@@ -55,7 +55,12 @@ pub fn time_step(
 ) -> Result<Vec<StepTiming>, WhiteBoxError> {
     let mut rows = Vec::new();
     for &size in sizes {
-        let loss = DetectionLoss { box_threshold: 0.05, target: detector.target_classes.clone(), reduce: Reduce::Mean };
+        let loss = DetectionLoss {
+            box_threshold: 0.05,
+            target: detector.target_classes.clone(),
+            reduce: Reduce::Mean,
+            proposals: Proposals::ArgMax,
+        };
         let o = WhiteBoxOptions { composite: size, input: Some(size), threads, surrogate: false };
         let wb = WhiteBox::with_options(detector, loss, o)?;
         let img = composite(size);

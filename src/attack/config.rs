@@ -1,6 +1,6 @@
 //! `pav optimize` configs (TOML). Relative paths are resolved against the config's folder.
 
-use super::loss::Reduce;
+use super::loss::{Proposals, Reduce};
 use super::smooth::SmoothNorm;
 use crate::geometry::camera::CameraConvention;
 use serde::Deserialize;
@@ -131,6 +131,10 @@ pub struct LossConfig {
     /// `"mean"` (the paper), `{ top_k = k }` or `{ softmax = τ }`.
     #[serde(default = "mean")]
     pub reduce: Reduce,
+    /// L2's set under `"mean"`: `"arg_max"` (the paper, the default) or `"scored"` (every
+    /// prediction whose car score reaches `box_threshold`, as the metrics count).
+    #[serde(default)]
+    pub proposals: Proposals,
     /// L_s normalization: `"mean"` over texels (the authors' code, the default) or `"sum"` (Eq. 12).
     #[serde(default)]
     pub smoothness: SmoothNorm,
@@ -339,6 +343,12 @@ impl OptimizeConfig {
             }
             _ => {}
         }
+        if l.proposals != Proposals::ArgMax && l.reduce != Reduce::Mean {
+            return Err(
+                "loss.proposals chooses the set of reduce = \"mean\"; the other reductions weight every prediction"
+                    .into(),
+            );
+        }
         if !(0.0..=1.0).contains(&l.box_threshold) {
             return Err(format!("loss.box_threshold must be in [0, 1], got {}", l.box_threshold));
         }
@@ -439,6 +449,10 @@ mod tests {
             let e = variant("reduce = \"mean\"", &format!("reduce = {bad}")).unwrap_err().to_string();
             assert!(e.contains(key), "{bad}: {e}");
         }
+        let scored = "reduce = \"mean\"\nproposals = \"scored\"";
+        assert_eq!(variant("reduce = \"mean\"", scored).unwrap().loss.proposals, Proposals::Scored);
+        let e = variant("reduce = \"mean\"", "reduce = { top_k = 1 }\nproposals = \"scored\"").unwrap_err().to_string();
+        assert!(e.contains("loss.proposals"), "{e}");
         let c = variant("init = 0.5", "init = \"peer.png\"").unwrap();
         assert_eq!(c.mesh.init, Init::File(dir.path().join("peer.png")));
         assert_eq!(variant("init = 0.5", "init = \"random\"").unwrap().mesh.init, Init::Named(InitName::Random));

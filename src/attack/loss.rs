@@ -20,6 +20,13 @@
 //! gradient, not 0/0. [`Reduce::TopK`] and [`Reduce::Softmax`] instead weight the strongest
 //! predictions, since a detector reports a car when its single best box scores high: L1 over the
 //! objectness values, L2 over the detection scores `objectness × target confidence`.
+//!
+//! [`Proposals::Scored`] changes the Mean's proposals to the set the digital metrics count: every
+//! prediction whose detection score for a target class reaches `box_threshold`, whatever its most
+//! likely class. The paper's set leaves out a box rated "truck 0.4, car 0.15", which P@0.5 and the
+//! mean best car score still count as a car at 0.15 (`detect::decode::Proposals::target_detections`); in the
+//! second half of a session-16 run, 21 of DEIMv2's 127 steps had no paper proposal while its
+//! best car score was ≥ 0.05, so L2 pushed nothing there.
 
 /// Sigmoid as `(1 + tanh(x/2))/2`, and its derivative `(1 − tanh²(x/2))/4`: both finite for every
 /// finite logit, where `1/(1 + exp(−x))` makes a NaN gradient below x ≈ −88 in f32.
@@ -43,6 +50,17 @@ pub enum Reduce {
     Softmax(f32),
 }
 
+/// Which predictions L2 averages over under [`Reduce::Mean`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Proposals {
+    /// The paper's: boxes (objectness ≥ the threshold) whose most likely class is a target.
+    #[default]
+    ArgMax,
+    /// What the metrics count: predictions whose target detection score reaches the threshold.
+    Scored,
+}
+
 /// The detector-loss settings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DetectionLoss {
@@ -52,6 +70,8 @@ pub struct DetectionLoss {
     pub target: Vec<usize>,
     /// How the predictions are reduced.
     pub reduce: Reduce,
+    /// L2's set under [`Reduce::Mean`].
+    pub proposals: Proposals,
 }
 
 /// L1 and L2 with the set sizes and the strongest target detection, for logs.
@@ -295,8 +315,14 @@ impl DetectionLoss {
             if o >= self.box_threshold && o.is_finite() {
                 boxes.push(i);
                 let b = best(i).0;
-                if targets.contains(&b) {
+                if self.proposals == Proposals::ArgMax && targets.contains(&b) {
                     proposals.push((i, b));
+                }
+            }
+            if self.proposals == Proposals::Scored {
+                let s = p.score(i, car).0;
+                if s >= self.box_threshold && s.is_finite() {
+                    proposals.push((i, tk[i].0));
                 }
             }
         }
@@ -350,7 +376,7 @@ mod tests {
     }
 
     fn loss(reduce: Reduce) -> DetectionLoss {
-        DetectionLoss { box_threshold: 0.5, target: vec![2], reduce }
+        DetectionLoss { box_threshold: 0.5, target: vec![2], reduce, proposals: Proposals::ArgMax }
     }
 
     fn eval(l: &DetectionLoss, m: &HeadMap, beta: f32) -> (LossTerms, Vec<Vec<f32>>) {
@@ -395,8 +421,10 @@ mod tests {
             *v += 0.01 * (i % 7) as f32;
         }
         let beta = 0.7;
-        for how in [Reduce::Mean, Reduce::TopK(2), Reduce::Softmax(0.2)] {
-            let l = loss(how);
+        let scored = DetectionLoss { proposals: Proposals::Scored, ..loss(Reduce::Mean) };
+        let losses = [loss(Reduce::Mean), loss(Reduce::TopK(2)), loss(Reduce::Softmax(0.2)), scored];
+        for l in losses {
+            let how = l.reduce;
             let (_, g) = eval(&l, &(m.clone(), hw), beta);
             let total = |m: &[f32]| {
                 let (t, _) = eval(&l, &(m.to_vec(), hw), beta);
@@ -410,10 +438,29 @@ mod tests {
                 let fd = (total(&p) - total(&q)) / (2.0 * eps as f64);
                 assert!((fd - g[0][i] as f64).abs() < 1e-4, "{how:?} logit {i}: {} vs {fd}", g[0][i]);
             }
-            if how == Reduce::Mean {
+            if l.proposals == Proposals::ArgMax && how == Reduce::Mean {
                 assert!(g[0].iter().filter(|v| **v != 0.0).count() == 5, "3 boxes and 2 proposals carry gradient");
             }
         }
+    }
+
+    #[test]
+    fn scored_proposals_count_a_car_that_is_not_the_most_likely_class() {
+        // Box 1 is most likely class 1 (logit 3) but rates car at logit 1: detection score
+        // s(2)·s(1) = 0.64, a car for the metrics. The paper's set leaves it out; Scored keeps it,
+        // and drops box 0, whose car score s(0)·s(3) = 0.48 is below the 0.5 threshold.
+        let (mut m, hw) = map([0.0, 2.0, -5.0, -5.0, 2.0, -5.0, -5.0, -5.0], [2, 1, 2, 0, 2, 0, 0, 0]);
+        m[(5 + 2) * 4 + 1] = 1.0;
+        let s = |x: f32| 1.0 / (1.0 + (-x).exp());
+        let (paper, _) = eval(&loss(Reduce::Mean), &(m.clone(), hw), 1.0);
+        assert_eq!(paper.proposals, 2);
+        assert!((paper.l2 - s(3.0)).abs() < 1e-6, "{paper:?}");
+        let scored = DetectionLoss { proposals: Proposals::Scored, ..loss(Reduce::Mean) };
+        let (t, g) = eval(&scored, &(m.clone(), hw), 1.0);
+        assert_eq!((t.boxes, t.proposals, t.l1), (paper.boxes, 2, paper.l1));
+        assert!((t.l2 - (s(1.0) + s(3.0)) / 2.0).abs() < 1e-6, "{t:?}");
+        // Box 1's car logit now carries L2's gradient; box 0's car logit none.
+        assert!(g[0][(5 + 2) * 4 + 1] > 0.0 && g[0][(5 + 2) * 4] == 0.0);
     }
 
     #[test]
@@ -479,8 +526,10 @@ mod tests {
         // Distinct probabilities, away from ties and from the box threshold.
         let s = v8_scores();
         let beta = 0.7;
-        for how in [Reduce::Mean, Reduce::TopK(2), Reduce::Softmax(0.2)] {
-            let l = loss(how);
+        let scored = DetectionLoss { proposals: Proposals::Scored, ..loss(Reduce::Mean) };
+        let losses = [loss(Reduce::Mean), loss(Reduce::TopK(2)), loss(Reduce::Softmax(0.2)), scored];
+        for l in losses {
+            let how = l.reduce;
             let total = |v: &[f32]| {
                 let (t, _) = l.terms(&Predictions::ultralytics(v, 3).unwrap(), &[v], beta).unwrap();
                 t.l1 as f64 + beta as f64 * t.l2 as f64
@@ -526,8 +575,10 @@ mod tests {
         assert_eq!((t.boxes, t.proposals), (3, 1));
         assert!((t.max_score - prob(1.4)).abs() < 1e-6, "{t:?}");
         let beta = 0.7;
-        for how in [Reduce::Mean, Reduce::TopK(2), Reduce::Softmax(0.2)] {
-            let l = loss(how);
+        let scored = DetectionLoss { proposals: Proposals::Scored, ..loss(Reduce::Mean) };
+        let losses = [loss(Reduce::Mean), loss(Reduce::TopK(2)), loss(Reduce::Softmax(0.2)), scored];
+        for l in losses {
+            let how = l.reduce;
             let total = |v: &[f32]| {
                 let (t, _) = l.terms(&Predictions::detr(v, 3).unwrap(), &[v], beta).unwrap();
                 t.l1 as f64 + beta as f64 * t.l2 as f64

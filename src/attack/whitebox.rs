@@ -345,6 +345,7 @@ impl Ensemble {
                     box_threshold: cfg.loss.box_threshold,
                     target: d.target_classes.clone(),
                     reduce: cfg.loss.reduce,
+                    proposals: cfg.loss.proposals,
                 };
                 let o = WhiteBoxOptions { composite: size, input: None, threads: 0, surrogate: e.surrogate };
                 Ok((WhiteBox::with_options(&d, loss, o)?, e.weight))
