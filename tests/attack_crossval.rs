@@ -135,6 +135,7 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     pav::table::write_csv(&dir.path().join("crossval.csv"), rows).unwrap();
     pav::table::write_csv(&dir.path().join("crossval_views.csv"), recs).unwrap();
     pav::table::write_csv(&dir.path().join("crossval_anatomy.csv"), &cv.anatomies).unwrap();
+    pav::table::write_csv(&dir.path().join("crossval_boxes.csv"), &cv.boxes).unwrap();
     let runs = [("tiny".to_string(), dir.path().to_path_buf()), ("again".to_string(), dir.path().to_path_buf())];
     let t = pav::experiments::table1::table1(&runs, &[]).unwrap();
     let held = |t: &str| rows.iter().find(|r| r.texture == t && r.split == "held-out").unwrap();
@@ -175,6 +176,21 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     assert_eq!(a("RAUCA_E2E"), an("RAUCA_E2E"));
     let opt = an("optimized");
     assert_eq!((a("seeds").images, a("seeds").on_car, a("seeds").best_off), (2 * opt.images, opt.on_car, opt.best_off));
+    // The car's own box: per view the best box at IoU ≥ 0.5 (0 without one), paired as the scores are.
+    let own = |t: &str, view: &str| {
+        cv.boxes
+            .iter()
+            .filter(|b| b.texture == t && b.view == view && b.iou >= 0.5)
+            .map(|b| b.score)
+            .fold(0.0, f32::max) as f64
+    };
+    let views: Vec<&str> =
+        recs.iter().filter(|r| r.role == "held-out" && r.texture == "original").map(|r| r.view.as_str()).collect();
+    let want = views.iter().map(|v| own("optimized", v) - own("RAUCA_E2E", v)).sum::<f64>() / views.len() as f64;
+    let got = g.own_box.iter().find(|x| x.row == "seeds" && x.against == "RAUCA_E2E").unwrap();
+    assert!((got.mean - want).abs() < 1e-6 && got.views == 3, "{got:?} vs {want}");
+    let self_own = g.own_box.iter().find(|x| x.row == "seeds" && x.against == "one").unwrap();
+    assert_eq!((self_own.mean, self_own.lo, self_own.hi), (0.0, 0.0, 0.0));
     let e = pav::experiments::table1::table1(&runs, &["none".to_string()]).unwrap_err();
     assert!(e.to_string().contains("no run has that label"), "{e}");
 }

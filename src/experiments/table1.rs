@@ -2,10 +2,11 @@
 //! run: what it was trained against), a column per detector it is scored on, every cell over
 //! held-out views; then each run's paired difference against every baseline, with its interval.
 
-use super::boxes::{markdown_anatomy, mean_anatomy, BoxAnatomy};
+use super::boxes::{markdown_anatomy, mean_anatomy, BoxAnatomy, HIT_IOU};
 use super::per_view::{paired, Paired, ViewRecord};
 use super::ExperimentError;
 use crate::table::unique;
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 /// The texture a crossval optimizes; every other texture of its tables is a baseline.
@@ -63,6 +64,9 @@ pub struct Table1 {
     pub cells: Vec<Cell>,
     /// Every label against every baseline and every `against` label.
     pub differences: Vec<Difference>,
+    /// The same pairs over the car's own box: each view's best car box on the car (IoU ≥ 0.5,
+    /// 0 without one), the boxes P@0.5 counts as hits (labels whose runs all wrote their boxes).
+    pub own_box: Vec<Difference>,
     /// The largest difference of a baseline's held-out mean between runs: zero when the runs
     /// scored the same baselines on the same views.
     pub baseline_spread: f64,
@@ -109,6 +113,32 @@ struct Run {
     held: Vec<CrossvalRow>,
     records: Vec<ViewRecord>,
     anatomy: Vec<BoxAnatomy>,
+    /// The records with each view's score replaced by its best box on the car (IoU ≥ 0.5; 0
+    /// without one); empty for a run written before crossval wrote its boxes.
+    own: Vec<ViewRecord>,
+}
+
+/// The runs of one label, averaged per held-out view.
+struct Group {
+    label: String,
+    /// The optimized texture's best car scores.
+    scores: Vec<ViewRecord>,
+    /// Its car's own box (None when a run lacks its boxes).
+    own: Option<Vec<ViewRecord>>,
+    /// The detectors it trained against.
+    white: Vec<String>,
+}
+
+/// One row of `crossval_boxes.csv`, as read back.
+#[derive(serde::Deserialize)]
+struct BoxRow {
+    fold: usize,
+    view: String,
+    texture: String,
+    seed: u64,
+    detector: String,
+    score: f32,
+    iou: f32,
 }
 
 fn read_run(dir: &Path) -> Result<Run, ExperimentError> {
@@ -121,7 +151,7 @@ fn read_run(dir: &Path) -> Result<Run, ExperimentError> {
         )));
     }
     let views: Vec<ViewRow> = read(&dir.join("crossval_views.csv"))?;
-    let records = views
+    let records: Vec<ViewRecord> = views
         .into_iter()
         .filter(|v| v.role == "held-out")
         .map(|v| ViewRecord {
@@ -136,15 +166,36 @@ fn read_run(dir: &Path) -> Result<Run, ExperimentError> {
         .collect();
     let path = dir.join("crossval_anatomy.csv");
     let anatomy = if path.is_file() { read(&path)? } else { Vec::new() };
-    Ok(Run { held, records, anatomy })
+    let path = dir.join("crossval_boxes.csv");
+    let own = if path.is_file() {
+        let mut best: HashMap<(usize, String, String, u64, String), f32> = HashMap::new();
+        for b in read::<BoxRow>(&path)?.into_iter().filter(|b| b.iou >= HIT_IOU) {
+            let e = best.entry((b.fold, b.view, b.texture, b.seed, b.detector)).or_insert(0.0);
+            *e = e.max(b.score);
+        }
+        records
+            .iter()
+            .map(|r: &ViewRecord| {
+                let key = (r.fold, r.view.clone(), r.texture.clone(), r.seed, r.detector.clone());
+                ViewRecord { score: best.get(&key).copied().unwrap_or(0.0), ..r.clone() }
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    Ok(Run { held, records, anatomy, own })
 }
 
 /// The optimized texture's held-out records of several runs of one label, each (fold, view,
 /// detector) averaged over the runs, renamed to `texture`. The runs must hold out the same views.
-fn averaged(runs: &[&Run], dirs: &[&Path], texture: &str) -> Result<Vec<ViewRecord>, ExperimentError> {
+fn averaged(
+    runs: &[&Run],
+    dirs: &[&Path],
+    texture: &str,
+    of: fn(&Run) -> &[ViewRecord],
+) -> Result<Vec<ViewRecord>, ExperimentError> {
     let mine = |r: &Run| -> Vec<(usize, String, String, f32)> {
-        let mut v: Vec<_> = r
-            .records
+        let mut v: Vec<_> = of(r)
             .iter()
             .filter(|x| x.texture == OPTIMIZED)
             .map(|x| (x.fold, x.view.clone(), x.detector.clone(), x.score))
@@ -222,7 +273,7 @@ pub fn table1(runs: &[(String, PathBuf)], against: &[String]) -> Result<Table1, 
     }
     let mut anatomy: Vec<BoxAnatomy> = read[0].anatomy.iter().filter(|a| a.texture != OPTIMIZED).cloned().collect();
     let mut cells = Vec::new();
-    let mut groups: Vec<(String, Vec<ViewRecord>, Vec<String>)> = Vec::new();
+    let mut groups: Vec<Group> = Vec::new();
     for label in &labels {
         let idx: Vec<usize> = (0..runs.len()).filter(|&i| &runs[i].0 == label).collect();
         let group: Vec<&Run> = idx.iter().map(|&i| &read[i]).collect();
@@ -255,29 +306,43 @@ pub fn table1(runs: &[(String, PathBuf)], against: &[String]) -> Result<Table1, 
             }
         }
         let white = unique(group[0].held.iter().filter(|r| r.white_box).map(|r| r.detector.clone()));
-        groups.push((label.clone(), averaged(&group, &dirs, OPTIMIZED)?, white));
+        let own = if group.iter().all(|g| !g.own.is_empty()) {
+            Some(averaged(&group, &dirs, OPTIMIZED, |r| &r.own)?)
+        } else {
+            None
+        };
+        let scores = averaged(&group, &dirs, OPTIMIZED, |r| &r.records)?;
+        groups.push(Group { label: label.clone(), scores, own, white });
     }
-    let mut differences = Vec::new();
-    for (label, mine, white) in &groups {
-        let mut records = mine.clone();
-        records.extend(read[0].records.iter().filter(|r| r.texture != OPTIMIZED && r.texture != "original").cloned());
-        for a in against.iter().filter(|a| *a != label) {
-            let theirs = &groups.iter().find(|g| &g.0 == a).expect("checked above").1;
-            records.extend(theirs.iter().map(|r| ViewRecord { texture: a.clone(), ..r.clone() }));
+    // Each label against the baselines and the `against` labels, over one kind of per-view score.
+    let pair_all = |mine_of: &dyn Fn(&Group) -> Option<&Vec<ViewRecord>>, baseline: &[ViewRecord]| {
+        let mut out = Vec::new();
+        for g in &groups {
+            let (label, white) = (&g.label, &g.white);
+            let Some(mine) = mine_of(g) else { continue };
+            let mut records = mine.clone();
+            records.extend(baseline.iter().filter(|r| r.texture != OPTIMIZED && r.texture != "original").cloned());
+            for a in against.iter().filter(|a| *a != label) {
+                let theirs = groups.iter().find(|g| &g.label == a).and_then(mine_of);
+                records.extend(theirs.into_iter().flatten().map(|r| ViewRecord { texture: a.clone(), ..r.clone() }));
+            }
+            out.extend(paired(&records, white, OPTIMIZED).into_iter().map(|p: Paired| Difference {
+                row: label.clone(),
+                against: p.against,
+                detector: p.detector,
+                white_box: p.white_box,
+                mean: p.mean,
+                lo: p.lo,
+                hi: p.hi,
+                views: p.views,
+            }));
         }
-        differences.extend(paired(&records, white, OPTIMIZED).into_iter().map(|p: Paired| Difference {
-            row: label.clone(),
-            against: p.against,
-            detector: p.detector,
-            white_box: p.white_box,
-            mean: p.mean,
-            lo: p.lo,
-            hi: p.hi,
-            views: p.views,
-        }));
-    }
+        out
+    };
+    let differences = pair_all(&|g| Some(&g.scores), &read[0].records);
+    let own_box = if read[0].own.is_empty() { Vec::new() } else { pair_all(&|g| g.own.as_ref(), &read[0].own) };
     baselines.extend(cells);
-    Ok(Table1 { cells: baselines, differences, baseline_spread: spread, anatomy })
+    Ok(Table1 { cells: baselines, differences, own_box, baseline_spread: spread, anatomy })
 }
 
 impl Table1 {
@@ -305,33 +370,39 @@ impl Table1 {
             }
             s.push('\n');
         }
-        for against in unique(self.differences.iter().map(|d| d.against.clone())) {
-            let what = if self.differences.iter().any(|d| d.row == against) { "row" } else { "optimized" };
-            s.push_str(&format!("\n| {what} − {against} | {} |\n{header}", dets.join(" | ")));
-            for row in unique(self.differences.iter().filter(|d| d.against == against).map(|d| d.row.clone())) {
-                s.push_str(&format!("| {row} |"));
-                for d in &dets {
-                    let hit =
-                        self.differences.iter().find(|x| x.row == row && &x.detector == d && x.against == against);
-                    match hit {
-                        Some(x) => {
-                            let p = x;
-                            let b = if p.white_box { "**" } else { "" };
-                            s.push_str(&format!(" {b}{:+.3} [{:+.3}, {:+.3}]{b} |", p.mean, p.lo, p.hi));
-                        }
-                        None => s.push_str(" – |"),
-                    }
-                }
-                s.push('\n');
-            }
-        }
+        s.push_str(&markdown_differences(&self.differences, &dets));
         s
     }
 }
 
+/// One table of paired differences per baseline or `against` label: a row per label, a column
+/// per detector in `dets` (bold where the row trained against it).
+fn markdown_differences(diffs: &[Difference], dets: &[String]) -> String {
+    let header = format!("|---|{}\n", "---:|".repeat(dets.len()));
+    let mut s = String::new();
+    for against in unique(diffs.iter().map(|d| d.against.clone())) {
+        let what = if diffs.iter().any(|d| d.row == against) { "row" } else { "optimized" };
+        s.push_str(&format!("\n| {what} − {against} | {} |\n{header}", dets.join(" | ")));
+        for row in unique(diffs.iter().filter(|d| d.against == against).map(|d| d.row.clone())) {
+            s.push_str(&format!("| {row} |"));
+            for d in dets {
+                match diffs.iter().find(|x| x.row == row && &x.detector == d && x.against == against) {
+                    Some(p) => {
+                        let b = if p.white_box { "**" } else { "" };
+                        s.push_str(&format!(" {b}{:+.3} [{:+.3}, {:+.3}]{b} |", p.mean, p.lo, p.hi));
+                    }
+                    None => s.push_str(" – |"),
+                }
+            }
+            s.push('\n');
+        }
+    }
+    s
+}
+
 /// `pav table1`: builds the table of `runs` (paired also with the rows labelled `against`) and
-/// writes `table1.md`, `table1.csv`, `table1_paired.csv` and (when the runs have box anatomies)
-/// `table1_anatomy.csv` into `out`; returns the Markdown.
+/// writes `table1.md`, `table1.csv`, `table1_paired.csv` and (when the runs wrote their boxes)
+/// `table1_anatomy.csv` and `table1_paired_own_box.csv` into `out`; returns the Markdown.
 pub fn table1_report(runs: &[(String, PathBuf)], against: &[String], out: &Path) -> Result<String, ExperimentError> {
     let t = table1(runs, against)?;
     super::create_dir(out)?;
@@ -354,6 +425,14 @@ pub fn table1_report(runs: &[(String, PathBuf)], against: &[String], out: &Path)
         md.push_str(&format!(
             "\n## Where the car boxes sit on held-out views (what P@0.5 reads)\n\nP@0.5 ranks every car box from score 0.05 over the held-out views: a box on the car (IoU ≥ 0.5) is a hit however low its score, one off the car a false positive. Rows of several runs are their mean; images are pooled.\n\n{}",
             markdown_anatomy(&a)
+        ));
+    }
+    if !t.own_box.is_empty() {
+        crate::table::write_csv(&out.join("table1_paired_own_box.csv"), &t.own_box)?;
+        let dets = unique(t.cells.iter().map(|c| c.detector.clone()));
+        md.push_str(&format!(
+            "\n## The car's own box, paired over held-out views\n\nPer view, the best score of a car box on the car (IoU ≥ 0.5; 0 where none is left from score 0.05): the hits P@0.5 counts, without the background's boxes that the mean best car score also takes. Optimized − baseline, mean [95 % paired-bootstrap interval].\n{}",
+            markdown_differences(&t.own_box, &dets)
         ));
     }
     super::write_markdown(out, "table1.md", &md)?;
