@@ -38,6 +38,6 @@ pub fn run(a: &Args) -> Result<()> {
         })
         .collect();
     println!("{}", table1_report(&runs, &a.against, &a.out)?);
-    eprintln!("wrote table1.md, table1.csv and table1_paired.csv in {}", a.out.display());
+    eprintln!("wrote table1.md and its CSVs in {}", a.out.display());
     Ok(())
 }
