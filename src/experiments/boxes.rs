@@ -3,14 +3,16 @@
 //! a low-scoring box on the car in every view keeps AP high, and one that leaves boxes off the
 //! car (IoU < 0.5) or none lowers it. These tables say which of the two a texture does.
 
+use super::per_view::ViewRecord;
 use crate::detect::nms::iou;
 use crate::eval::digital::ImageDetections;
+use std::collections::HashMap;
 
 /// IoU with the ground truth from which a car box counts as a hit for P@0.5.
 pub const HIT_IOU: f32 = 0.5;
 
 /// One car box (score ≥ `table2::AP_MIN_SCORE`, after NMS) on a held-out view.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct BoxRecord {
     /// Fold index.
     pub fold: usize,
@@ -59,6 +61,23 @@ pub fn box_records(
             y0: b[1],
             x1: b[2],
             y1: b[3],
+        })
+        .collect()
+}
+
+/// `records` with each view's score replaced by the best score of a box of `boxes` on the car
+/// (IoU ≥ [`HIT_IOU`]; 0 without one): the car's own box, the hit P@0.5 counts.
+pub fn own_box_records(records: &[ViewRecord], boxes: &[BoxRecord]) -> Vec<ViewRecord> {
+    let mut best: HashMap<(usize, &str, &str, u64, &str), f32> = HashMap::new();
+    for b in boxes.iter().filter(|b| b.iou >= HIT_IOU) {
+        let e = best.entry((b.fold, &b.view, &b.texture, b.seed, &b.detector)).or_insert(0.0);
+        *e = e.max(b.score);
+    }
+    records
+        .iter()
+        .map(|r| {
+            let key = (r.fold, r.view.as_str(), r.texture.as_str(), r.seed, r.detector.as_str());
+            ViewRecord { score: best.get(&key).copied().unwrap_or(0.0), ..r.clone() }
         })
         .collect()
 }

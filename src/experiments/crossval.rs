@@ -4,7 +4,7 @@
 //! other folds and scored on the held-out views by every detector, next to the photo and
 //! several random textures.
 
-use super::boxes::{anatomy, box_records, markdown_anatomy, BoxRecord};
+use super::boxes::{anatomy, box_records, markdown_anatomy, own_box_records, BoxRecord};
 use super::per_view::{conditional_asr, markdown_paired, paired, ViewRecord};
 use super::table2::{aggregate, detect_view, markdown, markdown_scores, DigitalRow, AP_MIN_SCORE};
 use super::{create_dir, write_markdown, ExperimentError, Scoring};
@@ -180,8 +180,8 @@ pub fn crossval(
 
 /// `pav crossval`: cross-validates `config` with `folds` folds (default: leave-one-out) and
 /// `random_seeds` random textures per fold; writes `crossval.csv`, `crossval_views.csv`,
-/// `crossval_boxes.csv`, `crossval_anatomy.csv`, `crossval.md` and a folder per fold into `out` (finished folds resume), and returns the
-/// Markdown.
+/// `crossval_boxes.csv`, `crossval_anatomy.csv`, `crossval_paired_own_box.csv`, `crossval.md`
+/// and a folder per fold into `out` (finished folds resume), and returns the Markdown.
 #[allow(clippy::too_many_arguments)]
 pub fn crossval_report(
     config: &Path,
@@ -284,6 +284,12 @@ pub fn crossval_report(
     md.push_str(&format!(
         "\n## Where the car boxes sit on held-out views (what P@0.5 reads)\n\nP@0.5 ranks every car box from score {AP_MIN_SCORE} over all held-out views: a box on the car (IoU ≥ 0.5) counts as a hit however low its score, and one off the car as a false positive. A texture lowers P@0.5 by leaving no box on the car, or boxes off the car that outrank the hits; it lowers the mean best car score by lowering scores. Boxes per view: `crossval_boxes.csv`.\n\n{}",
         markdown_anatomy(&anatomies)
+    ));
+    let own = paired(&own_box_records(&records, &boxes), &opts.white_box, "optimized");
+    write_csv(&out.join("crossval_paired_own_box.csv"), &own)?;
+    md.push_str(&format!(
+        "\n## The car's own box, optimized against each other texture, held-out views\n\nPer view, the best score of a car box on the car (IoU ≥ 0.5; 0 where none is left): the hits P@0.5 counts, without the background's boxes that the best car score also takes. Mean difference [95 % paired-bootstrap interval]; below zero, the optimized texture leaves less of the car's own box.\n\n{}",
+        markdown_paired(&own)
     ));
     write_markdown(out, "crossval.md", &md)?;
     Ok(md)

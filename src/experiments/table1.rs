@@ -2,11 +2,10 @@
 //! run: what it was trained against), a column per detector it is scored on, every cell over
 //! held-out views; then each run's paired difference against every baseline, with its interval.
 
-use super::boxes::{markdown_anatomy, mean_anatomy, BoxAnatomy, HIT_IOU};
+use super::boxes::{markdown_anatomy, mean_anatomy, own_box_records, BoxAnatomy, BoxRecord};
 use super::per_view::{paired, Paired, ViewRecord};
 use super::ExperimentError;
 use crate::table::unique;
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 /// The texture a crossval optimizes; every other texture of its tables is a baseline.
@@ -129,18 +128,6 @@ struct Group {
     white: Vec<String>,
 }
 
-/// One row of `crossval_boxes.csv`, as read back.
-#[derive(serde::Deserialize)]
-struct BoxRow {
-    fold: usize,
-    view: String,
-    texture: String,
-    seed: u64,
-    detector: String,
-    score: f32,
-    iou: f32,
-}
-
 fn read_run(dir: &Path) -> Result<Run, ExperimentError> {
     let rows: Vec<CrossvalRow> = read(&dir.join("crossval.csv"))?;
     let held: Vec<CrossvalRow> = rows.into_iter().filter(|r| r.split == "held-out").collect();
@@ -167,22 +154,7 @@ fn read_run(dir: &Path) -> Result<Run, ExperimentError> {
     let path = dir.join("crossval_anatomy.csv");
     let anatomy = if path.is_file() { read(&path)? } else { Vec::new() };
     let path = dir.join("crossval_boxes.csv");
-    let own = if path.is_file() {
-        let mut best: HashMap<(usize, String, String, u64, String), f32> = HashMap::new();
-        for b in read::<BoxRow>(&path)?.into_iter().filter(|b| b.iou >= HIT_IOU) {
-            let e = best.entry((b.fold, b.view, b.texture, b.seed, b.detector)).or_insert(0.0);
-            *e = e.max(b.score);
-        }
-        records
-            .iter()
-            .map(|r: &ViewRecord| {
-                let key = (r.fold, r.view.clone(), r.texture.clone(), r.seed, r.detector.clone());
-                ViewRecord { score: best.get(&key).copied().unwrap_or(0.0), ..r.clone() }
-            })
-            .collect()
-    } else {
-        Vec::new()
-    };
+    let own = if path.is_file() { own_box_records(&records, &read::<BoxRecord>(&path)?) } else { Vec::new() };
     Ok(Run { held, records, anatomy, own })
 }
 

@@ -53,9 +53,6 @@ pub fn run(a: &Args) -> Result<()> {
         &stop,
     )?;
     println!("{md}");
-    eprintln!(
-        "wrote crossval.csv, crossval_views.csv, crossval_paired.csv, crossval.md and a folder per fold in {}",
-        a.out.display()
-    );
+    eprintln!("wrote crossval.md, its CSVs (scores, views, boxes, pairs) and a folder per fold in {}", a.out.display());
     Ok(())
 }
