@@ -310,8 +310,9 @@ impl DetectionLoss {
         let tk: Vec<(usize, f32)> = (0..n).map(best_target).collect();
         let mut max_score = 0f32;
         let (mut boxes, mut proposals) = (Vec::new(), Vec::new());
-        for (i, (&o, &(_, car))) in p.obj.iter().zip(&tk).enumerate() {
-            max_score = max_score.max(p.score(i, car).0);
+        for (i, (&o, &(k, car))) in p.obj.iter().zip(&tk).enumerate() {
+            let score = p.score(i, car).0;
+            max_score = max_score.max(score);
             if o >= self.box_threshold && o.is_finite() {
                 boxes.push(i);
                 let b = best(i).0;
@@ -319,11 +320,8 @@ impl DetectionLoss {
                     proposals.push((i, b));
                 }
             }
-            if self.proposals == Proposals::Scored {
-                let s = p.score(i, car).0;
-                if s >= self.box_threshold && s.is_finite() {
-                    proposals.push((i, tk[i].0));
-                }
+            if self.proposals == Proposals::Scored && score >= self.box_threshold && score.is_finite() {
+                proposals.push((i, k));
             }
         }
         let mut dobj = vec![0f32; n];
@@ -379,6 +377,12 @@ mod tests {
         DetectionLoss { box_threshold: 0.5, target: vec![2], reduce, proposals: Proposals::ArgMax }
     }
 
+    /// Each reduction, and the mean over the metrics' set, for the gradient checks.
+    fn every_loss() -> [DetectionLoss; 4] {
+        let scored = DetectionLoss { proposals: Proposals::Scored, ..loss(Reduce::Mean) };
+        [loss(Reduce::Mean), loss(Reduce::TopK(2)), loss(Reduce::Softmax(0.2)), scored]
+    }
+
     fn eval(l: &DetectionLoss, m: &HeadMap, beta: f32) -> (LossTerms, Vec<Vec<f32>>) {
         let p = Predictions::darknet(std::slice::from_ref(m), &[2], 3).unwrap();
         l.terms(&p, &[&m.0], beta).unwrap()
@@ -421,9 +425,7 @@ mod tests {
             *v += 0.01 * (i % 7) as f32;
         }
         let beta = 0.7;
-        let scored = DetectionLoss { proposals: Proposals::Scored, ..loss(Reduce::Mean) };
-        let losses = [loss(Reduce::Mean), loss(Reduce::TopK(2)), loss(Reduce::Softmax(0.2)), scored];
-        for l in losses {
+        for l in every_loss() {
             let how = l.reduce;
             let (_, g) = eval(&l, &(m.clone(), hw), beta);
             let total = |m: &[f32]| {
@@ -526,9 +528,7 @@ mod tests {
         // Distinct probabilities, away from ties and from the box threshold.
         let s = v8_scores();
         let beta = 0.7;
-        let scored = DetectionLoss { proposals: Proposals::Scored, ..loss(Reduce::Mean) };
-        let losses = [loss(Reduce::Mean), loss(Reduce::TopK(2)), loss(Reduce::Softmax(0.2)), scored];
-        for l in losses {
+        for l in every_loss() {
             let how = l.reduce;
             let total = |v: &[f32]| {
                 let (t, _) = l.terms(&Predictions::ultralytics(v, 3).unwrap(), &[v], beta).unwrap();
@@ -575,9 +575,7 @@ mod tests {
         assert_eq!((t.boxes, t.proposals), (3, 1));
         assert!((t.max_score - prob(1.4)).abs() < 1e-6, "{t:?}");
         let beta = 0.7;
-        let scored = DetectionLoss { proposals: Proposals::Scored, ..loss(Reduce::Mean) };
-        let losses = [loss(Reduce::Mean), loss(Reduce::TopK(2)), loss(Reduce::Softmax(0.2)), scored];
-        for l in losses {
+        for l in every_loss() {
             let how = l.reduce;
             let total = |v: &[f32]| {
                 let (t, _) = l.terms(&Predictions::detr(v, 3).unwrap(), &[v], beta).unwrap();

@@ -4,6 +4,7 @@
 //! car (IoU < 0.5) or none lowers it. These tables say which of the two a texture does.
 
 use super::per_view::ViewRecord;
+use super::table2::AP_MIN_SCORE;
 use crate::detect::nms::iou;
 use crate::eval::digital::ImageDetections;
 use std::collections::HashMap;
@@ -154,6 +155,21 @@ pub fn mean_anatomy(texture: &str, a: &[&BoxAnatomy]) -> Option<BoxAnatomy> {
         off_boxes: m(|x| x.off_boxes),
         off_score: m(|x| x.off_score),
     })
+}
+
+/// The Markdown section of an anatomy `table`, with `note` (how the report pooled it) after
+/// the explanation both reports share.
+pub fn anatomy_section(table: &str, note: &str) -> String {
+    format!(
+        "\n## Where the car boxes sit on held-out views (what P@0.5 reads)\n\nP@0.5 ranks every car box from score {AP_MIN_SCORE} over all held-out views: a box on the car (IoU ≥ {HIT_IOU}) counts as a hit however low its score, and one off the car as a false positive. A texture lowers P@0.5 by leaving no box on the car, or boxes off the car that outrank the hits; it lowers the mean best car score by lowering scores. {note}\n\n{table}"
+    )
+}
+
+/// The Markdown section of the paired differences `table` over the car's own box.
+pub fn own_box_section(table: &str) -> String {
+    format!(
+        "\n## The car's own box, paired over held-out views\n\nPer view, the best score of a car box on the car (IoU ≥ {HIT_IOU}; 0 where none is left from score {AP_MIN_SCORE}): the hits P@0.5 counts, without the background's boxes that the mean best car score also takes. Optimized − other, mean [95 % paired-bootstrap interval]; below zero, the optimized texture leaves less of the car's own box.\n\n{table}"
+    )
 }
 
 /// The anatomies as a Markdown table, a row per detector and texture.

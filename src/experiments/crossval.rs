@@ -4,7 +4,9 @@
 //! other folds and scored on the held-out views by every detector, next to the photo and
 //! several random textures.
 
-use super::boxes::{anatomy, box_records, markdown_anatomy, own_box_records, BoxRecord};
+use super::boxes::{
+    anatomy, anatomy_section, box_records, markdown_anatomy, own_box_records, own_box_section, BoxRecord,
+};
 use super::per_view::{conditional_asr, markdown_paired, paired, ViewRecord};
 use super::table2::{aggregate, detect_view, markdown, markdown_scores, DigitalRow, AP_MIN_SCORE};
 use super::{create_dir, write_markdown, ExperimentError, Scoring};
@@ -281,16 +283,10 @@ pub fn crossval_report(
         "\n## Optimized against each other texture, held-out views: mean difference of the best car score [95 % paired-bootstrap interval over views]\n\nBelow zero: the optimized texture leaves the car a lower score. An interval entirely below zero is a win with error bars.\n\n{}",
         markdown_paired(&pairs)
     ));
-    md.push_str(&format!(
-        "\n## Where the car boxes sit on held-out views (what P@0.5 reads)\n\nP@0.5 ranks every car box from score {AP_MIN_SCORE} over all held-out views: a box on the car (IoU ≥ 0.5) counts as a hit however low its score, and one off the car as a false positive. A texture lowers P@0.5 by leaving no box on the car, or boxes off the car that outrank the hits; it lowers the mean best car score by lowering scores. Boxes per view: `crossval_boxes.csv`.\n\n{}",
-        markdown_anatomy(&anatomies)
-    ));
+    md.push_str(&anatomy_section(&markdown_anatomy(&anatomies), "Boxes per view: `crossval_boxes.csv`."));
     let own = paired(&own_box_records(&records, &boxes), &opts.white_box, "optimized");
     write_csv(&out.join("crossval_paired_own_box.csv"), &own)?;
-    md.push_str(&format!(
-        "\n## The car's own box, optimized against each other texture, held-out views\n\nPer view, the best score of a car box on the car (IoU ≥ 0.5; 0 where none is left): the hits P@0.5 counts, without the background's boxes that the best car score also takes. Mean difference [95 % paired-bootstrap interval]; below zero, the optimized texture leaves less of the car's own box.\n\n{}",
-        markdown_paired(&own)
-    ));
+    md.push_str(&own_box_section(&markdown_paired(&own)));
     write_markdown(out, "crossval.md", &md)?;
     Ok(md)
 }

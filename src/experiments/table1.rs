@@ -2,7 +2,9 @@
 //! run: what it was trained against), a column per detector it is scored on, every cell over
 //! held-out views; then each run's paired difference against every baseline, with its interval.
 
-use super::boxes::{markdown_anatomy, mean_anatomy, own_box_records, BoxAnatomy, BoxRecord};
+use super::boxes::{
+    anatomy_section, markdown_anatomy, mean_anatomy, own_box_records, own_box_section, BoxAnatomy, BoxRecord,
+};
 use super::per_view::{paired, Paired, ViewRecord};
 use super::ExperimentError;
 use crate::table::unique;
@@ -381,31 +383,24 @@ pub fn table1_report(runs: &[(String, PathBuf)], against: &[String], out: &Path)
     crate::table::write_csv(&out.join("table1.csv"), &t.cells)?;
     crate::table::write_csv(&out.join("table1_paired.csv"), &t.differences)?;
     let sources: Vec<String> = runs.iter().map(|(l, d)| format!("{l} = `{}`", d.display())).collect();
-    let md = format!(
+    let mut md = format!(
         "# Transfer over held-out views (the paper's Table I)\n\nRows: what the texture was trained against; columns: the detector it is scored on. A cell is the mean best car score / P@0.5 over the held-out views of every fold (bold: the row trained against that detector); runs sharing a label are averaged (P@0.5: their mean, lowest–highest in brackets). Baseline rows come from the first run; across runs their means differ by at most {:.4}. Differences: optimized − baseline per held-out view (runs of one label averaged per view first), mean [95 % paired-bootstrap interval]; an interval entirely below zero is a win with error bars.\n\nRuns: {}.\n\n{}",
         t.baseline_spread,
         sources.join("; "),
         t.markdown()
     );
-    let mut md = md;
     if !t.anatomy.is_empty() {
         crate::table::write_csv(&out.join("table1_anatomy.csv"), &t.anatomy)?;
         let mut a = t.anatomy.clone();
         // Grouped by detector, rows in table order (a stable sort keeps it).
         let dets = unique(a.iter().map(|x| x.detector.clone()));
         a.sort_by_key(|x| dets.iter().position(|d| *d == x.detector));
-        md.push_str(&format!(
-            "\n## Where the car boxes sit on held-out views (what P@0.5 reads)\n\nP@0.5 ranks every car box from score 0.05 over the held-out views: a box on the car (IoU ≥ 0.5) is a hit however low its score, one off the car a false positive. Rows of several runs are their mean; images are pooled.\n\n{}",
-            markdown_anatomy(&a)
-        ));
+        md.push_str(&anatomy_section(&markdown_anatomy(&a), "Rows of several runs are their mean; images are pooled."));
     }
     if !t.own_box.is_empty() {
         crate::table::write_csv(&out.join("table1_paired_own_box.csv"), &t.own_box)?;
         let dets = unique(t.cells.iter().map(|c| c.detector.clone()));
-        md.push_str(&format!(
-            "\n## The car's own box, paired over held-out views\n\nPer view, the best score of a car box on the car (IoU ≥ 0.5; 0 where none is left from score 0.05): the hits P@0.5 counts, without the background's boxes that the mean best car score also takes. Optimized − baseline, mean [95 % paired-bootstrap interval].\n{}",
-            markdown_differences(&t.own_box, &dets)
-        ));
+        md.push_str(&own_box_section(&markdown_differences(&t.own_box, &dets)));
     }
     super::write_markdown(out, "table1.md", &md)?;
     Ok(md)
