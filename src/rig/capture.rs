@@ -6,7 +6,7 @@
 //! angle is interpolated between the reports around its capture instant. Video frames are written as they arrive and sidecar rows as soon
 //! as their angle is known; on any fault both files are finalized before the error is returned.
 
-use super::clockmap::ClockMap;
+use super::clockmap::{ClockMap, ClockRange, DeviceTime};
 use super::source::FrameSource;
 use super::turntable::{Event, Turntable, TurntableError};
 use crate::progress::Progress;
@@ -171,23 +171,22 @@ struct AngleTrack {
     /// The host instant the spin was sent and where the table stood then (from a status
     /// reply): frames before the first report that got through interpolate from there.
     start: Option<(Instant, i64)>,
+    /// The clock settled at the end of a capture ([`AngleTrack::settle`]), replacing the fit.
+    settled: Option<(f64, f64)>,
 }
 
-/// Where the device-to-host clock offset lies, from both sides.
+/// How well the device clock is known over the frames of a capture.
 #[derive(Clone, Copy, Debug, PartialEq)]
-struct OffsetBounds {
-    /// Largest offset the one-way arrivals allow (latency only delays them).
-    lo: f64,
-    /// Smallest offset the round trips allow (the device answered after the request left).
-    hi: Option<f64>,
-}
-
-impl OffsetBounds {
-    /// Half the width of the interval, device seconds: the worst error of its midpoint. `None`
-    /// without a round trip (unbounded); `Some(negative)` when the two sides contradict.
-    fn half_width(&self) -> Option<f64> {
-        self.hi.map(|hi| (hi - self.lo) / 2.0)
-    }
+enum ClockKnown {
+    /// No round trip got through: nothing bounds the clock from above.
+    NoRoundTrip,
+    /// Round trips got through before the spin only: nothing bounds the clock's rate from
+    /// above, so late in the spin the device time is open.
+    NoneAfter,
+    /// Round trips and arrivals miss each other by this many device seconds.
+    Contradiction(f64),
+    /// Every frame's device time is within this many seconds of the settled clock's.
+    Within(f64),
 }
 
 impl AngleTrack {
@@ -225,24 +224,52 @@ impl AngleTrack {
         self.probes.push((self.host_s(sent), self.host_s(rx), t_ms as f64 / 1000.0));
     }
 
-    /// The clock offset's bounds at the fitted rate. Device times are whole milliseconds cut
-    /// down, so a reply stamped `t` was made in [t, t + 1 ms).
-    fn bounds(&self) -> Option<OffsetBounds> {
-        let rate = self.map?.rate;
-        let lo = self.probes.iter().map(|p| p.2 - rate * p.1).fold(self.map?.c, f64::max);
-        let hi = self.probes.iter().map(|p| p.2 + 0.001 - rate * p.0).reduce(f64::min);
-        Some(OffsetBounds { lo, hi })
+    /// Every clock line the observations allow. Device times are whole milliseconds cut down,
+    /// so a reply stamped `t` was made in [t, t + 1 ms); a round trip's reply also arrived, so
+    /// it bounds the clock from below as a report does.
+    fn range(&self) -> ClockRange {
+        let arrivals: Vec<(f64, f64)> =
+            self.samples.iter().map(|s| (s.0, s.1)).chain(self.probes.iter().map(|p| (p.1, p.2))).collect();
+        let upper: Vec<(f64, f64)> = self.probes.iter().map(|p| (p.0, p.2 + 0.001)).collect();
+        ClockRange::new(&arrivals, &upper)
     }
 
-    /// Clock model (rate, c): the middle of the offset's bounds when round trips gave an upper
-    /// one that agrees with the arrivals, else the fastest arrival's offset.
+    /// Settles the clock for frames between host seconds `t0` and `t1`: the line through the
+    /// middles of the device times the observations allow at either end. Between the ends it
+    /// is off by no more than at them (the range's top is convex in host time, its bottom
+    /// concave), so the wider half range bounds every frame.
+    fn settle(&mut self, t0: f64, t1: f64) -> ClockKnown {
+        let range = self.range();
+        let (a, b) = (range.device_at(t0), range.device_at(t1));
+        let (lo0, hi0, lo1, hi1) = match (a, b) {
+            (DeviceTime::Within(lo0, hi0), DeviceTime::Within(lo1, hi1)) => (lo0, hi0, lo1, hi1),
+            (DeviceTime::Contradiction(g), _) | (_, DeviceTime::Contradiction(g)) => {
+                return ClockKnown::Contradiction(g)
+            }
+            _ if self.probes.is_empty() => return ClockKnown::NoRoundTrip,
+            _ => return ClockKnown::NoneAfter,
+        };
+        let (m0, m1) = ((lo0 + hi0) / 2.0, (lo1 + hi1) / 2.0);
+        let rate = if t1 - t0 > 1e-6 { (m1 - m0) / (t1 - t0) } else { self.clock().0 };
+        self.settled = Some((rate, m0 - rate * t0));
+        ClockKnown::Within(((hi0 - lo0) / 2.0).max((hi1 - lo1) / 2.0))
+    }
+
+    /// Clock model (rate, c): the settled clock once there is one; else the fitted rate with
+    /// the offset in the middle of what round trips and arrivals allow at that rate (the
+    /// fastest arrival's offset without a round trip, or when they disagree).
     fn clock(&self) -> (f64, f64) {
+        if let Some(settled) = self.settled {
+            return settled;
+        }
         match self.map {
-            Some(m) => match self.bounds() {
-                Some(OffsetBounds { lo, hi: Some(hi) }) if hi >= lo => (m.rate, (lo + hi) / 2.0),
-                Some(b) => (m.rate, b.lo),
-                None => (m.rate, m.c),
-            },
+            Some(m) => {
+                let lo = self.probes.iter().map(|p| p.2 - m.rate * p.1).fold(m.c, f64::max);
+                match self.probes.iter().map(|p| p.2 + 0.001 - m.rate * p.0).reduce(f64::min) {
+                    Some(hi) if hi >= lo => (m.rate, (lo + hi) / 2.0),
+                    _ => (m.rate, lo),
+                }
+            }
             // Until the reports span some time, assume the device clock runs at host speed,
             // offset by the report that travelled fastest.
             None => (1.0, self.samples.iter().map(|s| s.1 - s.0).fold(f64::NEG_INFINITY, f64::max)),
@@ -303,9 +330,8 @@ impl AngleTrack {
 /// How far the sidecar's angles can be from the truth, judged at the end of a capture with the
 /// clock fitted to every report and bounded by round trips before and after the spin.
 struct ClockError {
-    /// Half the width of the final clock offset's bounds, device seconds; negative when round
-    /// trips and arrivals contradict each other, `None` without a round trip.
-    half_width: Option<f64>,
+    /// How well the settled clock places the frames in device time.
+    known: ClockKnown,
     /// Largest difference between a row as written (with the clock known then) and the same
     /// frame placed with the final clock, degrees.
     drift_deg: f64,
@@ -313,41 +339,54 @@ struct ClockError {
 
 impl ClockError {
     /// Worst angle error, degrees, at `deg_per_s` per device second, for a table that reports
-    /// whole microsteps of `step_deg` (a reported position is up to one step behind the table).
+    /// whole microsteps of `step_deg` (a reported position is up to one step behind the table)
+    /// stamped in whole device milliseconds (up to 1 ms early); `None` when nothing bounds it.
     fn bound_deg(&self, deg_per_s: f64, step_deg: f64) -> Option<f64> {
-        self.half_width.map(|h| h.abs() * deg_per_s + self.drift_deg + step_deg)
+        match self.known {
+            ClockKnown::Within(e) => Some((e + 0.001) * deg_per_s + self.drift_deg + step_deg),
+            _ => None,
+        }
     }
 
     /// Why the angles cannot be trusted to `limit` degrees, if they cannot.
     fn problem(&self, s: &CaptureSummary, limit: f64, deg_per_s: f64) -> Option<String> {
-        let Some(h) = self.half_width else {
-            return Some("no round trip to the table got through to bound its clock".into());
+        let e = match self.known {
+            ClockKnown::NoRoundTrip => {
+                return Some("no round trip to the table got through to bound its clock".into());
+            }
+            ClockKnown::NoneAfter => {
+                return Some(
+                    "no round trip to the table got through after the spin: without one nothing bounds how fast \
+                     its clock ran, so angles late in the spin are unbounded"
+                        .into(),
+                );
+            }
+            ClockKnown::Contradiction(g) => {
+                return Some(format!(
+                    "the table's clock contradicts itself by {:.1} ms of device time ({:.2}° at {deg_per_s:.1}°/s): \
+                     round trips place it earlier than its reports can have been sent",
+                    1000.0 * g,
+                    g * deg_per_s
+                ));
+            }
+            ClockKnown::Within(e) => e,
         };
         let bound = s.angle_bound_deg.unwrap_or(f64::INFINITY);
         if bound <= limit {
             return None;
         }
-        Some(if h < 0.0 {
-            format!(
-                "the table's clock contradicts itself by {:.1} ms of device time ({:.2}° at {deg_per_s:.1}°/s): \
-                 round trips place it earlier than its reports can have been sent",
-                -2000.0 * h,
-                -2.0 * h * deg_per_s
-            )
-        } else {
-            format!(
-                "angles are known only to ±{bound:.2}°: the fastest round trip to the table took {:.0} ms, which \
-                 places its clock to ±{:.0} ms of device time at {deg_per_s:.1}°/s{} (a faster link, a slower \
-                 --period or a larger --max-angle-error)",
-                s.round_trip_ms.unwrap_or(f64::NAN),
-                h * 1000.0,
-                if self.drift_deg > 0.05 {
-                    format!("; rows written early moved {:.2}° as the clock fit settled", self.drift_deg)
-                } else {
-                    String::new()
-                }
-            )
-        })
+        Some(format!(
+            "angles are known only to ±{bound:.2}°: round trips to the table (the fastest took {:.0} ms) and its \
+             reports' arrivals place its clock to ±{:.0} ms of device time over the spin at {deg_per_s:.1}°/s{} \
+             (a faster link, a slower --period or a larger --max-angle-error)",
+            s.round_trip_ms.unwrap_or(f64::NAN),
+            e * 1000.0,
+            if self.drift_deg > 0.05 {
+                format!("; rows written early moved {:.2}° as the clock fit settled", self.drift_deg)
+            } else {
+                String::new()
+            }
+        ))
     }
 }
 
@@ -528,12 +567,17 @@ pub fn capture(
         }
     }
     let released = writer.finish();
-    // Round trips after the spin bound the clock at the far end too (the table is idle); a
-    // table that cannot answer now only leaves the bound wider.
-    let after = if cause.is_none() { time_round_trips(table, &mut track, opts.probes).ok().flatten() } else { None };
+    // Round trips after the spin bound the clock at the far end, and with those before it the
+    // clock's rate (the table is idle). After a fault one try: a dead link costs a timeout.
+    let want = if cause.is_none() { opts.probes } else { 1 };
+    let after = time_round_trips(table, &mut track, want).ok().flatten();
     let round_trip = [before, after].into_iter().flatten().map(|r| r.0).min();
+    let span = written
+        .iter()
+        .map(|w| track.host_s(w.0))
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), t| (a.min(t), b.max(t)));
     let error = ClockError {
-        half_width: track.bounds().and_then(|b| b.half_width()),
+        known: if written.is_empty() { ClockKnown::Within(0.0) } else { track.settle(span.0, span.1) },
         drift_deg: written
             .iter()
             .filter_map(|&(at, pos)| track.place(at).map(|p| (p - pos).abs() * 360.0 / rev))
@@ -598,5 +642,50 @@ mod tests {
         assert_eq!(tr.at(t0 + Duration::from_secs(5)), None);
         tr.end = Some(1990);
         assert_eq!(tr.at(t0 + Duration::from_secs(5)), Some(1990.0));
+    }
+
+    #[test]
+    fn a_spin_read_late_for_a_third_is_within_its_stated_bound() {
+        // Device clock = host + 5 s, 100 microsteps per device second. Every message takes
+        // 50 ms each way; in the first third of the spin a starved reader also took every report
+        // 40 ms late, so the fastest early report is 90 ms late and the fastest late one 50 ms,
+        // and a rate fitted on them runs fast by 40 ms over the ~19 s between them (more than
+        // that and the round trips contradict the fitted rate, which was flagged already).
+        let t0 = Instant::now();
+        let at = |h: f64| t0 + Duration::from_secs_f64(h);
+        let stamp = |h: f64| ((h + 5.0) * 1000.0).floor() as u64;
+        let mut tr = AngleTrack::default();
+        let probes = |tr: &mut AngleTrack, from: f64| {
+            for k in 0..5 {
+                let s = from + 0.2 * k as f64;
+                tr.probe(at(s), at(s + 0.1), stamp(s + 0.05));
+            }
+        };
+        probes(&mut tr, 0.0);
+        let mut rx = 0.0f64;
+        for k in 0..2800 {
+            let h = 1.0 + k as f64 * 0.01;
+            rx = rx.max(h + 0.05 + if h < 1.0 + 28.0 / 3.0 { 0.04 } else { 0.0 });
+            tr.push(stamp(h), ((h - 1.0) * 100.0).round() as i64, at(rx));
+        }
+        probes(&mut tr, 29.5);
+        // The fitted rate with the offset bounded at that rate, as captures stated it before
+        // session 19: its half width does not cover the frames at the ends.
+        let m = tr.map.unwrap();
+        let lo = tr.probes.iter().map(|p| p.2 - m.rate * p.1).fold(m.c, f64::max);
+        let hi = tr.probes.iter().map(|p| p.2 + 0.001 - m.rate * p.0).fold(f64::INFINITY, f64::min);
+        let frames: Vec<f64> = (0..=54).map(|i| 1.5 + 0.5 * i as f64).collect();
+        let truth = |h: f64| h + 5.0;
+        let old_worst = frames.iter().map(|&h| (m.rate * h + (lo + hi) / 2.0 - truth(h)).abs()).fold(0.0, f64::max);
+        assert!(hi >= lo && old_worst > (hi - lo) / 2.0 + 0.005, "old {old_worst} within ±{}", (hi - lo) / 2.0);
+        // The range over every consistent line covers them, and stays useful.
+        let ClockKnown::Within(e) = tr.settle(1.5, 28.5) else { panic!("{:?}", tr.settle(1.5, 28.5)) };
+        let (rate, c) = tr.clock();
+        for &h in &frames {
+            let err = (rate * h + c - truth(h)).abs();
+            assert!(err <= e + 1e-9, "frame at {h} s: {err} s off, stated ±{e}");
+        }
+        eprintln!("fitted-rate bound ±{:.4} s, off by {old_worst:.4} s; range bound ±{e:.4} s", (hi - lo) / 2.0);
+        assert!(e < 0.06, "±{e} s");
     }
 }
