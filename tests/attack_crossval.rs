@@ -61,6 +61,8 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
             "RAUCA_E2E".into(),
             setup.load_texture(&common::shared_data().join("rauca-e2e/RAUCA_E2E.png")).unwrap(),
         )],
+        // Rendered views over plates: tests/blender_views.rs (they need Blender).
+        rendered: Vec::new(),
     };
     let never = AtomicBool::new(false);
     let stages = Stages::default();
@@ -102,6 +104,7 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     eprintln!("resumed in {:.1} s", t.elapsed().as_secs_f64());
     assert_eq!(recs.iter().map(|r| r.score).collect::<Vec<_>>(), recs2.iter().map(|r| r.score).collect::<Vec<_>>());
     assert_eq!(rows.len(), rows2.len());
+    assert!(cv.rendered.is_none(), "no rendered views given, none scored");
 
     // The held-out boxes: each view's best box is its recorded best score, every IoU is in
     // [0, 1] against the view's ground truth, and the anatomy counts each image once.

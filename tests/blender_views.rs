@@ -541,6 +541,7 @@ fn plates_put_the_rendered_car_on_the_photos_ground() {
         assert_eq!((s.pbr.len(), s.plates_held_out()), (4, 2));
         let swapped = s.with_views(s.test.clone(), Vec::new(), s.train.clone());
         assert_eq!(names(&swapped), ["pbr:city_data12506_t+0", "pbr:city_data12506_t+40"]);
+        plates_are_scored_with_their_photos_fold(cfg, &bare);
     }
     // With shadows: the caught shadow is there, and meets the car's underside.
     let shadowed = render("shadowed", "\"shadows\"");
@@ -569,4 +570,79 @@ fn bottom_offset(a: &[bool], b: &[bool], n: usize, tol: i64) -> (i64, f64) {
     d.sort();
     let within = d.iter().filter(|v| v.abs() <= tol).count() as f64 / d.len().max(1) as f64;
     (d[d.len() / 2], within)
+}
+
+/// `pav crossval --held-out-views`: each rendered view over a plate is scored in the fold that
+/// holds its photo out (never in another), with its silhouette's box as the ground truth; per
+/// photo the records average its views, and `pav table1` reads those averages as a run.
+#[cfg(feature = "optimize")]
+fn plates_are_scored_with_their_photos_fold(mut cfg: pav::attack::config::OptimizeConfig, plates: &std::path::Path) {
+    use pav::experiments::crossval::{crossval, per_photo, CrossvalOptions};
+    cfg.views.pbr.clear();
+    cfg.optimizer.epochs = 1;
+    let path = common::repo().join("configs/optimize/paper.toml");
+    let mut setup = pav::attack::setup::Setup::load(&cfg, None).unwrap();
+    let rendered = setup.rendered_over_plates(&cfg, &[plates.to_path_buf()]).unwrap();
+    assert_eq!(rendered.len(), 4);
+    assert!(rendered.iter().all(|v| setup.boxes.contains_key(&v.name)), "every view has its silhouette's box");
+    let wb = pav::attack::whitebox::Ensemble::load(&cfg, cfg.views.size).unwrap();
+    let mut dets =
+        pav::detect::load::load_detectors(&[common::repo().join("configs/detectors/yolov3-tiny.toml")], &[], 1)
+            .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let opts = CrossvalOptions {
+        folds: 2,
+        random_seeds: 1,
+        random_block: 16,
+        out: dir.path().into(),
+        threshold: 0.5,
+        white_box: vec!["yolov3-tiny".into()],
+        references: Vec::new(),
+        rendered,
+    };
+    let never = std::sync::atomic::AtomicBool::new(false);
+    let cv = crossval(&path, &cfg, &setup, &wb, &mut dets, &opts, &pav::progress::Silent, &never).unwrap();
+    let r = cv.rendered.expect("rendered views were given");
+    // Fold 0 holds out data12501, fold 1 data12506: each photo's two views, in its fold only,
+    // under each of the four textures (original, optimized, random, random32).
+    for (fold, photo) in [(0, "data12501"), (1, "data12506")] {
+        let mut seen: Vec<&str> = r
+            .records
+            .iter()
+            .filter(|x| x.fold == fold && x.texture == "original")
+            .map(|x| {
+                assert_eq!(x.photo, photo);
+                x.view.as_str()
+            })
+            .collect();
+        seen.sort();
+        assert_eq!(seen, [format!("pbr:city_{photo}_t+0"), format!("pbr:city_{photo}_t+40")]);
+    }
+    assert_eq!(r.records.len(), 4 * 4);
+    assert!(r.records.iter().all(|x| x.own_box <= x.score && (0.0..=1.0).contains(&x.score)), "{:?}", r.records);
+    let held = |t: &str| r.rows.iter().find(|x| x.texture == t).unwrap().images;
+    assert_eq!((held("original"), held("optimized"), held("random")), (4, 4, 4));
+    // Per photo: the mean of its two views.
+    let scores = per_photo(&r.records, false);
+    let own = per_photo(&r.records, true);
+    assert_eq!(scores.len(), 2 * 4);
+    for p in &scores {
+        let views: Vec<f64> = r
+            .records
+            .iter()
+            .filter(|x| x.photo == p.view && x.texture == p.texture && x.seed == p.seed)
+            .map(|x| x.score as f64)
+            .collect();
+        assert_eq!(views.len(), 2);
+        assert!((p.score as f64 - views.iter().sum::<f64>() / 2.0).abs() < 1e-6, "{p:?} vs {views:?}");
+    }
+    // `pav table1` reads the folder as a run: two photos paired, own box from the averages.
+    pav::table::write_csv(&dir.path().join("crossval.csv"), &r.rows).unwrap();
+    pav::table::write_csv(&dir.path().join("crossval_views.csv"), &scores).unwrap();
+    pav::table::write_csv(&dir.path().join("crossval_own_views.csv"), &own).unwrap();
+    let t = pav::experiments::table1::table1(&[("plates".into(), dir.path().to_path_buf())], &[]).unwrap();
+    let d = t.own_box.iter().find(|x| x.against == "random").unwrap();
+    let of = |t: &str| own.iter().filter(|x| x.texture == t).map(|x| x.score as f64).collect::<Vec<_>>();
+    let want = of("optimized").iter().zip(of("random")).map(|(a, b)| a - b).sum::<f64>() / 2.0;
+    assert!(d.views == 2 && (d.mean - want).abs() < 1e-6, "{d:?} vs {want}");
 }

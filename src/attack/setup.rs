@@ -442,6 +442,27 @@ impl Setup {
         self.train.iter().chain(&self.synthetic).chain(self.pbr.iter().filter(|v| !self.over_held_out(v))).collect()
     }
 
+    /// Rendered views over photos' background plates (folders written by `pav views render`
+    /// with `[plates]`), to be scored, never trained on: each kept view's car box (its
+    /// silhouette's) goes into [`Setup::boxes`] and its photo into [`Setup::plates`]. A view
+    /// without a plate is refused: it belongs to no photo's fold.
+    pub fn rendered_over_plates(&mut self, cfg: &OptimizeConfig, dirs: &[PathBuf]) -> Result<Vec<View>, SetupError> {
+        let views =
+            pbr_views(cfg, dirs, &self.maker, &self.mesh, &self.region, Some(&mut self.boxes), &mut self.plates)?;
+        if let Some(v) = views.iter().find(|v| !self.plates.contains_key(&v.name)) {
+            return Err(SetupError::Views(format!(
+                "{}: not laid over a photo's plate; only views rendered with [plates] can be held out with their photo",
+                v.name
+            )));
+        }
+        Ok(views)
+    }
+
+    /// The photo whose background plate a rendered view lies over.
+    pub fn plate_of(&self, view: &str) -> Option<&str> {
+        self.plates.get(view).map(String::as_str)
+    }
+
     /// Rendered training views left out because they lie over a held-out photo's background.
     pub fn plates_held_out(&self) -> usize {
         self.pbr.iter().filter(|v| self.over_held_out(v)).count()

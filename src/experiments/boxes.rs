@@ -66,6 +66,13 @@ pub fn box_records(
         .collect()
 }
 
+/// The best score of a car box on the car in `im` (IoU ≥ [`HIT_IOU`] with its ground truth; 0
+/// without one, or without a ground truth): the car's own box.
+pub fn own_box_score(im: &ImageDetections) -> f32 {
+    let Some(g) = im.gt else { return 0.0 };
+    im.cars.iter().filter(|(_, b)| iou(b, &g) >= HIT_IOU).map(|c| c.0).fold(0.0, f32::max)
+}
+
 /// `records` with each view's score replaced by the best score of a box of `boxes` on the car
 /// (IoU ≥ [`HIT_IOU`]; 0 without one): the car's own box, the hit P@0.5 counts.
 pub fn own_box_records(records: &[ViewRecord], boxes: &[BoxRecord]) -> Vec<ViewRecord> {

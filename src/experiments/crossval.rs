@@ -5,7 +5,8 @@
 //! several random textures.
 
 use super::boxes::{
-    anatomy, anatomy_section, box_records, markdown_anatomy, own_box_records, own_box_section, BoxRecord,
+    anatomy, anatomy_section, box_records, markdown_anatomy, own_box_records, own_box_score, own_box_section,
+    BoxAnatomy, BoxRecord,
 };
 use super::per_view::{conditional_asr, markdown_paired, paired, ViewRecord};
 use super::table2::{aggregate, detect_view, markdown, markdown_scores, DigitalRow, AP_MIN_SCORE};
@@ -21,7 +22,7 @@ use crate::eval::digital::ImageDetections;
 use crate::image::save_rgb;
 use crate::progress::{Progress, Silent};
 use crate::table::{unique, write_csv};
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
@@ -43,6 +44,9 @@ pub struct CrossvalOptions {
     pub white_box: Vec<String>,
     /// Fixed textures scored beside the optimized one (a peer's published texture), by name.
     pub references: Vec<(String, Vec<f32>)>,
+    /// Rendered views over photos' plates ([`Setup::rendered_over_plates`]), each scored in
+    /// the fold that holds its photo out: a street and camera that fold never trained on.
+    pub rendered: Vec<View>,
 }
 
 /// Views of fold `f`: index `i` of `all` is held out when `i % k == f`.
@@ -60,7 +64,66 @@ pub struct Crossval {
     /// Every car box on a held-out view.
     pub boxes: Vec<BoxRecord>,
     /// Where those boxes sit, per detector and texture.
-    pub anatomies: Vec<super::boxes::BoxAnatomy>,
+    pub anatomies: Vec<BoxAnatomy>,
+    /// The rendered views over held-out photos' plates, when options gave some.
+    pub rendered: Option<Rendered>,
+}
+
+/// What a cross-validation scored on rendered views over the held-out photos' plates.
+#[derive(Clone, Debug)]
+pub struct Rendered {
+    /// Pooled table rows over those views (split "held-out").
+    pub rows: Vec<DigitalRow>,
+    /// Every view under every texture and detector.
+    pub records: Vec<RenderedRecord>,
+    /// Where the car boxes sit, per detector and texture.
+    pub anatomies: Vec<BoxAnatomy>,
+}
+
+/// One rendered view over a held-out photo's plate, scored.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RenderedRecord {
+    /// Fold index.
+    pub fold: usize,
+    /// The held-out photo whose plate the view lies over.
+    pub photo: String,
+    /// View name.
+    pub view: String,
+    /// Texture name.
+    pub texture: String,
+    /// Random seed (0 for the others).
+    pub seed: u64,
+    /// Detector name.
+    pub detector: String,
+    /// Best car score (0 without a car box).
+    pub score: f32,
+    /// Best score of a box on the car (IoU ≥ 0.5; 0 without one).
+    pub own_box: f32,
+}
+
+/// Per held-out photo, the mean over its rendered views of the best car score (or, with
+/// `own_box`, of the car's own box), as one held-out record per photo: views of one street and
+/// camera are not independent, so a bootstrap over these resamples photos.
+pub fn per_photo(records: &[RenderedRecord], own_box: bool) -> Vec<ViewRecord> {
+    // (fold, photo, texture, seed, detector) → (sum, views)
+    type Key<'a> = (usize, &'a str, &'a str, u64, &'a str);
+    let mut sums: BTreeMap<Key, (f64, usize)> = BTreeMap::new();
+    for r in records {
+        let e = sums.entry((r.fold, &r.photo, &r.texture, r.seed, &r.detector)).or_default();
+        e.0 += if own_box { r.own_box } else { r.score } as f64;
+        e.1 += 1;
+    }
+    sums.into_iter()
+        .map(|((fold, photo, texture, seed, detector), (sum, n))| ViewRecord {
+            fold,
+            role: "held-out",
+            view: photo.to_string(),
+            texture: texture.to_string(),
+            seed,
+            detector: detector.to_string(),
+            score: (sum / n as f64) as f32,
+        })
+        .collect()
 }
 
 /// Runs every fold; returns the pooled table rows (splits "held-out" and "train") and the
@@ -90,6 +153,8 @@ pub fn crossval(
     let mut pooled: HashMap<(&'static str, String, usize), Vec<ImageDetections>> = HashMap::new();
     let mut records = Vec::new();
     let mut boxes = Vec::new();
+    let mut rendered_pooled: HashMap<(String, usize), Vec<ImageDetections>> = HashMap::new();
+    let mut rendered = Vec::new();
     for f in 0..k {
         let (tr, te) = fold_split(all.len(), k, f);
         // Synthetic views come from this fold's training photos only.
@@ -152,32 +217,55 @@ pub fn crossval(
                 }
             }
         }
+        let held: Vec<&str> = te.iter().map(|&i| all[i].name.as_str()).collect();
+        for v in &opts.rendered {
+            let Some(photo) = setup.plate_of(&v.name).filter(|p| held.contains(p)) else { continue };
+            for (tname, seed, tex) in &textures {
+                for (d, im) in detect_view(v, *tex, &fs, detectors)?.into_iter().enumerate() {
+                    rendered.push(RenderedRecord {
+                        fold: f,
+                        photo: photo.to_string(),
+                        view: v.name.clone(),
+                        texture: tname.clone(),
+                        seed: *seed,
+                        detector: detectors[d].name().to_string(),
+                        score: im.best_score(),
+                        own_box: own_box_score(&im),
+                    });
+                    rendered_pooled.entry((tname.clone(), d)).or_default().push(im);
+                }
+            }
+        }
         stage(f, "done");
         progress.advance(1);
     }
     progress.end(None);
     let mut rows = Vec::new();
     let mut anatomies = Vec::new();
+    let (mut rendered_rows, mut rendered_anatomies) = (Vec::new(), Vec::new());
     let names = ["original", "random", "random32", "optimized"].map(String::from).into_iter();
     for tname in names.chain(opts.references.iter().map(|r| r.0.clone())) {
         for (d, det) in detectors.iter().enumerate() {
+            let white_box = opts.white_box.iter().any(|w| w == det.name());
             if let Some(ims) = pooled.get(&("held-out", tname.clone(), d)) {
                 anatomies.extend(anatomy(det.name(), &tname, ims));
             }
+            if let Some(ims) = rendered_pooled.get(&(tname.clone(), d)) {
+                rendered_anatomies.extend(anatomy(det.name(), &tname, ims));
+                rendered_rows.extend(aggregate(det.name(), white_box, &tname, "held-out", ims, opts.threshold));
+            }
             for role in ["held-out", "train"] {
                 let ims = pooled.get(&(role, tname.clone(), d)).map(Vec::as_slice).unwrap_or_default();
-                rows.extend(aggregate(
-                    det.name(),
-                    opts.white_box.iter().any(|w| w == det.name()),
-                    &tname,
-                    role,
-                    ims,
-                    opts.threshold,
-                ));
+                rows.extend(aggregate(det.name(), white_box, &tname, role, ims, opts.threshold));
             }
         }
     }
-    Ok(Crossval { rows, records, boxes, anatomies })
+    let rendered = (!opts.rendered.is_empty()).then_some(Rendered {
+        rows: rendered_rows,
+        records: rendered,
+        anatomies: rendered_anatomies,
+    });
+    Ok(Crossval { rows, records, boxes, anatomies, rendered })
 }
 
 /// `pav crossval`: cross-validates `config` with `folds` folds (default: leave-one-out) and
@@ -190,6 +278,7 @@ pub fn crossval_report(
     folds: Option<usize>,
     random_seeds: u64,
     references: &[PathBuf],
+    rendered: &[PathBuf],
     scoring: &Scoring,
     out: &Path,
     progress: &dyn Progress,
@@ -209,6 +298,7 @@ pub fn crossval_report(
     if let Some(k) = &pbr_kept {
         progress.note(&format!("views.pbr: {k}"));
     }
+    let rendered_views = setup.rendered_over_plates(&cfg, rendered)?;
     let mut dets = load_detectors(&scoring.detectors, &[], 1)?;
     let n = setup.train.len() + setup.test.len();
     let k = folds.unwrap_or(n);
@@ -228,9 +318,10 @@ pub fn crossval_report(
                 setup.load_texture(p).map(|t| (name, t))
             })
             .collect::<Result<_, _>>()?,
+        rendered: rendered_views,
     };
     let t = Instant::now();
-    let Crossval { rows, records, boxes, anatomies } =
+    let Crossval { rows, records, boxes, anatomies, rendered: scored } =
         crossval(config, &cfg, &setup, &wb, &mut dets, &opts, progress, stop)?;
     write_csv(&out.join("crossval.csv"), &rows)?;
     write_csv(&out.join("crossval_views.csv"), &records)?;
@@ -287,8 +378,62 @@ pub fn crossval_report(
     let own = paired(&own_box_records(&records, &boxes), &opts.white_box, "optimized");
     write_csv(&out.join("crossval_paired_own_box.csv"), &own)?;
     md.push_str(&own_box_section(&markdown_paired(&own)));
+    if let Some(r) = &scored {
+        md.push_str(&rendered_report(r, rendered, &opts.white_box, &out.join(PLATES_DIR))?);
+    }
     write_markdown(out, "crossval.md", &md)?;
     Ok(md)
+}
+
+/// Where crossval writes what it scored on rendered views over the held-out photos' plates: the
+/// files of a crossval folder, one record per photo, so `pav table1` reads it as a run.
+pub const PLATES_DIR: &str = "plates";
+
+/// Writes the rendered views' files into `dir` (per photo: `crossval_views.csv` of best car
+/// scores, `crossval_own_views.csv` of the car's own box; every view: `crossval_rendered.csv`;
+/// the pooled table, anatomy and pairs; `crossval.md`), and returns a section for crossval.md.
+fn rendered_report(
+    r: &Rendered,
+    dirs: &[PathBuf],
+    white_box: &[String],
+    dir: &Path,
+) -> Result<String, ExperimentError> {
+    create_dir(dir)?;
+    let scores = per_photo(&r.records, false);
+    let own = per_photo(&r.records, true);
+    write_csv(&dir.join("crossval.csv"), &r.rows)?;
+    write_csv(&dir.join("crossval_views.csv"), &scores)?;
+    write_csv(&dir.join("crossval_own_views.csv"), &own)?;
+    write_csv(&dir.join("crossval_rendered.csv"), &r.records)?;
+    write_csv(&dir.join("crossval_anatomy.csv"), &r.anatomies)?;
+    let pairs = paired(&scores, white_box, "optimized");
+    let own_pairs = paired(&own, white_box, "optimized");
+    write_csv(&dir.join("crossval_paired.csv"), &pairs)?;
+    write_csv(&dir.join("crossval_paired_own_box.csv"), &own_pairs)?;
+    let views = unique(r.records.iter().map(|x| x.view.clone())).len();
+    let photos = unique(r.records.iter().map(|x| x.photo.clone())).len();
+    let intro = format!(
+        "{views} rendered views over {photos} photos' plates ({}), each scored in the fold that holds its photo out, so its street and camera were never trained on. Views of one photo are not independent: the pairs compare per-photo means, bootstrapped over photos.",
+        dirs.iter().map(|d| d.display().to_string()).collect::<Vec<_>>().join(", ")
+    );
+    let body = format!(
+        "{intro}\n\n## ASR / P@0.5 (%), every view\n\n{}\n## Mean best car score, every view\n\n{}\n## Optimized against each other texture: mean difference of the per-photo mean best car score [95 % paired-bootstrap interval over photos]\n\n{}{}{}",
+        markdown(&r.rows, "held-out"),
+        markdown_scores(&r.rows, "held-out"),
+        markdown_paired(&pairs),
+        anatomy_section(&markdown_anatomy(&r.anatomies), "Every view: `crossval_rendered.csv`."),
+        own_box_section(&markdown_paired(&own_pairs)),
+    );
+    write_markdown(
+        dir,
+        "crossval.md",
+        &format!("# Cross-validation: rendered views over the held-out photos' plates\n\n{body}"),
+    )?;
+    Ok(format!(
+        "\n## Rendered views over the held-out photos' plates (`{PLATES_DIR}/`)\n\n{intro}\n\n{}\n{}",
+        markdown_scores(&r.rows, "held-out"),
+        markdown_paired(&pairs)
+    ))
 }
 
 #[cfg(test)]

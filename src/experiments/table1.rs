@@ -139,24 +139,33 @@ fn read_run(dir: &Path) -> Result<Run, ExperimentError> {
             dir.join("crossval.csv").display()
         )));
     }
-    let views: Vec<ViewRow> = read(&dir.join("crossval_views.csv"))?;
-    let records: Vec<ViewRecord> = views
-        .into_iter()
-        .filter(|v| v.role == "held-out")
-        .map(|v| ViewRecord {
-            fold: v.fold,
-            role: "held-out",
-            view: v.view,
-            texture: v.texture,
-            seed: v.seed,
-            detector: v.detector,
-            score: v.score,
-        })
-        .collect();
+    let held_out = |path: &Path| -> Result<Vec<ViewRecord>, ExperimentError> {
+        Ok(read::<ViewRow>(path)?
+            .into_iter()
+            .filter(|v| v.role == "held-out")
+            .map(|v| ViewRecord {
+                fold: v.fold,
+                role: "held-out",
+                view: v.view,
+                texture: v.texture,
+                seed: v.seed,
+                detector: v.detector,
+                score: v.score,
+            })
+            .collect())
+    };
+    let records = held_out(&dir.join("crossval_views.csv"))?;
     let path = dir.join("crossval_anatomy.csv");
     let anatomy = if path.is_file() { read(&path)? } else { Vec::new() };
-    let path = dir.join("crossval_boxes.csv");
-    let own = if path.is_file() { own_box_records(&records, &read::<BoxRecord>(&path)?) } else { Vec::new() };
+    // A `plates` folder has each photo's own box already averaged over its rendered views.
+    let (boxes, own_views) = (dir.join("crossval_boxes.csv"), dir.join("crossval_own_views.csv"));
+    let own = if own_views.is_file() {
+        held_out(&own_views)?
+    } else if boxes.is_file() {
+        own_box_records(&records, &read::<BoxRecord>(&boxes)?)
+    } else {
+        Vec::new()
+    };
     Ok(Run { held, records, anatomy, own })
 }
 

@@ -21,6 +21,11 @@ pub struct Args {
     /// texture, `data:rauca-e2e/RAUCA_E2E.png`); any size, resampled to the atlas. Repeatable.
     #[arg(long = "reference", value_parser = pav::data::arg_path)]
     references: Vec<PathBuf>,
+    /// Rendered views over FCA's photos' plates (a `pav views render` folder with `[plates]`,
+    /// e.g. out/views_etron_plates_wide): each scored in the fold that holds its photo out, into
+    /// <out>/plates (a folder `pav table1` reads). Repeatable.
+    #[arg(long = "held-out-views")]
+    held_out_views: Vec<PathBuf>,
     #[command(flatten)]
     scoring: Scoring,
     /// Output folder; an interrupted run resumes from it.
@@ -37,6 +42,10 @@ pub fn run(a: &Args) -> Result<()> {
         .setting("seed", cfg.optimizer.seed)
         .setting("folds", a.folds.map_or("one per view".to_string(), |k| k.to_string()))
         .setting("random_seeds", a.random_seeds)
+        .setting(
+            "held_out_views",
+            a.held_out_views.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "),
+        )
         .setting("threshold", a.scoring.threshold)
         .tool("onnxruntime", pav::detect::onnx::runtime_version());
     let record_path = a.out.join(pav::provenance::FILE);
@@ -47,6 +56,7 @@ pub fn run(a: &Args) -> Result<()> {
         a.folds,
         a.random_seeds,
         &a.references,
+        &a.held_out_views,
         &a.scoring.to_lib(),
         &a.out,
         &Bar::default(),
