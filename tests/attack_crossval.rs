@@ -6,7 +6,7 @@
 mod common;
 
 use pav::attack::config::OptimizeConfig;
-use pav::experiments::crossval::{crossval, CrossvalOptions};
+use pav::experiments::crossval::crossval;
 use pav::experiments::per_view::{conditional_asr, paired};
 use pav::progress::{Progress, Silent};
 use std::cell::RefCell;
@@ -45,25 +45,11 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     cfg.optimizer.epochs = 1;
     let setup = Setup::load(&cfg, None).unwrap();
     let wb = Ensemble::load(&cfg, cfg.views.size).unwrap();
-    let mut dets =
-        pav::detect::load::load_detectors(&[common::repo().join("configs/detectors/yolov3-tiny.toml")], &[], 1)
-            .unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let opts = CrossvalOptions {
-        folds: 2,
-        random_seeds: 2,
-        random_block: 16,
-        out: dir.path().into(),
-        threshold: 0.5,
-        white_box: vec!["yolov3-tiny".into()],
-        // A peer's texture at its own size (2048²), resampled to the atlas.
-        references: vec![(
-            "RAUCA_E2E".into(),
-            setup.load_texture(&common::shared_data().join("rauca-e2e/RAUCA_E2E.png")).unwrap(),
-        )],
-        // Rendered views over plates: tests/blender_views.rs (they need Blender).
-        rendered: Vec::new(),
-    };
+    // A peer's texture at its own size (2048²), resampled to the atlas; rendered views over
+    // plates are tested in tests/blender_views.rs (they need Blender).
+    let rauca = setup.load_texture(&common::shared_data().join("rauca-e2e/RAUCA_E2E.png")).unwrap();
+    let (opts, mut dets) = common::two_folds(dir.path(), 2, vec![("RAUCA_E2E".into(), rauca)], Vec::new());
     let never = AtomicBool::new(false);
     let stages = Stages::default();
     let cv = crossval(&path, &cfg, &setup, &wb, &mut dets, &opts, &stages, &never).unwrap();

@@ -577,7 +577,7 @@ fn bottom_offset(a: &[bool], b: &[bool], n: usize, tol: i64) -> (i64, f64) {
 /// photo the records average its views, and `pav table1` reads those averages as a run.
 #[cfg(feature = "optimize")]
 fn plates_are_scored_with_their_photos_fold(mut cfg: pav::attack::config::OptimizeConfig, plates: &std::path::Path) {
-    use pav::experiments::crossval::{crossval, per_photo, CrossvalOptions};
+    use pav::experiments::crossval::{crossval, per_photo};
     cfg.views.pbr.clear();
     cfg.optimizer.epochs = 1;
     let path = common::repo().join("configs/optimize/paper.toml");
@@ -586,20 +586,8 @@ fn plates_are_scored_with_their_photos_fold(mut cfg: pav::attack::config::Optimi
     assert_eq!(rendered.len(), 4);
     assert!(rendered.iter().all(|v| setup.boxes.contains_key(&v.name)), "every view has its silhouette's box");
     let wb = pav::attack::whitebox::Ensemble::load(&cfg, cfg.views.size).unwrap();
-    let mut dets =
-        pav::detect::load::load_detectors(&[common::repo().join("configs/detectors/yolov3-tiny.toml")], &[], 1)
-            .unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let opts = CrossvalOptions {
-        folds: 2,
-        random_seeds: 1,
-        random_block: 16,
-        out: dir.path().into(),
-        threshold: 0.5,
-        white_box: vec!["yolov3-tiny".into()],
-        references: Vec::new(),
-        rendered,
-    };
+    let (opts, mut dets) = common::two_folds(dir.path(), 1, Vec::new(), rendered);
     let never = std::sync::atomic::AtomicBool::new(false);
     let cv = crossval(&path, &cfg, &setup, &wb, &mut dets, &opts, &pav::progress::Silent, &never).unwrap();
     let r = cv.rendered.expect("rendered views were given");

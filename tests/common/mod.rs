@@ -145,3 +145,25 @@ pub fn central_difference(
 pub fn whole_image_direction(n: usize) -> Vec<f32> {
     (0..n as i32).map(|i| (i.wrapping_mul(7919) % 101) as f32 / 50.0 - 1.0).collect()
 }
+
+/// A two-fold cross-validation of the tests into `out`, YOLOv3-tiny the white box (ASR at 0.5,
+/// 16-texel random blocks), and YOLOv3-tiny loaded to score it.
+#[cfg(feature = "optimize")]
+pub fn two_folds(
+    out: &Path,
+    random_seeds: u64,
+    references: Vec<(String, Vec<f32>)>,
+    rendered: Vec<pav::attack::view::View>,
+) -> (pav::experiments::crossval::CrossvalOptions, Vec<Box<dyn pav::detect::Detector>>) {
+    let opts = pav::experiments::crossval::CrossvalOptions {
+        folds: 2,
+        random_seeds,
+        random_block: 16,
+        out: out.into(),
+        threshold: 0.5,
+        white_box: vec!["yolov3-tiny".into()],
+        references,
+        rendered,
+    };
+    (opts, pav::detect::load::load_detectors(&[detector_config("yolov3-tiny")], &[], 1).unwrap())
+}
