@@ -143,6 +143,9 @@ pub enum CaptureError {
 /// A round trip this fast bounds the clock well enough; slower ones are retried a little.
 const FAST_ROUND_TRIP: Duration = Duration::from_millis(2);
 
+/// A device time stamped `t` (whole milliseconds, cut down) was in [t, t + STAMP_S).
+const STAMP_S: f64 = 0.001;
+
 /// Device seconds of reports the clock map needs before it places frames.
 const MIN_FIT_SPAN_S: f64 = 1.0;
 
@@ -224,14 +227,21 @@ impl AngleTrack {
         self.probes.push((self.host_s(sent), self.host_s(rx), t_ms as f64 / 1000.0));
     }
 
-    /// Every clock line the observations allow. Device times are whole milliseconds cut down,
-    /// so a reply stamped `t` was made in [t, t + 1 ms); a round trip's reply also arrived, so
-    /// it bounds the clock from below as a report does.
+    /// Every clock line the observations allow: a reply stamped `t` was made by `t + STAMP_S`
+    /// and after its request left; it also arrived, so it bounds the clock from below as a
+    /// report does.
     fn range(&self) -> ClockRange {
         let arrivals: Vec<(f64, f64)> =
             self.samples.iter().map(|s| (s.0, s.1)).chain(self.probes.iter().map(|p| (p.1, p.2))).collect();
-        let upper: Vec<(f64, f64)> = self.probes.iter().map(|p| (p.0, p.2 + 0.001)).collect();
+        let upper: Vec<(f64, f64)> = self.probes.iter().map(|p| (p.0, p.2 + STAMP_S)).collect();
         ClockRange::new(&arrivals, &upper)
+    }
+
+    /// The clock offsets allowed at the fitted rate `m.rate`: the lowest (from the arrivals and
+    /// replies) and the highest (from the round trips; `None` without one).
+    fn offsets_at(&self, m: ClockMap) -> (f64, Option<f64>) {
+        let lo = self.probes.iter().map(|p| p.2 - m.rate * p.1).fold(m.c, f64::max);
+        (lo, self.probes.iter().map(|p| p.2 + STAMP_S - m.rate * p.0).reduce(f64::min))
     }
 
     /// Settles the clock for frames between host seconds `t0` and `t1`: the line through the
@@ -263,13 +273,10 @@ impl AngleTrack {
             return settled;
         }
         match self.map {
-            Some(m) => {
-                let lo = self.probes.iter().map(|p| p.2 - m.rate * p.1).fold(m.c, f64::max);
-                match self.probes.iter().map(|p| p.2 + 0.001 - m.rate * p.0).reduce(f64::min) {
-                    Some(hi) if hi >= lo => (m.rate, (lo + hi) / 2.0),
-                    _ => (m.rate, lo),
-                }
-            }
+            Some(m) => match self.offsets_at(m) {
+                (lo, Some(hi)) if hi >= lo => (m.rate, (lo + hi) / 2.0),
+                (lo, _) => (m.rate, lo),
+            },
             // Until the reports span some time, assume the device clock runs at host speed,
             // offset by the report that travelled fastest.
             None => (1.0, self.samples.iter().map(|s| s.1 - s.0).fold(f64::NEG_INFINITY, f64::max)),
@@ -343,7 +350,7 @@ impl ClockError {
     /// stamped in whole device milliseconds (up to 1 ms early); `None` when nothing bounds it.
     fn bound_deg(&self, deg_per_s: f64, step_deg: f64) -> Option<f64> {
         match self.known {
-            ClockKnown::Within(e) => Some((e + 0.001) * deg_per_s + self.drift_deg + step_deg),
+            ClockKnown::Within(e) => Some((e + STAMP_S) * deg_per_s + self.drift_deg + step_deg),
             _ => None,
         }
     }
@@ -672,8 +679,8 @@ mod tests {
         // The fitted rate with the offset bounded at that rate, as captures stated it before
         // session 19: its half width does not cover the frames at the ends.
         let m = tr.map.unwrap();
-        let lo = tr.probes.iter().map(|p| p.2 - m.rate * p.1).fold(m.c, f64::max);
-        let hi = tr.probes.iter().map(|p| p.2 + 0.001 - m.rate * p.0).fold(f64::INFINITY, f64::min);
+        let (lo, hi) = tr.offsets_at(m);
+        let hi = hi.unwrap();
         let frames: Vec<f64> = (0..=54).map(|i| 1.5 + 0.5 * i as f64).collect();
         let truth = |h: f64| h + 5.0;
         let old_worst = frames.iter().map(|&h| (m.rate * h + (lo + hi) / 2.0 - truth(h)).abs()).fold(0.0, f64::max);

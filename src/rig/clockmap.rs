@@ -26,8 +26,9 @@ impl ClockMap {
         self.rate * h + self.c
     }
 
-    /// The upper-envelope fit of arrivals `(host s, device s)` in arrival order; `None` until
-    /// they span two distinct host times with the device clock moving forward.
+    /// The upper-envelope fit of arrivals `(host s, device s)` in arrival order (host time never
+    /// decreasing); `None` until they span two distinct host times with the device clock moving
+    /// forward.
     pub fn fit(arrivals: &[(f64, f64)]) -> Option<ClockMap> {
         let hull = upper_hull(arrivals);
         let mean = arrivals.iter().map(|p| p.0).sum::<f64>() / arrivals.len().max(1) as f64;
@@ -95,16 +96,18 @@ pub enum DeviceTime {
     Unbounded,
 }
 
-/// The upper convex hull of `(h, d)` points by Andrew's monotone chain, left to right; of
+/// The upper convex hull of `(h, d)` points in host-time order, by Andrew's monotone chain; of
 /// points at one host time only the latest device time counts (lines read together: the last
-/// one sent waited least).
-fn upper_hull(points: &[(f64, f64)]) -> Vec<(f64, f64)> {
-    let mut pts = points.to_vec();
-    pts.sort_by(|p, q| p.0.total_cmp(&q.0).then(p.1.total_cmp(&q.1)));
+/// one sent waited least). Raising a point in place leaves no hull vertex out, which is all
+/// [`ClockRange`] needs of it.
+fn upper_hull(in_order: &[(f64, f64)]) -> Vec<(f64, f64)> {
     let mut hull: Vec<(f64, f64)> = Vec::new();
-    for (h, d) in pts {
-        if hull.last().is_some_and(|l| l.0 == h) {
-            hull.pop();
+    for &(h, d) in in_order {
+        if let Some(last) = hull.last_mut() {
+            if h <= last.0 {
+                last.1 = last.1.max(d);
+                continue;
+            }
         }
         while hull.len() >= 2 {
             let (o, a) = (hull[hull.len() - 2], hull[hull.len() - 1]);
@@ -126,7 +129,10 @@ impl ClockRange {
     /// From arrivals `(host s, device s)` (device time at or before sending) and round trips
     /// `(host s sent, device s)` (device time at or after the reply was made).
     pub fn new(arrivals: &[(f64, f64)], upper: &[(f64, f64)]) -> ClockRange {
-        ClockRange { lower: upper_hull(arrivals), upper: upper.to_vec() }
+        // Round trips' replies come after the reports in the caller's list: sort by host time.
+        let mut sorted = arrivals.to_vec();
+        sorted.sort_by(|p, q| p.0.total_cmp(&q.0));
+        ClockRange { lower: upper_hull(&sorted), upper: upper.to_vec() }
     }
 
     /// Lowest `c` the arrivals allow at `rate`.
