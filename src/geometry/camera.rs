@@ -104,6 +104,17 @@ pub fn fca(cam_trans: [[f64; 3]; 2], veh_trans: [[f64; 3]; 2]) -> Camera {
     Camera::look_at(eye, at, to_mesh(up), 90.0)
 }
 
+/// A CARLA camera pose with the car moved along the ground, straight away from the camera, to
+/// `factor` times its horizontal distance: the camera keeps its place, height, pitch and yaw, so
+/// the photo behind the car stays true while the car is seen smaller, from lower down (factor
+/// above 1), and off the image centre.
+pub fn moved_away(cam_trans: [[f64; 3]; 2], factor: f64) -> [[f64; 3]; 2] {
+    let mut c = cam_trans;
+    c[0][0] *= factor;
+    c[0][1] *= factor;
+    c
+}
+
 /// How a mesh is normalized, which fixes the camera convention that fits a CARLA pose.
 #[derive(Clone, Copy, Debug, serde::Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
@@ -115,6 +126,13 @@ pub enum CameraConvention {
 }
 
 impl CameraConvention {
+    /// Whether a car moved along the ground ([`moved_away`]) keeps this convention's camera
+    /// true: FCA's eye is the camera's offset itself, PAV-Camou's takes its elevation from the
+    /// camera's pitch, which a moved car no longer matches.
+    pub fn keeps_moved_cars(self) -> bool {
+        self == CameraConvention::Fca
+    }
+
     /// The camera of a CARLA pose with the car turned in place by `turn_deg` (its yaw).
     pub fn camera(self, cam_trans: [[f64; 3]; 2], veh_trans: [[f64; 3]; 2], turn_deg: f64) -> Camera {
         let mut veh = veh_trans;
@@ -139,6 +157,26 @@ mod tests {
         // A point above the target lands above the centre.
         let up = c.to_pixel(c.to_view([0.0, 0.5, 0.0]), 100);
         assert!(up[1] < 50.0);
+    }
+
+    #[test]
+    fn a_car_moved_away_is_seen_smaller_from_lower_down_by_the_same_camera() {
+        // FCA's data12501: 4.62 m behind the car, 1.91 m up, pitched −22.5°.
+        let (cam, veh) = ([[4.62, 0.0, 1.91], [-22.5, 180.0, 0.0]], [[0.0; 3], [0.0, 89.84, 0.0]]);
+        let near = fca(cam, veh);
+        let far = fca(moved_away(cam, 1.5), veh);
+        // The camera looks the same way; only the car's offset changed.
+        assert!(near.axes.iter().zip(&far.axes).all(|(a, b)| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-6)));
+        let d = |c: &Camera| c.eye.iter().map(|v| v * v).sum::<f32>().sqrt();
+        let e = |c: &Camera| (c.eye[2] / d(c)).asin().to_degrees();
+        assert!((d(&far) / d(&near) - 1.45).abs() < 0.01, "{} {}", d(&far), d(&near));
+        // In mesh units the eye is 0.68 above the car's centre and 1.85 (2.77 moved) away along the
+        // ground: the car is seen from 13.9° above instead of 20.3°.
+        assert!((e(&near) - 20.3).abs() < 0.1 && (e(&far) - 13.9).abs() < 0.1, "{} {}", e(&near), e(&far));
+        // The car's centre moves up in the frame, towards the horizon.
+        let (pn, pf) = (near.to_pixel(near.to_view([0.0; 3]), 416), far.to_pixel(far.to_view([0.0; 3]), 416));
+        assert!(pf[1] < pn[1] - 20.0, "{pn:?} {pf:?}");
+        assert!(CameraConvention::Fca.keeps_moved_cars() && !CameraConvention::PavCamou.keeps_moved_cars());
     }
 
     #[test]

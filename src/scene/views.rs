@@ -29,6 +29,7 @@
 //! photos = ["data:fca/carla_dataset/train/data1.npz"]
 //! camera = "fca"               # the convention that fits the mesh to the photos' CARLA poses
 //! turns = [-30, 0, 30]         # the car turned in place on the plate's ground, degrees
+//! distances = [1.0, 1.4]       # and moved away along it (× the camera's distance; default [1])
 //! ```
 //!
 //! A plate view is Cycles' car with its caught shadow on a transparent film (`<name>_car.png`),
@@ -37,7 +38,7 @@
 //! environment then only lights the car; the photo's own car shadow stays on the plate.
 
 use super::blender::{Blender, BlenderError, Job, JobView, Mode};
-use crate::geometry::camera::{spherical, Camera, CameraConvention};
+use crate::geometry::camera::{moved_away, spherical, Camera, CameraConvention};
 use crate::geometry::mesh::{Mesh, MeshError};
 use crate::image::resize::{resize, Interpolation};
 use crate::image::Frame;
@@ -194,6 +195,10 @@ fn sixty() -> f32 {
     60.0
 }
 
+fn unmoved() -> Vec<f32> {
+    vec![1.0]
+}
+
 /// Background plates: real photos with their car painted out, the rendered car laid over them.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -204,6 +209,10 @@ pub struct Plates {
     pub camera: CameraConvention,
     /// Turns of the car in place, degrees (0: the photo's own pose).
     pub turns: Vec<f32>,
+    /// The car moved along the ground, straight away from the camera, to these multiples of its
+    /// distance in the photo (1: where it stood; needs `camera = "fca"`).
+    #[serde(default = "unmoved")]
+    pub distances: Vec<f32>,
     /// Pixels the painted-out hole extends past the car's silhouette (default: size / 50),
     /// since the fitted cameras are off by a few pixels at the edge.
     #[serde(default)]
@@ -311,6 +320,18 @@ impl ViewsConfig {
             if pl.turns.iter().any(|t| !t.is_finite()) {
                 return Err("plates: turns must be finite".into());
             }
+            if pl.distances.is_empty() || pl.distances.iter().any(|d| !(d.is_finite() && *d >= 0.7 && *d <= 3.0)) {
+                return Err(format!(
+                    "plates: distances {:?}: list factors from 0.7 to 3 (nearer, the camera can stand over the car in FCA's poses)",
+                    pl.distances
+                ));
+            }
+            if pl.distances.iter().any(|&d| d != 1.0) && !pl.camera.keeps_moved_cars() {
+                return Err(format!(
+                    "plates: distances other than 1 need camera = \"fca\": under {:?} the camera's elevation comes from its pitch and would not follow the moved car",
+                    pl.camera
+                ));
+            }
         }
         up_rotation(&self.mesh.up)?;
         for (i, p) in self.poses.iter().enumerate() {
@@ -394,30 +415,37 @@ impl ViewsConfig {
         out
     }
 
-    /// The camera of plate `pi` with the car turned by `turn` degrees, in pav's frame.
-    pub fn plate_camera(&self, pi: usize, turn: f32) -> Camera {
+    /// The camera of plate `pi` with the car turned by `turn` degrees and moved away to
+    /// `distance` times its distance, in pav's frame.
+    pub fn plate_camera(&self, pi: usize, turn: f32, distance: f32) -> Camera {
         let pl = self.plates.as_ref().expect("plate_camera needs plates");
         let r = up_rotation(&self.mesh.up).expect("checked by load");
         let [cam, veh] = pl.poses[pi];
+        let cam = if distance == 1.0 { cam } else { moved_away(cam, distance as f64) };
         let c = pl.camera.camera(cam, veh, turn as f64);
         Camera { axes: c.axes.map(|a| rotate(&r, a)), eye: rotate(&r, c.eye), ..c }
     }
 
-    /// The plate views in environment `ei`: every photo, every turn, at the photo's camera.
+    /// The plate views in environment `ei`: every photo, every turn and distance, at the photo's
+    /// camera. A view at distance 1 keeps the name it had before distances existed, so renders resume.
     fn plate_views(&self, ei: usize) -> Vec<View> {
         let Some(pl) = &self.plates else { return Vec::new() };
         let env_name = self.environment_name(ei);
         let mut out = Vec::new();
         for (pi, photo) in pl.photos.iter().enumerate() {
             let stem = photo.file_stem().map_or_else(|| format!("plate{pi}"), |s| s.to_string_lossy().into());
-            for &turn in &pl.turns {
-                let camera = self.plate_camera(pi, turn);
+            for (&dist, &turn) in pl.distances.iter().flat_map(|d| pl.turns.iter().map(move |t| (d, t))) {
+                let camera = self.plate_camera(pi, turn, dist);
                 let e = camera.eye;
                 let d = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
                 // A look-at point on the optical axis, as far as the car's centre.
                 let target = [0, 1, 2].map(|k| e[k] + camera.axes[2][k] * d);
                 out.push(View {
-                    name: format!("{env_name}_{stem}_t{turn:+.0}"),
+                    name: if dist == 1.0 {
+                        format!("{env_name}_{stem}_t{turn:+.0}")
+                    } else {
+                        format!("{env_name}_{stem}_t{turn:+.0}_d{dist:.2}")
+                    },
                     environment: ei,
                     pose: [d, (e[1] / d).asin().to_degrees(), e[0].atan2(e[2]).to_degrees().rem_euclid(360.0)],
                     target,
@@ -833,7 +861,7 @@ fn plate_frame(cfg: &ViewsConfig, mesh: &Mesh, pi: usize) -> Result<Frame, Views
     if photo.width != n {
         photo = Frame::from_levels(n, n, &resize(&photo, n, n, Interpolation::Antialias));
     }
-    let plate = Plate::new(mesh, &photo, &cfg.plate_camera(pi, 0.0), pl.grow_px.unwrap_or(n / 50))
+    let plate = Plate::new(mesh, &photo, &cfg.plate_camera(pi, 0.0, 1.0), pl.grow_px.unwrap_or(n / 50))
         .map_err(|e| bad(format!("painting the car out: {e}")))?;
     Ok(plate.frame())
 }
@@ -913,7 +941,7 @@ mod tests {
         let views = plates.views();
         assert_eq!(views.len(), 110);
         assert!(views.iter().all(|v| v.plate.is_some()));
-        let (a, b) = (&views[0].camera, &plates.plate_camera(0, -40.0));
+        let (a, b) = (&views[0].camera, &plates.plate_camera(0, -40.0, 1.0));
         assert_eq!((a.eye, a.axes), (b.eye, b.axes));
         // The paper's grid: 4 distances × (3 elevations × 20 azimuths + 2 × 8) per environment.
         let grid = shipped("paper-grid.toml");
@@ -959,6 +987,40 @@ mod tests {
         std::fs::write(&path, text("0").replace("m.obj", "/dev/null")).unwrap();
         let e = ViewsConfig::load(&path).unwrap_err().to_string();
         assert!(e.contains("a.npz"), "{e}");
+    }
+
+    #[test]
+    fn moved_plates_are_named_apart_and_drawn_from_the_same_camera() {
+        let moved = shipped("etron-plates-moved.toml");
+        let views = moved.views();
+        // 2 environments × 11 photos × 2 distances × 3 turns.
+        assert_eq!(views.len(), 132);
+        assert_eq!(views.iter().map(|v| &v.name).collect::<HashSet<_>>().len(), 132);
+        let v = views.iter().find(|v| v.name == "city_data12501_t+40_d1.40").expect("named by distance");
+        let c = moved.plate_camera(1, 40.0, 1.4);
+        assert_eq!((v.camera.eye, v.camera.axes), (c.eye, c.axes));
+        // Moved away, the eye is farther and the camera still looks where the photo's did.
+        let (near, far) = (moved.plate_camera(1, 40.0, 1.0), moved.plate_camera(1, 40.0, 1.4));
+        let norm = |e: [f32; 3]| e.iter().map(|x| x * x).sum::<f32>().sqrt();
+        assert!(norm(far.eye) > 1.3 * norm(near.eye));
+        assert!(far.axes.iter().flatten().zip(near.axes.iter().flatten()).all(|(a, b)| (a - b).abs() < 1e-6));
+        // Distance 1 keeps the names of etron-plates-wide.toml, so that folder is not redrawn.
+        let mut one = moved.clone();
+        one.plates.as_mut().unwrap().distances = vec![1.0];
+        assert!(one
+            .views()
+            .iter()
+            .all(|v| v.name.ends_with("_t-40") || v.name.ends_with("_t+0") || v.name.ends_with("_t+40")));
+        // Factors out of range, or a convention whose camera cannot follow a moved car, are refused.
+        for (d, conv, says) in
+            [(0.5, CameraConvention::Fca, "0.7 to 3"), (1.4, CameraConvention::PavCamou, "need camera")]
+        {
+            let mut c = moved.clone();
+            let pl = c.plates.as_mut().unwrap();
+            (pl.distances, pl.camera) = (vec![d], conv);
+            let e = c.check().unwrap_err();
+            assert!(e.contains(says), "{e}");
+        }
     }
 
     #[test]
