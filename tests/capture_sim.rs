@@ -237,7 +237,9 @@ fn reply_latency_is_bounded_and_too_much_of_it_is_flagged() {
             let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
             let mut o = opts(&video);
             o.home = false;
-            o.max_angle_error_deg = 0.5;
+            // Between 10 ms's bound (±0.49° at 51°/s, with a step or two for the spin's start) and
+            // 50 ms's (±1.5°), with room on both sides for a loaded host.
+            o.max_angle_error_deg = 0.8;
             let r = capture(&mut table, &mut cam, &o, &Silent, &AtomicBool::new(false));
             let rows = sidecar::read(&sidecar::sidecar_path(&video)).unwrap();
             let worst = worst_angle_error(&rows, &cam.true_angles, if ms == 100 { 2.69 } else { 90.0 });

@@ -77,8 +77,9 @@ pub struct CaptureSummary {
     /// The table's `done` was lost on the line; the end came from a status report.
     pub done_lost: bool,
     /// Every frame's angle is within this many degrees of the truth: the clock's bounds from
-    /// round trips and report arrivals at the cruise speed, plus one microstep; `None` when no
-    /// round trip got through.
+    /// round trips and report arrivals at the cruise speed, plus where the table can be between
+    /// the reports around a frame (a microstep at cruise speed); `None` when no round trip got
+    /// through.
     pub angle_bound_deg: Option<f64>,
     /// The fastest round trip to the table, ms.
     pub round_trip_ms: Option<f64>,
@@ -176,6 +177,16 @@ struct AngleTrack {
     start: Option<(Instant, i64)>,
     /// The clock settled at the end of a capture ([`AngleTrack::settle`]), replacing the fit.
     settled: Option<(f64, f64)>,
+}
+
+/// The reports that place a device time ([`AngleTrack::knots`]): (device s, microsteps).
+enum Knots {
+    /// The table stood here.
+    Rest(f64),
+    /// Between two known positions.
+    Between((f64, f64), (f64, f64)),
+    /// After the last report.
+    After,
 }
 
 /// How well the device clock is known over the frames of a capture.
@@ -297,22 +308,58 @@ impl AngleTrack {
 
     /// [`AngleTrack::at`] without waiting for the fit to mature.
     fn place(&self, at: Instant) -> Option<f64> {
-        let (first, last) = (self.samples.first()?, self.samples.last()?);
+        let d = self.device_s(at)?;
+        Some(match self.knots(d) {
+            Knots::Rest(p) => p,
+            Knots::Between((da, pa), (db, pb)) => pa + (pb - pa) * (d - da) / (db - da),
+            Knots::After => return self.end.map(|end| self.tail(d, end)),
+        })
+    }
+
+    /// Device seconds at host instant `at` on the current clock, once there is a report.
+    fn device_s(&self, at: Instant) -> Option<f64> {
+        self.samples.first()?;
         let (rate, c) = self.clock();
-        let d = rate * self.host_s(at) + c;
+        Some(rate * self.host_s(at) + c)
+    }
+
+    /// What places device time `d`: the table at rest before the spin reached it (or before the
+    /// first report, without a start), two reports (or the start and the first report) around
+    /// it, or only the last report before it.
+    fn knots(&self, d: f64) -> Knots {
+        let (first, last) = (self.samples[0], *self.samples.last().expect("device_s checked"));
         if d <= first.1 {
-            return Some(match self.start.map(|(sent, p)| (rate * self.host_s(sent) + c, p as f64)) {
-                Some((ds, p)) if d <= ds => p,
-                Some((ds, p)) if first.1 > ds => p + (first.2 as f64 - p) * (d - ds) / (first.1 - ds),
-                _ => first.2 as f64,
-            });
+            let (rate, c) = self.clock();
+            return match self.start.map(|(sent, p)| (rate * self.host_s(sent) + c, p as f64)) {
+                Some((ds, p)) if d <= ds => Knots::Rest(p),
+                Some((ds, p)) if first.1 > ds => Knots::Between((ds, p), (first.1, first.2 as f64)),
+                _ => Knots::Rest(first.2 as f64),
+            };
         }
         if d >= last.1 {
-            return self.end.map(|end| self.tail(d, end));
+            return Knots::After;
         }
         let i = self.samples.partition_point(|s| s.1 <= d);
         let (a, b) = (self.samples[i - 1], self.samples[i]);
-        Some(a.2 as f64 + (b.2 - a.2) as f64 * (d - a.1) / (b.1 - a.1))
+        Knots::Between((a.1, a.2 as f64), (b.1, b.2 as f64))
+    }
+
+    /// Microsteps the table can be from where [`AngleTrack::place`] puts it at `at`, clock
+    /// aside: a reported position is up to one step behind the table, and between two reports
+    /// a table that moves one way no faster than the spin's speed lies between "still at the
+    /// first, then at full speed to the second" and "at full speed from the first, then
+    /// waiting". At cruise speed that leaves the step; a ramp, or a stretch of lost reports in
+    /// one, leaves more.
+    fn steps_off(&self, at: Instant) -> f64 {
+        let (Some(d), Some((dir, v))) = (self.device_s(at), self.motion) else { return 1.0 };
+        let Knots::Between((da, pa), (db, pb)) = self.knots(d) else { return 1.0 };
+        // Progress along the spin's direction, as reported (the table is up to a step further);
+        // stamps are up to STAMP_S early.
+        let span = dir * (pb - pa);
+        let line = span * (d - da) / (db - da);
+        let lo = (span - v * (db - d + STAMP_S)).max(0.0);
+        let hi = 1.0 + (v * (d - da + STAMP_S)).min(span);
+        (line - lo).max(hi - line).max(1.0)
     }
 
     /// Position at device time `d` after the last report of a motion that ended at `end`: the
@@ -342,15 +389,18 @@ struct ClockError {
     /// Largest difference between a row as written (with the clock known then) and the same
     /// frame placed with the final clock, degrees.
     drift_deg: f64,
+    /// Largest [`AngleTrack::steps_off`] over the frames: a reported step, or more where a ramp
+    /// or lost reports leave the table off the line drawn between reports.
+    steps_off: f64,
 }
 
 impl ClockError {
     /// Worst angle error, degrees, at `deg_per_s` per device second, for a table that reports
-    /// whole microsteps of `step_deg` (a reported position is up to one step behind the table)
-    /// stamped in whole device milliseconds (up to 1 ms early); `None` when nothing bounds it.
+    /// whole microsteps of `step_deg`, stamped in whole device milliseconds (up to 1 ms early);
+    /// `None` when nothing bounds it.
     fn bound_deg(&self, deg_per_s: f64, step_deg: f64) -> Option<f64> {
         match self.known {
-            ClockKnown::Within(e) => Some((e + STAMP_S) * deg_per_s + self.drift_deg + step_deg),
+            ClockKnown::Within(e) => Some((e + STAMP_S) * deg_per_s + self.drift_deg + step_deg * self.steps_off),
             _ => None,
         }
     }
@@ -384,12 +434,21 @@ impl ClockError {
         }
         Some(format!(
             "angles are known only to ±{bound:.2}°: round trips to the table (the fastest took {:.0} ms) and its \
-             reports' arrivals place its clock to ±{:.0} ms of device time over the spin at {deg_per_s:.1}°/s{} \
+             reports' arrivals place its clock to ±{:.0} ms of device time over the spin at {deg_per_s:.1}°/s{}{} \
              (a faster link, a slower --period or a larger --max-angle-error)",
             s.round_trip_ms.unwrap_or(f64::NAN),
             e * 1000.0,
             if self.drift_deg > 0.05 {
                 format!("; rows written early moved {:.2}° as the clock fit settled", self.drift_deg)
+            } else {
+                String::new()
+            },
+            if self.steps_off > 2.0 {
+                format!(
+                    "; where the table changed speed between reports, or reports were lost, it can be {:.1} \
+                     microsteps from the line drawn between them",
+                    self.steps_off
+                )
             } else {
                 String::new()
             }
@@ -605,6 +664,7 @@ pub fn capture(
             .iter()
             .filter_map(|&(at, pos)| track.place(at).map(|p| (p - pos).abs() * 360.0 / rev))
             .fold(0.0, f64::max),
+        steps_off: written.iter().map(|w| track.steps_off(w.0)).fold(1.0, f64::max),
     };
     let summary = CaptureSummary {
         video: opts.video.clone(),
@@ -665,6 +725,42 @@ mod tests {
         assert_eq!(tr.at(t0 + Duration::from_secs(5)), None);
         tr.end = Some(1990);
         assert_eq!(tr.at(t0 + Duration::from_secs(5)), Some(1990.0));
+    }
+
+    #[test]
+    fn a_ramp_whose_reports_were_lost_is_within_its_stated_bound_and_cruise_costs_nothing() {
+        // 100 microsteps per device second, device seconds = host seconds. The table rests at 0
+        // until 0.1 s, speeds up evenly to full speed at 0.3 s (10 microsteps on), then cruises.
+        // Reports every 50 ms; those inside the ramp, and the one at 0.7 s, were lost.
+        let truth = |t: f64| match t {
+            t if t < 0.1 => 0.0,
+            t if t < 0.3 => 250.0 * (t - 0.1) * (t - 0.1),
+            t => 10.0 + 100.0 * (t - 0.3),
+        };
+        let t0 = Instant::now();
+        let at = |h: f64| t0 + Duration::from_secs_f64(h);
+        let mut tr = AngleTrack { motion: Some((1.0, 100.0)), ..AngleTrack::default() };
+        for k in 0..=20 {
+            let t = k as f64 * 0.05;
+            if !(t > 0.12 && t < 0.28) && k != 14 {
+                tr.push((t * 1000.0).round() as u64, (truth(t) + 1e-9).floor() as i64, at(t));
+            }
+        }
+        tr.settled = Some((1.0, 0.0));
+        let frames: Vec<f64> = (1..100).map(|i| i as f64 * 0.01).collect();
+        let off = |t: f64| (tr.place(at(t)).unwrap() - truth(t)).abs();
+        // The line drawn across the ramp misses the table by more than the one step a report's
+        // rounding allows, which was all the bound held for it before.
+        assert!(off(0.2) > 2.0, "{}", off(0.2));
+        for &t in &frames {
+            let (e, allowed) = (off(t), tr.steps_off(at(t)));
+            assert!(e <= allowed + 1e-9, "frame at {t} s: {e} microsteps off, allowed {allowed}");
+        }
+        // Across the ramp the table could have been anywhere between rest and full speed.
+        assert!((tr.steps_off(at(0.2)) - 6.0).abs() < 0.2, "{}", tr.steps_off(at(0.2)));
+        // At cruise speed a lost report costs nothing beyond the step and the stamps' millisecond.
+        let cruise = frames.iter().filter(|&&t| t > 0.31).map(|&t| tr.steps_off(at(t))).fold(0.0, f64::max);
+        assert!(cruise <= 1.1 + 1e-9, "{cruise}");
     }
 
     #[test]
