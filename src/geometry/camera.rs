@@ -107,7 +107,7 @@ pub fn fca(cam_trans: [[f64; 3]; 2], veh_trans: [[f64; 3]; 2]) -> Camera {
 /// A CARLA camera pose with the car moved along the ground, straight away from the camera, to
 /// `factor` times its horizontal distance: the camera keeps its place, height, pitch and yaw, so
 /// the photo behind the car stays true while the car is seen smaller, from lower down (factor
-/// above 1), and off the image centre.
+/// above 1), and off the image centre. Factor 1 gives the pose back bit for bit.
 pub fn moved_away(cam_trans: [[f64; 3]; 2], factor: f64) -> [[f64; 3]; 2] {
     let mut c = cam_trans;
     c[0][0] *= factor;

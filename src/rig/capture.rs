@@ -477,14 +477,13 @@ fn time_round_trips(
     let mut best: Option<(Duration, i64)> = None;
     let (mut got, mut lost) = (0, 0);
     loop {
-        let done = if got == 0 {
-            lost >= if insist { UNTIL_ONE.max(2 * want) } else { 2 * want }
+        let enough = got >= want && (best.is_some_and(|b| b.0 <= FAST_ROUND_TRIP) || got + lost >= 2 * want);
+        let spent = if got == 0 && insist {
+            lost >= UNTIL_ONE.max(2 * want)
         } else {
-            got + lost >= 4 * want
-                || lost >= 2 * want
-                || (got >= want && (best.is_some_and(|b| b.0 <= FAST_ROUND_TRIP) || got + lost >= 2 * want))
+            got + lost >= 4 * want || lost >= 2 * want
         };
-        if done {
+        if enough || spent {
             break;
         }
         match table.clock_probe()? {

@@ -320,7 +320,7 @@ impl ViewsConfig {
             if pl.turns.iter().any(|t| !t.is_finite()) {
                 return Err("plates: turns must be finite".into());
             }
-            if pl.distances.is_empty() || pl.distances.iter().any(|d| !(d.is_finite() && *d >= 0.7 && *d <= 3.0)) {
+            if pl.distances.is_empty() || pl.distances.iter().any(|d| !(0.7..=3.0).contains(d)) {
                 return Err(format!(
                     "plates: distances {:?}: list factors from 0.7 to 3 (nearer, the camera can stand over the car in FCA's poses)",
                     pl.distances
@@ -421,8 +421,7 @@ impl ViewsConfig {
         let pl = self.plates.as_ref().expect("plate_camera needs plates");
         let r = up_rotation(&self.mesh.up).expect("checked by load");
         let [cam, veh] = pl.poses[pi];
-        let cam = if distance == 1.0 { cam } else { moved_away(cam, distance as f64) };
-        let c = pl.camera.camera(cam, veh, turn as f64);
+        let c = pl.camera.camera(moved_away(cam, distance as f64), veh, turn as f64);
         Camera { axes: c.axes.map(|a| rotate(&r, a)), eye: rotate(&r, c.eye), ..c }
     }
 
