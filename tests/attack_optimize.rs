@@ -7,7 +7,7 @@ mod common;
 
 use pav::attack::checkpoint::Checkpoint;
 use pav::attack::config::OptimizeConfig;
-use pav::attack::optimize::{optimize_texture, Finish, RunOptions};
+use pav::attack::optimize::{optimize_texture, snapshots, Finish, RunOptions};
 use pav::attack::setup::Setup;
 use pav::attack::whitebox::Ensemble;
 use pav::experiments::outputs::score_views;
@@ -28,7 +28,14 @@ fn problem() -> (PathBuf, OptimizeConfig, Setup, Ensemble) {
 }
 
 fn opts(out: &std::path::Path, epochs: usize, resume: bool) -> RunOptions {
-    RunOptions { out: out.into(), resume, checkpoint_every: 1000, max_skips: 3, epochs: Some(epochs) }
+    RunOptions {
+        out: out.into(),
+        resume,
+        checkpoint_every: 1000,
+        max_skips: 3,
+        epochs: Some(epochs),
+        snapshot_every: 0,
+    }
 }
 
 #[test]
@@ -57,14 +64,24 @@ fn optimization_lowers_the_car_score_and_resume_is_exact() {
     // Measured: 0.91 → 0.05 and 0.76 → 0.04 after 3 epochs; the bound leaves room.
     assert!(scores.iter().all(|v| v.optimized < 0.5 * v.initial && v.optimized < 0.3), "{scores:?}");
 
-    // One epoch, then resume to three: the same texture as the straight run.
+    // One epoch, then resume to three: the same texture as the straight run. Snapshots every 4
+    // steps: the start, step 4 and the end, the ones before the stop kept through the resume.
     let b = dir.path().join("b");
-    optimize_texture(&path, &cfg, &s, &wb, &opts(&b, 1, false), &Silent, &never).unwrap();
+    let every4 = |epochs, resume| RunOptions { snapshot_every: 4, ..opts(&b, epochs, resume) };
+    optimize_texture(&path, &cfg, &s, &wb, &every4(1, false), &Silent, &never).unwrap();
+    assert_eq!(snapshots(&b).iter().map(|s| s.0).collect::<Vec<_>>(), [0, 2]);
     assert_eq!(Checkpoint::load(&b.join("checkpoint.bin")).unwrap().steps_done, 2);
     let err = optimize_texture(&path, &cfg, &s, &wb, &opts(&b, 3, false), &Silent, &never).err().unwrap().to_string();
     assert!(err.contains("--resume"), "{err}");
-    let resumed = optimize_texture(&path, &cfg, &s, &wb, &opts(&b, 3, true), &Silent, &never).unwrap();
+    let resumed = optimize_texture(&path, &cfg, &s, &wb, &every4(3, true), &Silent, &never).unwrap();
     assert_eq!(resumed.log.len(), 6);
+    assert_eq!(snapshots(&b).iter().map(|s| s.0).collect::<Vec<_>>(), [0, 2, 4, 6]);
+    let (first, last) = (&snapshots(&b)[0].1, &snapshots(&b)[3].1);
+    let eight_bit = |t: &[f32], path: &std::path::Path| {
+        let png = pav::image::Rgb::load(path).unwrap().rgb;
+        t.iter().zip(&png).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max)
+    };
+    assert!(eight_bit(&init, first) <= 0.5 / 255.0 + 1e-6 && eight_bit(&resumed.texture, last) <= 0.5 / 255.0 + 1e-6);
     let worst = resumed.texture.iter().zip(&straight.texture).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
     assert!(worst < 1e-5, "resumed texture differs by {worst}");
 }

@@ -9,7 +9,7 @@ mod common;
 use pav::attack::config::OptimizeConfig;
 use pav::attack::loss::{DetectionLoss, Proposals, Reduce};
 use pav::attack::setup::Setup;
-use pav::attack::whitebox::WhiteBox;
+use pav::attack::whitebox::{Ensemble, WhiteBox};
 use pav::detect::DetectorConfig;
 use pav::rng::Rng;
 use pav::scene::{self, Effect, Scene};
@@ -44,6 +44,27 @@ fn texture_gradient_matches_finite_differences_through_yolox_nano() {
 #[test]
 fn texture_gradient_matches_finite_differences_through_a_zoom_out_and_yolov3_tiny() {
     check_chain("yolov3-tiny", Some(0.8));
+}
+
+#[test]
+fn an_ensemble_sums_its_members_and_a_drawn_subset_keeps_the_loss_scale() {
+    let (_, s, tiny) = setup(416, "yolov3-tiny");
+    let (_, _, nano) = setup(416, "yolox_nano");
+    let v = &s.train[1];
+    let grey = vec![0.5f32; s.tex_size * s.tex_size * 3];
+    let img = v.composite(&grey, &s.eval_scene());
+    let (a, b) = (tiny.loss_and_grad(&img, v.size, 1.0).unwrap(), nano.loss_and_grad(&img, v.size, 1.0).unwrap());
+    assert!(a.loss.l1 > 0.0 && b.loss.l1 > 0.0, "both should see the grey car: {:?} {:?}", a.loss, b.loss);
+    let e = Ensemble { members: vec![(tiny, 1.0), (nano, 3.0)] };
+    let close = |x: f32, y: f32| (x - y).abs() <= 1e-5 * (1.0 + y.abs());
+    // All members: 1·a + 3·b. Only YOLOX-Nano: its weight scaled to the total 4, the other absent.
+    let all = e.loss_and_grad(&img, v.size, 1.0).unwrap();
+    assert!(close(all.sum.loss.l1, a.loss.l1 + 3.0 * b.loss.l1), "{:?}", all.sum.loss);
+    let one = e.loss_and_grad_of(&[1], &img, v.size, 1.0).unwrap();
+    assert!(close(one.sum.loss.l1, 4.0 * b.loss.l1) && close(one.sum.loss.l2, 4.0 * b.loss.l2), "{:?}", one.sum.loss);
+    assert!(one.per_detector[0].is_none() && one.per_detector[1].as_ref() == Some(&b.loss));
+    assert!(one.sum.grad.iter().zip(&b.grad).all(|(g, x)| close(*g, 4.0 * x)));
+    assert!(all.sum.grad.iter().zip(a.grad.iter().zip(&b.grad)).all(|(g, (x, y))| close(*g, x + 3.0 * y)));
 }
 
 /// The chain texture → composite → (zoom by `zoom` at a fixed place) → detector → loss.

@@ -245,7 +245,14 @@ fn the_optimizer_trains_on_rendered_views() {
     assert!(s.pbr.iter().all(|v| v.name.starts_with("pbr:city_")));
     let wb = Ensemble::load(&cfg, cfg.views.size).unwrap();
     let out = tmp.path().join("run");
-    let ro = RunOptions { out: out.clone(), resume: false, checkpoint_every: 1000, max_skips: 0, epochs: Some(1) };
+    let ro = RunOptions {
+        out: out.clone(),
+        resume: false,
+        checkpoint_every: 1000,
+        max_skips: 0,
+        epochs: Some(1),
+        snapshot_every: 0,
+    };
     let o =
         optimize_texture(&path, &cfg, &s, &wb, &ro, &pav::progress::Silent, &std::sync::atomic::AtomicBool::new(false))
             .unwrap();

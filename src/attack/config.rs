@@ -162,6 +162,11 @@ pub struct OptimizerConfig {
     /// than 1 biases the optimization towards large structures. 1 (the default) optimizes texels.
     #[serde(default = "one_level")]
     pub levels: usize,
+    /// White boxes drawn at random for each step (the rest sit it out, the drawn ones' weights
+    /// scaled up to the ensemble's total), a regularizer against fitting any one network; absent:
+    /// every white box at every step.
+    #[serde(default)]
+    pub white_boxes_per_step: Option<usize>,
 }
 
 fn one_level() -> usize {
@@ -318,6 +323,12 @@ impl OptimizeConfig {
         if let Err(e) = super::pyramid::Pyramid::new(self.mesh.texture_size, self.optimizer.levels) {
             return Err(format!("optimizer.levels: {e}"));
         }
+        if let Some(k) = o.white_boxes_per_step.filter(|k| !(1..=self.white_box.len()).contains(k)) {
+            return Err(format!(
+                "optimizer.white_boxes_per_step must be in 1..={} (the [[white_box]] entries), got {k}",
+                self.white_box.len()
+            ));
+        }
         if let Init::Grey(g) = self.mesh.init {
             if !(0.0..=1.0).contains(&g) {
                 return Err(format!("mesh.init must be in [0, 1] or \"random\", got {g}"));
@@ -463,6 +474,14 @@ mod tests {
         assert_eq!(variant("seed = 0", "seed = 0\nlevels = 6").unwrap().optimizer.levels, 6);
         let e = variant("seed = 0", "seed = 0\nlevels = 9").unwrap_err().to_string();
         assert!(e.contains("optimizer.levels") && e.contains("halve"), "{e}");
+        // A subset of white boxes per step: at least one, at most the one listed.
+        assert_eq!(variant("seed = 0", "seed = 0").unwrap().optimizer.white_boxes_per_step, None);
+        let one = variant("seed = 0", "seed = 0\nwhite_boxes_per_step = 1").unwrap();
+        assert_eq!(one.optimizer.white_boxes_per_step, Some(1));
+        for bad in [0, 2] {
+            let e = variant("seed = 0", &format!("seed = 0\nwhite_boxes_per_step = {bad}")).unwrap_err().to_string();
+            assert!(e.contains("white_boxes_per_step") && e.contains("1..=1"), "{bad}: {e}");
+        }
     }
 
     #[test]

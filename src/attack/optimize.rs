@@ -58,7 +58,7 @@ pub struct StepLog {
     pub adjoint_ms: f64,
     /// Smoothness loss and Adam step, ms.
     pub optimizer_ms: f64,
-    /// Each white-box detector's own terms (`loss_detectors.csv`).
+    /// Each white-box detector's own terms (`loss_detectors.csv`), those that took part.
     #[serde(skip)]
     pub per_detector: Vec<DetectorStep>,
 }
@@ -106,6 +106,26 @@ pub struct RunOptions {
     pub max_skips: u64,
     /// Override the epochs of the config.
     pub epochs: Option<usize>,
+    /// Save the texture as `snapshots/step{N:06}.png` at the start and every this many steps
+    /// (and at the end); 0 saves none.
+    pub snapshot_every: u64,
+}
+
+/// Folder of a run's texture snapshots in its output folder.
+pub const SNAPSHOTS: &str = "snapshots";
+
+/// The texture snapshots in `out` ([`RunOptions::snapshot_every`]) as (step, path), by step.
+pub fn snapshots(out: &Path) -> Vec<(u64, PathBuf)> {
+    let Ok(dir) = std::fs::read_dir(out.join(SNAPSHOTS)) else { return Vec::new() };
+    let mut v: Vec<(u64, PathBuf)> = dir
+        .filter_map(|e| {
+            let p = e.ok()?.path();
+            let step = p.file_name()?.to_str()?.strip_prefix("step")?.strip_suffix(".png")?.parse().ok()?;
+            Some((step, p))
+        })
+        .collect();
+    v.sort();
+    v
 }
 
 /// Errors of a run.
@@ -134,6 +154,9 @@ pub enum OptimizeError {
     /// The config's `optimizer.levels` do not fit its texture size.
     #[error(transparent)]
     Pyramid(#[from] super::pyramid::PyramidError),
+    /// Writing a texture snapshot.
+    #[error("writing a texture snapshot: {0}")]
+    Snapshot(crate::image::ImageError),
     /// Writing `loss.csv`.
     #[error("writing {path}: {source}")]
     Log {
@@ -186,6 +209,20 @@ fn epoch_order(n: usize, seed: u64, epoch: u64) -> Vec<usize> {
     p
 }
 
+/// The ensemble members that take part in a step: all of them, or `k` drawn without
+/// replacement from `rng` (so a resumed run draws the same ones), in member order.
+fn draw_members(n: usize, k: Option<usize>, rng: &mut Rng) -> Vec<usize> {
+    let mut all: Vec<usize> = (0..n).collect();
+    let Some(k) = k.filter(|&k| k < n) else { return all };
+    for i in 0..k {
+        let j = i + (rng.next_u64() % (n - i) as u64) as usize;
+        all.swap(i, j);
+    }
+    all.truncate(k);
+    all.sort_unstable();
+    all
+}
+
 /// One step on `view`: returns its record and adds ∂L/∂texture into `grad`.
 pub fn step(
     setup: &Setup,
@@ -204,7 +241,8 @@ pub fn step(
     let tape = eot::apply(&setup.scene, &mut img, 3, &view.active, rng);
     let zoomed = zoom::apply(&setup.scene, &mut img, view.size, rng);
     let eot_ms = ms(t);
-    let EnsembleGrad { sum: g, per_detector } = wb.loss_and_grad(&img, view.size, cfg.loss.beta)?;
+    let drawn = draw_members(wb.members.len(), cfg.optimizer.white_boxes_per_step, rng);
+    let EnsembleGrad { sum: g, per_detector } = wb.loss_and_grad_of(&drawn, &img, view.size, cfg.loss.beta)?;
     let t = Instant::now();
     match &zoomed {
         Some(z) => view.backward(&tape, &zoom::backward(z, &g.grad, view.size), grad),
@@ -218,6 +256,7 @@ pub fn step(
     let per_detector = per_detector
         .iter()
         .zip(&wb.members)
+        .filter_map(|(t, m)| Some((t.as_ref()?, m)))
         .map(|(t, (w, weight))| DetectorStep {
             step: 0,
             detector: w.name().into(),
@@ -345,6 +384,15 @@ pub fn optimize_texture(
         .save(&ckpt_path)?;
         write_log(&opts.out, log)
     };
+    let snapshot = |tex: &[f32], done: u64| -> Result<(), OptimizeError> {
+        let dir = opts.out.join(SNAPSHOTS);
+        std::fs::create_dir_all(&dir).map_err(|source| OptimizeError::Io { path: dir.clone(), source })?;
+        let path = dir.join(format!("step{done:06}.png"));
+        crate::image::save_rgb(&path, setup.tex_size, setup.tex_size, tex).map_err(OptimizeError::Snapshot)
+    };
+    if opts.snapshot_every > 0 && start == 0 {
+        snapshot(&tex, 0)?;
+    }
     progress.begin("step", total);
     progress.set_position(start);
     let mut grad = vec![0f32; n_values];
@@ -397,10 +445,36 @@ pub fn optimize_texture(
         progress.advance(1);
         log.push(rec);
         let done = s + 1;
+        if opts.snapshot_every > 0 && (done % opts.snapshot_every == 0 || done == total) {
+            snapshot(&tex, done)?;
+        }
         if done % n == 0 || done % opts.checkpoint_every.max(1) == 0 || done == total {
             save(&params, &adam, &rng, done, &log)?;
         }
     }
     progress.end(None);
     Ok(Outcome { texture: tex, log, finish: Finish::Done })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn members_drawn_per_step_are_distinct_in_order_and_each_drawn_as_often() {
+        let mut rng = Rng::new(7);
+        // Every member, and no draw: a config without the option keeps its EoT draws.
+        assert_eq!(draw_members(3, None, &mut rng), [0, 1, 2]);
+        assert_eq!(draw_members(3, Some(3), &mut rng), [0, 1, 2]);
+        assert_eq!(rng.state, Rng::new(7).state);
+        let mut count = [0usize; 4];
+        for _ in 0..4000 {
+            let d = draw_members(4, Some(2), &mut rng);
+            assert_eq!(d.len(), 2);
+            assert!(d[0] < d[1], "{d:?}");
+            d.iter().for_each(|&i| count[i] += 1);
+        }
+        // 2000 draws each expected; a binomial's sd is 27, so ±150 holds unless the draw is biased.
+        assert!(count.iter().all(|&c| c.abs_diff(2000) < 150), "{count:?}");
+    }
 }

@@ -326,11 +326,11 @@ pub struct Ensemble {
 
 /// One step's gradient over an ensemble, with each member's terms.
 pub struct EnsembleGrad {
-    /// The weighted sum over the members: terms and gradient weighted (`boxes`, `proposals`
-    /// summed; `max_score` the highest), times summed.
+    /// The weighted sum over the members that took part: terms and gradient weighted (`boxes`,
+    /// `proposals` summed; `max_score` the highest), times summed.
     pub sum: DetectorGrad,
-    /// Each member's own terms, in member order.
-    pub per_detector: Vec<DetectorLoss>,
+    /// Each member's own terms, in member order; `None` for a member that sat the step out.
+    pub per_detector: Vec<Option<DetectorLoss>>,
 }
 
 impl Ensemble {
@@ -354,16 +354,34 @@ impl Ensemble {
         Ok(Ensemble { members })
     }
 
-    /// Weighted `L1 + β·L2` over the members and its gradient.
+    /// Weighted `L1 + β·L2` over all members and its gradient.
     pub fn loss_and_grad(&self, img: &[f32], size: usize, beta: f32) -> Result<EnsembleGrad, WhiteBoxError> {
+        let all: Vec<usize> = (0..self.members.len()).collect();
+        self.loss_and_grad_of(&all, img, size, beta)
+    }
+
+    /// Weighted `L1 + β·L2` over the members `drawn` (indices), their weights scaled so that they
+    /// sum to the whole ensemble's: the loss keeps its scale whichever members take part.
+    pub fn loss_and_grad_of(
+        &self,
+        drawn: &[usize],
+        img: &[f32],
+        size: usize,
+        beta: f32,
+    ) -> Result<EnsembleGrad, WhiteBoxError> {
         let mut sum = DetectorGrad {
             loss: DetectorLoss { l1: 0.0, l2: 0.0, boxes: 0, proposals: 0, max_score: 0.0 },
             grad: vec![0f32; img.len()],
             forward_ms: 0.0,
             backward_ms: 0.0,
         };
-        let mut per_detector = Vec::with_capacity(self.members.len());
-        for (wb, w) in &self.members {
+        let total: f32 = self.members.iter().map(|m| m.1).sum();
+        let taking_part: f32 = drawn.iter().map(|&i| self.members[i].1).sum();
+        let scale = total / taking_part;
+        let mut per_detector = vec![None; self.members.len()];
+        for &i in drawn {
+            let (wb, weight) = &self.members[i];
+            let w = weight * scale;
             let g = wb.loss_and_grad(img, size, beta)?;
             sum.grad.iter_mut().zip(&g.grad).for_each(|(a, b)| *a += w * b);
             let l = &mut sum.loss;
@@ -374,7 +392,7 @@ impl Ensemble {
             l.max_score = l.max_score.max(g.loss.max_score);
             sum.forward_ms += g.forward_ms;
             sum.backward_ms += g.backward_ms;
-            per_detector.push(g.loss);
+            per_detector[i] = Some(g.loss);
         }
         Ok(EnsembleGrad { sum, per_detector })
     }

@@ -126,6 +126,8 @@ pub struct OptimizeRun {
     pub resume: bool,
     /// Override the config's epochs.
     pub epochs: Option<usize>,
+    /// Texture snapshots every this many steps (0: none; `attack::optimize::RunOptions`).
+    pub snapshot_every: u64,
     /// The printable sheet's scale and resolution.
     pub print: PrintSpec,
 }
@@ -154,8 +156,14 @@ pub fn optimize_and_report(
     create_dir(out)?;
     let region_rgb: Vec<f32> = setup.region.iter().flat_map(|v| [*v; 3]).collect();
     save_rgb(&out.join("region.png"), n, n, &region_rgb)?;
-    let opts =
-        RunOptions { out: out.clone(), resume: run.resume, checkpoint_every: 20, max_skips: 5, epochs: run.epochs };
+    let opts = RunOptions {
+        out: out.clone(),
+        resume: run.resume,
+        checkpoint_every: 20,
+        max_skips: 5,
+        epochs: run.epochs,
+        snapshot_every: run.snapshot_every,
+    };
     let o = optimize_texture(&p.path, &p.cfg, setup, &p.wb, &opts, progress, stop)?;
     save_rgb(&out.join("texture.png"), n, n, &o.texture)?;
     plot_log(&out.join("loss.png"), &o.log, setup.training_views().len())?;

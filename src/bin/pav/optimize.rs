@@ -21,6 +21,9 @@ pub struct Args {
     /// Override the config's epochs.
     #[arg(long)]
     epochs: Option<usize>,
+    /// Save the texture to <out>/snapshots/stepNNNNNN.png every this many steps (0: never).
+    #[arg(long, default_value_t = 0)]
+    snapshot_every: u64,
     /// Override the config's render size (views.size).
     #[arg(long)]
     size: Option<usize>,
@@ -75,6 +78,7 @@ pub fn run(a: &Args) -> Result<()> {
         out: a.out.clone(),
         resume: a.resume,
         epochs: a.epochs,
+        snapshot_every: a.snapshot_every,
         print: PrintSpec { scale: a.scale, dpi: a.dpi },
     };
     let r = optimize_and_report(&p, &run, &Bar::default(), &stop)?;
