@@ -7,8 +7,10 @@ mod common;
 
 use pav::attack::config::OptimizeConfig;
 use pav::experiments::crossval::crossval;
+use pav::experiments::curve::pool;
 use pav::experiments::per_view::{conditional_asr, paired};
 use pav::progress::{Progress, Silent};
+use pav::table::unique;
 use std::cell::RefCell;
 
 /// Records what crossval reports, in order.
@@ -49,16 +51,19 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     // A peer's texture at its own size (2048²), resampled to the atlas; rendered views over
     // plates are tested in tests/blender_views.rs (they need Blender).
     let rauca = setup.load_texture(&common::shared_data().join("rauca-e2e/RAUCA_E2E.png")).unwrap();
-    let (opts, mut dets) = common::two_folds(dir.path(), 2, vec![("RAUCA_E2E".into(), rauca)], Vec::new());
+    let (mut opts, mut dets) = common::two_folds(dir.path(), 2, vec![("RAUCA_E2E".into(), rauca)], Vec::new());
+    // A snapshot every step: the start and each step, scored on the fold's photos.
+    opts.curve_every = 1;
     let never = AtomicBool::new(false);
     let stages = Stages::default();
     let cv = crossval(&path, &cfg, &setup, &wb, &mut dets, &opts, &stages, &never).unwrap();
     let (rows, recs) = (&cv.rows, &cv.records);
     assert_eq!(
         *stages.seen.borrow(),
-        ["folds/4", "fold 1/2: optimizing", "fold 1/2: scoring", "+1", "fold 1/2: done", "+1"]
+        ["folds/4", "fold 1/2: optimizing", "fold 1/2: scoring the snapshots", "fold 1/2: scoring", "+1"]
             .into_iter()
-            .chain(["fold 2/2: optimizing", "fold 2/2: scoring", "+1", "fold 2/2: done", "+1", "end"])
+            .chain(["fold 1/2: done", "+1", "fold 2/2: optimizing", "fold 2/2: scoring the snapshots"])
+            .chain(["fold 2/2: scoring", "+1", "fold 2/2: done", "+1", "end"])
             .collect::<Vec<_>>()
     );
     let mut held: Vec<String> =
@@ -80,6 +85,20 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     assert!(cond.iter().all(|c| c.views == detected && (0.0..=1.0).contains(&c.asr)), "{cond:?}");
     assert_eq!(cell("optimized", "train"), 3, "each view trains in the one fold that does not hold it out");
     assert!(recs.iter().all(|r| r.score.is_finite() && (0.0..=1.0).contains(&r.score)));
+    // The curve: fold 1 trains on one view (steps 0 and 1), fold 2 on two (0, 1, 2); each
+    // snapshot scored on the fold's three photos. A fold's last snapshot is its texture saved in
+    // 8 bits, so it scores as the optimized texture did, to within that rounding.
+    let steps = |f: usize| unique(cv.curve.iter().filter(|c| c.fold == f).map(|c| c.step));
+    assert_eq!((steps(0), steps(1)), (vec![0, 1], vec![0, 1, 2]));
+    assert_eq!(cv.curve.len(), 5 * 3);
+    for c in cv.curve.iter().filter(|c| c.last && c.role == "held-out") {
+        let r = recs.iter().find(|r| r.fold == c.fold && r.view == c.view && r.texture == "optimized").unwrap();
+        assert!((c.score - r.score).abs() < 0.02, "{c:?} vs {r:?}");
+    }
+    let pooled = pool(&cv.curve);
+    let held: Vec<(f64, bool, usize)> =
+        pooled.iter().filter(|p| p.role == "held-out").map(|p| (p.step, p.last, p.n)).collect();
+    assert_eq!(held, [(0.0, false, 3), (1.5, true, 3)], "step 1 is not a step both folds reached before their end");
     // Both folds wrote their texture; a second call finds them finished and scores the same.
     for f in 0..2 {
         assert!(dir.path().join(format!("fold{f}of2/texture.png")).is_file());

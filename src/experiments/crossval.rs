@@ -8,6 +8,7 @@ use super::boxes::{
     anatomy, anatomy_section, box_records, markdown_anatomy, own_box_records, own_box_score, own_box_section,
     BoxAnatomy, BoxRecord,
 };
+use super::curve::{pool, score_snapshots, CurveRecord};
 use super::per_view::{conditional_asr, markdown_paired, paired, ViewRecord};
 use super::table2::{aggregate, detect_view, markdown, markdown_scores, DigitalRow, AP_MIN_SCORE};
 use super::{create_dir, write_markdown, ExperimentError, Scoring};
@@ -47,6 +48,9 @@ pub struct CrossvalOptions {
     /// Rendered views over photos' plates ([`Setup::rendered_over_plates`]), each scored in
     /// the fold that holds its photo out: a street and camera that fold never trained on.
     pub rendered: Vec<View>,
+    /// Snapshot every fold's texture every this many steps and score the snapshots on its
+    /// photos (`experiments::curve`); 0: no curve.
+    pub curve_every: u64,
 }
 
 /// Views of fold `f`: index `i` of `all` is held out when `i % k == f`.
@@ -67,6 +71,8 @@ pub struct Crossval {
     pub anatomies: Vec<BoxAnatomy>,
     /// The rendered views over held-out photos' plates, when options gave some.
     pub rendered: Option<Rendered>,
+    /// The snapshots' scores, when options asked for a curve.
+    pub curve: Vec<CurveRecord>,
 }
 
 /// What a cross-validation scored on rendered views over the held-out photos' plates.
@@ -155,6 +161,7 @@ pub fn crossval(
     let mut boxes = Vec::new();
     let mut rendered_pooled: HashMap<(String, usize), Vec<ImageDetections>> = HashMap::new();
     let mut rendered = Vec::new();
+    let mut curve = Vec::new();
     for f in 0..k {
         let (tr, te) = fold_split(all.len(), k, f);
         // Synthetic views come from this fold's training photos only.
@@ -172,6 +179,7 @@ pub fn crossval(
             checkpoint_every: 20,
             max_skips: 5,
             epochs: None,
+            snapshot_every: opts.curve_every,
         };
         let o = optimize_texture(cfg_path, cfg, &fs, wb, &ro, &Silent, stop)?;
         if matches!(o.finish, Finish::Stopped) {
@@ -179,6 +187,10 @@ pub fn crossval(
             return Err(ExperimentError::Stopped(ro.out));
         }
         save_rgb(&ro.out.join("texture.png"), fs.tex_size, fs.tex_size, &o.texture)?;
+        if opts.curve_every > 0 {
+            stage(f, "scoring the snapshots");
+            curve.extend(score_snapshots(f, &ro.out, &fs, detectors)?);
+        }
         stage(f, "scoring");
         progress.advance(1);
         let mut textures: Vec<(String, u64, Option<&[f32]>)> =
@@ -265,7 +277,7 @@ pub fn crossval(
         records: rendered,
         anatomies: rendered_anatomies,
     });
-    Ok(Crossval { rows, records, boxes, anatomies, rendered })
+    Ok(Crossval { rows, records, boxes, anatomies, rendered, curve })
 }
 
 /// `pav crossval`: cross-validates `config` with `folds` folds (default: leave-one-out) and
@@ -279,6 +291,7 @@ pub fn crossval_report(
     random_seeds: u64,
     references: &[PathBuf],
     rendered: &[PathBuf],
+    curve_every: u64,
     scoring: &Scoring,
     out: &Path,
     progress: &dyn Progress,
@@ -319,9 +332,10 @@ pub fn crossval_report(
             })
             .collect::<Result<_, _>>()?,
         rendered: rendered_views,
+        curve_every,
     };
     let t = Instant::now();
-    let Crossval { rows, records, boxes, anatomies, rendered: scored } =
+    let Crossval { rows, records, boxes, anatomies, rendered: scored, curve } =
         crossval(config, &cfg, &setup, &wb, &mut dets, &opts, progress, stop)?;
     write_csv(&out.join("crossval.csv"), &rows)?;
     write_csv(&out.join("crossval_views.csv"), &records)?;
@@ -380,6 +394,15 @@ pub fn crossval_report(
     md.push_str(&own_box_section(&markdown_paired(&own)));
     if let Some(r) = &scored {
         md.push_str(&rendered_report(r, rendered, &opts.white_box, &out.join(PLATES_DIR))?);
+    }
+    if !curve.is_empty() {
+        write_csv(&out.join("crossval_curve.csv"), &curve)?;
+        let points = pool(&curve);
+        super::curve::plot(&out.join("crossval_curve.png"), &points, threshold)?;
+        md.push_str(&format!(
+            "\n## The texture as it was optimized: mean best car score of its snapshots, every {curve_every} steps (`crossval_curve.csv`, `crossval_curve.png`)\n\nEach fold's snapshots scored on that fold's photos, pooled at the steps every fold reached; the end row is the folds' final textures (8-bit, as saved).\n\n{}",
+            super::curve::markdown(&points)
+        ));
     }
     write_markdown(out, "crossval.md", &md)?;
     Ok(md)

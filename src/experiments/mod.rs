@@ -3,6 +3,7 @@
 
 pub mod boxes;
 pub mod crossval;
+pub mod curve;
 pub mod outputs;
 pub mod per_view;
 pub mod table1;

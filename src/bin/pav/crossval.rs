@@ -26,6 +26,10 @@ pub struct Args {
     /// <out>/plates (a folder `pav table1` reads). Repeatable.
     #[arg(long = "held-out-views")]
     held_out_views: Vec<PathBuf>,
+    /// Snapshot each fold's texture every N steps and score the snapshots on the fold's photos:
+    /// the held-out and training curves in crossval.md, crossval_curve.csv and .png (0: none).
+    #[arg(long, default_value_t = 0)]
+    curve_every: u64,
     #[command(flatten)]
     scoring: Scoring,
     /// Output folder; an interrupted run resumes from it.
@@ -46,6 +50,7 @@ pub fn run(a: &Args) -> Result<()> {
             "held_out_views",
             a.held_out_views.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "),
         )
+        .setting("curve_every", a.curve_every)
         .setting("threshold", a.scoring.threshold)
         .tool("onnxruntime", pav::detect::onnx::runtime_version());
     let record_path = a.out.join(pav::provenance::FILE);
@@ -57,6 +62,7 @@ pub fn run(a: &Args) -> Result<()> {
         a.random_seeds,
         &a.references,
         &a.held_out_views,
+        a.curve_every,
         &a.scoring.to_lib(),
         &a.out,
         &Bar::default(),

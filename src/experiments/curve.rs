@@ -1,0 +1,190 @@
+//! The held-out curve of a cross-validation (`pav crossval --curve-every N`): every fold's
+//! texture snapshots scored on that fold's training and held-out photos, so one sees when the
+//! held-out score stops following the training score (and whether stopping earlier would pay).
+
+use super::table2::detect_view;
+use super::ExperimentError;
+use crate::attack::optimize::snapshots;
+use crate::attack::setup::Setup;
+use crate::detect::Detector;
+use crate::plot::loss_curve;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// One snapshot's best car score on one photo by one detector.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct CurveRecord {
+    /// Fold index.
+    pub fold: usize,
+    /// Optimizer steps done when the snapshot was taken.
+    pub step: u64,
+    /// Whether the fold's last snapshot (its final texture).
+    pub last: bool,
+    /// "train" or "held-out".
+    pub role: &'static str,
+    /// Photo name.
+    pub view: String,
+    /// Detector name.
+    pub detector: String,
+    /// Best car score (0 without a car box).
+    pub score: f32,
+}
+
+/// Scores the snapshots in `fold_dir` on `fs`'s training and held-out photos (synthetic and
+/// rendered views are not scored: the curve is about photos).
+pub fn score_snapshots(
+    fold: usize,
+    fold_dir: &Path,
+    fs: &Setup,
+    detectors: &mut [Box<dyn Detector>],
+) -> Result<Vec<CurveRecord>, ExperimentError> {
+    let shots = snapshots(fold_dir);
+    let mut out = Vec::new();
+    for (k, (step, path)) in shots.iter().enumerate() {
+        let tex = fs.load_texture(path)?;
+        for (role, views) in [("train", &fs.train), ("held-out", &fs.test)] {
+            for v in views.iter() {
+                for (d, im) in detect_view(v, Some(&tex), fs, detectors)?.into_iter().enumerate() {
+                    out.push(CurveRecord {
+                        fold,
+                        step: *step,
+                        last: k + 1 == shots.len(),
+                        role,
+                        view: v.name.clone(),
+                        detector: detectors[d].name().to_string(),
+                        score: im.best_score(),
+                    });
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// One point of the pooled curve: the mean over every fold's photos of one role.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CurvePoint {
+    /// Step, or for `last` the mean over folds of their final steps.
+    pub step: f64,
+    /// The folds' final textures (their final steps differ with their view counts).
+    pub last: bool,
+    /// "train" or "held-out".
+    pub role: &'static str,
+    /// Detector name.
+    pub detector: String,
+    /// Mean best car score.
+    pub mean: f64,
+    /// Photos pooled (folds × photos of the role).
+    pub n: usize,
+}
+
+/// Pools the records per (role, detector) at each step that every fold reached, plus the
+/// folds' final textures as one point at their mean final step; ordered by role, detector, then
+/// steps before the end.
+pub fn pool(records: &[CurveRecord]) -> Vec<CurvePoint> {
+    let folds = records.iter().map(|r| r.fold).collect::<std::collections::BTreeSet<_>>().len();
+    // (role, detector, last, step; 0 for last) → (sum, n, each fold's step)
+    type Acc = (f64, usize, BTreeMap<usize, u64>);
+    let mut acc: BTreeMap<(&'static str, &str, bool, u64), Acc> = BTreeMap::new();
+    for r in records {
+        // A fold's last snapshot counts only as the end: its step is not one every fold has.
+        let e = acc.entry((r.role, r.detector.as_str(), r.last, if r.last { 0 } else { r.step })).or_default();
+        e.0 += r.score as f64;
+        e.1 += 1;
+        e.2.insert(r.fold, r.step);
+    }
+    acc.into_iter()
+        .filter(|(_, a)| a.2.len() == folds)
+        .map(|((role, detector, last, step), (sum, n, steps))| CurvePoint {
+            step: if last { steps.values().sum::<u64>() as f64 / steps.len() as f64 } else { step as f64 },
+            last,
+            role,
+            detector: detector.to_string(),
+            mean: sum / n as f64,
+            n,
+        })
+        .collect()
+}
+
+/// A Markdown table: one row per step, a column per (role, detector).
+pub fn markdown(points: &[CurvePoint]) -> String {
+    let mut cols: Vec<(&'static str, String)> = Vec::new();
+    for role in ["held-out", "train"] {
+        for p in points.iter().filter(|p| p.role == role) {
+            if !cols.iter().any(|c| c.0 == role && c.1 == p.detector) {
+                cols.push((role, p.detector.clone()));
+            }
+        }
+    }
+    let mut rows: Vec<(bool, f64)> = Vec::new();
+    for p in points {
+        if !rows.iter().any(|r| r.0 == p.last && (p.last || r.1 == p.step)) {
+            rows.push((p.last, p.step));
+        }
+    }
+    rows.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    let mut md = format!(
+        "| step | {} |\n|---:|{}\n",
+        cols.iter().map(|(r, d)| format!("{r} {d}")).collect::<Vec<_>>().join(" | "),
+        "---:|".repeat(cols.len())
+    );
+    for (last, step) in rows {
+        md.push_str(&if last { format!("| end (mean {step:.0}) |") } else { format!("| {step:.0} |") });
+        for (role, det) in &cols {
+            let p = points
+                .iter()
+                .find(|p| p.role == *role && &p.detector == det && p.last == last && (last || p.step == step));
+            md.push_str(&p.map_or(" – |".to_string(), |p| format!(" {:.3} |", p.mean)));
+        }
+        md.push('\n');
+    }
+    md
+}
+
+/// Draws the pooled curves (held-out and training, a line per detector) into `path`.
+pub fn plot(path: &Path, points: &[CurvePoint], threshold: f32) -> Result<(), ExperimentError> {
+    let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    for p in points {
+        let name = format!("{} {}", p.role, p.detector);
+        match series.iter_mut().find(|s| s.0 == name) {
+            Some(s) => s.1.push((p.step, p.mean)),
+            None => series.push((name, vec![(p.step, p.mean)])),
+        }
+    }
+    series.iter_mut().for_each(|s| s.1.sort_by(|a, b| a.0.total_cmp(&b.0)));
+    loss_curve(path, "mean best car score of the snapshots, pooled over folds", &series, 1, Some(threshold as f64))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rec(fold: usize, step: u64, last: bool, role: &'static str, score: f32) -> CurveRecord {
+        CurveRecord { fold, step, last, role, view: format!("v{fold}"), detector: "d".into(), score }
+    }
+
+    #[test]
+    fn steps_every_fold_reached_are_pooled_and_the_final_textures_are_one_point() {
+        // Fold 0 ran 120 steps, fold 1 ran 140: step 100 is in both, their ends differ.
+        let r = [
+            rec(0, 0, false, "held-out", 0.9),
+            rec(1, 0, false, "held-out", 0.7),
+            rec(0, 100, false, "held-out", 0.4),
+            rec(1, 100, false, "held-out", 0.2),
+            rec(0, 120, true, "held-out", 0.5),
+            rec(1, 140, true, "held-out", 0.3),
+            rec(1, 0, false, "train", 0.8),
+        ];
+        let p = pool(&r);
+        let at = |step: f64, last: bool| p.iter().find(|q| q.role == "held-out" && q.last == last && q.step == step);
+        assert!((at(0.0, false).unwrap().mean - 0.8).abs() < 1e-6);
+        assert!((at(100.0, false).unwrap().mean - 0.3).abs() < 1e-6);
+        let end = at(130.0, true).unwrap();
+        assert!((end.mean - 0.4).abs() < 1e-6 && end.n == 2);
+        // Neither fold's last step stands as a step of its own, and fold 0 has no training row.
+        assert_eq!(p.len(), 3, "{p:?}");
+        let md = markdown(&p);
+        assert!(md.contains("| 100 | 0.300 |") && md.contains("| end (mean 130) | 0.400 |"), "{md}");
+    }
+}
