@@ -7,7 +7,7 @@ mod common;
 
 use pav::attack::config::OptimizeConfig;
 use pav::experiments::crossval::crossval;
-use pav::experiments::curve::pool;
+use pav::experiments::curve::{pool, CurveOptions};
 use pav::experiments::per_view::{conditional_asr, paired};
 use pav::progress::{Progress, Silent};
 use pav::table::unique;
@@ -52,8 +52,9 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     // plates are tested in tests/blender_views.rs (they need Blender).
     let rauca = setup.load_texture(&common::shared_data().join("rauca-e2e/RAUCA_E2E.png")).unwrap();
     let (mut opts, mut dets) = common::two_folds(dir.path(), 2, vec![("RAUCA_E2E".into(), rauca)], Vec::new());
-    // A snapshot every step: the start and each step, scored on the fold's photos.
-    opts.curve_every = 1;
+    // A snapshot every step: the start and each step, scored on the fold's photos, and the mean of
+    // the snapshots from step 1 on.
+    opts.curve = CurveOptions { every: 1, mean_from: Some(1) };
     let never = AtomicBool::new(false);
     let stages = Stages::default();
     let cv = crossval(&path, &cfg, &setup, &wb, &mut dets, &opts, &stages, &never).unwrap();
@@ -90,15 +91,32 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     // 8 bits, so it scores as the optimized texture did, to within that rounding.
     let steps = |f: usize| unique(cv.curve.iter().filter(|c| c.fold == f).map(|c| c.step));
     assert_eq!((steps(0), steps(1)), (vec![0, 1], vec![0, 1, 2]));
-    assert_eq!(cv.curve.len(), 5 * 3);
-    for c in cv.curve.iter().filter(|c| c.last && c.role == "held-out") {
+    let shots: Vec<_> = cv.curve.iter().filter(|c| c.mean_from.is_none()).collect();
+    assert_eq!(shots.len(), 5 * 3);
+    for c in shots.iter().filter(|c| c.last && c.role == "held-out") {
         let r = recs.iter().find(|r| r.fold == c.fold && r.view == c.view && r.texture == "optimized").unwrap();
         assert!((c.score - r.score).abs() < 0.02, "{c:?} vs {r:?}");
+    }
+    // The mean from step 1: in fold 1 that is its last snapshot alone, so it scores exactly that;
+    // in fold 2 the mean of steps 1 and 2, a texture of its own.
+    let means: Vec<_> = cv.curve.iter().filter(|c| c.mean_from == Some(1)).collect();
+    assert_eq!(means.len(), 2 * 3);
+    for m in &means {
+        let last = shots.iter().find(|c| c.last && c.fold == m.fold && c.view == m.view).unwrap();
+        assert_eq!(m.step, last.step);
+        if m.fold == 0 {
+            assert_eq!(m.score, last.score, "{m:?}");
+        }
+        assert!(m.score.is_finite() && (0.0..=1.0).contains(&m.score));
     }
     let pooled = pool(&cv.curve);
     let held: Vec<(f64, bool, usize)> =
         pooled.iter().filter(|p| p.role == "held-out").map(|p| (p.step, p.last, p.n)).collect();
-    assert_eq!(held, [(0.0, false, 3), (1.5, true, 3)], "step 1 is not a step both folds reached before their end");
+    assert_eq!(
+        held,
+        [(0.0, false, 3), (1.5, false, 3), (1.5, true, 3)],
+        "step 1 is not a step both folds reached before their end; the mean stands at the mean end"
+    );
     // Both folds wrote their texture; a second call finds them finished and scores the same.
     for f in 0..2 {
         assert!(dir.path().join(format!("fold{f}of2/texture.png")).is_file());

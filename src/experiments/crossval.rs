@@ -8,7 +8,7 @@ use super::boxes::{
     anatomy, anatomy_section, box_records, markdown_anatomy, own_box_records, own_box_score, own_box_section,
     BoxAnatomy, BoxRecord,
 };
-use super::curve::{pool, score_snapshots, CurveRecord};
+use super::curve::{pool, score_snapshots, CurveOptions, CurveRecord};
 use super::per_view::{conditional_asr, markdown_paired, paired, ViewRecord};
 use super::table2::{aggregate, detect_view, markdown, markdown_scores, DigitalRow, AP_MIN_SCORE};
 use super::{create_dir, write_markdown, ExperimentError, Scoring};
@@ -48,9 +48,9 @@ pub struct CrossvalOptions {
     /// Rendered views over photos' plates ([`Setup::rendered_over_plates`]), each scored in
     /// the fold that holds its photo out: a street and camera that fold never trained on.
     pub rendered: Vec<View>,
-    /// Snapshot every fold's texture every this many steps and score the snapshots on its
-    /// photos (`experiments::curve`); 0: no curve.
-    pub curve_every: u64,
+    /// Snapshot every fold's texture and score the snapshots on its photos
+    /// (`experiments::curve`).
+    pub curve: CurveOptions,
 }
 
 /// Views of fold `f`: index `i` of `all` is held out when `i % k == f`.
@@ -179,7 +179,7 @@ pub fn crossval(
             checkpoint_every: 20,
             max_skips: 5,
             epochs: None,
-            snapshot_every: opts.curve_every,
+            snapshot_every: opts.curve.every,
         };
         let o = optimize_texture(cfg_path, cfg, &fs, wb, &ro, &Silent, stop)?;
         if matches!(o.finish, Finish::Stopped) {
@@ -187,9 +187,9 @@ pub fn crossval(
             return Err(ExperimentError::Stopped(ro.out));
         }
         save_rgb(&ro.out.join("texture.png"), fs.tex_size, fs.tex_size, &o.texture)?;
-        if opts.curve_every > 0 {
+        if opts.curve.every > 0 {
             stage(f, "scoring the snapshots");
-            curve.extend(score_snapshots(f, &ro.out, &fs, detectors)?);
+            curve.extend(score_snapshots(f, &ro.out, opts.curve.mean_from, &fs, detectors)?);
         }
         stage(f, "scoring");
         progress.advance(1);
@@ -291,13 +291,16 @@ pub fn crossval_report(
     random_seeds: u64,
     references: &[PathBuf],
     rendered: &[PathBuf],
-    curve_every: u64,
+    curve: CurveOptions,
     scoring: &Scoring,
     out: &Path,
     progress: &dyn Progress,
     stop: &AtomicBool,
 ) -> Result<String, ExperimentError> {
     let threshold = scoring.threshold;
+    if curve.mean_from.is_some() && curve.every == 0 {
+        return Err(ExperimentError::Invalid("a mean of snapshots needs snapshots: give --curve-every too".into()));
+    }
     let cfg = OptimizeConfig::load(config)?;
     if !cfg.views.pbr_test.is_empty() {
         return Err(ExperimentError::Invalid(format!(
@@ -332,10 +335,10 @@ pub fn crossval_report(
             })
             .collect::<Result<_, _>>()?,
         rendered: rendered_views,
-        curve_every,
+        curve,
     };
     let t = Instant::now();
-    let Crossval { rows, records, boxes, anatomies, rendered: scored, curve } =
+    let Crossval { rows, records, boxes, anatomies, rendered: scored, curve: scored_curve } =
         crossval(config, &cfg, &setup, &wb, &mut dets, &opts, progress, stop)?;
     write_csv(&out.join("crossval.csv"), &rows)?;
     write_csv(&out.join("crossval_views.csv"), &records)?;
@@ -395,12 +398,16 @@ pub fn crossval_report(
     if let Some(r) = &scored {
         md.push_str(&rendered_report(r, rendered, &opts.white_box, &out.join(PLATES_DIR))?);
     }
-    if !curve.is_empty() {
-        write_csv(&out.join("crossval_curve.csv"), &curve)?;
-        let points = pool(&curve);
+    if !scored_curve.is_empty() {
+        write_csv(&out.join("crossval_curve.csv"), &scored_curve)?;
+        let points = pool(&scored_curve);
         super::curve::plot(&out.join("crossval_curve.png"), &points, threshold)?;
         md.push_str(&format!(
-            "\n## The texture as it was optimized: mean best car score of its snapshots, every {curve_every} steps (`crossval_curve.csv`, `crossval_curve.png`)\n\nEach fold's snapshots scored on that fold's photos, pooled at the steps every fold reached; the end row is the folds' final textures (8-bit, as saved).\n\n{}",
+            "\n## The texture as it was optimized: mean best car score of its snapshots, every {} steps (`crossval_curve.csv`, `crossval_curve.png`)\n\nEach fold's snapshots scored on that fold's photos, pooled at the steps every fold reached; the end row is the folds' final textures (8-bit, as saved){}.\n\n{}",
+            curve.every,
+            curve.mean_from.map_or(String::new(), |m| format!(
+                "; the mean row is each fold's pixel mean of its snapshots from step {m} to its end"
+            )),
             super::curve::markdown(&points)
         ));
     }

@@ -164,7 +164,7 @@ pub fn two_folds(
         white_box: vec!["yolov3-tiny".into()],
         references,
         rendered,
-        curve_every: 0,
+        curve: Default::default(),
     };
     (opts, pav::detect::load::load_detectors(&[detector_config("yolov3-tiny")], &[], 1).unwrap())
 }

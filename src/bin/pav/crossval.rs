@@ -30,6 +30,10 @@ pub struct Args {
     /// the held-out and training curves in crossval.md, crossval_curve.csv and .png (0: none).
     #[arg(long, default_value_t = 0)]
     curve_every: u64,
+    /// With --curve-every: also score each fold's pixel mean of its snapshots from this step to
+    /// its end (averaged iterates against the final texture).
+    #[arg(long)]
+    curve_mean_from: Option<u64>,
     #[command(flatten)]
     scoring: Scoring,
     /// Output folder; an interrupted run resumes from it.
@@ -51,6 +55,7 @@ pub fn run(a: &Args) -> Result<()> {
             a.held_out_views.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "),
         )
         .setting("curve_every", a.curve_every)
+        .setting("curve_mean_from", a.curve_mean_from.map_or("none".to_string(), |m| m.to_string()))
         .setting("threshold", a.scoring.threshold)
         .tool("onnxruntime", pav::detect::onnx::runtime_version());
     let record_path = a.out.join(pav::provenance::FILE);
@@ -62,7 +67,7 @@ pub fn run(a: &Args) -> Result<()> {
         a.random_seeds,
         &a.references,
         &a.held_out_views,
-        a.curve_every,
+        pav::experiments::curve::CurveOptions { every: a.curve_every, mean_from: a.curve_mean_from },
         &a.scoring.to_lib(),
         &a.out,
         &Bar::default(),
