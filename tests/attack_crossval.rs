@@ -52,8 +52,8 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     // plates are tested in tests/blender_views.rs (they need Blender).
     let rauca = setup.load_texture(&common::shared_data().join("rauca-e2e/RAUCA_E2E.png")).unwrap();
     let (mut opts, mut dets) = common::two_folds(dir.path(), 2, vec![("RAUCA_E2E".into(), rauca)], Vec::new());
-    // A snapshot every step: the start and each step, scored on the fold's photos, and the mean of
-    // the snapshots from step 1 on.
+    // A snapshot every step: the start and each step, scored on the fold's photos; and the mean
+    // of the snapshots from step 1 on.
     opts.curve = CurveOptions { every: 1, mean_from: Some(1) };
     let never = AtomicBool::new(false);
     let stages = Stages::default();
@@ -77,12 +77,13 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     // Optimized against each other texture, paired by view: three held-out views each.
     let pairs = paired(recs, &opts.white_box, "optimized");
     let against: Vec<(&str, usize)> = pairs.iter().map(|p| (p.against.as_str(), p.views)).collect();
-    assert_eq!(against, [("original", 3), ("random", 3), ("random32", 3), ("RAUCA_E2E", 3)], "{pairs:?}");
+    let expected = [("original", 3), ("snapshot-mean-from-1", 3), ("random", 3), ("random32", 3), ("RAUCA_E2E", 3)];
+    assert_eq!(against, expected, "{pairs:?}");
     assert!(pairs.iter().all(|p| p.lo <= p.mean && p.mean <= p.hi && p.white_box));
     // ASR over the held-out views the original paint is detected on: those views only.
     let cond = conditional_asr(recs, 0.5);
     let detected = recs.iter().filter(|r| r.role == "held-out" && r.texture == "original" && r.score >= 0.5).count();
-    assert_eq!(cond.len(), 4);
+    assert_eq!(cond.len(), 5);
     assert!(cond.iter().all(|c| c.views == detected && (0.0..=1.0).contains(&c.asr)), "{cond:?}");
     assert_eq!(cell("optimized", "train"), 3, "each view trains in the one fold that does not hold it out");
     assert!(recs.iter().all(|r| r.score.is_finite() && (0.0..=1.0).contains(&r.score)));
@@ -91,32 +92,26 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     // 8 bits, so it scores as the optimized texture did, to within that rounding.
     let steps = |f: usize| unique(cv.curve.iter().filter(|c| c.fold == f).map(|c| c.step));
     assert_eq!((steps(0), steps(1)), (vec![0, 1], vec![0, 1, 2]));
-    let shots: Vec<_> = cv.curve.iter().filter(|c| c.mean_from.is_none()).collect();
-    assert_eq!(shots.len(), 5 * 3);
-    for c in shots.iter().filter(|c| c.last && c.role == "held-out") {
+    assert_eq!(cv.curve.len(), 5 * 3);
+    for c in cv.curve.iter().filter(|c| c.last && c.role == "held-out") {
         let r = recs.iter().find(|r| r.fold == c.fold && r.view == c.view && r.texture == "optimized").unwrap();
         assert!((c.score - r.score).abs() < 0.02, "{c:?} vs {r:?}");
     }
-    // The mean from step 1: in fold 1 that is its last snapshot alone, so it scores exactly that;
-    // in fold 2 the mean of steps 1 and 2, a texture of its own.
-    let means: Vec<_> = cv.curve.iter().filter(|c| c.mean_from == Some(1)).collect();
+    // The mean of the snapshots from step 1, scored as a texture of its own on every photo: in
+    // fold 1 that is its last snapshot alone, the optimized texture in 8 bits; in fold 2 the mean
+    // of steps 1 and 2. The optimized texture is paired against it like any other.
+    let means: Vec<_> = recs.iter().filter(|r| r.texture == "snapshot-mean-from-1").collect();
     assert_eq!(means.len(), 2 * 3);
-    for m in &means {
-        let last = shots.iter().find(|c| c.last && c.fold == m.fold && c.view == m.view).unwrap();
-        assert_eq!(m.step, last.step);
-        if m.fold == 0 {
-            assert_eq!(m.score, last.score, "{m:?}");
-        }
-        assert!(m.score.is_finite() && (0.0..=1.0).contains(&m.score));
+    for m in means.iter().filter(|m| m.fold == 0) {
+        let r = recs.iter().find(|r| r.fold == 0 && r.view == m.view && r.texture == "optimized").unwrap();
+        assert!((m.score - r.score).abs() < 0.02, "{m:?} vs {r:?}");
     }
+    assert!(rows.iter().any(|r| r.texture == "snapshot-mean-from-1" && r.split == "held-out"));
+    assert!(cv.anatomies.iter().any(|a| a.texture == "snapshot-mean-from-1"));
     let pooled = pool(&cv.curve);
     let held: Vec<(f64, bool, usize)> =
         pooled.iter().filter(|p| p.role == "held-out").map(|p| (p.step, p.last, p.n)).collect();
-    assert_eq!(
-        held,
-        [(0.0, false, 3), (1.5, false, 3), (1.5, true, 3)],
-        "step 1 is not a step both folds reached before their end; the mean stands at the mean end"
-    );
+    assert_eq!(held, [(0.0, false, 3), (1.5, true, 3)], "step 1 is not a step both folds reached before their end");
     // Both folds wrote their texture; a second call finds them finished and scores the same.
     for f in 0..2 {
         assert!(dir.path().join(format!("fold{f}of2/texture.png")).is_file());
@@ -174,8 +169,9 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     assert_eq!(cell("RAUCA_E2E").mean_score, held("RAUCA_E2E").mean_score);
     assert!(cell("tiny").white_box && !cell("random").white_box);
     assert_eq!(t.baseline_spread, 0.0);
+    // The snapshot mean is the run's own texture, not a baseline: table1 leaves it out.
     let mine: Vec<(&str, f64)> = t.differences[..3].iter().map(|d| (d.against.as_str(), d.mean)).collect();
-    let want: Vec<(&str, f64)> = pairs[1..].iter().map(|p| (p.against.as_str(), p.mean)).collect();
+    let want: Vec<(&str, f64)> = pairs[2..].iter().map(|p| (p.against.as_str(), p.mean)).collect();
     assert_eq!(mine, want, "the run against random, random32 and RAUCA_E2E, as crossval paired them");
     let md = t.markdown();
     assert!(md.contains(&format!("**{:.3} / ", held("optimized").mean_score)), "{md}");

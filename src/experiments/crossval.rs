@@ -8,7 +8,7 @@ use super::boxes::{
     anatomy, anatomy_section, box_records, markdown_anatomy, own_box_records, own_box_score, own_box_section,
     BoxAnatomy, BoxRecord,
 };
-use super::curve::{pool, score_snapshots, CurveOptions, CurveRecord};
+use super::curve::{pool, score_snapshots, snapshot_mean, snapshot_mean_name, CurveOptions, CurveRecord};
 use super::per_view::{conditional_asr, markdown_paired, paired, ViewRecord};
 use super::table2::{aggregate, detect_view, markdown, markdown_scores, DigitalRow, AP_MIN_SCORE};
 use super::{create_dir, write_markdown, ExperimentError, Scoring};
@@ -189,12 +189,17 @@ pub fn crossval(
         save_rgb(&ro.out.join("texture.png"), fs.tex_size, fs.tex_size, &o.texture)?;
         if opts.curve.every > 0 {
             stage(f, "scoring the snapshots");
-            curve.extend(score_snapshots(f, &ro.out, opts.curve.mean_from, &fs, detectors)?);
+            curve.extend(score_snapshots(f, &ro.out, &fs, detectors)?);
         }
         stage(f, "scoring");
         progress.advance(1);
+        let mean = match opts.curve.mean_from {
+            Some(m) if opts.curve.every > 0 => Some((snapshot_mean_name(m), snapshot_mean(&ro.out, m, &fs)?)),
+            _ => None,
+        };
         let mut textures: Vec<(String, u64, Option<&[f32]>)> =
             vec![("original".into(), 0, None), ("optimized".into(), 0, Some(&o.texture))];
+        textures.extend(mean.iter().map(|(name, t)| (name.clone(), 0, Some(t.as_slice()))));
         // Both random baselines, the same seeds for each: blocks, and the paper's 32×32 image.
         let mut randoms = Vec::new();
         for (name, block) in [("random", opts.random_block), ("random32", fs.paper_random_block())] {
@@ -256,7 +261,8 @@ pub fn crossval(
     let mut anatomies = Vec::new();
     let (mut rendered_rows, mut rendered_anatomies) = (Vec::new(), Vec::new());
     let names = ["original", "random", "random32", "optimized"].map(String::from).into_iter();
-    for tname in names.chain(opts.references.iter().map(|r| r.0.clone())) {
+    let mean = opts.curve.mean_from.filter(|_| opts.curve.every > 0).map(snapshot_mean_name);
+    for tname in names.chain(mean).chain(opts.references.iter().map(|r| r.0.clone())) {
         for (d, det) in detectors.iter().enumerate() {
             let white_box = opts.white_box.iter().any(|w| w == det.name());
             if let Some(ims) = pooled.get(&("held-out", tname.clone(), d)) {
@@ -406,7 +412,8 @@ pub fn crossval_report(
             "\n## The texture as it was optimized: mean best car score of its snapshots, every {} steps (`crossval_curve.csv`, `crossval_curve.png`)\n\nEach fold's snapshots scored on that fold's photos, pooled at the steps every fold reached; the end row is the folds' final textures (8-bit, as saved){}.\n\n{}",
             curve.every,
             curve.mean_from.map_or(String::new(), |m| format!(
-                "; the mean row is each fold's pixel mean of its snapshots from step {m} to its end"
+                ". The texture {} in the tables above is each fold's pixel mean of its snapshots from step {m} to its end",
+                snapshot_mean_name(m)
             )),
             super::curve::markdown(&points)
         ));

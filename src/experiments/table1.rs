@@ -5,12 +5,14 @@
 use super::boxes::{
     anatomy_section, markdown_anatomy, mean_anatomy, own_box_records, own_box_section, BoxAnatomy, BoxRecord,
 };
+use super::curve::is_snapshot_mean;
 use super::per_view::{paired, Paired, ViewRecord};
 use super::ExperimentError;
 use crate::table::unique;
 use std::path::{Path, PathBuf};
 
-/// The texture a crossval optimizes; every other texture of its tables is a baseline.
+/// The texture a crossval optimizes; every other texture of its tables is a baseline, except a
+/// run's snapshot mean.
 const OPTIMIZED: &str = "optimized";
 
 /// One cell of the transfer table: a texture on one detector over the held-out views.
@@ -132,7 +134,9 @@ struct Group {
 
 fn read_run(dir: &Path) -> Result<Run, ExperimentError> {
     let rows: Vec<CrossvalRow> = read(&dir.join("crossval.csv"))?;
-    let held: Vec<CrossvalRow> = rows.into_iter().filter(|r| r.split == "held-out").collect();
+    // A snapshot mean is one run's own texture, not a baseline the runs share: left out.
+    let held: Vec<CrossvalRow> =
+        rows.into_iter().filter(|r| r.split == "held-out" && !is_snapshot_mean(&r.texture)).collect();
     if !held.iter().any(|r| r.texture == OPTIMIZED) {
         return Err(ExperimentError::Invalid(format!(
             "{}: no held-out scores of an optimized texture",
@@ -142,7 +146,7 @@ fn read_run(dir: &Path) -> Result<Run, ExperimentError> {
     let held_out = |path: &Path| -> Result<Vec<ViewRecord>, ExperimentError> {
         Ok(read::<ViewRow>(path)?
             .into_iter()
-            .filter(|v| v.role == "held-out")
+            .filter(|v| v.role == "held-out" && !is_snapshot_mean(&v.texture))
             .map(|v| ViewRecord {
                 fold: v.fold,
                 role: "held-out",
@@ -156,7 +160,8 @@ fn read_run(dir: &Path) -> Result<Run, ExperimentError> {
     };
     let records = held_out(&dir.join("crossval_views.csv"))?;
     let path = dir.join("crossval_anatomy.csv");
-    let anatomy = if path.is_file() { read(&path)? } else { Vec::new() };
+    let mut anatomy: Vec<BoxAnatomy> = if path.is_file() { read(&path)? } else { Vec::new() };
+    anatomy.retain(|a| !is_snapshot_mean(&a.texture));
     // A `plates` folder has each photo's own box already averaged over its rendered views.
     let (boxes, own_views) = (dir.join("crossval_boxes.csv"), dir.join("crossval_own_views.csv"));
     let own = if own_views.is_file() {
