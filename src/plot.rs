@@ -233,6 +233,59 @@ pub fn labelled_lines(
     )
 }
 
+/// One line of [`curves`].
+pub struct Curve {
+    /// Legend entry.
+    pub name: String,
+    /// Colour index: lines that belong together share one.
+    pub colour: usize,
+    /// Dashed instead of solid.
+    pub dashed: bool,
+    /// (step, value) points, by step.
+    pub points: Vec<(f64, f64)>,
+}
+
+/// Lines over steps, each with its own colour index and dash, and an optional dashed threshold.
+pub fn curves(path: &Path, title: &str, lines: &[Curve], threshold: Option<f64>) -> Result<(), PlotError> {
+    fonts();
+    let xmax = lines.iter().flat_map(|s| s.points.iter().map(|p| p.0)).fold(1.0, f64::max);
+    let ymax = lines.iter().flat_map(|s| s.points.iter().map(|p| p.1)).filter(|v| v.is_finite()).fold(1.0, f64::max);
+    wrap(
+        path,
+        (|| -> R<()> {
+            let root = BitMapBackend::new(path, (900, 520)).into_drawing_area();
+            root.fill(&WHITE)?;
+            let mut ch = ChartBuilder::on(&root)
+                .caption(title, ("sans-serif", 22))
+                .margin(15)
+                .x_label_area_size(45)
+                .y_label_area_size(60)
+                .build_cartesian_2d(0f64..xmax, 0f64..ymax * 1.05)?;
+            ch.configure_mesh().x_desc("step").draw()?;
+            if let Some(t) = threshold {
+                ch.draw_series(DashedLineSeries::new([(0.0, t), (xmax, t)], 6, 4, BLACK.stroke_width(1)))?;
+            }
+            for l in lines {
+                let c = colour(l.colour);
+                let pts: Vec<(f64, f64)> = l.points.iter().copied().filter(|p| p.1.is_finite()).collect();
+                let dashed = l.dashed;
+                let style = c.stroke_width(if dashed { 2 } else { 3 });
+                if dashed {
+                    ch.draw_series(DashedLineSeries::new(pts, 8, 5, style))?
+                } else {
+                    ch.draw_series(LineSeries::new(pts, style))?
+                }
+                .label(l.name.as_str())
+                .legend(move |(x, y)| {
+                    let len = if dashed { 8 } else { 20 };
+                    PathElement::new(vec![(x, y), (x + len, y)], style)
+                });
+            }
+            finish(&mut ch, &root, SeriesLabelPosition::UpperRight)
+        })(),
+    )
+}
+
 /// Optimization curves over steps: named series of (step, value), each drawn faint per step with
 /// its per-`window` running mean on top; `threshold` draws a dashed line for score series.
 pub fn loss_curve(
@@ -279,4 +332,46 @@ pub fn loss_curve(
             finish(&mut ch, &root, SeriesLabelPosition::UpperRight)
         })(),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn curves_of_one_colour_draw_solid_and_dashed_lines() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.png");
+        let line = |dashed, y| Curve {
+            name: if dashed { "train d" } else { "held-out d" }.into(),
+            colour: 0,
+            dashed,
+            points: vec![(0.0, y), (100.0, y)],
+        };
+        curves(&path, "t", &[line(false, 0.2), line(true, 0.6)], Some(0.5)).unwrap();
+        let img = crate::image::Rgb::load(&path).unwrap();
+        assert_eq!((img.width, img.height), (900, 520));
+        // Pixels in palette colour 0 per row: the solid line fills its rows, the dashed one
+        // about 8 of every 13 pixels; the short legend entries add a few to other rows.
+        let c0 = PALETTE[0];
+        let want = [c0.0, c0.1, c0.2].map(|c| c as f32 / 255.0);
+        let rows: Vec<usize> = (0..img.height)
+            .map(|y| {
+                (0..img.width)
+                    .filter(|x| {
+                        let p = &img.rgb[3 * (y * img.width + x)..][..3];
+                        p.iter().zip(&want).all(|(a, b)| (a - b).abs() < 0.05)
+                    })
+                    .count()
+            })
+            .collect();
+        let best = |ys: std::ops::Range<usize>| ys.map(|y| rows[y]).max().unwrap();
+        let mid = img.height / 2;
+        let (upper, lower) = (best(0..mid), best(mid..img.height));
+        assert!(lower > 700, "the solid line at 0.2 spans the plot: {lower}");
+        assert!(
+            upper > 300 && (upper as f64) < 0.8 * lower as f64,
+            "the dashed line at 0.6 has gaps: {upper} vs {lower}"
+        );
+    }
 }

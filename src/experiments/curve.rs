@@ -9,7 +9,7 @@ use super::ExperimentError;
 use crate::attack::optimize::snapshots;
 use crate::attack::setup::Setup;
 use crate::detect::Detector;
-use crate::plot::loss_curve;
+use crate::plot::{curves, Curve};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -181,18 +181,23 @@ pub fn markdown(points: &[CurvePoint]) -> String {
     md
 }
 
-/// Draws the pooled curves (held-out and training, a line per detector) into `path`.
+/// Draws the pooled curves into `path`: a colour per detector, held-out solid and training
+/// dashed.
 pub fn plot(path: &Path, points: &[CurvePoint], threshold: f32) -> Result<(), ExperimentError> {
-    let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
-    for p in points {
-        let name = format!("{} {}", p.role, p.detector);
-        match series.iter_mut().find(|s| s.0 == name) {
-            Some(s) => s.1.push((p.step, p.mean)),
-            None => series.push((name, vec![(p.step, p.mean)])),
+    let detectors = crate::table::unique(points.iter().map(|p| p.detector.clone()));
+    let mut lines: Vec<Curve> = Vec::new();
+    for role in ["held-out", "train"] {
+        for (c, det) in detectors.iter().enumerate() {
+            let mut pts: Vec<(f64, f64)> =
+                points.iter().filter(|p| p.role == role && &p.detector == det).map(|p| (p.step, p.mean)).collect();
+            if pts.is_empty() {
+                continue;
+            }
+            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+            lines.push(Curve { name: format!("{role} {det}"), colour: c, dashed: role == "train", points: pts });
         }
     }
-    series.iter_mut().for_each(|s| s.1.sort_by(|a, b| a.0.total_cmp(&b.0)));
-    loss_curve(path, "mean best car score of the snapshots, pooled over folds", &series, 1, Some(threshold as f64))?;
+    curves(path, "mean best car score of the snapshots, pooled over folds", &lines, Some(threshold as f64))?;
     Ok(())
 }
 
