@@ -107,6 +107,7 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
         assert!((m.score - r.score).abs() < 0.02, "{m:?} vs {r:?}");
     }
     assert!(rows.iter().any(|r| r.texture == "snapshot-mean-from-1" && r.split == "held-out"));
+    assert!(dir.path().join("fold1of2/snapshot-mean-from-1.png").is_file());
     assert!(cv.anatomies.iter().any(|a| a.texture == "snapshot-mean-from-1"));
     let pooled = pool(&cv.curve);
     let held: Vec<(f64, bool, usize)> =

@@ -197,6 +197,9 @@ pub fn crossval(
             Some(m) if opts.curve.every > 0 => Some((snapshot_mean_name(m), snapshot_mean(&ro.out, m, &fs)?)),
             _ => None,
         };
+        if let Some((name, t)) = &mean {
+            save_rgb(&ro.out.join(format!("{name}.png")), fs.tex_size, fs.tex_size, t)?;
+        }
         let mut textures: Vec<(String, u64, Option<&[f32]>)> =
             vec![("original".into(), 0, None), ("optimized".into(), 0, Some(&o.texture))];
         textures.extend(mean.iter().map(|(name, t)| (name.clone(), 0, Some(t.as_slice()))));
