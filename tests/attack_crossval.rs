@@ -176,6 +176,25 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     assert_eq!(mine, want, "the run against random, random32 and RAUCA_E2E, as crossval paired them");
     let md = t.markdown();
     assert!(md.contains(&format!("**{:.3} / ", held("optimized").mean_score)), "{md}");
+    // The snapshot mean as the run's row: its own held-out cells, paired against the same
+    // baselines as crossval paired it, with the final texture out of the table.
+    let as_mean = [("mean".to_string(), dir.path().to_path_buf(), "snapshot-mean-from-1".to_string())];
+    let m = pav::experiments::table1::table1_of(&as_mean, &[]).unwrap();
+    let rows_of = |t: &pav::experiments::table1::Table1| unique(t.cells.iter().map(|c| c.row.clone()));
+    assert_eq!(rows_of(&m), ["original", "random", "random32", "RAUCA_E2E", "mean"]);
+    let mine = m.cells.iter().find(|c| c.row == "mean").unwrap();
+    assert_eq!(mine.mean_score, held("snapshot-mean-from-1").mean_score);
+    let from_mean = paired(recs, &opts.white_box, "snapshot-mean-from-1");
+    let rauca =
+        |ds: &[pav::experiments::table1::Difference]| ds.iter().find(|d| d.against == "RAUCA_E2E").unwrap().mean;
+    let want = from_mean.iter().find(|p| p.against == "RAUCA_E2E").unwrap().mean;
+    assert!((rauca(&m.differences) - want).abs() < 1e-9, "{} vs {want}", rauca(&m.differences));
+    let e = pav::experiments::table1::table1_of(
+        &[("x".into(), dir.path().to_path_buf(), "snapshot-mean-from-7".into())],
+        &[],
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("snapshot-mean-from-7"), "{e}");
     let e = pav::experiments::table1::table1(&[("x".into(), dir.path().join("fold0of2"))], &[]).unwrap_err();
     assert!(e.to_string().contains("pav crossval"), "{e}");
 

@@ -132,42 +132,65 @@ struct Group {
     white: Vec<String>,
 }
 
-fn read_run(dir: &Path) -> Result<Run, ExperimentError> {
+/// Reads the run in `dir` with `texture` as its row: renamed to "optimized", while the other
+/// textures of the run's own (its final texture when another was chosen, its snapshot means)
+/// are left out; the rest are baselines the runs share.
+fn read_run(dir: &Path, texture: &str) -> Result<Run, ExperimentError> {
+    // The name a texture of the run takes in the table, or None to leave it out.
+    let role = |t: String| -> Option<String> {
+        if t == texture {
+            Some(OPTIMIZED.to_string())
+        } else if t == OPTIMIZED || is_snapshot_mean(&t) {
+            None
+        } else {
+            Some(t)
+        }
+    };
     let rows: Vec<CrossvalRow> = read(&dir.join("crossval.csv"))?;
-    // A snapshot mean is one run's own texture, not a baseline the runs share: left out.
-    let held: Vec<CrossvalRow> =
-        rows.into_iter().filter(|r| r.split == "held-out" && !is_snapshot_mean(&r.texture)).collect();
+    let held: Vec<CrossvalRow> = rows
+        .into_iter()
+        .filter(|r| r.split == "held-out")
+        .filter_map(|r| role(r.texture.clone()).map(|texture| CrossvalRow { texture, ..r }))
+        .collect();
     if !held.iter().any(|r| r.texture == OPTIMIZED) {
         return Err(ExperimentError::Invalid(format!(
-            "{}: no held-out scores of an optimized texture",
+            "{}: no held-out scores of a texture named {texture}",
             dir.join("crossval.csv").display()
         )));
     }
     let held_out = |path: &Path| -> Result<Vec<ViewRecord>, ExperimentError> {
         Ok(read::<ViewRow>(path)?
             .into_iter()
-            .filter(|v| v.role == "held-out" && !is_snapshot_mean(&v.texture))
-            .map(|v| ViewRecord {
-                fold: v.fold,
-                role: "held-out",
-                view: v.view,
-                texture: v.texture,
-                seed: v.seed,
-                detector: v.detector,
-                score: v.score,
+            .filter(|v| v.role == "held-out")
+            .filter_map(|v| {
+                role(v.texture).map(|texture| ViewRecord {
+                    fold: v.fold,
+                    role: "held-out",
+                    view: v.view,
+                    texture,
+                    seed: v.seed,
+                    detector: v.detector,
+                    score: v.score,
+                })
             })
             .collect())
     };
     let records = held_out(&dir.join("crossval_views.csv"))?;
     let path = dir.join("crossval_anatomy.csv");
-    let mut anatomy: Vec<BoxAnatomy> = if path.is_file() { read(&path)? } else { Vec::new() };
-    anatomy.retain(|a| !is_snapshot_mean(&a.texture));
+    let anatomy: Vec<BoxAnatomy> = if path.is_file() { read(&path)? } else { Vec::new() };
+    let anatomy = anatomy
+        .into_iter()
+        .filter_map(|a| role(a.texture.clone()).map(|texture| BoxAnatomy { texture, ..a }))
+        .collect();
     // A `plates` folder has each photo's own box already averaged over its rendered views.
     let (boxes, own_views) = (dir.join("crossval_boxes.csv"), dir.join("crossval_own_views.csv"));
     let own = if own_views.is_file() {
         held_out(&own_views)?
     } else if boxes.is_file() {
-        own_box_records(&records, &read::<BoxRecord>(&boxes)?)
+        let b: Vec<BoxRecord> = read(&boxes)?;
+        let b: Vec<BoxRecord> =
+            b.into_iter().filter_map(|x| role(x.texture.clone()).map(|texture| BoxRecord { texture, ..x })).collect();
+        own_box_records(&records, &b)
     } else {
         Vec::new()
     };
@@ -227,10 +250,19 @@ fn averaged(
 /// of it. `against` names labels whose rows every other row is also paired with (a variant
 /// against the config it varies).
 pub fn table1(runs: &[(String, PathBuf)], against: &[String]) -> Result<Table1, ExperimentError> {
+    let runs: Vec<(String, PathBuf, String)> =
+        runs.iter().map(|(l, d)| (l.clone(), d.clone(), OPTIMIZED.into())).collect();
+    table1_of(&runs, against)
+}
+
+/// [`table1`] with each run's row texture named: (label, folder, texture), the texture
+/// "optimized" or another of the run's own, such as its snapshot mean.
+pub fn table1_of(runs: &[(String, PathBuf, String)], against: &[String]) -> Result<Table1, ExperimentError> {
     if runs.is_empty() {
         return Err(ExperimentError::Invalid("name at least one `pav crossval` output folder".into()));
     }
-    let read: Vec<Run> = runs.iter().map(|(_, d)| read_run(d)).collect::<Result<_, _>>()?;
+    let read: Vec<Run> = runs.iter().map(|(_, d, t)| read_run(d, t)).collect::<Result<_, _>>()?;
+    let runs: Vec<(String, PathBuf)> = runs.iter().map(|(l, d, _)| (l.clone(), d.clone())).collect();
     let labels = unique(runs.iter().map(|r| r.0.clone()));
     if let Some(a) = against.iter().find(|a| !labels.contains(a)) {
         return Err(ExperimentError::Invalid(format!(
@@ -391,12 +423,22 @@ fn markdown_differences(diffs: &[Difference], dets: &[String]) -> String {
 /// `pav table1`: builds the table of `runs` (paired also with the rows labelled `against`) and
 /// writes `table1.md`, `table1.csv`, `table1_paired.csv` and (when the runs wrote their boxes)
 /// `table1_anatomy.csv` and `table1_paired_own_box.csv` into `out`; returns the Markdown.
-pub fn table1_report(runs: &[(String, PathBuf)], against: &[String], out: &Path) -> Result<String, ExperimentError> {
-    let t = table1(runs, against)?;
+pub fn table1_report(
+    runs: &[(String, PathBuf, String)],
+    against: &[String],
+    out: &Path,
+) -> Result<String, ExperimentError> {
+    let t = table1_of(runs, against)?;
     super::create_dir(out)?;
     crate::table::write_csv(&out.join("table1.csv"), &t.cells)?;
     crate::table::write_csv(&out.join("table1_paired.csv"), &t.differences)?;
-    let sources: Vec<String> = runs.iter().map(|(l, d)| format!("{l} = `{}`", d.display())).collect();
+    let sources: Vec<String> = runs
+        .iter()
+        .map(|(l, d, t)| {
+            let of = if t == OPTIMIZED { String::new() } else { format!(" ({t})") };
+            format!("{l} = `{}`{of}", d.display())
+        })
+        .collect();
     let mut md = format!(
         "# Transfer over held-out views (the paper's Table I)\n\nRows: what the texture was trained against; columns: the detector it is scored on. A cell is the mean best car score / P@0.5 over the held-out views of every fold (bold: the row trained against that detector); runs sharing a label are averaged (P@0.5: their mean, lowest–highest in brackets). Baseline rows come from the first run; across runs their means differ by at most {:.4}. Differences: optimized − baseline per held-out view (runs of one label averaged per view first), mean [95 % paired-bootstrap interval]; an interval entirely below zero is a win with error bars.\n\nRuns: {}.\n\n{}",
         t.baseline_spread,

@@ -13,6 +13,10 @@ pub struct Args {
     /// label (seeds of one config) make one row, averaged per held-out view.
     #[arg(long = "label")]
     labels: Vec<String>,
+    /// The texture of a run that makes its row (default: "optimized", its final texture; e.g.
+    /// snapshot-mean-from-100 of a `--curve-mean-from 100` run); give one per run or none.
+    #[arg(long = "texture")]
+    textures: Vec<String>,
     /// Also pair every row with the row of this label (a variant against the config it varies).
     /// Repeatable.
     #[arg(long)]
@@ -26,7 +30,10 @@ pub fn run(a: &Args) -> Result<()> {
     if !a.labels.is_empty() && a.labels.len() != a.runs.len() {
         bail!("{} labels for {} runs: give one per run or none", a.labels.len(), a.runs.len());
     }
-    let runs: Vec<(String, PathBuf)> = a
+    if !a.textures.is_empty() && a.textures.len() != a.runs.len() {
+        bail!("{} textures for {} runs: give one per run or none", a.textures.len(), a.runs.len());
+    }
+    let runs: Vec<(String, PathBuf, String)> = a
         .runs
         .iter()
         .enumerate()
@@ -34,7 +41,7 @@ pub fn run(a: &Args) -> Result<()> {
             let name = a.labels.get(i).cloned().unwrap_or_else(|| {
                 d.file_name().map_or_else(|| d.display().to_string(), |n| n.to_string_lossy().into_owned())
             });
-            (name, d.clone())
+            (name, d.clone(), a.textures.get(i).cloned().unwrap_or_else(|| "optimized".into()))
         })
         .collect();
     println!("{}", table1_report(&runs, &a.against, &a.out)?);
