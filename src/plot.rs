@@ -48,10 +48,14 @@ fn wrap(path: &Path, r: R<()>) -> Result<(), PlotError> {
     r.map_err(|source| PlotError { path: path.into(), source })
 }
 
-type Chart<'a> = ChartContext<'a, BitMapBackend<'a>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+type Chart<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
 /// Draws the legend box at `pos` and writes the image.
-fn finish(ch: &mut Chart<'_>, root: &DrawingArea<BitMapBackend<'_>, Shift>, pos: SeriesLabelPosition) -> R<()> {
+fn finish<'a, 'b: 'a>(
+    ch: &mut Chart<'a, 'b>,
+    root: &DrawingArea<BitMapBackend<'_>, Shift>,
+    pos: SeriesLabelPosition,
+) -> R<()> {
     ch.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).position(pos).draw()?;
     root.present()?;
     Ok(())
@@ -233,6 +237,30 @@ pub fn labelled_lines(
     )
 }
 
+/// A chart of values over steps on `root`: x from 0 to the largest step, y from 0 to 1.05 × the
+/// largest finite value (each at least 1), with `threshold` as a dashed line.
+fn step_chart<'a, 'b: 'a>(
+    root: &'a DrawingArea<BitMapBackend<'b>, Shift>,
+    title: &str,
+    points: impl Iterator<Item = (f64, f64)>,
+    threshold: Option<f64>,
+) -> R<Chart<'a, 'b>> {
+    let (xmax, ymax) =
+        points.fold((1.0f64, 1.0f64), |(x, y), p| (x.max(p.0), if p.1.is_finite() { y.max(p.1) } else { y }));
+    root.fill(&WHITE)?;
+    let mut ch = ChartBuilder::on(root)
+        .caption(title, ("sans-serif", 22))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0f64..xmax, 0f64..ymax * 1.05)?;
+    ch.configure_mesh().x_desc("step").draw()?;
+    if let Some(t) = threshold {
+        ch.draw_series(DashedLineSeries::new([(0.0, t), (xmax, t)], 6, 4, BLACK.stroke_width(1)))?;
+    }
+    Ok(ch)
+}
+
 /// One line of [`curves`].
 pub struct Curve {
     /// Legend entry.
@@ -248,23 +276,12 @@ pub struct Curve {
 /// Lines over steps, each with its own colour index and dash, and an optional dashed threshold.
 pub fn curves(path: &Path, title: &str, lines: &[Curve], threshold: Option<f64>) -> Result<(), PlotError> {
     fonts();
-    let xmax = lines.iter().flat_map(|s| s.points.iter().map(|p| p.0)).fold(1.0, f64::max);
-    let ymax = lines.iter().flat_map(|s| s.points.iter().map(|p| p.1)).filter(|v| v.is_finite()).fold(1.0, f64::max);
     wrap(
         path,
         (|| -> R<()> {
             let root = BitMapBackend::new(path, (900, 520)).into_drawing_area();
-            root.fill(&WHITE)?;
-            let mut ch = ChartBuilder::on(&root)
-                .caption(title, ("sans-serif", 22))
-                .margin(15)
-                .x_label_area_size(45)
-                .y_label_area_size(60)
-                .build_cartesian_2d(0f64..xmax, 0f64..ymax * 1.05)?;
-            ch.configure_mesh().x_desc("step").draw()?;
-            if let Some(t) = threshold {
-                ch.draw_series(DashedLineSeries::new([(0.0, t), (xmax, t)], 6, 4, BLACK.stroke_width(1)))?;
-            }
+            let points = lines.iter().flat_map(|l| l.points.iter().copied());
+            let mut ch = step_chart(&root, title, points, threshold)?;
             for l in lines {
                 let c = colour(l.colour);
                 let pts: Vec<(f64, f64)> = l.points.iter().copied().filter(|p| p.1.is_finite()).collect();
@@ -296,23 +313,11 @@ pub fn loss_curve(
     threshold: Option<f64>,
 ) -> Result<(), PlotError> {
     fonts();
-    let xmax = series.iter().flat_map(|s| s.1.iter().map(|p| p.0)).fold(1.0, f64::max);
-    let ymax = series.iter().flat_map(|s| s.1.iter().map(|p| p.1)).filter(|v| v.is_finite()).fold(1.0, f64::max) * 1.05;
     wrap(
         path,
         (|| -> R<()> {
             let root = BitMapBackend::new(path, (900, 520)).into_drawing_area();
-            root.fill(&WHITE)?;
-            let mut ch = ChartBuilder::on(&root)
-                .caption(title, ("sans-serif", 22))
-                .margin(15)
-                .x_label_area_size(45)
-                .y_label_area_size(60)
-                .build_cartesian_2d(0f64..xmax, 0f64..ymax)?;
-            ch.configure_mesh().x_desc("step").draw()?;
-            if let Some(t) = threshold {
-                ch.draw_series(DashedLineSeries::new([(0.0, t), (xmax, t)], 6, 4, BLACK.stroke_width(1)))?;
-            }
+            let mut ch = step_chart(&root, title, series.iter().flat_map(|s| s.1.iter().copied()), threshold)?;
             for (i, (name, pts)) in series.iter().enumerate() {
                 let c = colour(i);
                 let finite: Vec<(f64, f64)> = pts.iter().copied().filter(|p| p.1.is_finite()).collect();

@@ -153,6 +153,8 @@ pub fn crossval(
             all.len()
         )));
     }
+    opts.curve.check()?;
+    let mean_name = opts.curve.mean_from.map(snapshot_mean_name);
     progress.begin("folds", 2 * k as u64);
     let stage = |f: usize, s: &str| progress.status(&format!("fold {}/{k}: {s}", f + 1));
     // (role, texture, detector index) → detections, pooled over folds and seeds.
@@ -193,16 +195,13 @@ pub fn crossval(
         }
         stage(f, "scoring");
         progress.advance(1);
-        let mean = match opts.curve.mean_from {
-            Some(m) if opts.curve.every > 0 => Some((snapshot_mean_name(m), snapshot_mean(&ro.out, m, &fs)?)),
-            _ => None,
-        };
-        if let Some((name, t)) = &mean {
-            save_rgb(&ro.out.join(format!("{name}.png")), fs.tex_size, fs.tex_size, t)?;
-        }
+        let mean = opts.curve.mean_from.map(|m| snapshot_mean(&ro.out, m, &fs)).transpose()?;
         let mut textures: Vec<(String, u64, Option<&[f32]>)> =
             vec![("original".into(), 0, None), ("optimized".into(), 0, Some(&o.texture))];
-        textures.extend(mean.iter().map(|(name, t)| (name.clone(), 0, Some(t.as_slice()))));
+        if let (Some(name), Some(t)) = (&mean_name, &mean) {
+            save_rgb(&ro.out.join(format!("{name}.png")), fs.tex_size, fs.tex_size, t)?;
+            textures.push((name.clone(), 0, Some(t)));
+        }
         // Both random baselines, the same seeds for each: blocks, and the paper's 32×32 image.
         let mut randoms = Vec::new();
         for (name, block) in [("random", opts.random_block), ("random32", fs.paper_random_block())] {
@@ -264,8 +263,7 @@ pub fn crossval(
     let mut anatomies = Vec::new();
     let (mut rendered_rows, mut rendered_anatomies) = (Vec::new(), Vec::new());
     let names = ["original", "random", "random32", "optimized"].map(String::from).into_iter();
-    let mean = opts.curve.mean_from.filter(|_| opts.curve.every > 0).map(snapshot_mean_name);
-    for tname in names.chain(mean).chain(opts.references.iter().map(|r| r.0.clone())) {
+    for tname in names.chain(mean_name).chain(opts.references.iter().map(|r| r.0.clone())) {
         for (d, det) in detectors.iter().enumerate() {
             let white_box = opts.white_box.iter().any(|w| w == det.name());
             if let Some(ims) = pooled.get(&("held-out", tname.clone(), d)) {
@@ -307,9 +305,8 @@ pub fn crossval_report(
     stop: &AtomicBool,
 ) -> Result<String, ExperimentError> {
     let threshold = scoring.threshold;
-    if curve.mean_from.is_some() && curve.every == 0 {
-        return Err(ExperimentError::Invalid("a mean of snapshots needs snapshots: give --curve-every too".into()));
-    }
+    // Before loading anything: a refused option should not wait for the photos.
+    curve.check()?;
     let cfg = OptimizeConfig::load(config)?;
     if !cfg.views.pbr_test.is_empty() {
         return Err(ExperimentError::Invalid(format!(

@@ -22,6 +22,16 @@ pub struct CurveOptions {
     pub mean_from: Option<u64>,
 }
 
+impl CurveOptions {
+    /// Refuses a snapshot mean without snapshots to average.
+    pub fn check(&self) -> Result<(), ExperimentError> {
+        if self.mean_from.is_some() && self.every == 0 {
+            return Err(ExperimentError::Invalid("a mean of snapshots needs snapshots: give --curve-every too".into()));
+        }
+        Ok(())
+    }
+}
+
 /// The texture name under which a cross-validation scores [`snapshot_mean`] from step `from`.
 pub fn snapshot_mean_name(from: u64) -> String {
     format!("{SNAPSHOT_MEAN}{from}")
