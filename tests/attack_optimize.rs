@@ -1,12 +1,13 @@
 //! The optimization loop on real data (two training views, YOLOv3-tiny): it lowers the
 //! white-box car score, a stopped-and-resumed run equals an uninterrupted one, and a poisoned
-//! state is refused after a few skipped steps with the last good checkpoint kept.
+//! state is refused after a few skipped steps with the last good checkpoint kept; the averaged
+//! output is the mean of the iterates it counts, through a resume too.
 #![cfg(feature = "optimize")]
 
 mod common;
 
 use pav::attack::checkpoint::Checkpoint;
-use pav::attack::config::OptimizeConfig;
+use pav::attack::config::{AverageConfig, OptimizeConfig};
 use pav::attack::optimize::{optimize_texture, snapshots, Finish, RunOptions};
 use pav::attack::setup::Setup;
 use pav::attack::whitebox::Ensemble;
@@ -168,4 +169,38 @@ fn a_pyramid_moves_patches_keeps_to_the_region_and_resumes_exactly() {
     cfg.optimizer.levels = 1;
     let e = optimize_texture(&path, &cfg, &s, &wb, &opts(&b, 3, true), &Silent, &never).err().unwrap().to_string();
     assert!(e.contains("parameter count"), "{e}");
+}
+
+#[test]
+fn the_average_is_the_mean_of_the_counted_iterates_and_survives_a_resume() {
+    let (path, mut cfg, s, wb) = problem();
+    let never = AtomicBool::new(false);
+    let dir = tempfile::tempdir().unwrap();
+    // Six steps; the average counts the textures after steps 1, 3 and 5 (its grid) and the last.
+    cfg.optimizer.average = Some(AverageConfig { from: 1, every: 2 });
+    let a = dir.path().join("a");
+    let every1 = RunOptions { snapshot_every: 1, ..opts(&a, 3, false) };
+    let straight = optimize_texture(&path, &cfg, &s, &wb, &every1, &Silent, &never).unwrap();
+    assert_eq!(snapshots(&a).iter().map(|s| s.0).collect::<Vec<_>>(), [0, 1, 2, 3, 4, 5, 6]);
+    let shots: Vec<Vec<f32>> = snapshots(&a).iter().map(|(_, p)| pav::image::Rgb::load(p).unwrap().rgb).collect();
+    let worst = |x: &[f32], y: &[f32]| x.iter().zip(y).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    let mean: Vec<f32> =
+        (0..shots[1].len()).map(|i| [1, 3, 5, 6].iter().map(|&k| shots[k][i]).sum::<f32>() / 4.0).collect();
+    // The snapshots are 8-bit: each within half a level of its iterate, so their mean too.
+    assert!(worst(&straight.texture, &mean) <= 0.5 / 255.0 + 1e-5, "{}", worst(&straight.texture, &mean));
+    assert!(worst(&straight.last, &shots[6]) <= 0.5 / 255.0 + 1e-6);
+    assert!(worst(&straight.texture, &straight.last) > 0.02, "the average is the last iterate");
+    // Stopped after one epoch, resumed to three: the sum came back from the checkpoint, and the
+    // stopped run's last texture (step 2, off the grid) was not summed into it.
+    let b = dir.path().join("b");
+    optimize_texture(&path, &cfg, &s, &wb, &opts(&b, 1, false), &Silent, &never).unwrap();
+    let resumed = optimize_texture(&path, &cfg, &s, &wb, &opts(&b, 3, true), &Silent, &never).unwrap();
+    assert!(worst(&resumed.texture, &straight.texture) < 1e-5, "{}", worst(&resumed.texture, &straight.texture));
+    assert!(worst(&resumed.last, &straight.last) < 1e-5);
+    // An average that would start after the last step is refused before any step.
+    cfg.optimizer.average = Some(AverageConfig { from: 7, every: 1 });
+    let e = optimize_texture(&path, &cfg, &s, &wb, &opts(&dir.path().join("c"), 3, false), &Silent, &never);
+    let e = e.err().unwrap().to_string();
+    assert!(e.contains("optimizer.average.from = 7") && e.contains("6 steps"), "{e}");
+    assert!(!dir.path().join("c/checkpoint.bin").exists());
 }

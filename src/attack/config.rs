@@ -167,6 +167,35 @@ pub struct OptimizerConfig {
     /// every white box at every step.
     #[serde(default)]
     pub white_boxes_per_step: Option<usize>,
+    /// Output the pixel mean of the textures after step `from`, every `every` steps after it and
+    /// the last, instead of the last alone: late iterates wander on unseen detectors, their mean
+    /// less (README "Averaged snapshots"). Absent: the last texture.
+    #[serde(default)]
+    pub average: Option<AverageConfig>,
+}
+
+/// `optimizer.average`: which iterates the output texture averages.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct AverageConfig {
+    /// The first step counted (steps done, as snapshot names count them).
+    pub from: u64,
+    /// Steps between the textures counted (1: every step).
+    #[serde(default = "one_step")]
+    pub every: u64,
+}
+
+impl AverageConfig {
+    /// Whether the texture after `done` steps lies on the average's grid (`from`, `from + every`,
+    /// …). The last texture of a run is averaged too, on the grid or not, but only into the
+    /// output: a run stopped and resumed with more epochs counts what a straight run counts.
+    pub fn on_grid(&self, done: u64) -> bool {
+        done >= self.from && (done - self.from) % self.every.max(1) == 0
+    }
+}
+
+fn one_step() -> u64 {
+    1
 }
 
 fn one_level() -> usize {
@@ -329,6 +358,9 @@ impl OptimizeConfig {
                 self.white_box.len()
             ));
         }
+        if o.average.is_some_and(|a| a.every == 0) {
+            return Err("optimizer.average.every must be at least 1".into());
+        }
         if let Init::Grey(g) = self.mesh.init {
             if !(0.0..=1.0).contains(&g) {
                 return Err(format!("mesh.init must be in [0, 1] or \"random\", got {g}"));
@@ -476,6 +508,17 @@ mod tests {
         assert!(e.contains("optimizer.levels") && e.contains("halve"), "{e}");
         // A subset of white boxes per step: at least one, at most the one listed.
         assert_eq!(variant("seed = 0", "seed = 0").unwrap().optimizer.white_boxes_per_step, None);
+        // The average: every step by default; every 0 and unknown keys are refused.
+        assert_eq!(variant("seed = 0", "seed = 0").unwrap().optimizer.average, None);
+        let a = variant("seed = 0", "seed = 0\naverage = { from = 100 }").unwrap().optimizer.average.unwrap();
+        assert_eq!(a, AverageConfig { from: 100, every: 1 });
+        let a = variant("seed = 0", "seed = 0\naverage = { from = 100, every = 50 }").unwrap().optimizer.average;
+        let a = a.unwrap();
+        let counted: Vec<u64> = (1..=490).filter(|&d| a.on_grid(d)).collect();
+        assert_eq!(counted, [100, 150, 200, 250, 300, 350, 400, 450]);
+        let e = variant("seed = 0", "seed = 0\naverage = { from = 1, every = 0 }").unwrap_err().to_string();
+        assert!(e.contains("optimizer.average.every"), "{e}");
+        assert!(variant("seed = 0", "seed = 0\naverage = { start = 1 }").is_err());
         let one = variant("seed = 0", "seed = 0\nwhite_boxes_per_step = 1").unwrap();
         assert_eq!(one.optimizer.white_boxes_per_step, Some(1));
         for bad in [0, 2] {

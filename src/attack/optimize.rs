@@ -2,11 +2,13 @@
 //! texture, apply EoT, composite (zoomed when the scene lists `zoom`), run the white-box detector, and take an Adam step on
 //! L = L1 + β·L2 + γ·Ls over the optimizable texels only.
 //!
+//! With `optimizer.average` the output is the pixel mean of the late iterates, not the last one.
+//!
 //! Checkpoints are written every epoch and every `checkpoint_every` steps (and on a stop
 //! request); a non-finite loss or gradient skips the step instead of poisoning the texture.
 
 use super::adam::Adam;
-use super::checkpoint::{fingerprint, Checkpoint};
+use super::checkpoint::{fingerprint, Average, Checkpoint};
 use super::config::OptimizeConfig;
 use super::pyramid::Pyramid;
 use super::setup::Setup;
@@ -114,6 +116,9 @@ pub struct RunOptions {
 /// Folder of a run's texture snapshots in its output folder.
 pub const SNAPSHOTS: &str = "snapshots";
 
+/// The last iterate's file beside `texture.png` when that is an average (`optimizer.average`).
+pub const LAST_ITERATE: &str = "texture-last.png";
+
 /// The texture snapshots in `out` ([`RunOptions::snapshot_every`]) as (step, path), by step.
 pub fn snapshots(out: &Path) -> Vec<(u64, PathBuf)> {
     let Ok(dir) = std::fs::read_dir(out.join(SNAPSHOTS)) else { return Vec::new() };
@@ -173,6 +178,14 @@ pub enum OptimizeError {
         /// What does not match, and what to do.
         why: String,
     },
+    /// `optimizer.average.from` lies beyond the run's last step: nothing would be averaged.
+    #[error("optimizer.average.from = {from} is beyond this run's {total} steps: lower it or run more epochs")]
+    AverageBeyondEnd {
+        /// The first step counted.
+        from: u64,
+        /// The run's steps.
+        total: u64,
+    },
     /// Too many steps in a row had a non-finite loss or gradient.
     #[error("{skips} consecutive steps had a non-finite loss or gradient (last at step {step}, view {view}); the last good state is in {checkpoint}")]
     NotFinite {
@@ -189,8 +202,11 @@ pub enum OptimizeError {
 
 /// The result of a run: the texture, its log, and how it ended.
 pub struct Outcome {
-    /// Final texture (RGB interleaved, `tex_size²`).
+    /// The output texture (RGB interleaved, `tex_size²`): the mean of the iterates that
+    /// `optimizer.average` counts (those so far, on a stop), else the last iterate.
     pub texture: Vec<f32>,
+    /// The last iterate (the same as `texture` without `optimizer.average`).
+    pub last: Vec<f32>,
     /// All step records, resumed runs included.
     pub log: Vec<StepLog>,
     /// How it ended.
@@ -341,7 +357,7 @@ pub fn optimize_texture(
     let pyramid = Pyramid::new(setup.tex_size, cfg.optimizer.levels)?;
     // The start is needed after a resume too: the pyramid's projection restores it off the region.
     let start_tex = setup.initial_texture(&cfg.mesh.init, cfg.optimizer.seed)?;
-    let (mut params, mut adam, mut rng, start, mut log) = if opts.resume && ckpt_path.exists() {
+    let (mut params, mut adam, mut rng, start, mut log, mut average) = if opts.resume && ckpt_path.exists() {
         let c = Checkpoint::load(&ckpt_path)?;
         let refuse = |why: String| OptimizeError::Resume { checkpoint: ckpt_path.clone(), why };
         if c.config_hash != hash {
@@ -355,7 +371,7 @@ pub fn optimize_texture(
         }
         let log = read_log(&opts.out, c.steps_done);
         progress.note(&format!("resuming from step {} ({})", c.steps_done, ckpt_path.display()));
-        (c.params, c.adam, Rng { state: c.rng_state }, c.steps_done, log)
+        (c.params, c.adam, Rng { state: c.rng_state }, c.steps_done, log, c.average)
     } else {
         if ckpt_path.exists() {
             return Err(OptimizeError::Resume {
@@ -364,7 +380,8 @@ pub fn optimize_texture(
             });
         }
         let p = pyramid.from_texture(&start_tex);
-        (p, Adam::new(pyramid.len(), cfg.optimizer.lr), Rng::new(cfg.optimizer.seed), 0, Vec::new())
+        let adam = Adam::new(pyramid.len(), cfg.optimizer.lr);
+        (p, adam, Rng::new(cfg.optimizer.seed), 0, Vec::new(), Average::default())
     };
     let active = pyramid.active(&setup.region_values);
     let clamp = (cfg.optimizer.clamp[0], cfg.optimizer.clamp[1]);
@@ -373,13 +390,26 @@ pub fn optimize_texture(
     let n = views.len() as u64;
     let epochs = opts.epochs.unwrap_or(cfg.optimizer.epochs) as u64;
     let total = n * epochs;
-    let save = |params: &[f32], adam: &Adam, rng: &Rng, done: u64, log: &[StepLog]| -> Result<(), OptimizeError> {
+    if let Some(a) = cfg.optimizer.average.filter(|a| a.from > total) {
+        return Err(OptimizeError::AverageBeyondEnd { from: a.from, total });
+    }
+    // The output: the grid's textures so far and, at the end, the last one if off the grid.
+    let output = |average: &Average, tex: Vec<f32>, end: bool| {
+        let mut a = average.clone();
+        if end && cfg.optimizer.average.is_some_and(|g| !g.on_grid(total)) {
+            a.add(&tex);
+        }
+        Outcome { texture: a.mean().unwrap_or_else(|| tex.clone()), last: tex, log: Vec::new(), finish: Finish::Done }
+    };
+    type Saved = Result<(), OptimizeError>;
+    let save = |params: &[f32], adam: &Adam, rng: &Rng, average: &Average, done: u64, log: &[StepLog]| -> Saved {
         Checkpoint {
             config_hash: hash,
             steps_done: done,
             rng_state: rng.state,
             params: params.to_vec(),
             adam: adam.clone(),
+            average: average.clone(),
         }
         .save(&ckpt_path)?;
         write_log(&opts.out, log)
@@ -400,9 +430,9 @@ pub fn optimize_texture(
     let mut order = epoch_order(n as usize, cfg.optimizer.seed, start / n.max(1));
     for s in start..total {
         if stop.load(Ordering::SeqCst) {
-            save(&params, &adam, &rng, s, &log)?;
+            save(&params, &adam, &rng, &average, s, &log)?;
             progress.end(Some("stopped; continue with --resume"));
-            return Ok(Outcome { texture: tex, log, finish: Finish::Stopped });
+            return Ok(Outcome { log, finish: Finish::Stopped, ..output(&average, tex, false) });
         }
         let (epoch, k) = (s / n, (s % n) as usize);
         if k == 0 {
@@ -431,7 +461,7 @@ pub fn optimize_texture(
             skips += 1;
             progress.note(&format!("step {s} ({}): non-finite loss or gradient, step skipped", view.name));
             if skips >= opts.max_skips {
-                save(&params, &adam, &rng, s, &log)?;
+                save(&params, &adam, &rng, &average, s, &log)?;
                 progress.end(None);
                 return Err(OptimizeError::NotFinite {
                     skips,
@@ -445,15 +475,18 @@ pub fn optimize_texture(
         progress.advance(1);
         log.push(rec);
         let done = s + 1;
+        if cfg.optimizer.average.is_some_and(|a| a.on_grid(done)) {
+            average.add(&tex);
+        }
         if opts.snapshot_every > 0 && (done % opts.snapshot_every == 0 || done == total) {
             snapshot(&tex, done)?;
         }
         if done % n == 0 || done % opts.checkpoint_every.max(1) == 0 || done == total {
-            save(&params, &adam, &rng, done, &log)?;
+            save(&params, &adam, &rng, &average, done, &log)?;
         }
     }
     progress.end(None);
-    Ok(Outcome { texture: tex, log, finish: Finish::Done })
+    Ok(Outcome { log, ..output(&average, tex, true) })
 }
 
 #[cfg(test)]

@@ -13,7 +13,7 @@ use super::per_view::{conditional_asr, markdown_paired, paired, ViewRecord};
 use super::table2::{aggregate, detect_view, markdown, markdown_scores, DigitalRow, AP_MIN_SCORE};
 use super::{create_dir, write_markdown, ExperimentError, Scoring};
 use crate::attack::config::OptimizeConfig;
-use crate::attack::optimize::{optimize_texture, Finish, RunOptions};
+use crate::attack::optimize::{optimize_texture, Finish, RunOptions, LAST_ITERATE};
 use crate::attack::setup::Setup;
 use crate::attack::view::View;
 use crate::attack::whitebox::Ensemble;
@@ -189,6 +189,9 @@ pub fn crossval(
             return Err(ExperimentError::Stopped(ro.out));
         }
         save_rgb(&ro.out.join("texture.png"), fs.tex_size, fs.tex_size, &o.texture)?;
+        if cfg.optimizer.average.is_some() {
+            save_rgb(&ro.out.join(LAST_ITERATE), fs.tex_size, fs.tex_size, &o.last)?;
+        }
         if opts.curve.every > 0 {
             stage(f, "scoring the snapshots");
             curve.extend(score_snapshots(f, &ro.out, &fs, detectors)?);

@@ -5,7 +5,7 @@
 use super::{create_dir, ExperimentError};
 use crate::attack::config::OptimizeConfig;
 use crate::attack::export::{atlas_side_m, write_sheet, PrintSpec, Sheet};
-use crate::attack::optimize::{optimize_texture, Finish, RunOptions, StepLog};
+use crate::attack::optimize::{optimize_texture, Finish, RunOptions, StepLog, LAST_ITERATE};
 use crate::attack::setup::{PbrKept, Setup};
 use crate::attack::view::View;
 use crate::attack::whitebox::{Ensemble, WhiteBox, WhiteBoxError};
@@ -168,6 +168,11 @@ pub fn optimize_and_report(
     save_rgb(&out.join("texture.png"), n, n, &o.texture)?;
     plot_log(&out.join("loss.png"), &o.log, setup.training_views().len())?;
     let mut files = vec!["region.png", "texture.png", "loss.csv", "loss_detectors.csv", "loss.png"];
+    if p.cfg.optimizer.average.is_some() {
+        // texture.png is the average; the last iterate beside it, for comparison.
+        save_rgb(&out.join(LAST_ITERATE), n, n, &o.last)?;
+        files.push(LAST_ITERATE);
+    }
     if matches!(o.finish, Finish::Stopped) {
         return Ok(OptimizeReport { finish: o.finish, scores: Vec::new(), sheet: None, files });
     }
