@@ -176,6 +176,30 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     assert_eq!(mine, want, "the run against random, random32 and RAUCA_E2E, as crossval paired them");
     let md = t.markdown();
     assert!(md.contains(&format!("**{:.3} / ", held("optimized").mean_score)), "{md}");
+    // Per held-out view: the label's scores are the run's own, the random rows their seeds' mean.
+    let view_of = |tex: &str, r: &pav::experiments::per_view::ViewRecord| {
+        t.views
+            .iter()
+            .find(|v| v.texture == tex && (v.fold, &v.view, &v.detector) == (r.fold, &r.view, &r.detector))
+            .unwrap()
+            .score
+    };
+    let held_recs: Vec<_> = recs.iter().filter(|r| r.role == "held-out").collect();
+    for r in held_recs.iter().filter(|r| r.texture == "optimized") {
+        assert_eq!(view_of("tiny", r), r.score);
+        assert_eq!(view_of("again", r), r.score);
+    }
+    for r in held_recs.iter().filter(|r| r.texture == "random") {
+        let seeds: Vec<f32> = held_recs
+            .iter()
+            .filter(|x| x.texture == "random" && (x.fold, &x.view, &x.detector) == (r.fold, &r.view, &r.detector))
+            .map(|x| x.score)
+            .collect();
+        assert!(
+            seeds.len() > 1 && (view_of("random", r) - seeds.iter().sum::<f32>() / seeds.len() as f32).abs() < 1e-6
+        );
+    }
+    assert!(t.views.iter().all(|v| v.texture != "optimized" && v.seed == 0));
     // The snapshot mean as the run's row: its own held-out cells, paired against the same
     // baselines as crossval paired it, with the final texture out of the table.
     let as_mean = [("mean".to_string(), dir.path().to_path_buf(), "snapshot-mean-from-1".to_string())];

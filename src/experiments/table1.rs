@@ -76,6 +76,9 @@ pub struct Table1 {
     /// Where the car boxes sit on held-out views: the first run's baselines, then each label's
     /// optimized texture averaged over its runs (labels whose runs all have them).
     pub anatomy: Vec<BoxAnatomy>,
+    /// Every held-out view's best car score: the first run's baselines (random ones averaged
+    /// over their seeds), then each label's texture averaged over its runs (texture: the label).
+    pub views: Vec<ViewRecord>,
 }
 
 /// One row of `crossval.csv`, as read back.
@@ -360,9 +363,61 @@ pub fn table1_of(runs: &[(String, PathBuf, String)], against: &[String]) -> Resu
         out
     };
     let differences = pair_all(&|g| Some(&g.scores), &read[0].records);
+    let mut views = seeds_averaged(read[0].records.iter().filter(|r| r.texture != OPTIMIZED));
+    views.extend(
+        groups.iter().flat_map(|g| g.scores.iter().map(|r| ViewRecord { texture: g.label.clone(), ..r.clone() })),
+    );
     let own_box = if read[0].own.is_empty() { Vec::new() } else { pair_all(&|g| g.own.as_ref(), &read[0].own) };
     baselines.extend(cells);
-    Ok(Table1 { cells: baselines, differences, own_box, baseline_spread: spread, anatomy })
+    Ok(Table1 { cells: baselines, differences, own_box, baseline_spread: spread, anatomy, views })
+}
+
+/// `records` with each (fold, view, texture, detector)'s seeds averaged into one (seed 0), in
+/// first-seen order.
+fn seeds_averaged<'a>(records: impl Iterator<Item = &'a ViewRecord>) -> Vec<ViewRecord> {
+    let mut out: Vec<(ViewRecord, f64, usize)> = Vec::new();
+    for r in records {
+        let same =
+            |o: &ViewRecord| (o.fold, &o.view, &o.texture, &o.detector) == (r.fold, &r.view, &r.texture, &r.detector);
+        match out.iter_mut().find(|(o, _, _)| same(o)) {
+            Some((_, sum, n)) => (*sum, *n) = (*sum + r.score as f64, *n + 1),
+            None => out.push((ViewRecord { seed: 0, ..r.clone() }, r.score as f64, 1)),
+        }
+    }
+    out.into_iter().map(|(r, sum, n)| ViewRecord { score: (sum / n as f64) as f32, ..r }).collect()
+}
+
+/// Per held-out view, one table per detector that some row never trained against: a row per
+/// view, a column per texture (baselines, then each label), so one sees which views a gap
+/// between two rows comes from.
+fn markdown_views(t: &Table1) -> String {
+    let textures = unique(t.views.iter().map(|r| r.texture.clone()));
+    let held_out = unique(
+        t.cells
+            .iter()
+            .filter(|c| !c.white_box && t.differences.iter().any(|d| d.row == c.row))
+            .map(|c| c.detector.clone()),
+    );
+    let mut s = String::new();
+    for det in held_out {
+        s.push_str(&format!(
+            "\n### {det}\n\n| fold | view | {} |\n|---:|---|{}\n",
+            textures.join(" | "),
+            "---:|".repeat(textures.len())
+        ));
+        let of_det: Vec<&ViewRecord> = t.views.iter().filter(|r| r.detector == det).collect();
+        for (fold, view) in unique(of_det.iter().map(|r| (r.fold, r.view.clone()))) {
+            s.push_str(&format!("| {fold} | {view} |"));
+            for tex in &textures {
+                match of_det.iter().find(|r| r.fold == fold && r.view == view && &r.texture == tex) {
+                    Some(r) => s.push_str(&format!(" {:.3} |", r.score)),
+                    None => s.push_str(" – |"),
+                }
+            }
+            s.push('\n');
+        }
+    }
+    s
 }
 
 impl Table1 {
@@ -421,7 +476,7 @@ fn markdown_differences(diffs: &[Difference], dets: &[String]) -> String {
 }
 
 /// `pav table1`: builds the table of `runs` (paired also with the rows labelled `against`) and
-/// writes `table1.md`, `table1.csv`, `table1_paired.csv` and (when the runs wrote their boxes)
+/// writes `table1.md`, `table1.csv`, `table1_paired.csv`, `table1_views.csv` and (when the runs wrote their boxes)
 /// `table1_anatomy.csv` and `table1_paired_own_box.csv` into `out`; returns the Markdown.
 pub fn table1_report(
     runs: &[(String, PathBuf, String)],
@@ -452,6 +507,11 @@ pub fn table1_report(
         let dets = unique(a.iter().map(|x| x.detector.clone()));
         a.sort_by_key(|x| dets.iter().position(|d| *d == x.detector));
         md.push_str(&anatomy_section(&markdown_anatomy(&a), "Rows of several runs are their mean; images are pooled."));
+    }
+    crate::table::write_csv(&out.join("table1_views.csv"), &t.views)?;
+    let per_view = markdown_views(&t);
+    if !per_view.is_empty() {
+        md.push_str(&format!("\n## Per held-out view, on the detectors a row never trained against\n\nBest car score per held-out view (`table1_views.csv`); random rows averaged over their seeds, a label over its runs.\n{per_view}"));
     }
     if !t.own_box.is_empty() {
         crate::table::write_csv(&out.join("table1_paired_own_box.csv"), &t.own_box)?;
