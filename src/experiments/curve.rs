@@ -6,6 +6,7 @@
 
 use super::table2::detect_view;
 use super::ExperimentError;
+use crate::attack::checkpoint::Average;
 use crate::attack::optimize::snapshots;
 use crate::attack::setup::Setup;
 use crate::detect::Detector;
@@ -48,17 +49,13 @@ const SNAPSHOT_MEAN: &str = "snapshot-mean-from-";
 /// The pixel mean of the snapshots in `fold_dir` taken at step `from` or later, at `fs`'s atlas
 /// size.
 pub fn snapshot_mean(fold_dir: &Path, from: u64, fs: &Setup) -> Result<Vec<f32>, ExperimentError> {
-    let mut sum: Option<(Vec<f32>, usize)> = None;
+    let mut sum = Average::default();
     for (_, path) in snapshots(fold_dir).into_iter().filter(|s| s.0 >= from) {
-        let tex = fs.load_texture(&path)?;
-        let (acc, n) = sum.get_or_insert_with(|| (vec![0.0; tex.len()], 0));
-        acc.iter_mut().zip(&tex).for_each(|(a, t)| *a += t);
-        *n += 1;
+        sum.add(&fs.load_texture(&path)?);
     }
-    let (acc, n) = sum.ok_or_else(|| {
+    sum.mean().ok_or_else(|| {
         ExperimentError::Invalid(format!("{}: no snapshot at or after step {from} to average", fold_dir.display()))
-    })?;
-    Ok(acc.into_iter().map(|a| a / n as f32).collect())
+    })
 }
 
 /// One snapshot's best car score on one photo by one detector.
