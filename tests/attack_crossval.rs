@@ -200,6 +200,39 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
         );
     }
     assert!(t.views.iter().all(|v| v.texture != "optimized" && v.seed == 0));
+    // On the photos it trained on: per photo the mean of its train-role scores over the folds
+    // that trained on it, against the same photo held out and against RAUCA-E2E's score there.
+    let trained_of = |view: &str, det: &str| {
+        let s: Vec<f64> = recs
+            .iter()
+            .filter(|r| r.role == "train" && r.texture == "optimized" && r.view == view && r.detector == det)
+            .map(|r| r.score as f64)
+            .collect();
+        assert!(!s.is_empty(), "{view} trains in some fold");
+        s.iter().sum::<f64>() / s.len() as f64
+    };
+    let dets = unique(recs.iter().map(|r| r.detector.clone()));
+    assert_eq!(t.trained_cells.iter().filter(|c| c.row == "tiny").count(), dets.len());
+    for c in t.trained_cells.iter().filter(|c| c.row == "tiny") {
+        let of: Vec<_> = held_recs.iter().filter(|r| r.texture == "optimized" && r.detector == c.detector).collect();
+        let n = of.len() as f64;
+        let want_t = of.iter().map(|r| trained_of(&r.view, &c.detector)).sum::<f64>() / n;
+        let want_h = of.iter().map(|r| r.score as f64).sum::<f64>() / n;
+        assert!((c.trained_on - want_t).abs() < 1e-6 && (c.held_out - want_h).abs() < 1e-6 && c.views == 3, "{c:?}");
+        let g = t.generalization.iter().find(|d| d.row == "tiny" && d.detector == c.detector).unwrap();
+        assert!(g.against == "trained-on" && (g.mean - (want_h - want_t)).abs() < 1e-6, "{g:?}");
+        let rauca = |v: &str| {
+            held_recs
+                .iter()
+                .find(|r| r.texture == "RAUCA_E2E" && r.view == v && r.detector == c.detector)
+                .unwrap()
+                .score as f64
+        };
+        let want = of.iter().map(|r| trained_of(&r.view, &c.detector) - rauca(&r.view)).sum::<f64>() / n;
+        let d = t.trained_on.iter().find(|d| d.row == "tiny" && d.detector == c.detector && d.against == "RAUCA_E2E");
+        assert!((d.unwrap().mean - want).abs() < 1e-6, "{d:?} vs {want}");
+    }
+    assert!(!t.trained_on.iter().any(|d| d.against == "original" || d.against == "optimized"));
     // The snapshot mean as the run's row: its own held-out cells, paired against the same
     // baselines as crossval paired it, with the final texture out of the table.
     let as_mean = [("mean".to_string(), dir.path().to_path_buf(), "snapshot-mean-from-1".to_string())];

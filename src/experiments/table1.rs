@@ -79,7 +79,36 @@ pub struct Table1 {
     /// Every held-out view's best car score: the first run's baselines (random ones averaged
     /// over their seeds), then each label's texture averaged over its runs (texture: the label).
     pub views: Vec<ViewRecord>,
+    /// Each label's mean best car score on the photos it trained on and on the same photos held out.
+    pub trained_cells: Vec<TrainedCell>,
+    /// Each label on the photos it trained on against every baseline: trained-on − baseline,
+    /// paired over photos (a gap already there is not one of generalization over photos).
+    pub trained_on: Vec<Difference>,
+    /// Each label held out against itself trained on (against = "trained-on"): held-out −
+    /// trained-on, paired over photos, what a texture loses on a photo it has not seen.
+    pub generalization: Vec<Difference>,
 }
+
+/// A label's texture on one detector: its mean best car score over the photos, each photo
+/// scored where it trained (mean over those folds) and where it was held out.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct TrainedCell {
+    /// The label.
+    pub row: String,
+    /// The detector scored.
+    pub detector: String,
+    /// Whether the label trained against it.
+    pub white_box: bool,
+    /// Mean over photos of the best car score in the folds that trained on the photo.
+    pub trained_on: f64,
+    /// Mean over the same photos of the best car score in the fold that held it out.
+    pub held_out: f64,
+    /// Photos.
+    pub views: usize,
+}
+
+/// The texture name of a label's trained-on records in its pairings.
+const TRAINED_ON: &str = "trained-on";
 
 /// One row of `crossval.csv`, as read back.
 #[derive(serde::Deserialize)]
@@ -94,7 +123,7 @@ struct CrossvalRow {
 }
 
 /// One row of `crossval_views.csv`, as read back.
-#[derive(serde::Deserialize)]
+#[derive(Clone, serde::Deserialize)]
 struct ViewRow {
     fold: usize,
     role: String,
@@ -122,6 +151,9 @@ struct Run {
     /// The records with each view's score replaced by its best box on the car (IoU ≥ 0.5; 0
     /// without one); empty for a run written before crossval wrote its boxes.
     own: Vec<ViewRecord>,
+    /// The row texture on the photos it trained on, per (photo, detector) the mean over the
+    /// folds that trained on it, filed under the fold that holds the photo out (see [`trained_on`]).
+    trained: Vec<ViewRecord>,
 }
 
 /// The runs of one label, averaged per held-out view.
@@ -131,6 +163,8 @@ struct Group {
     scores: Vec<ViewRecord>,
     /// Its car's own box (None when a run lacks its boxes).
     own: Option<Vec<ViewRecord>>,
+    /// Its scores on the photos it trained on (None when a run has none).
+    trained: Option<Vec<ViewRecord>>,
     /// The detectors it trained against.
     white: Vec<String>,
 }
@@ -161,9 +195,8 @@ fn read_run(dir: &Path, texture: &str) -> Result<Run, ExperimentError> {
             dir.join("crossval.csv").display()
         )));
     }
-    let held_out = |path: &Path| -> Result<Vec<ViewRecord>, ExperimentError> {
-        Ok(read::<ViewRow>(path)?
-            .into_iter()
+    let held_out_of = |rows: Vec<ViewRow>| -> Vec<ViewRecord> {
+        rows.into_iter()
             .filter(|v| v.role == "held-out")
             .filter_map(|v| {
                 role(v.texture).map(|texture| ViewRecord {
@@ -176,9 +209,12 @@ fn read_run(dir: &Path, texture: &str) -> Result<Run, ExperimentError> {
                     score: v.score,
                 })
             })
-            .collect())
+            .collect()
     };
-    let records = held_out(&dir.join("crossval_views.csv"))?;
+    let held_out = |path: &Path| -> Result<Vec<ViewRecord>, ExperimentError> { Ok(held_out_of(read(path)?)) };
+    let rows: Vec<ViewRow> = read(&dir.join("crossval_views.csv"))?;
+    let trained = trained_on(&rows, texture);
+    let records = held_out_of(rows);
     let path = dir.join("crossval_anatomy.csv");
     let anatomy: Vec<BoxAnatomy> = if path.is_file() { read(&path)? } else { Vec::new() };
     let anatomy = anatomy
@@ -197,7 +233,33 @@ fn read_run(dir: &Path, texture: &str) -> Result<Run, ExperimentError> {
     } else {
         Vec::new()
     };
-    Ok(Run { held, records, anatomy, own })
+    Ok(Run { held, records, anatomy, own, trained })
+}
+
+/// `texture`'s records on the photos it trained on: per (photo, detector) the mean best car
+/// score over the folds that trained on the photo, filed as a held-out record of the fold that
+/// holds the photo out (so it pairs with that fold's held-out scores) and named "optimized".
+fn trained_on(rows: &[ViewRow], texture: &str) -> Vec<ViewRecord> {
+    let mut out = Vec::new();
+    for h in rows.iter().filter(|r| r.role == "held-out" && r.texture == texture) {
+        let of: Vec<f64> = rows
+            .iter()
+            .filter(|r| r.role == "train" && r.texture == texture && r.view == h.view && r.detector == h.detector)
+            .map(|r| r.score as f64)
+            .collect();
+        if !of.is_empty() {
+            out.push(ViewRecord {
+                fold: h.fold,
+                role: "held-out",
+                view: h.view.clone(),
+                texture: OPTIMIZED.into(),
+                seed: 0,
+                detector: h.detector.clone(),
+                score: (of.iter().sum::<f64>() / of.len() as f64) as f32,
+            });
+        }
+    }
+    out
 }
 
 /// The optimized texture's held-out records of several runs of one label, each (fold, view,
@@ -335,7 +397,12 @@ pub fn table1_of(runs: &[(String, PathBuf, String)], against: &[String]) -> Resu
             None
         };
         let scores = averaged(&group, &dirs, OPTIMIZED, |r| &r.records)?;
-        groups.push(Group { label: label.clone(), scores, own, white });
+        let trained = if group.iter().all(|g| !g.trained.is_empty()) {
+            Some(averaged(&group, &dirs, OPTIMIZED, |r| &r.trained)?)
+        } else {
+            None
+        };
+        groups.push(Group { label: label.clone(), scores, own, white, trained });
     }
     // Each label against the baselines and the `against` labels, over one kind of per-view score.
     let pair_all = |mine_of: &dyn Fn(&Group) -> Option<&Vec<ViewRecord>>, baseline: &[ViewRecord]| {
@@ -368,8 +435,60 @@ pub fn table1_of(runs: &[(String, PathBuf, String)], against: &[String]) -> Resu
         groups.iter().flat_map(|g| g.scores.iter().map(|r| ViewRecord { texture: g.label.clone(), ..r.clone() })),
     );
     let own_box = if read[0].own.is_empty() { Vec::new() } else { pair_all(&|g| g.own.as_ref(), &read[0].own) };
+    let (mut trained_cells, mut trained_on, mut generalization) = (Vec::new(), Vec::new(), Vec::new());
+    for g in &groups {
+        let Some(trained) = &g.trained else { continue };
+        let as_difference = |p: Paired| Difference {
+            row: g.label.clone(),
+            against: p.against,
+            detector: p.detector,
+            white_box: p.white_box,
+            mean: p.mean,
+            lo: p.lo,
+            hi: p.hi,
+            views: p.views,
+        };
+        let mut records: Vec<ViewRecord> =
+            trained.iter().map(|r| ViewRecord { texture: TRAINED_ON.into(), ..r.clone() }).collect();
+        records.extend(g.scores.iter().cloned());
+        generalization.extend(
+            paired(&records, &g.white, OPTIMIZED).into_iter().filter(|p| p.against == TRAINED_ON).map(as_difference),
+        );
+        records.retain(|r| r.texture == TRAINED_ON);
+        records.extend(read[0].records.iter().filter(|r| r.texture != OPTIMIZED && r.texture != "original").cloned());
+        trained_on.extend(paired(&records, &g.white, TRAINED_ON).into_iter().map(as_difference));
+        for det in unique(trained.iter().map(|r| r.detector.clone())) {
+            // The held-out scores of the same photos as the trained-on ones.
+            let of_det: Vec<&ViewRecord> = trained.iter().filter(|r| r.detector == det).collect();
+            let same = |r: &ViewRecord| of_det.iter().any(|t| (t.fold, &t.view) == (r.fold, &r.view));
+            let held: Vec<f64> =
+                g.scores.iter().filter(|r| r.detector == det && same(r)).map(|r| r.score as f64).collect();
+            let views = of_det.len();
+            let t = of_det.iter().map(|r| r.score as f64).sum::<f64>() / views as f64;
+            let h = held.iter().sum::<f64>() / held.len() as f64;
+            let white_box = g.white.contains(&det);
+            trained_cells.push(TrainedCell {
+                row: g.label.clone(),
+                detector: det,
+                white_box,
+                trained_on: t,
+                held_out: h,
+                views,
+            });
+        }
+    }
     baselines.extend(cells);
-    Ok(Table1 { cells: baselines, differences, own_box, baseline_spread: spread, anatomy, views })
+    Ok(Table1 {
+        cells: baselines,
+        differences,
+        own_box,
+        baseline_spread: spread,
+        anatomy,
+        views,
+        trained_cells,
+        trained_on,
+        generalization,
+    })
 }
 
 /// `records` with each (fold, view, texture, detector)'s seeds averaged into one (seed 0), in
@@ -445,18 +564,43 @@ impl Table1 {
             }
             s.push('\n');
         }
-        s.push_str(&markdown_differences(&self.differences, &dets));
+        s.push_str(&markdown_differences(&self.differences, &dets, None));
+        s
+    }
+
+    /// The trained-on section: each label's mean best car score on the photos it trained on
+    /// and held out, then held-out − trained-on and trained-on − each baseline, paired over photos.
+    fn markdown_trained(&self) -> String {
+        let dets = unique(self.trained_cells.iter().map(|c| c.detector.clone()));
+        let mut s =
+            format!("| texture: trained on / held out | {} |\n|---|{}\n", dets.join(" | "), "---:|".repeat(dets.len()));
+        for row in unique(self.trained_cells.iter().map(|c| c.row.clone())) {
+            s.push_str(&format!("| {row} |"));
+            for d in &dets {
+                match self.trained_cells.iter().find(|c| c.row == row && &c.detector == d) {
+                    Some(c) => {
+                        let b = if c.white_box { "**" } else { "" };
+                        s.push_str(&format!(" {b}{:.3} / {:.3}{b} |", c.trained_on, c.held_out));
+                    }
+                    None => s.push_str(" – |"),
+                }
+            }
+            s.push('\n');
+        }
+        s.push_str(&markdown_differences(&self.generalization, &dets, Some("held out")));
+        s.push_str(&markdown_differences(&self.trained_on, &dets, Some(TRAINED_ON)));
         s
     }
 }
 
 /// One table of paired differences per baseline or `against` label: a row per label, a column
-/// per detector in `dets` (bold where the row trained against it).
-fn markdown_differences(diffs: &[Difference], dets: &[String]) -> String {
+/// per detector in `dets` (bold where the row trained against it); `mine` names the left side
+/// of each difference (by default "optimized", or "row" against another label).
+fn markdown_differences(diffs: &[Difference], dets: &[String], mine: Option<&str>) -> String {
     let header = format!("|---|{}\n", "---:|".repeat(dets.len()));
     let mut s = String::new();
     for against in unique(diffs.iter().map(|d| d.against.clone())) {
-        let what = if diffs.iter().any(|d| d.row == against) { "row" } else { "optimized" };
+        let what = mine.unwrap_or(if diffs.iter().any(|d| d.row == against) { "row" } else { "optimized" });
         s.push_str(&format!("\n| {what} − {against} | {} |\n{header}", dets.join(" | ")));
         for row in unique(diffs.iter().filter(|d| d.against == against).map(|d| d.row.clone())) {
             s.push_str(&format!("| {row} |"));
@@ -476,8 +620,9 @@ fn markdown_differences(diffs: &[Difference], dets: &[String]) -> String {
 }
 
 /// `pav table1`: builds the table of `runs` (paired also with the rows labelled `against`) and
-/// writes `table1.md`, `table1.csv`, `table1_paired.csv`, `table1_views.csv` and (when the runs wrote their boxes)
-/// `table1_anatomy.csv` and `table1_paired_own_box.csv` into `out`; returns the Markdown.
+/// writes `table1.md`, `table1.csv`, `table1_paired.csv`, `table1_views.csv`, `table1_trained.csv`,
+/// `table1_paired_trained.csv` and (when the runs wrote their boxes) `table1_anatomy.csv` and
+/// `table1_paired_own_box.csv` into `out`; returns the Markdown.
 pub fn table1_report(
     runs: &[(String, PathBuf, String)],
     against: &[String],
@@ -516,8 +661,43 @@ pub fn table1_report(
     if !t.own_box.is_empty() {
         crate::table::write_csv(&out.join("table1_paired_own_box.csv"), &t.own_box)?;
         let dets = unique(t.cells.iter().map(|c| c.detector.clone()));
-        md.push_str(&own_box_section(&markdown_differences(&t.own_box, &dets)));
+        md.push_str(&own_box_section(&markdown_differences(&t.own_box, &dets, None)));
+    }
+    if !t.trained_cells.is_empty() {
+        crate::table::write_csv(&out.join("table1_trained.csv"), &t.trained_cells)?;
+        let pairs: Vec<&Difference> = t.generalization.iter().chain(&t.trained_on).collect();
+        crate::table::write_csv(&out.join("table1_paired_trained.csv"), &pairs)?;
+        md.push_str(&format!("\n## On the photos each texture trained on\n\nEach photo trains in every fold but the one that holds it out. Per photo, a label's best car score averaged over the folds that trained on it (runs of a label averaged), next to the same photo held out (`table1_trained.csv`, `table1_paired_trained.csv`). Held out − trained-on is what a texture loses on a photo it has not seen; trained-on − a baseline says whether it beats that baseline even on the photos it was fitted to. Mean [95 % paired-bootstrap interval] over photos.\n\n{}", t.markdown_trained()));
     }
     super::write_markdown(out, "table1.md", &md)?;
     Ok(md)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(fold: usize, role: &str, view: &str, texture: &str, score: f32) -> ViewRow {
+        let (role, view, texture, detector) = (role.into(), view.into(), texture.into(), "d".into());
+        ViewRow { fold, role, view, texture, seed: 0, detector, score }
+    }
+
+    #[test]
+    fn a_photo_trained_on_in_several_folds_is_their_mean_filed_under_its_held_out_fold() {
+        // Three photos, three folds: each photo held out once and trained on in the other two.
+        let mut rows = Vec::new();
+        for (f, v) in ["a", "b", "c"].into_iter().enumerate() {
+            rows.push(row(f, "held-out", v, "mine", 0.9));
+            rows.push(row(f, "held-out", v, "other", 0.5));
+        }
+        rows.extend([row(1, "train", "a", "mine", 0.2), row(2, "train", "a", "mine", 0.4)]);
+        rows.extend([row(0, "train", "b", "mine", 0.1), row(2, "train", "b", "mine", 0.3)]);
+        rows.push(row(1, "train", "a", "other", 0.8));
+        let t = trained_on(&rows, "mine");
+        let got: Vec<(usize, &str, f32)> = t.iter().map(|r| (r.fold, r.view.as_str(), r.score)).collect();
+        assert_eq!(got.len(), 2, "c never trains on `mine`: {got:?}");
+        assert!(got[0].0 == 0 && got[0].1 == "a" && (got[0].2 - 0.3).abs() < 1e-6, "{got:?}");
+        assert!(got[1].0 == 1 && got[1].1 == "b" && (got[1].2 - 0.2).abs() < 1e-6, "{got:?}");
+        assert!(t.iter().all(|r| r.texture == OPTIMIZED && r.role == "held-out"));
+    }
 }
