@@ -128,7 +128,8 @@ pub struct LossConfig {
     pub gamma: f32,
     /// Objectness from which a prediction counts as a box in L1/L2.
     pub box_threshold: f32,
-    /// `"mean"` (the paper), `{ top_k = k }` or `{ softmax = τ }`.
+    /// `"mean"` (the paper), `{ top_k = k }`, `{ softmax = τ }` or `"log_max"` (RAUCA-E2E's
+    /// `−log(1 − s*)` without its IoU weight).
     #[serde(default = "mean")]
     pub reduce: Reduce,
     /// L2's set under `"mean"`: `"arg_max"` (the paper, the default) or `"scored"` (every
@@ -486,6 +487,8 @@ mod tests {
         assert_eq!(c.loss.reduce, Reduce::TopK(3));
         let c = variant("reduce = \"mean\"", "reduce = { softmax = 0.1 }").unwrap();
         assert_eq!(c.loss.reduce, Reduce::Softmax(0.1));
+        let c = variant("reduce = \"mean\"", "reduce = \"log_max\"").unwrap();
+        assert_eq!(c.loss.reduce, Reduce::LogMax);
         for (bad, key) in
             [("{ top_k = 0 }", "top_k"), ("{ softmax = -1.0 }", "softmax"), ("\"max\"", "unknown variant")]
         {

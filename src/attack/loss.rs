@@ -21,6 +21,12 @@
 //! predictions, since a detector reports a car when its single best box scores high: L1 over the
 //! objectness values, L2 over the detection scores `objectness × target confidence`.
 //!
+//! [`Reduce::LogMax`] is RAUCA-E2E's loss without its IoU weight: one term, `−log(1 − s*)` of
+//! the best target detection score over all predictions, reported as L2 (L1 is 0). RAUCA-E2E
+//! weights each score by its box's overlap with the car's box first; pav's white-box graphs
+//! carry no boxes for the heads cut to their class branch (YOLOv8n, DEIMv2), so here a
+//! background car that outscores the target holds the maximum and the step pushes nothing.
+//!
 //! [`Proposals::Scored`] changes the Mean's proposals to the set the digital metrics count: every
 //! prediction whose detection score for a target class reaches `box_threshold`, whatever its most
 //! likely class. The paper's set leaves out a box rated "truck 0.4, car 0.15", which P@0.5 and the
@@ -48,7 +54,13 @@ pub enum Reduce {
     TopK(usize),
     /// `Σ softmax(v/τ)·v`: a smooth maximum with temperature τ.
     Softmax(f32),
+    /// `−log(1 − s*)`, s* the best target detection score: one term, L2 (see the module doc).
+    LogMax,
 }
+
+/// The largest score [`Reduce::LogMax`] takes: `−log(1 − s)` and its slope `1/(1 − s)` stay
+/// finite (at most 9.2 and 10⁴) where a detector is certain.
+const LOG_MAX_CAP: f32 = 1.0 - 1e-4;
 
 /// Which predictions L2 averages over under [`Reduce::Mean`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Deserialize)]
@@ -247,6 +259,16 @@ impl Predictions {
     }
 }
 
+/// The mean of the `k` largest of the non-empty `v` (ties to the first) and its weights in `w`.
+fn top_k(v: &[f32], k: usize, mut w: Vec<f32>) -> (f32, Vec<f32>) {
+    let mut idx: Vec<usize> = (0..v.len()).collect();
+    idx.sort_by(|&a, &b| v[b].total_cmp(&v[a]).then(a.cmp(&b)));
+    let top = &idx[..k.clamp(1, v.len())];
+    let n = top.len() as f32;
+    top.iter().for_each(|&i| w[i] = 1.0 / n);
+    (top.iter().map(|&i| v[i]).sum::<f32>() / n, w)
+}
+
 /// Weights of a reduction over `v`: the value and `∂value/∂v` (dense).
 fn reduce(v: &[f32], how: Reduce) -> (f32, Vec<f32>) {
     let mut w = vec![0f32; v.len()];
@@ -259,14 +281,8 @@ fn reduce(v: &[f32], how: Reduce) -> (f32, Vec<f32>) {
             w.fill(1.0 / n);
             (v.iter().sum::<f32>() / n, w)
         }
-        Reduce::TopK(k) => {
-            let mut idx: Vec<usize> = (0..v.len()).collect();
-            idx.sort_by(|&a, &b| v[b].total_cmp(&v[a]).then(a.cmp(&b)));
-            let top = &idx[..k.clamp(1, v.len())];
-            let n = top.len() as f32;
-            top.iter().for_each(|&i| w[i] = 1.0 / n);
-            (top.iter().map(|&i| v[i]).sum::<f32>() / n, w)
-        }
+        Reduce::TopK(k) => top_k(v, k, w),
+        Reduce::LogMax => top_k(v, 1, w),
         Reduce::Softmax(tau) => {
             // Shifted by the maximum: exp never overflows, and the largest weight is exp(0) = 1.
             let m = v.iter().copied().fold(f32::NEG_INFINITY, f32::max);
@@ -334,6 +350,22 @@ impl DetectionLoss {
                 proposals.iter().zip(&w2).for_each(|(&(i, k), &w)| dcls.push((i, k, beta * w)));
                 (l1, l2)
             }
+            Reduce::LogMax => {
+                let scores: Vec<f32> = (0..n).map(|i| p.score(i, tk[i].1).0).collect();
+                let (best, w) = reduce(&scores, Reduce::LogMax);
+                match w.iter().position(|&x| x != 0.0) {
+                    Some(i) if best.is_finite() => {
+                        let s = best.clamp(0.0, LOG_MAX_CAP);
+                        // d(−log(1 − s))/ds = 1/(1 − s); zero past the cap, where the value is held.
+                        let slope = if best < LOG_MAX_CAP { 1.0 / (1.0 - s) } else { 0.0 };
+                        let (_, d_obj, d_car) = p.score(i, tk[i].1);
+                        dobj[i] += beta * slope * d_obj;
+                        dcls.push((i, tk[i].0, beta * slope * d_car));
+                        (0.0, -(1.0 - s).ln())
+                    }
+                    _ => (0.0, 0.0),
+                }
+            }
             how => {
                 let (l1, w1) = reduce(&p.obj, how);
                 w1.iter().enumerate().for_each(|(i, &w)| dobj[i] += w);
@@ -378,9 +410,9 @@ mod tests {
     }
 
     /// Each reduction, and the mean over the metrics' set, for the gradient checks.
-    fn every_loss() -> [DetectionLoss; 4] {
+    fn every_loss() -> [DetectionLoss; 5] {
         let scored = DetectionLoss { proposals: Proposals::Scored, ..loss(Reduce::Mean) };
-        [loss(Reduce::Mean), loss(Reduce::TopK(2)), loss(Reduce::Softmax(0.2)), scored]
+        [loss(Reduce::Mean), loss(Reduce::TopK(2)), loss(Reduce::Softmax(0.2)), scored, loss(Reduce::LogMax)]
     }
 
     fn eval(l: &DetectionLoss, m: &HeadMap, beta: f32) -> (LossTerms, Vec<Vec<f32>>) {
@@ -415,6 +447,19 @@ mod tests {
         let (t, _) = eval(&loss(Reduce::Softmax(1e6)), &m, 1.0);
         let mean_obj = [0.0, 2.0, -5.0, -5.0, 2.0, -5.0, -5.0, -5.0].iter().map(|&x| s(x)).sum::<f32>() / 8.0;
         assert!((t.l1 - mean_obj).abs() < 1e-5, "{t:?}");
+        // RAUCA-E2E's shape: one term, −log(1 − best detection score), its gradient on that
+        // prediction only: anchor 1, cell 0 (objectness s(2), car s(3)), whose objectness and car
+        // logits sit at 32 + 4·4 and 32 + 7·4 of the map; slope 1/(1 − s) through each factor.
+        let (t, g) = eval(&loss(Reduce::LogMax), &m, 1.0);
+        assert!(t.l1 == 0.0 && (t.l2 + (1.0 - s(2.0) * s(3.0)).ln()).abs() < 1e-6, "{t:?}");
+        let nonzero: Vec<usize> = (0..g[0].len()).filter(|&i| g[0][i] != 0.0).collect();
+        assert_eq!(nonzero, [48, 60]);
+        let slope = 1.0 / (1.0 - s(2.0) * s(3.0));
+        let want_obj = slope * s(3.0) * s(2.0) * (1.0 - s(2.0));
+        assert!((g[0][48] - want_obj).abs() < 1e-4, "{} vs {want_obj}", g[0][48]);
+        // A certain detection (score past the cap) is held at the cap's value, with a zero slope.
+        let (t, g) = eval(&loss(Reduce::LogMax), &(vec![1e4; 2 * 8 * 4], (2, 2)), 1.0);
+        assert!((t.l2 + (1.0 - LOG_MAX_CAP).ln()).abs() < 1e-3 && g[0].iter().all(|v| *v == 0.0), "{t:?}");
     }
 
     #[test]
@@ -479,7 +524,7 @@ mod tests {
         let m = map([1e4, -1e4, 1e4, -1e4, 1e4, 1e4, -1e4, -1e4], [2, 2, 0, 2, 1, 2, 2, 2]);
         let rows: Vec<f32> =
             (0..6).flat_map(|r| [0.0, 0.0, 0.0, 0.0, (r % 2) as f32, 0.0, (r % 3 == 0) as u8 as f32, 1.0]).collect();
-        for how in [Reduce::Mean, Reduce::TopK(3), Reduce::Softmax(0.05), Reduce::Softmax(1e-6)] {
+        for how in [Reduce::Mean, Reduce::TopK(3), Reduce::Softmax(0.05), Reduce::Softmax(1e-6), Reduce::LogMax] {
             let (t, g) = eval(&loss(how), &m, 1.0);
             assert!(t.l1.is_finite() && t.l2.is_finite() && g[0].iter().all(|v| v.is_finite()), "{how:?} {t:?}");
             let p = Predictions::yolox(&rows, 3).unwrap();
