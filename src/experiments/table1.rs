@@ -60,6 +60,14 @@ pub struct Difference {
     pub views: usize,
 }
 
+impl Difference {
+    /// The paired comparison `p` as a row of `row`.
+    fn of(row: &str, p: Paired) -> Self {
+        let Paired { against, detector, white_box, mean, lo, hi, views, .. } = p;
+        Difference { row: row.to_string(), against, detector, white_box, mean, lo, hi, views }
+    }
+}
+
 /// The transfer table of several runs.
 #[derive(Clone, Debug)]
 pub struct Table1 {
@@ -416,16 +424,7 @@ pub fn table1_of(runs: &[(String, PathBuf, String)], against: &[String]) -> Resu
                 let theirs = groups.iter().find(|g| &g.label == a).and_then(mine_of);
                 records.extend(theirs.into_iter().flatten().map(|r| ViewRecord { texture: a.clone(), ..r.clone() }));
             }
-            out.extend(paired(&records, white, OPTIMIZED).into_iter().map(|p: Paired| Difference {
-                row: label.clone(),
-                against: p.against,
-                detector: p.detector,
-                white_box: p.white_box,
-                mean: p.mean,
-                lo: p.lo,
-                hi: p.hi,
-                views: p.views,
-            }));
+            out.extend(paired(&records, white, OPTIMIZED).into_iter().map(|p| Difference::of(label, p)));
         }
         out
     };
@@ -438,16 +437,7 @@ pub fn table1_of(runs: &[(String, PathBuf, String)], against: &[String]) -> Resu
     let (mut trained_cells, mut trained_on, mut generalization) = (Vec::new(), Vec::new(), Vec::new());
     for g in &groups {
         let Some(trained) = &g.trained else { continue };
-        let as_difference = |p: Paired| Difference {
-            row: g.label.clone(),
-            against: p.against,
-            detector: p.detector,
-            white_box: p.white_box,
-            mean: p.mean,
-            lo: p.lo,
-            hi: p.hi,
-            views: p.views,
-        };
+        let as_difference = |p: Paired| Difference::of(&g.label, p);
         let mut records: Vec<ViewRecord> =
             trained.iter().map(|r| ViewRecord { texture: TRAINED_ON.into(), ..r.clone() }).collect();
         records.extend(g.scores.iter().cloned());
