@@ -131,7 +131,7 @@ struct CrossvalRow {
 }
 
 /// One row of `crossval_views.csv`, as read back.
-#[derive(Clone, serde::Deserialize)]
+#[derive(serde::Deserialize)]
 struct ViewRow {
     fold: usize,
     role: String,
@@ -536,24 +536,15 @@ impl Table1 {
         let dets = unique(self.cells.iter().map(|c| c.detector.clone()));
         let header = format!("|---|{}\n", "---:|".repeat(dets.len()));
         let mut s = format!("| texture (held-out views) | {} |\n{header}", dets.join(" | "));
-        for row in unique(self.cells.iter().map(|c| c.row.clone())) {
-            s.push_str(&format!("| {row} |"));
-            for d in &dets {
-                match self.cells.iter().find(|c| c.row == row && &c.detector == d) {
-                    Some(c) => {
-                        let b = if c.white_box { "**" } else { "" };
-                        let range = if c.runs > 1 {
-                            format!(" ({:.0}–{:.0})", 100.0 * c.p50_min, 100.0 * c.p50_max)
-                        } else {
-                            String::new()
-                        };
-                        s.push_str(&format!(" {b}{:.3} / {:.0} %{range}{b} |", c.mean_score, 100.0 * c.p50));
-                    }
-                    None => s.push_str(" – |"),
-                }
-            }
-            s.push('\n');
-        }
+        s.push_str(&grid(&unique(self.cells.iter().map(|c| c.row.clone())), &dets, |row, d| {
+            let c = self.cells.iter().find(|c| c.row == row && c.detector == d)?;
+            let range = if c.runs > 1 {
+                format!(" ({:.0}–{:.0})", 100.0 * c.p50_min, 100.0 * c.p50_max)
+            } else {
+                String::new()
+            };
+            Some((format!("{:.3} / {:.0} %{range}", c.mean_score, 100.0 * c.p50), c.white_box))
+        }));
         s.push_str(&markdown_differences(&self.differences, &dets, None));
         s
     }
@@ -564,19 +555,10 @@ impl Table1 {
         let dets = unique(self.trained_cells.iter().map(|c| c.detector.clone()));
         let mut s =
             format!("| texture: trained on / held out | {} |\n|---|{}\n", dets.join(" | "), "---:|".repeat(dets.len()));
-        for row in unique(self.trained_cells.iter().map(|c| c.row.clone())) {
-            s.push_str(&format!("| {row} |"));
-            for d in &dets {
-                match self.trained_cells.iter().find(|c| c.row == row && &c.detector == d) {
-                    Some(c) => {
-                        let b = if c.white_box { "**" } else { "" };
-                        s.push_str(&format!(" {b}{:.3} / {:.3}{b} |", c.trained_on, c.held_out));
-                    }
-                    None => s.push_str(" – |"),
-                }
-            }
-            s.push('\n');
-        }
+        s.push_str(&grid(&unique(self.trained_cells.iter().map(|c| c.row.clone())), &dets, |row, d| {
+            let c = self.trained_cells.iter().find(|c| c.row == row && c.detector == d)?;
+            Some((format!("{:.3} / {:.3}", c.trained_on, c.held_out), c.white_box))
+        }));
         s.push_str(&markdown_differences(&self.generalization, &dets, Some("held out")));
         s.push_str(&markdown_differences(&self.trained_on, &dets, Some(TRAINED_ON)));
         s
@@ -592,19 +574,31 @@ fn markdown_differences(diffs: &[Difference], dets: &[String], mine: Option<&str
     for against in unique(diffs.iter().map(|d| d.against.clone())) {
         let what = mine.unwrap_or(if diffs.iter().any(|d| d.row == against) { "row" } else { "optimized" });
         s.push_str(&format!("\n| {what} − {against} | {} |\n{header}", dets.join(" | ")));
-        for row in unique(diffs.iter().filter(|d| d.against == against).map(|d| d.row.clone())) {
-            s.push_str(&format!("| {row} |"));
-            for d in dets {
-                match diffs.iter().find(|x| x.row == row && &x.detector == d && x.against == against) {
-                    Some(p) => {
-                        let b = if p.white_box { "**" } else { "" };
-                        s.push_str(&format!(" {b}{:+.3} [{:+.3}, {:+.3}]{b} |", p.mean, p.lo, p.hi));
-                    }
-                    None => s.push_str(" – |"),
+        let rows = unique(diffs.iter().filter(|d| d.against == against).map(|d| d.row.clone()));
+        s.push_str(&grid(&rows, dets, |row, d| {
+            let p = diffs.iter().find(|x| x.row == row && x.detector == d && x.against == against)?;
+            Some((format!("{:+.3} [{:+.3}, {:+.3}]", p.mean, p.lo, p.hi), p.white_box))
+        }));
+    }
+    s
+}
+
+/// Markdown table rows: one per entry of `rows`, a cell per detector of `dets` from `cell` (its
+/// text, bold when the flag is set), "–" where `cell` gives none.
+fn grid(rows: &[String], dets: &[String], cell: impl Fn(&str, &str) -> Option<(String, bool)>) -> String {
+    let mut s = String::new();
+    for row in rows {
+        s.push_str(&format!("| {row} |"));
+        for d in dets {
+            match cell(row, d) {
+                Some((text, bold)) => {
+                    let b = if bold { "**" } else { "" };
+                    s.push_str(&format!(" {b}{text}{b} |"));
                 }
+                None => s.push_str(" – |"),
             }
-            s.push('\n');
         }
+        s.push('\n');
     }
     s
 }
