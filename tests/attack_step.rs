@@ -26,6 +26,7 @@ fn setup(size: usize, detector: &str) -> (OptimizeConfig, Setup, WhiteBox) {
         target: d.target_classes.clone(),
         reduce: Reduce::Mean,
         proposals: Proposals::ArgMax,
+        iou: false,
     };
     let wb = WhiteBox::load(&d, loss, size).unwrap();
     (cfg, s, wb)
@@ -53,14 +54,15 @@ fn an_ensemble_sums_its_members_and_a_drawn_subset_keeps_the_loss_scale() {
     let v = &s.train[1];
     let grey = vec![0.5f32; s.tex_size * s.tex_size * 3];
     let img = v.composite(&grey, &s.eval_scene());
-    let (a, b) = (tiny.loss_and_grad(&img, v.size, 1.0).unwrap(), nano.loss_and_grad(&img, v.size, 1.0).unwrap());
+    let (a, b) =
+        (tiny.loss_and_grad(&img, v.size, 1.0, None).unwrap(), nano.loss_and_grad(&img, v.size, 1.0, None).unwrap());
     assert!(a.loss.l1 > 0.0 && b.loss.l1 > 0.0, "both should see the grey car: {:?} {:?}", a.loss, b.loss);
     let e = Ensemble { members: vec![(tiny, 1.0), (nano, 3.0)] };
     let close = |x: f32, y: f32| (x - y).abs() <= 1e-5 * (1.0 + y.abs());
     // All members: 1·a + 3·b. Only YOLOX-Nano: its weight scaled to the total 4, the other absent.
-    let all = e.loss_and_grad(&img, v.size, 1.0).unwrap();
+    let all = e.loss_and_grad(&img, v.size, 1.0, None).unwrap();
     assert!(close(all.sum.loss.l1, a.loss.l1 + 3.0 * b.loss.l1), "{:?}", all.sum.loss);
-    let one = e.loss_and_grad_of(&[1], &img, v.size, 1.0).unwrap();
+    let one = e.loss_and_grad_of(&[1], &img, v.size, 1.0, None).unwrap();
     assert!(close(one.sum.loss.l1, 4.0 * b.loss.l1) && close(one.sum.loss.l2, 4.0 * b.loss.l2), "{:?}", one.sum.loss);
     assert!(one.per_detector[0].is_none() && one.per_detector[1].as_ref() == Some(&b.loss));
     assert!(one.sum.grad.iter().zip(&b.grad).all(|(g, x)| close(*g, 4.0 * x)));
@@ -100,7 +102,7 @@ fn check_chain(detector: &str, zoom: Option<f32>) {
     if let Some(z) = &z {
         eprintln!("zoomed to {}² of {}²", z.scaled(), v.size);
     }
-    let g = wb.loss_and_grad(&img, v.size, 1.0).unwrap();
+    let g = wb.loss_and_grad(&img, v.size, 1.0, None).unwrap();
 
     eprintln!("{:?}, forward {:.0} ms, backward {:.0} ms", g.loss, g.forward_ms, g.backward_ms);
     assert!(

@@ -35,7 +35,7 @@ fn the_class_branch_forward_equals_the_surrogate_on_real_frames() {
     let path = tmp.path().join("float.onnx");
     std::fs::write(&path, surrogate().to_bytes()).unwrap();
     let mut plain = OnnxDetector::new(DetectorConfig { model: path, ..config() }, 2).unwrap();
-    let branch = class_branch(surrogate()).unwrap();
+    let branch = class_branch(surrogate(), false).unwrap();
     // The box decoder (Softmax, Div, Sub) is gone with the boxes.
     assert!(branch.nodes.iter().all(|n| !["Softmax", "Div", "Sub"].contains(&n.op_type.as_str())));
     let d = differentiate_with(&branch, &[1, 3, 640, 640], Kernels::Fused).unwrap_or_else(|e| panic!("{e}"));
@@ -55,7 +55,7 @@ fn the_class_branch_forward_equals_the_surrogate_on_real_frames() {
 
 #[test]
 fn the_class_branch_gradient_matches_central_differences() {
-    let branch = class_branch(surrogate()).unwrap();
+    let branch = class_branch(surrogate(), false).unwrap();
     let input = prepare(&frame("data12503.npz").image, &config().input).0;
     let d = differentiate_with(&branch, &[1, 3, 640, 640], Kernels::Fused).unwrap();
     let mut g = GradSession::new("yolov8n class branch", d, 2).unwrap();
@@ -89,6 +89,7 @@ fn the_int8_model_trains_only_as_a_named_surrogate() {
         target: config().target_classes.clone(),
         reduce: Reduce::Mean,
         proposals: Proposals::ArgMax,
+        iou: false,
     };
     let e = WhiteBox::load(&config(), loss.clone(), 416).err().expect("refused").to_string();
     assert!(e.contains("surrogate = true"), "{e}");
@@ -97,7 +98,7 @@ fn the_int8_model_trains_only_as_a_named_surrogate() {
     // A real photo, as a 416² composite: the car is found, and the loss and gradient are finite.
     let img = frame("data12503.npz").image;
     let comp = composite(&img, 416);
-    let g = wb.loss_and_grad(&comp, 416, 1.0).unwrap();
+    let g = wb.loss_and_grad(&comp, 416, 1.0, None).unwrap();
     eprintln!("{:?}", g.loss);
     assert!(g.loss.max_score > 0.5 && g.loss.proposals > 0, "{:?}", g.loss);
     assert!(g.grad.iter().all(|v| v.is_finite()) && g.grad.iter().any(|v| *v != 0.0));

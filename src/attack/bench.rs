@@ -60,12 +60,13 @@ pub fn time_step(
             target: detector.target_classes.clone(),
             reduce: Reduce::Mean,
             proposals: Proposals::ArgMax,
+            iou: false,
         };
         let o = WhiteBoxOptions { composite: size, input: Some(size), threads, surrogate: false };
         let wb = WhiteBox::with_options(detector, loss, o)?;
         let img = composite(size);
         for _ in 0..3 {
-            wb.loss_and_grad(&img, size, 1.0)?;
+            wb.loss_and_grad(&img, size, 1.0, None)?;
         }
         let (mut fwd, mut step, mut sf, mut sb) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for _ in 0..repeats.max(1) {
@@ -73,7 +74,7 @@ pub fn time_step(
             wb.loss(&img, size)?;
             fwd.push(t.elapsed().as_secs_f64() * 1e3);
             let t = Instant::now();
-            let g = wb.loss_and_grad(&img, size, 1.0)?;
+            let g = wb.loss_and_grad(&img, size, 1.0, None)?;
             step.push(t.elapsed().as_secs_f64() * 1e3);
             sf.push(g.forward_ms);
             sb.push(g.backward_ms);

@@ -129,9 +129,13 @@ pub struct LossConfig {
     /// Objectness from which a prediction counts as a box in L1/L2.
     pub box_threshold: f32,
     /// `"mean"` (the paper), `{ top_k = k }`, `{ softmax = τ }` or `"log_max"` (RAUCA-E2E's
-    /// `−log(1 − s*)` without its IoU weight).
+    /// `−log(1 − s*)`).
     #[serde(default = "mean")]
     pub reduce: Reduce,
+    /// Weight each detection score by its box's IoU with the car's box (RAUCA-E2E's weight), so
+    /// a background car does not count; for the score reductions only.
+    #[serde(default)]
+    pub iou: bool,
     /// L2's set under `"mean"`: `"arg_max"` (the paper, the default) or `"scored"` (every
     /// prediction whose car score reaches `box_threshold`, as the metrics count).
     #[serde(default)]
@@ -393,6 +397,12 @@ impl OptimizeConfig {
                     .into(),
             );
         }
+        if l.iou && l.reduce == Reduce::Mean {
+            return Err(
+                "loss.iou weights detection scores, which reduce = \"mean\" does not read; use it with log_max, top_k or softmax"
+                    .into(),
+            );
+        }
         if !(0.0..=1.0).contains(&l.box_threshold) {
             return Err(format!("loss.box_threshold must be in [0, 1], got {}", l.box_threshold));
         }
@@ -499,6 +509,9 @@ mod tests {
         assert_eq!(variant("reduce = \"mean\"", scored).unwrap().loss.proposals, Proposals::Scored);
         let e = variant("reduce = \"mean\"", "reduce = { top_k = 1 }\nproposals = \"scored\"").unwrap_err().to_string();
         assert!(e.contains("loss.proposals"), "{e}");
+        assert!(variant("reduce = \"mean\"", "reduce = \"log_max\"\niou = true").unwrap().loss.iou);
+        let e = variant("reduce = \"mean\"", "reduce = \"mean\"\niou = true").unwrap_err().to_string();
+        assert!(e.contains("loss.iou"), "{e}");
         let c = variant("init = 0.5", "init = \"peer.png\"").unwrap();
         assert_eq!(c.mesh.init, Init::File(dir.path().join("peer.png")));
         assert_eq!(variant("init = 0.5", "init = \"random\"").unwrap().mesh.init, Init::Named(InitName::Random));

@@ -21,11 +21,15 @@
 //! predictions, since a detector reports a car when its single best box scores high: L1 over the
 //! objectness values, L2 over the detection scores `objectness × target confidence`.
 //!
-//! [`Reduce::LogMax`] is RAUCA-E2E's loss without its IoU weight: one term, `−log(1 − s*)` of
-//! the best target detection score over all predictions, reported as L2 (L1 is 0). RAUCA-E2E
-//! weights each score by its box's overlap with the car's box first; pav's white-box graphs
-//! carry no boxes for the heads cut to their class branch (YOLOv8n, DEIMv2), so here a
-//! background car that outscores the target holds the maximum and the step pushes nothing.
+//! [`Reduce::LogMax`] is RAUCA-E2E's loss: one term, `−log(1 − s*)` of the best target detection
+//! score over all predictions, reported as L2 (L1 is 0). Without a weight a background car that
+//! outscores the target holds the maximum and the step pushes nothing the texture can change;
+//! [`Predictions::weigh`] multiplies each prediction's detection score by its box's IoU with the
+//! car's box first, as RAUCA-E2E does (`loss.iou`). The weight is held constant: the gradient
+//! goes through the scores, not the boxes (the box branches of the YOLOv8n and DEIMv2 graphs are
+//! computed without a gradient), so a step lowers the car's scores and does not move its boxes
+//! off the car. Under the score reductions (top-k, softmax, log-max) the weight enters L2's
+//! scores; the reported `max_score` stays the unweighted best score.
 //!
 //! [`Proposals::Scored`] changes the Mean's proposals to the set the digital metrics count: every
 //! prediction whose detection score for a target class reaches `box_threshold`, whatever its most
@@ -33,6 +37,8 @@
 //! mean best car score still count as a car at 0.15 (`detect::decode::Proposals::target_detections`); in the
 //! second half of a session-16 run, 21 of DEIMv2's 127 steps had no paper proposal while its
 //! best car score was ≥ 0.05, so L2 pushed nothing there.
+
+use crate::detect::nms::iou;
 
 /// Sigmoid as `(1 + tanh(x/2))/2`, and its derivative `(1 − tanh²(x/2))/4`: both finite for every
 /// finite logit, where `1/(1 + exp(−x))` makes a NaN gradient below x ≈ −88 in f32.
@@ -84,6 +90,8 @@ pub struct DetectionLoss {
     pub reduce: Reduce,
     /// L2's set under [`Reduce::Mean`].
     pub proposals: Proposals,
+    /// Whether a white box weights scores by IoU with the car's box ([`Predictions::weigh`]).
+    pub iou: bool,
 }
 
 /// L1 and L2 with the set sizes and the strongest target detection, for logs.
@@ -134,6 +142,8 @@ pub struct Predictions {
     /// Whether the head has objectness (false: objectness is the largest class probability and
     /// the detection score is the target probability alone).
     objectness: bool,
+    /// Per prediction, the constant its detection score is weighted by in the loss (none: 1).
+    weight: Option<Vec<f32>>,
 }
 
 impl Predictions {
@@ -142,7 +152,15 @@ impl Predictions {
         if maps.len() != anchors.len() {
             return Err(HeadShapeError(format!("{} head maps for {} heads", maps.len(), anchors.len())));
         }
-        let mut p = Predictions { classes, raw: Raw::Logit, obj: vec![], cls: vec![], at: vec![], objectness: true };
+        let mut p = Predictions {
+            classes,
+            raw: Raw::Logit,
+            obj: vec![],
+            cls: vec![],
+            at: vec![],
+            objectness: true,
+            weight: None,
+        };
         for (output, ((map, (h, w)), &a)) in maps.iter().zip(anchors).enumerate() {
             let hw = h * w;
             if map.len() != a * (5 + classes) * hw {
@@ -168,8 +186,15 @@ impl Predictions {
         if out.len() % cols != 0 {
             return Err(HeadShapeError(format!("{} values are not rows of 5 + {classes}", out.len())));
         }
-        let mut p =
-            Predictions { classes, raw: Raw::Probability, obj: vec![], cls: vec![], at: vec![], objectness: true };
+        let mut p = Predictions {
+            classes,
+            raw: Raw::Probability,
+            obj: vec![],
+            cls: vec![],
+            at: vec![],
+            objectness: true,
+            weight: None,
+        };
         for r in 0..out.len() / cols {
             p.push(out, At { output: 0, obj: r * cols + 4, cls0: r * cols + 5, stride: 1 });
         }
@@ -183,8 +208,15 @@ impl Predictions {
             return Err(HeadShapeError(format!("{} values are not {classes} class rows", scores.len())));
         }
         let n = scores.len() / classes;
-        let mut p =
-            Predictions { classes, raw: Raw::Probability, obj: vec![], cls: vec![], at: vec![], objectness: false };
+        let mut p = Predictions {
+            classes,
+            raw: Raw::Probability,
+            obj: vec![],
+            cls: vec![],
+            at: vec![],
+            objectness: false,
+            weight: None,
+        };
         for i in 0..n {
             // The largest class probability stands for objectness; ties go to the first class.
             let k = (0..classes).fold(0, |m, k| if scores[k * n + i] > scores[m * n + i] { k } else { m });
@@ -200,7 +232,15 @@ impl Predictions {
         if classes == 0 || logits.len() % classes != 0 {
             return Err(HeadShapeError(format!("{} values are not queries of {classes} classes", logits.len())));
         }
-        let mut p = Predictions { classes, raw: Raw::Logit, obj: vec![], cls: vec![], at: vec![], objectness: false };
+        let mut p = Predictions {
+            classes,
+            raw: Raw::Logit,
+            obj: vec![],
+            cls: vec![],
+            at: vec![],
+            objectness: false,
+            weight: None,
+        };
         for q in 0..logits.len() / classes {
             let row = &logits[q * classes..(q + 1) * classes];
             let k = (0..classes).fold(0, |m, k| if row[k] > row[m] { k } else { m });
@@ -217,6 +257,37 @@ impl Predictions {
         } else {
             (car, 0.0, 1.0)
         }
+    }
+
+    /// The detection score of prediction `i` and its derivatives, times the prediction's weight.
+    fn weighted(&self, i: usize, car: f32) -> (f32, f32, f32) {
+        let (s, d_obj, d_car) = self.score(i, car);
+        match &self.weight {
+            Some(w) => (w[i] * s, w[i] * d_obj, w[i] * d_car),
+            None => (s, d_obj, d_car),
+        }
+    }
+
+    /// Each prediction's best detection score over the `targets` classes (unweighted).
+    pub fn target_scores(&self, targets: &[usize]) -> Vec<f32> {
+        let c = self.classes;
+        (0..self.len())
+            .map(|i| {
+                let car = targets.iter().filter(|&&k| k < c).map(|&k| self.cls[i * c + k]).fold(0f32, f32::max);
+                self.score(i, car).0
+            })
+            .collect()
+    }
+
+    /// Weights each prediction's detection score in the loss by the IoU of its box (`boxes`, one
+    /// per prediction in order, xyxy) with `car` (xyxy, the same pixels): see the module doc.
+    pub fn weigh(&mut self, boxes: &[[f32; 4]], car: [f32; 4]) -> Result<(), HeadShapeError> {
+        if boxes.len() != self.len() {
+            return Err(HeadShapeError(format!("{} boxes for {} predictions", boxes.len(), self.len())));
+        }
+        let w = boxes.iter().map(|b| if b.iter().all(|v| v.is_finite()) { iou(b, &car) } else { 0.0 }).collect();
+        self.weight = Some(w);
+        Ok(())
     }
 
     fn push(&mut self, raw: &[f32], at: At) {
@@ -351,14 +422,14 @@ impl DetectionLoss {
                 (l1, l2)
             }
             Reduce::LogMax => {
-                let scores: Vec<f32> = (0..n).map(|i| p.score(i, tk[i].1).0).collect();
+                let scores: Vec<f32> = (0..n).map(|i| p.weighted(i, tk[i].1).0).collect();
                 let (best, w) = reduce(&scores, Reduce::LogMax);
                 match w.iter().position(|&x| x != 0.0) {
                     Some(i) if best.is_finite() => {
                         let s = best.clamp(0.0, LOG_MAX_CAP);
                         // d(−log(1 − s))/ds = 1/(1 − s); zero past the cap, where the value is held.
                         let slope = if best < LOG_MAX_CAP { 1.0 / (1.0 - s) } else { 0.0 };
-                        let (_, d_obj, d_car) = p.score(i, tk[i].1);
+                        let (_, d_obj, d_car) = p.weighted(i, tk[i].1);
                         dobj[i] += beta * slope * d_obj;
                         dcls.push((i, tk[i].0, beta * slope * d_car));
                         (0.0, -(1.0 - s).ln())
@@ -369,11 +440,11 @@ impl DetectionLoss {
             how => {
                 let (l1, w1) = reduce(&p.obj, how);
                 w1.iter().enumerate().for_each(|(i, &w)| dobj[i] += w);
-                let scores: Vec<f32> = (0..n).map(|i| p.score(i, tk[i].1).0).collect();
+                let scores: Vec<f32> = (0..n).map(|i| p.weighted(i, tk[i].1).0).collect();
                 let (l2, w2) = reduce(&scores, how);
                 for (i, &w) in w2.iter().enumerate() {
                     if w != 0.0 {
-                        let (_, d_obj, d_car) = p.score(i, tk[i].1);
+                        let (_, d_obj, d_car) = p.weighted(i, tk[i].1);
                         dobj[i] += beta * w * d_obj;
                         dcls.push((i, tk[i].0, beta * w * d_car));
                     }
@@ -406,7 +477,7 @@ mod tests {
     }
 
     fn loss(reduce: Reduce) -> DetectionLoss {
-        DetectionLoss { box_threshold: 0.5, target: vec![2], reduce, proposals: Proposals::ArgMax }
+        DetectionLoss { box_threshold: 0.5, target: vec![2], reduce, proposals: Proposals::ArgMax, iou: false }
     }
 
     /// Each reduction, and the mean over the metrics' set, for the gradient checks.
@@ -641,5 +712,45 @@ mod tests {
             }
         }
         assert!(Predictions::detr(&logits[..11], 3).is_err());
+    }
+
+    #[test]
+    fn an_iou_weight_leaves_a_background_car_out_of_the_maximum_with_an_exact_gradient() {
+        // The DETR queries above: query 0 is the best car (logit 1.4) but its box lies off the
+        // car; query 2 (car logit 0.1) overlaps it by a third, query 3 (−2.9) by two thirds.
+        let logits: Vec<f32> = vec![0.3, -2.0, 1.4, 0.9, -1.1, 0.2, -0.6, 0.4, 0.1, -3.0, -2.5, -2.9];
+        let car = [10.0, 10.0, 50.0, 30.0];
+        let boxes = [[60.0, 0.0, 90.0, 20.0], [0.0, 0.0, 5.0, 5.0], [30.0, 10.0, 70.0, 30.0], [10.0, 10.0, 50.0, 40.0]];
+        let prob = |x: f32| sigmoid(x).0;
+        let weighed = |v: &[f32]| {
+            let mut p = Predictions::detr(v, 3).unwrap();
+            p.weigh(&boxes, car).unwrap();
+            p
+        };
+        let l = DetectionLoss { iou: true, ..loss(Reduce::LogMax) };
+        let (t, g) = l.terms(&weighed(&logits), &[&logits], 1.0).unwrap();
+        // IoUs: 0, 0, 20·20/(800 + 800 − 400) = 1/3, 800/1200 = 2/3.
+        let want = prob(0.1) / 3.0;
+        assert!(want > 2.0 / 3.0 * prob(-2.9));
+        assert!((t.l2 + (1.0 - want).ln()).abs() < 1e-6, "{t:?} vs {want}");
+        // The unweighted best score is still reported.
+        assert!((t.max_score - prob(1.4)).abs() < 1e-6, "{t:?}");
+        // Only query 2's car logit gets a gradient, exact by central differences.
+        let nonzero: Vec<usize> = (0..12).filter(|&i| g[0][i] != 0.0).collect();
+        assert_eq!(nonzero, [8], "{:?}", g[0]);
+        let total = |v: &[f32]| l.terms(&weighed(v), &[v], 1.0).unwrap().0.l2 as f64;
+        for i in 0..12 {
+            let (mut a, mut b) = (logits.clone(), logits.clone());
+            a[i] += 1e-3;
+            b[i] -= 1e-3;
+            let fd = (total(&a) - total(&b)) / 2e-3;
+            assert!((fd - g[0][i] as f64).abs() < 1e-3, "value {i}: {} vs {fd}", g[0][i]);
+        }
+        // No box on the car: nothing to push. A box list of the wrong length is refused.
+        let mut p = Predictions::detr(&logits, 3).unwrap();
+        p.weigh(&[[100.0, 100.0, 110.0, 110.0]; 4], car).unwrap();
+        let (t, g) = l.terms(&p, &[&logits], 1.0).unwrap();
+        assert!(t.l2 == 0.0 && g[0].iter().all(|&x| x == 0.0), "{t:?}");
+        assert!(p.weigh(&boxes[..3], car).is_err());
     }
 }

@@ -258,7 +258,8 @@ pub fn step(
     let zoomed = zoom::apply(&setup.scene, &mut img, view.size, rng);
     let eot_ms = ms(t);
     let drawn = draw_members(wb.members.len(), cfg.optimizer.white_boxes_per_step, rng);
-    let EnsembleGrad { sum: g, per_detector } = wb.loss_and_grad_of(&drawn, &img, view.size, cfg.loss.beta)?;
+    let car = view.car_box.map(|b| zoomed.as_ref().map_or(b, |z| z.map_box(b, view.size)));
+    let EnsembleGrad { sum: g, per_detector } = wb.loss_and_grad_of(&drawn, &img, view.size, cfg.loss.beta, car)?;
     let t = Instant::now();
     match &zoomed {
         Some(z) => view.backward(&tape, &zoom::backward(z, &g.grad, view.size), grad),

@@ -31,6 +31,8 @@ pub struct View {
     pub coverage: f32,
     /// The mask threshold found for this view.
     pub c_mid: f32,
+    /// The car's box in the view (its rendered silhouette's, xyxy pixels), if it is in view.
+    pub car_box: Option<[f32; 4]>,
     /// Texture lookup at the active pixels.
     gather: Gather,
     /// Shading factor and added light per active pixel, when the scene is lit.
@@ -66,7 +68,17 @@ impl View {
         });
         let bgr = resize(photo, size, size, Interpolation::Antialias);
         let photo = bgr.chunks(3).flat_map(|c| [c[2] / 255.0, c[1] / 255.0, c[0] / 255.0]).collect();
-        Ok(View { name: name.into(), size, photo, active, coverage: g.coverage(), c_mid, gather, shade })
+        Ok(View {
+            name: name.into(),
+            size,
+            photo,
+            active,
+            coverage: g.coverage(),
+            c_mid,
+            car_box: g.bounds(),
+            gather,
+            shade,
+        })
     }
 
     /// The composite for texture `tex` (RGB interleaved, in [0, 1]) with the scene's EoT drawn

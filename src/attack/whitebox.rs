@@ -6,15 +6,19 @@
 //! (`detect::ortgrad`). The input transform the config describes (resize, channel order, scale,
 //! mean and std) is applied here with its exact adjoint. Outputs are read by their layout:
 //! darknet heads and YOLOX rows with objectness, Ultralytics class scores and DETR class logits
-//! without (see `attack::loss`).
+//! without (see `attack::loss`). Under `loss.iou` each prediction's box is read too (decoded from
+//! the darknet and YOLOX outputs; for Ultralytics and DETR a forward-only second output, the box
+//! branch the gradient graph leaves out), to weight its score by its overlap with the car.
 
 use super::config::OptimizeConfig;
 use super::loss::{DetectionLoss, HeadShapeError, Predictions};
-use crate::detect::autodiff::{differentiate_with, AutodiffError, Kernels};
+use crate::detect::autodiff::{differentiate_first, AutodiffError, Kernels};
 use crate::detect::config::{ChannelOrder, DetectorConfig, OutputLayout};
+use crate::detect::decode::{decode, LayoutError, RawOutput};
 use crate::detect::fold::fold_shapes;
 use crate::detect::onnx_proto::{Dim, Model, ProtoError, ValueInfo, FLOAT};
 use crate::detect::ortgrad::{GradSession, Pass};
+use crate::detect::preprocess::InputMap;
 use crate::detect::surrogate::dequantize;
 use crate::detect::DetectError;
 use crate::image::resize::Resampler;
@@ -55,6 +59,10 @@ pub struct WhiteBox {
     session: Mutex<GradSession>,
     heads: Heads,
     head_sizes: Vec<(usize, usize)>,
+    /// The differentiated outputs' names and shapes (what the box decoder reads).
+    out_shapes: Vec<(String, Vec<usize>)>,
+    /// The config's output layout.
+    layout: OutputLayout,
     loss: DetectionLoss,
     input: usize,
     resample: Resampler,
@@ -85,6 +93,9 @@ pub enum WhiteBoxError {
     /// Outputs that do not fit the layout.
     #[error("white-box detector: {0}")]
     Heads(#[from] HeadShapeError),
+    /// Box outputs that do not fit the layout.
+    #[error("white-box detector boxes: {0}")]
+    Boxes(#[from] LayoutError),
     /// A composite of another size than the one the detector was loaded for.
     #[error("white-box detector: a {got}-value composite, expected {expected}² RGB")]
     Size {
@@ -118,8 +129,9 @@ pub struct WhiteBoxOptions {
 
 /// An Ultralytics graph cut to its class branch: its output is `Concat(boxes [4], classes [C])` on
 /// axis 1, and L1 and L2 read the class probabilities only, so the box decoder (a softmax over
-/// distance bins) needs no gradient and is dropped.
-pub fn class_branch(mut model: Model) -> Result<Model, String> {
+/// distance bins) needs no gradient: dropped, or with `boxes` kept as a second output `[1, 4, N]`
+/// (cx, cy, w, h in input pixels) for [`differentiate_first`] to compute without a gradient.
+pub fn class_branch(mut model: Model, boxes: bool) -> Result<Model, String> {
     let out = match model.outputs.as_slice() {
         [o] => o.clone(),
         _ => return Err(format!("{} graph outputs, expected one [1, 4 + C, N]", model.outputs.len())),
@@ -130,8 +142,11 @@ pub fn class_branch(mut model: Model) -> Result<Model, String> {
         .find(|n| n.outputs.contains(&out.name))
         .filter(|n| n.op_type == "Concat" && n.inputs.len() == 2)
         .ok_or("the output is not a Concat of boxes and class probabilities")?;
-    let classes = concat.inputs[1].clone();
-    model.outputs = vec![ValueInfo { name: classes, elem_type: FLOAT, dims: vec![] }];
+    let value = |name: &str| ValueInfo { name: name.into(), elem_type: FLOAT, dims: vec![] };
+    model.outputs = vec![value(&concat.inputs[1])];
+    if boxes {
+        model.outputs.push(value(&concat.inputs[0]));
+    }
     model.prune();
     Ok(model)
 }
@@ -167,10 +182,13 @@ impl WhiteBox {
         if quantized {
             model = dequantize(&model).map_err(|e| unsupported(e.to_string()))?.0;
         }
+        // Outputs past the first are read forward only (the box branches under `loss.iou`).
+        let mut seeded = usize::MAX;
         if matches!(cfg.output, OutputLayout::Ultralytics { .. }) {
-            model = class_branch(model).map_err(&unsupported)?;
+            model = class_branch(model, loss.iou).map_err(&unsupported)?;
+            seeded = 1;
         }
-        if let OutputLayout::Detr { logits, .. } = &cfg.output {
+        if let OutputLayout::Detr { logits, pred_boxes, .. } = &cfg.output {
             let logits = logits.clone().ok_or_else(|| {
                 unsupported("a DETR white box needs `logits` in the config's [output]: the class logits before the post-processor".into())
             })?;
@@ -178,6 +196,16 @@ impl WhiteBox {
                 return Err(unsupported(format!("no value `{logits}` (the config's `logits`) in the graph")));
             }
             model.outputs = vec![ValueInfo { name: logits, elem_type: FLOAT, dims: vec![] }];
+            seeded = 1;
+            if loss.iou {
+                let b = pred_boxes.clone().ok_or_else(|| {
+                    unsupported("loss.iou on a DETR white box needs `pred_boxes` in the config's [output]: the decoder's boxes before the post-processor".into())
+                })?;
+                if !model.nodes.iter().any(|n| n.outputs.contains(&b)) {
+                    return Err(unsupported(format!("no value `{b}` (the config's `pred_boxes`) in the graph")));
+                }
+                model.outputs.push(ValueInfo { name: b, elem_type: FLOAT, dims: vec![] });
+            }
             model.prune();
             // The exported graph computes its reshapes from run-time shapes: fixed here.
             let x = model.inputs.first().map(|i| i.name.clone()).unwrap_or_default();
@@ -188,7 +216,8 @@ impl WhiteBox {
                 return Err(unsupported(format!("the graph's input is fixed at {:?}, not {side}²", x.dims)));
             }
         }
-        let d = differentiate_with(&model, &[1, 3, side as i64, side as i64], Kernels::Fused)?;
+        let seeded = seeded.min(model.outputs.len());
+        let d = differentiate_first(&model, &[1, 3, side as i64, side as i64], Kernels::Fused, seeded)?;
         let names: Vec<&str> = d.outputs.iter().map(|(n, _)| n.as_str()).collect();
         // As evaluate decodes: the config's class list; the loss checks the outputs against it.
         let classes = cfg.class_names.len();
@@ -214,6 +243,7 @@ impl WhiteBox {
             }
         };
         let head_sizes = d.outputs.iter().map(|(_, s)| (s[s.len() - 2] as usize, s[s.len() - 1] as usize)).collect();
+        let out_shapes = d.outputs.iter().map(|(n, s)| (n.clone(), s.iter().map(|&v| v as usize).collect())).collect();
         let session = GradSession::new(&format!("{} (white-box)", cfg.name), d, o.threads)?;
         let channel = match i.channels {
             ChannelOrder::Rgb => [0, 1, 2],
@@ -226,6 +256,8 @@ impl WhiteBox {
             session: Mutex::new(session),
             heads,
             head_sizes,
+            out_shapes,
+            layout: cfg.output.clone(),
             loss,
             input: side,
             // The config's filter, as evaluate resizes (without its 8-bit rounding, which has no gradient).
@@ -279,31 +311,100 @@ impl WhiteBox {
         self.resample.adjoint(&rgb, 3)
     }
 
-    /// The loss terms of the outputs and their gradients.
-    fn score(&self, outs: &[Vec<f32>], beta: f32) -> Result<(DetectorLoss, Vec<Vec<f32>>), WhiteBoxError> {
-        let p = match &self.heads {
+    /// Each prediction's box in composite pixels (xyxy), in the order [`Predictions`] reads them:
+    /// decoded as evaluate decodes darknet and YOLOX outputs, read from the forward-only box
+    /// output for Ultralytics (cx, cy, w, h in input pixels) and DETR (the same as input shares).
+    fn boxes(&self, outs: &[Vec<f32>]) -> Result<Vec<[f32; 4]>, WhiteBoxError> {
+        let k = self.input as f32 / self.composite as f32;
+        let c = self.composite as f32;
+        let map = InputMap { scale_x: k, scale_y: k, pad_x: 0.0, pad_y: 0.0, frame_w: c, frame_h: c };
+        let centred = |v: &[f32], unit: f32| {
+            let (cx, cy, w, h) = (v[0] * unit, v[1] * unit, v[2] * unit, v[3] * unit);
+            map.to_frame([cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0])
+        };
+        let aux = || {
+            outs.get(self.out_shapes.len())
+                .ok_or_else(|| LayoutError("no box output: the white box was loaded without loss.iou".into()))
+        };
+        Ok(match &self.heads {
+            Heads::Darknet { classes, .. } | Heads::Yolox { classes } => {
+                let raw: Vec<RawOutput> = self
+                    .out_shapes
+                    .iter()
+                    .zip(outs)
+                    .map(|((name, shape), data)| RawOutput {
+                        name: name.clone(),
+                        shape: shape.clone(),
+                        data: data.clone(),
+                    })
+                    .collect();
+                decode(&self.layout, &raw, self.input, self.input, *classes, &map)?.boxes
+            }
+            Heads::Ultralytics { .. } => {
+                let b = aux()?;
+                let n = b.len() / 4;
+                (0..n).map(|i| centred(&[b[i], b[n + i], b[2 * n + i], b[3 * n + i]], 1.0)).collect()
+            }
+            Heads::Detr { .. } => aux()?.chunks_exact(4).map(|v| centred(v, self.input as f32)).collect(),
+        })
+    }
+
+    /// The loss terms of the outputs and their gradients, each score weighted by its box's IoU
+    /// with `car` (composite pixels, xyxy) when the loss says so.
+    fn score(
+        &self,
+        outs: &[Vec<f32>],
+        beta: f32,
+        car: Option<[f32; 4]>,
+    ) -> Result<(DetectorLoss, Vec<Vec<f32>>), WhiteBoxError> {
+        let seeded = &outs[..self.out_shapes.len()];
+        let mut p = self.read(seeded)?;
+        if let (true, Some(car)) = (self.loss.iou, car) {
+            p.weigh(&self.boxes(outs)?, car)?;
+        }
+        let raw: Vec<&[f32]> = seeded.iter().map(|v| v.as_slice()).collect();
+        Ok(self.loss.terms(&p, &raw, beta)?)
+    }
+
+    /// The differentiated outputs read as predictions.
+    fn read(&self, seeded: &[Vec<f32>]) -> Result<Predictions, HeadShapeError> {
+        Ok(match &self.heads {
             Heads::Darknet { anchors, classes } => {
-                let maps: Vec<_> = outs.iter().cloned().zip(self.head_sizes.iter().copied()).collect();
+                let maps: Vec<_> = seeded.iter().cloned().zip(self.head_sizes.iter().copied()).collect();
                 Predictions::darknet(&maps, anchors, *classes)?
             }
-            Heads::Yolox { classes } => Predictions::yolox(&outs[0], *classes)?,
-            Heads::Ultralytics { classes } => Predictions::ultralytics(&outs[0], *classes)?,
-            Heads::Detr { classes } => Predictions::detr(&outs[0], *classes)?,
-        };
-        let raw: Vec<&[f32]> = outs.iter().map(|v| v.as_slice()).collect();
-        Ok(self.loss.terms(&p, &raw, beta)?)
+            Heads::Yolox { classes } => Predictions::yolox(&seeded[0], *classes)?,
+            Heads::Ultralytics { classes } => Predictions::ultralytics(&seeded[0], *classes)?,
+            Heads::Detr { classes } => Predictions::detr(&seeded[0], *classes)?,
+        })
+    }
+
+    /// Each prediction's box in composite pixels and its unweighted detection score for the
+    /// target classes, for checks and plots (the box output is there under `loss.iou` only for
+    /// Ultralytics and DETR).
+    pub fn predictions(&self, img: &[f32], size: usize) -> Result<Vec<([f32; 4], f32)>, WhiteBoxError> {
+        let (outs, _) = self.outputs(&mut self.session(), img, size)?;
+        let scores = self.read(&outs[..self.out_shapes.len()])?.target_scores(&self.loss.target);
+        Ok(self.boxes(&outs)?.into_iter().zip(scores).collect())
     }
 
     fn outputs(&self, s: &mut GradSession, img: &[f32], size: usize) -> Result<(Vec<Vec<f32>>, Pass), WhiteBoxError> {
         Ok(s.forward(self.model_input(img, size)?)?)
     }
 
-    /// Loss of the `size × size` RGB composite `img` and its gradient for weight `beta` on L2.
-    pub fn loss_and_grad(&self, img: &[f32], size: usize, beta: f32) -> Result<DetectorGrad, WhiteBoxError> {
+    /// Loss of the `size × size` RGB composite `img` and its gradient for weight `beta` on L2;
+    /// `car` is the car's box in the composite (xyxy), which `loss.iou` weights scores by.
+    pub fn loss_and_grad(
+        &self,
+        img: &[f32],
+        size: usize,
+        beta: f32,
+        car: Option<[f32; 4]>,
+    ) -> Result<DetectorGrad, WhiteBoxError> {
         let t0 = Instant::now();
         let mut s = self.session();
         let (outs, pass) = self.outputs(&mut s, img, size)?;
-        let (loss, out_grads) = self.score(&outs, beta)?;
+        let (loss, out_grads) = self.score(&outs, beta, car)?;
         let forward_ms = t0.elapsed().as_secs_f64() * 1e3;
         let t1 = Instant::now();
         let g = s.backward(&pass, out_grads)?;
@@ -314,7 +415,7 @@ impl WhiteBox {
     /// The loss terms of a composite, without gradients (for scoring).
     pub fn loss(&self, img: &[f32], size: usize) -> Result<DetectorLoss, WhiteBoxError> {
         let (outs, _) = self.outputs(&mut self.session(), img, size)?;
-        Ok(self.score(&outs, 1.0)?.0)
+        Ok(self.score(&outs, 1.0, None)?.0)
     }
 }
 
@@ -346,6 +447,7 @@ impl Ensemble {
                     target: d.target_classes.clone(),
                     reduce: cfg.loss.reduce,
                     proposals: cfg.loss.proposals,
+                    iou: cfg.loss.iou,
                 };
                 let o = WhiteBoxOptions { composite: size, input: None, threads: 0, surrogate: e.surrogate };
                 Ok((WhiteBox::with_options(&d, loss, o)?, e.weight))
@@ -354,10 +456,16 @@ impl Ensemble {
         Ok(Ensemble { members })
     }
 
-    /// Weighted `L1 + β·L2` over all members and its gradient.
-    pub fn loss_and_grad(&self, img: &[f32], size: usize, beta: f32) -> Result<EnsembleGrad, WhiteBoxError> {
+    /// Weighted `L1 + β·L2` over all members and its gradient (`car` as for [`WhiteBox::loss_and_grad`]).
+    pub fn loss_and_grad(
+        &self,
+        img: &[f32],
+        size: usize,
+        beta: f32,
+        car: Option<[f32; 4]>,
+    ) -> Result<EnsembleGrad, WhiteBoxError> {
         let all: Vec<usize> = (0..self.members.len()).collect();
-        self.loss_and_grad_of(&all, img, size, beta)
+        self.loss_and_grad_of(&all, img, size, beta, car)
     }
 
     /// Weighted `L1 + β·L2` over the members `drawn` (indices), their weights scaled so that they
@@ -368,6 +476,7 @@ impl Ensemble {
         img: &[f32],
         size: usize,
         beta: f32,
+        car: Option<[f32; 4]>,
     ) -> Result<EnsembleGrad, WhiteBoxError> {
         let mut sum = DetectorGrad {
             loss: DetectorLoss { l1: 0.0, l2: 0.0, boxes: 0, proposals: 0, max_score: 0.0 },
@@ -382,7 +491,7 @@ impl Ensemble {
         for &i in drawn {
             let (wb, weight) = &self.members[i];
             let w = weight * scale;
-            let g = wb.loss_and_grad(img, size, beta)?;
+            let g = wb.loss_and_grad(img, size, beta, car)?;
             sum.grad.iter_mut().zip(&g.grad).for_each(|(a, b)| *a += w * b);
             let l = &mut sum.loss;
             l.l1 += w * g.loss.l1;

@@ -91,8 +91,11 @@ pub struct Differentiated {
     pub input: String,
     /// Its shape.
     pub input_shape: Vec<i64>,
-    /// The original outputs, in order, with their shapes.
+    /// The original outputs the backward takes gradients for, in order, with their shapes.
     pub outputs: Vec<(String, Vec<i64>)>,
+    /// Outputs the forward computes without a gradient (a detector's boxes, read to weight the
+    /// loss), in order, with their shapes; the forward outputs them after `outputs`.
+    pub forward_only: Vec<(String, Vec<i64>)>,
     /// The tensors the backward reads from the forward, in the order the forward outputs them
     /// after the original outputs (the graph input is never among them).
     pub saved: Vec<String>,
@@ -723,6 +726,17 @@ pub fn differentiate_with(
     input_shape: &[i64],
     kernels: Kernels,
 ) -> Result<Differentiated, AutodiffError> {
+    differentiate_first(model, input_shape, kernels, model.outputs.len())
+}
+
+/// [`differentiate_with`] for the first `seeded` outputs of `model`; the others are computed by
+/// the forward only ([`Differentiated::forward_only`]), so the backward never walks their branch.
+pub fn differentiate_first(
+    model: &Model,
+    input_shape: &[i64],
+    kernels: Kernels,
+    seeded: usize,
+) -> Result<Differentiated, AutodiffError> {
     let input = model.inputs.first().ok_or_else(|| AutodiffError::Graph("no input".into()))?.name.clone();
     let consts: HashMap<&str, &Initializer> = model.initializers.iter().map(|i| (i.name.as_str(), i)).collect();
     let mut shape: HashMap<String, Vec<i64>> = HashMap::from([(input.clone(), input_shape.to_vec())]);
@@ -790,10 +804,14 @@ pub fn differentiate_with(
         };
         grad.insert(v.to_string(), sum);
     };
-    let mut outputs = Vec::new();
-    for o in &model.outputs {
+    let (mut outputs, mut forward_only) = (Vec::new(), Vec::new());
+    for (k, o) in model.outputs.iter().enumerate() {
         let s =
             shape.get(&o.name).cloned().ok_or_else(|| AutodiffError::Graph(format!("unknown output {}", o.name)))?;
+        if k >= seeded {
+            forward_only.push((o.name.clone(), s));
+            continue;
+        }
         outputs.push((o.name.clone(), s));
         add_grad(&mut grad, &mut tape, &o.name, grad_name(&o.name));
     }
@@ -1416,11 +1434,16 @@ pub fn differentiate_with(
     let saves_input = saved.contains(&input);
     saved.retain(|s| *s != input);
     // A saved value that is also an original output is output once.
-    let extra: Vec<&String> = saved.iter().filter(|s| !outputs.iter().any(|o| &o.0 == *s)).collect();
+    let extra: Vec<&String> =
+        saved.iter().filter(|s| !outputs.iter().chain(&forward_only).any(|o| &o.0 == *s)).collect();
     let mut forward = model.clone();
     forward.inputs = vec![fixed(&input, input_shape)];
-    forward.outputs =
-        outputs.iter().map(|(n, s)| fixed(n, s)).chain(extra.iter().map(|n| fixed(n, &shape[*n]))).collect();
+    forward.outputs = outputs
+        .iter()
+        .chain(&forward_only)
+        .map(|(n, s)| fixed(n, s))
+        .chain(extra.iter().map(|n| fixed(n, &shape[*n])))
+        .collect();
     let mut b_inputs: Vec<ValueInfo> = saved.iter().map(|n| fixed(n, &shape[n])).collect();
     if saves_input {
         b_inputs.push(fixed(&input, input_shape));
@@ -1445,5 +1468,14 @@ pub fn differentiate_with(
         inputs: b_inputs,
         outputs: vec![fixed(&out_name, input_shape)],
     };
-    Ok(Differentiated { forward, backward, input, input_shape: input_shape.to_vec(), outputs, saved, saves_input })
+    Ok(Differentiated {
+        forward,
+        backward,
+        input,
+        input_shape: input_shape.to_vec(),
+        outputs,
+        forward_only,
+        saved,
+        saves_input,
+    })
 }

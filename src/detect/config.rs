@@ -131,6 +131,11 @@ pub enum OutputLayout {
         /// `pav optimize` reads it.
         #[serde(default)]
         logits: Option<String>,
+        /// The same decoder layer's boxes `[1, Q, 4]` (cx, cy, w, h as shares of the input side):
+        /// what a white box weights its scores by under `loss.iou`. Optional; only `pav optimize`
+        /// reads it.
+        #[serde(default)]
+        pred_boxes: Option<String>,
     },
 }
 

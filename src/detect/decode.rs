@@ -322,6 +322,7 @@ mod tests {
             scores: "s".into(),
             size_input: None,
             logits: None,
+            pred_boxes: None,
         };
         let p = decode(&l, &outs, 32, 32, 2, &ID).unwrap();
         assert_eq!(p.best(&[1]).unwrap().score, 0.9);

@@ -62,15 +62,16 @@ impl GradSession {
     }
 
     /// Runs the model on `input` (of the graphs' input shape); returns each output's values in the
-    /// graph's order and what the backward needs.
+    /// graph's order (the differentiated outputs, then the forward-only ones) and what the
+    /// backward needs.
     pub fn forward(&mut self, input: Vec<f32>) -> Result<(Vec<Vec<f32>>, Pass), DetectError> {
         let shape: Vec<usize> = self.d.input_shape.iter().map(|&v| v as usize).collect();
         let name = self.name.clone();
         let err = |what| session_err(&name, what);
         let x = Tensor::from_array((shape, input)).map_err(err("preparing the input"))?.into_dyn();
         let mut outs = self.forward.run(vec![(self.d.input.clone(), &x)]).map_err(err("the forward pass"))?;
-        let mut values = Vec::with_capacity(self.d.outputs.len());
-        for (o, _) in &self.d.outputs {
+        let mut values = Vec::with_capacity(self.d.outputs.len() + self.d.forward_only.len());
+        for (o, _) in self.d.outputs.iter().chain(&self.d.forward_only) {
             let v = outs.get(o).ok_or_else(|| err("reading the outputs")(ort::Error::new(format!("no output {o}"))))?;
             values.push(v.try_extract_tensor::<f32>().map_err(err("reading the outputs"))?.1.to_vec());
         }

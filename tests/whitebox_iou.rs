@@ -1,0 +1,83 @@
+//! `loss.iou` on real photos and the four white boxes: each prediction's box as the white box
+//! reads it (decoded darknet and YOLOX outputs; the forward-only box outputs of the YOLOv8n and
+//! DEIMv2 graphs) agrees with evaluate's boxes, the view's car box agrees with the photo's label,
+//! and the IoU-weighted log-max counts the car and not the rest of the street.
+#![cfg(feature = "optimize")]
+
+mod common;
+
+use pav::attack::config::OptimizeConfig;
+use pav::attack::loss::{DetectionLoss, Proposals, Reduce};
+use pav::attack::setup::Setup;
+use pav::attack::whitebox::{WhiteBox, WhiteBoxOptions};
+use pav::detect::nms::iou;
+use pav::detect::onnx::OnnxDetector;
+use pav::detect::{Detector, DetectorConfig};
+use pav::image::Frame;
+
+fn check(detector: &str, surrogate: bool) {
+    common::real_data();
+    let mut cfg = OptimizeConfig::load(&common::repo().join("configs/optimize/paper.toml")).unwrap();
+    cfg.views.train.truncate(2);
+    cfg.views.test.clear();
+    let s = Setup::load(&cfg, Some(416)).unwrap();
+    let d = DetectorConfig::load(&common::detector_config(detector)).unwrap();
+    let loss = DetectionLoss {
+        box_threshold: 0.05,
+        target: d.target_classes.clone(),
+        reduce: Reduce::LogMax,
+        proposals: Proposals::ArgMax,
+        iou: true,
+    };
+    let o = WhiteBoxOptions { composite: 416, input: None, threads: 2, surrogate };
+    let wb = WhiteBox::with_options(&d, loss, o).unwrap();
+    let mut det = OnnxDetector::new(d.clone(), 1).unwrap();
+    for v in &s.train {
+        let car = v.car_box.expect("the car is in view");
+        let label = s.boxes[&v.name];
+        assert!(iou(&car, &label) > 0.75, "{}: silhouette box {car:?} vs label {label:?}", v.name);
+        let p = wb.predictions(&v.photo, v.size).unwrap();
+        let (best_box, best) = p.iter().copied().fold(([0.0; 4], 0.0), |m, x| if x.1 > m.1 { x } else { m });
+        let bgr: Vec<f32> = v.photo.chunks(3).flat_map(|p| [p[2] * 255.0, p[1] * 255.0, p[0] * 255.0]).collect();
+        let eval = det.propose(&Frame::from_levels(v.size, v.size, &bgr)).unwrap().best(det.target_classes()).unwrap();
+        eprintln!(
+            "{detector} {}: white box best {best:.3} at {best_box:?}, evaluate {:.3} at {:?}, car {car:?}",
+            v.name, eval.score, eval.bbox
+        );
+        assert!((best - eval.score).abs() < 0.1, "{}: white box {best} vs evaluate {}", v.name, eval.score);
+        assert!(iou(&best_box, &eval.bbox) > 0.8, "{}: {best_box:?} vs {:?}", v.name, eval.bbox);
+        assert!(iou(&best_box, &car) > 0.6, "{}: {best_box:?} vs the car {car:?}", v.name);
+        // The loss is −log(1 − max IoU·s) over the boxes read here, with the car's box ...
+        let want = p.iter().map(|(b, s)| iou(b, &car) * s).fold(0f32, f32::max);
+        let g = wb.loss_and_grad(&v.photo, v.size, 1.0, Some(car)).unwrap();
+        assert!((g.loss.l2 + (1.0 - want).ln()).abs() < 1e-4, "{}: {} vs {want}", v.name, g.loss.l2);
+        assert!(want > 0.3 && g.grad.iter().any(|x| *x != 0.0), "{}: {want}", v.name);
+        // ... and a box on the sky above the car weighs nothing the detector sees as a car there.
+        let sky = [car[0], 0.0, car[2], (car[1] - 40.0).max(8.0)];
+        let off = wb.loss_and_grad(&v.photo, v.size, 1.0, Some(sky)).unwrap();
+        assert!(off.loss.l2 < 0.1 * g.loss.l2, "{}: {} on the sky vs {} on the car", v.name, off.loss.l2, g.loss.l2);
+        // Without a car box the weight is off: the unweighted best score.
+        let plain = wb.loss(&v.photo, v.size).unwrap();
+        assert!((plain.l2 + (1.0 - best.min(1.0 - 1e-4)).ln()).abs() < 1e-3, "{}: {plain:?} vs {best}", v.name);
+    }
+}
+
+#[test]
+fn yolov3_tiny_boxes_weigh_the_car() {
+    check("yolov3-tiny", false);
+}
+
+#[test]
+fn yolox_nano_boxes_weigh_the_car() {
+    check("yolox_nano", false);
+}
+
+#[test]
+fn yolov8n_box_branch_runs_forward_only_and_weighs_the_car() {
+    check("yolov8n_int8", true);
+}
+
+#[test]
+fn deimv2_decoder_boxes_run_forward_only_and_weigh_the_car() {
+    check("deimv2_atto_int8", true);
+}
