@@ -105,7 +105,7 @@ def main():
     torch.set_num_threads(a.threads)
     layers = load(a.cfg, a.weights)
     if a.header:
-        print('backend,size,threads,repeats,forward_ms,forward_backward_ms,step_forward_ms,step_backward_ms')
+        print('backend,size,threads,repeats,forward_ms,forward_backward_ms,step_forward_ms,step_backward_ms,loss')
     for size in [int(s) for s in a.sizes.split(',')]:
         yy, xx = np.mgrid[0:size, 0:size]
         img = np.stack([0.5 + 0.4 * np.sin(xx * 0.05 + c) * np.cos(yy * 0.03) for c in range(3)])
@@ -125,7 +125,7 @@ def main():
             if r >= 3:
                 fwd.append(t1 - t); step.append(t3 - t1); sf.append(t2 - t1); sb.append(t3 - t2)
         med = lambda v: 1e3 * float(np.median(v))
-        print(f'PyTorch {torch.__version__},{size},{a.threads},{a.repeats},{med(fwd):.3f},{med(step):.3f},{med(sf):.3f},{med(sb):.3f}')
+        print(f'PyTorch {torch.__version__},{size},{a.threads},{a.repeats},{med(fwd):.3f},{med(step):.3f},{med(sf):.3f},{med(sb):.3f},sum obj×car')
 
 
 if __name__ == '__main__':

@@ -26,6 +26,8 @@ pub struct StepTiming {
     pub step_forward_ms: f64,
     /// Of which the backward part.
     pub step_backward_ms: f64,
+    /// The loss: `mean` (the paper's) or `log_max+iou` (RAUCA-E2E's, boxes read every step).
+    pub loss: String,
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -43,30 +45,46 @@ fn composite(size: usize) -> Vec<f32> {
         .collect()
 }
 
-/// Times the white-box step of `detector` with its network at each of `sizes`, on `threads`
-/// threads (0 = the runtime's default), `repeats` times after 3 warm-up runs; each size's result
-/// is a note on `progress`.
+/// How [`time_step`] runs.
+#[derive(Clone, Copy, Debug)]
+pub struct StepBench {
+    /// Threads (0 = the runtime's default).
+    pub threads: usize,
+    /// Timed repetitions after 3 warm-up runs.
+    pub repeats: usize,
+    /// Differentiate the float surrogate of a dynamically quantized model.
+    pub surrogate: bool,
+    /// RAUCA-E2E's loss with the IoU weight (the box outputs read every step) instead of the
+    /// paper's means.
+    pub iou: bool,
+}
+
+/// Times the white-box step of `detector` with its network at each of `sizes` as `b` says; each
+/// size's result is a note on `progress`.
 pub fn time_step(
     detector: &DetectorConfig,
     sizes: &[usize],
-    threads: usize,
-    repeats: usize,
+    b: StepBench,
     progress: &dyn Progress,
 ) -> Result<Vec<StepTiming>, WhiteBoxError> {
+    let StepBench { threads, repeats, surrogate, iou } = b;
     let mut rows = Vec::new();
     for &size in sizes {
         let loss = DetectionLoss {
             box_threshold: 0.05,
             target: detector.target_classes.clone(),
-            reduce: Reduce::Mean,
+            reduce: if iou { Reduce::LogMax } else { Reduce::Mean },
             proposals: Proposals::ArgMax,
-            iou: false,
+            iou,
         };
-        let o = WhiteBoxOptions { composite: size, input: Some(size), threads, surrogate: false };
+        let o = WhiteBoxOptions { composite: size, input: Some(size), threads, surrogate };
         let wb = WhiteBox::with_options(detector, loss, o)?;
         let img = composite(size);
+        // The central half of the composite stands for the car.
+        let s = size as f32;
+        let car = iou.then_some([0.25 * s, 0.25 * s, 0.75 * s, 0.75 * s]);
         for _ in 0..3 {
-            wb.loss_and_grad(&img, size, 1.0, None)?;
+            wb.loss_and_grad(&img, size, 1.0, car)?;
         }
         let (mut fwd, mut step, mut sf, mut sb) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for _ in 0..repeats.max(1) {
@@ -74,7 +92,7 @@ pub fn time_step(
             wb.loss(&img, size)?;
             fwd.push(t.elapsed().as_secs_f64() * 1e3);
             let t = Instant::now();
-            let g = wb.loss_and_grad(&img, size, 1.0, None)?;
+            let g = wb.loss_and_grad(&img, size, 1.0, car)?;
             step.push(t.elapsed().as_secs_f64() * 1e3);
             sf.push(g.forward_ms);
             sb.push(g.backward_ms);
@@ -88,6 +106,7 @@ pub fn time_step(
             forward_backward_ms: median(step),
             step_forward_ms: median(sf),
             step_backward_ms: median(sb),
+            loss: if iou { "log_max+iou" } else { "mean" }.into(),
         };
         progress.note(&format!(
             "{size}²: forward {:.1} ms, forward + backward {:.1} ms ({:.1} + {:.1})",

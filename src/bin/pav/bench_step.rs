@@ -2,7 +2,7 @@
 
 use crate::common::Bar;
 use anyhow::{Context, Result};
-use pav::attack::bench::time_step;
+use pav::attack::bench::{time_step, StepBench};
 use pav::detect::DetectorConfig;
 use pav::table::write_csv;
 use std::path::PathBuf;
@@ -21,6 +21,13 @@ pub struct Args {
     /// Timed repetitions per size (the median is kept).
     #[arg(long, default_value_t = 10)]
     repeats: usize,
+    /// Differentiate the float surrogate of a dynamically quantized model (YOLOv8n, DEIMv2).
+    #[arg(long)]
+    surrogate: bool,
+    /// Also time RAUCA-E2E's loss with the IoU weight (`loss.iou`: the boxes read every step)
+    /// beside the paper's means.
+    #[arg(long)]
+    iou: bool,
     /// Output CSV.
     #[arg(long, short = 'o', default_value = "bench/step.csv")]
     out: PathBuf,
@@ -28,7 +35,14 @@ pub struct Args {
 
 pub fn run(a: &Args) -> Result<()> {
     let cfg = DetectorConfig::load(&a.detector)?;
-    let rows = time_step(&cfg, &a.sizes, a.threads, a.repeats, &Bar::default())?;
+    let mut rows = Vec::new();
+    // Size by size, the two losses one after the other, so that a change of load hits both.
+    for &size in &a.sizes {
+        for iou in if a.iou { vec![false, true] } else { vec![false] } {
+            let b = StepBench { threads: a.threads, repeats: a.repeats, surrogate: a.surrogate, iou };
+            rows.extend(time_step(&cfg, &[size], b, &Bar::default())?);
+        }
+    }
     if let Some(d) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
     }
