@@ -152,15 +152,7 @@ impl Predictions {
         if maps.len() != anchors.len() {
             return Err(HeadShapeError(format!("{} head maps for {} heads", maps.len(), anchors.len())));
         }
-        let mut p = Predictions {
-            classes,
-            raw: Raw::Logit,
-            obj: vec![],
-            cls: vec![],
-            at: vec![],
-            objectness: true,
-            weight: None,
-        };
+        let mut p = Predictions::empty(classes, Raw::Logit, true);
         for (output, ((map, (h, w)), &a)) in maps.iter().zip(anchors).enumerate() {
             let hw = h * w;
             if map.len() != a * (5 + classes) * hw {
@@ -186,15 +178,7 @@ impl Predictions {
         if out.len() % cols != 0 {
             return Err(HeadShapeError(format!("{} values are not rows of 5 + {classes}", out.len())));
         }
-        let mut p = Predictions {
-            classes,
-            raw: Raw::Probability,
-            obj: vec![],
-            cls: vec![],
-            at: vec![],
-            objectness: true,
-            weight: None,
-        };
+        let mut p = Predictions::empty(classes, Raw::Probability, true);
         for r in 0..out.len() / cols {
             p.push(out, At { output: 0, obj: r * cols + 4, cls0: r * cols + 5, stride: 1 });
         }
@@ -208,15 +192,7 @@ impl Predictions {
             return Err(HeadShapeError(format!("{} values are not {classes} class rows", scores.len())));
         }
         let n = scores.len() / classes;
-        let mut p = Predictions {
-            classes,
-            raw: Raw::Probability,
-            obj: vec![],
-            cls: vec![],
-            at: vec![],
-            objectness: false,
-            weight: None,
-        };
+        let mut p = Predictions::empty(classes, Raw::Probability, false);
         for i in 0..n {
             // The largest class probability stands for objectness; ties go to the first class.
             let k = (0..classes).fold(0, |m, k| if scores[k * n + i] > scores[m * n + i] { k } else { m });
@@ -232,21 +208,31 @@ impl Predictions {
         if classes == 0 || logits.len() % classes != 0 {
             return Err(HeadShapeError(format!("{} values are not queries of {classes} classes", logits.len())));
         }
-        let mut p = Predictions {
-            classes,
-            raw: Raw::Logit,
-            obj: vec![],
-            cls: vec![],
-            at: vec![],
-            objectness: false,
-            weight: None,
-        };
+        let mut p = Predictions::empty(classes, Raw::Logit, false);
         for q in 0..logits.len() / classes {
             let row = &logits[q * classes..(q + 1) * classes];
             let k = (0..classes).fold(0, |m, k| if row[k] > row[m] { k } else { m });
             p.push(logits, At { output: 0, obj: q * classes + k, cls0: q * classes, stride: 1 });
         }
         Ok(p)
+    }
+
+    /// No predictions yet, for heads of `classes` classes read as `raw`.
+    fn empty(classes: usize, raw: Raw, objectness: bool) -> Self {
+        Predictions { classes, raw, obj: vec![], cls: vec![], at: vec![], objectness, weight: None }
+    }
+
+    /// Prediction `i`'s most likely class among the non-empty `targets` (ties to the first) and
+    /// its probability.
+    fn best_target(&self, i: usize, targets: &[usize]) -> (usize, f32) {
+        let c = self.classes;
+        targets.iter().map(|&k| (k, self.cls[i * c + k])).fold((targets[0], f32::NEG_INFINITY), |m, t| {
+            if t.1 > m.1 {
+                t
+            } else {
+                m
+            }
+        })
     }
 
     /// The detection score of prediction `i` for a target probability `car`, and its derivatives
@@ -268,15 +254,14 @@ impl Predictions {
         }
     }
 
-    /// Each prediction's best detection score over the `targets` classes (unweighted).
+    /// Each prediction's best detection score over the `targets` classes (unweighted; 0 where
+    /// none of them is among the head's classes).
     pub fn target_scores(&self, targets: &[usize]) -> Vec<f32> {
-        let c = self.classes;
-        (0..self.len())
-            .map(|i| {
-                let car = targets.iter().filter(|&&k| k < c).map(|&k| self.cls[i * c + k]).fold(0f32, f32::max);
-                self.score(i, car).0
-            })
-            .collect()
+        let targets: Vec<usize> = targets.iter().copied().filter(|&k| k < self.classes).collect();
+        if targets.is_empty() {
+            return vec![0.0; self.len()];
+        }
+        (0..self.len()).map(|i| self.score(i, self.best_target(i, &targets).1).0).collect()
     }
 
     /// Weights each prediction's detection score in the loss by the IoU of its box (`boxes`, one
@@ -387,14 +372,8 @@ impl DetectionLoss {
         // Per box: its best class, and its best target class with that class's confidence.
         let best =
             |i: usize| (0..c).fold((0, f32::NEG_INFINITY), |m, k| if cls(i, k) > m.1 { (k, cls(i, k)) } else { m });
-        let best_target = |i: usize| {
-            targets
-                .iter()
-                .map(|&k| (k, cls(i, k)))
-                .fold((targets[0], f32::NEG_INFINITY), |m, t| if t.1 > m.1 { t } else { m })
-        };
         let n = p.len();
-        let tk: Vec<(usize, f32)> = (0..n).map(best_target).collect();
+        let tk: Vec<(usize, f32)> = (0..n).map(|i| p.best_target(i, &targets)).collect();
         let mut max_score = 0f32;
         let (mut boxes, mut proposals) = (Vec::new(), Vec::new());
         for (i, (&o, &(k, car))) in p.obj.iter().zip(&tk).enumerate() {

@@ -266,16 +266,7 @@ fn pbr_views(
 /// The box around a silhouette mask's lit pixels, scaled to a `size × size` view (None when
 /// the mask is empty).
 fn silhouette_box(mask: &Rgb, size: usize) -> Option<BBox> {
-    let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
-    for (i, c) in mask.rgb.chunks(3).enumerate() {
-        if c[0] > 0.5 {
-            let (x, y) = (i % mask.width, i / mask.width);
-            (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x + 1), y1.max(y + 1));
-        }
-    }
-    if x0 == usize::MAX {
-        return None;
-    }
+    let [x0, y0, x1, y1] = crate::image::set_bounds(mask.width, mask.rgb.chunks(3).map(|c| c[0] > 0.5))?;
     let (sx, sy) = (size as f32 / mask.width as f32, size as f32 / mask.height as f32);
     Some([x0 as f32 * sx, y0 as f32 * sy, x1 as f32 * sx, y1 as f32 * sy])
 }

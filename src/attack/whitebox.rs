@@ -182,11 +182,11 @@ impl WhiteBox {
         if quantized {
             model = dequantize(&model).map_err(|e| unsupported(e.to_string()))?.0;
         }
-        // Outputs past the first are read forward only (the box branches under `loss.iou`).
-        let mut seeded = usize::MAX;
+        // The box outputs `loss.iou` reads come last and are computed forward only.
+        let mut forward_only = 0;
         if matches!(cfg.output, OutputLayout::Ultralytics { .. }) {
             model = class_branch(model, loss.iou).map_err(&unsupported)?;
-            seeded = 1;
+            forward_only = usize::from(loss.iou);
         }
         if let OutputLayout::Detr { logits, pred_boxes, .. } = &cfg.output {
             let logits = logits.clone().ok_or_else(|| {
@@ -196,7 +196,6 @@ impl WhiteBox {
                 return Err(unsupported(format!("no value `{logits}` (the config's `logits`) in the graph")));
             }
             model.outputs = vec![ValueInfo { name: logits, elem_type: FLOAT, dims: vec![] }];
-            seeded = 1;
             if loss.iou {
                 let b = pred_boxes.clone().ok_or_else(|| {
                     unsupported("loss.iou on a DETR white box needs `pred_boxes` in the config's [output]: the decoder's boxes before the post-processor".into())
@@ -205,6 +204,7 @@ impl WhiteBox {
                     return Err(unsupported(format!("no value `{b}` (the config's `pred_boxes`) in the graph")));
                 }
                 model.outputs.push(ValueInfo { name: b, elem_type: FLOAT, dims: vec![] });
+                forward_only = 1;
             }
             model.prune();
             // The exported graph computes its reshapes from run-time shapes: fixed here.
@@ -216,7 +216,7 @@ impl WhiteBox {
                 return Err(unsupported(format!("the graph's input is fixed at {:?}, not {side}²", x.dims)));
             }
         }
-        let seeded = seeded.min(model.outputs.len());
+        let seeded = model.outputs.len() - forward_only;
         let d = differentiate_first(&model, &[1, 3, side as i64, side as i64], Kernels::Fused, seeded)?;
         let names: Vec<&str> = d.outputs.iter().map(|(n, _)| n.as_str()).collect();
         // As evaluate decodes: the config's class list; the loss checks the outputs against it.

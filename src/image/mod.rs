@@ -131,6 +131,18 @@ pub fn save_rgb(path: &Path, w: usize, h: usize, rgb: &[f32]) -> Result<(), Imag
     save_rgb8(path, w, h, rgb.iter().map(|v| to_u8(*v)).collect())
 }
 
+/// The box of the set pixels of a row-major mask `width` pixels wide: `[x0, y0, x1, y1]` on
+/// pixel edges (x1, y1 one past the last set pixel), or `None` where no pixel is set.
+pub fn set_bounds(width: usize, set: impl IntoIterator<Item = bool>) -> Option<[usize; 4]> {
+    let mut b: Option<[usize; 4]> = None;
+    for (p, _) in set.into_iter().enumerate().filter(|(_, s)| *s) {
+        let (x, y) = (p % width, p / width);
+        let r = b.get_or_insert([x, y, x + 1, y + 1]);
+        *r = [r[0].min(x), r[1].min(y), r[2].max(x + 1), r[3].max(y + 1)];
+    }
+    b
+}
+
 /// Half the size of an interleaved RGB image by averaging each 2×2 block (odd edges dropped).
 pub fn halve(src: &[f32], w: usize, h: usize) -> Vec<f32> {
     let (hw, hh) = (w / 2, h / 2);

@@ -141,14 +141,7 @@ impl GBuffer {
 
     /// The box of the covered pixels (xyxy, pixel edges), or `None` where nothing is covered.
     pub fn bounds(&self) -> Option<[f32; 4]> {
-        let n = self.size;
-        let mut b: Option<[usize; 4]> = None;
-        for (p, _) in self.face.iter().enumerate().filter(|(_, f)| **f != EMPTY) {
-            let (x, y) = (p % n, p / n);
-            let r = b.get_or_insert([x, y, x, y]);
-            *r = [r[0].min(x), r[1].min(y), r[2].max(x), r[3].max(y)];
-        }
-        b.map(|r| [r[0] as f32, r[1] as f32, (r[2] + 1) as f32, (r[3] + 1) as f32])
+        crate::image::set_bounds(self.size, self.face.iter().map(|f| *f != EMPTY)).map(|b| b.map(|v| v as f32))
     }
 }
 
