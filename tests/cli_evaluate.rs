@@ -43,6 +43,9 @@ fn evaluate_prints_table_and_writes_reports() {
     assert!(out.contains("A_physical at score threshold 0.5"), "{out}");
     assert!(out.lines().any(|l| l.starts_with("carla_orbit") && l.contains(" 10 ") && l.contains(" 15 ")), "{out}");
     assert!(err.contains("one frame in 3"), "{err}");
+    // stderr is a pipe here, as in a log file: the bar's stage still shows as plain lines.
+    assert!(err.lines().any(|l| l.starts_with("carla_orbit: 0/45, ")), "{err}");
+    assert!(err.lines().any(|l| l.starts_with("carla_orbit: 45/45, ") && l.ends_with(", done")), "{err}");
     assert!(tmp.path().join("accuracy.png").exists());
 }
 

@@ -2,15 +2,30 @@
 //! Ctrl-C flag that long jobs poll.
 
 use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::{HumanDuration, ProgressBar, ProgressStyle};
 use pav::progress::Progress;
+use std::io::IsTerminal;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
-/// A progress bar on stderr: one bar per stage, notes printed above it.
-#[derive(Default)]
+/// A progress bar on stderr, one per stage, notes printed above it. When stderr is not a
+/// terminal (a log file, `nohup`, CI) indicatif draws nothing and drops `println`, so the bar
+/// writes plain lines instead: each stage's start and end, its count at most every
+/// [`LOG_EVERY`], and every note.
 pub struct Bar {
     bar: Mutex<Option<ProgressBar>>,
+    plain: bool,
+    last_line: Mutex<Instant>,
+}
+
+/// How often a stage's count is written as a line when stderr is not a terminal.
+const LOG_EVERY: Duration = Duration::from_secs(30);
+
+impl Default for Bar {
+    fn default() -> Self {
+        Bar { bar: Mutex::new(None), plain: !std::io::stderr().is_terminal(), last_line: Mutex::new(Instant::now()) }
+    }
 }
 
 impl Bar {
@@ -19,6 +34,34 @@ impl Bar {
             f(b);
         }
     }
+
+    /// In plain mode, the stage's count as a line when `force`d or [`LOG_EVERY`] after the last;
+    /// [`Progress::end`] writes the final count.
+    fn log_count(&self, force: bool) {
+        if !self.plain {
+            return;
+        }
+        let mut last = self.last_line.lock().unwrap_or_else(|e| e.into_inner());
+        let b = self.bar.lock().unwrap_or_else(|e| e.into_inner());
+        let Some(b) = b.as_ref() else { return };
+        if force || last.elapsed() >= LOG_EVERY {
+            eprintln!("{}", count_line(b));
+            *last = Instant::now();
+        }
+    }
+}
+
+/// `label: pos/len, elapsed (eta) message` for a log file.
+fn count_line(b: &ProgressBar) -> String {
+    let len = b.length().filter(|&n| n > 0).map_or(String::new(), |n| format!("/{n}"));
+    let eta = if b.position() > 0 && b.length().is_some_and(|n| b.position() < n) {
+        format!(" (eta {})", HumanDuration(b.eta()))
+    } else {
+        String::new()
+    };
+    let msg = b.message();
+    let msg = if msg.is_empty() { msg } else { format!(" {msg}") };
+    format!("{}: {}{len}, {}{eta}{msg}", b.prefix(), b.position(), HumanDuration(b.elapsed()))
 }
 
 impl Progress for Bar {
@@ -31,24 +74,30 @@ impl Progress for Bar {
         );
         b.set_prefix(label.to_string());
         *self.bar.lock().unwrap_or_else(|e| e.into_inner()) = Some(b);
+        self.log_count(true);
     }
     fn advance(&self, n: u64) {
         self.with(|b| b.inc(n));
+        self.log_count(false);
     }
     fn set_position(&self, done: u64) {
         self.with(|b| b.set_position(done));
+        self.log_count(true);
     }
     fn status(&self, msg: &str) {
         self.with(|b| b.set_message(msg.to_string()));
     }
     fn note(&self, line: &str) {
         match self.bar.lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
-            Some(b) if !b.is_finished() => b.println(line),
+            Some(b) if !self.plain && !b.is_finished() => b.println(line),
             _ => eprintln!("{line}"),
         }
     }
     fn end(&self, kept: Option<&str>) {
         if let Some(b) = self.bar.lock().unwrap_or_else(|e| e.into_inner()).take() {
+            if self.plain {
+                eprintln!("{}{}", count_line(&b), kept.map_or(String::from(", done"), |m| format!(", {m}")));
+            }
             match kept {
                 Some(msg) => b.abandon_with_message(msg.to_string()),
                 None => b.finish_and_clear(),
