@@ -96,7 +96,7 @@ impl Progress for Bar {
     fn end(&self, kept: Option<&str>) {
         if let Some(b) = self.bar.lock().unwrap_or_else(|e| e.into_inner()).take() {
             if self.plain {
-                eprintln!("{}{}", count_line(&b), kept.map_or(String::from(", done"), |m| format!(", {m}")));
+                eprintln!("{}, {}", count_line(&b), kept.unwrap_or("done"));
             }
             match kept {
                 Some(msg) => b.abandon_with_message(msg.to_string()),
