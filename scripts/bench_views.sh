@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# What accuracy costs in time for the Blender back-end of the simulated turntable (#14): seconds
+# What accuracy costs in time for the Blender back-end of the simulated turntable: seconds
 # per view against Cycles samples and resolution, and how far the simulated A_physical and each
 # detector's mean best car score move with them. Each setting films configs/views/turntable.toml's
 # car and room, 8 frames a turn at polar 0° and 20° (16 frames), and scores them with every

@@ -192,8 +192,8 @@ fn describe(path: &Path) -> Option<Input> {
     Some(Input { path: tidy(path).display().to_string(), data, bytes, sha256 })
 }
 
-/// `a/b/../c` → `a/c`, so one file reached two ways is one input.
-fn tidy(path: &Path) -> PathBuf {
+/// `a/b/../c` → `a/c` without touching the file system, so one file reached two ways is one input.
+pub fn tidy(path: &Path) -> PathBuf {
     use std::path::Component;
     let mut out = PathBuf::new();
     for c in path.components() {

@@ -40,7 +40,7 @@ use std::sync::atomic::AtomicBool;
 #[test]
 fn every_view_is_held_out_once_and_finished_folds_resume() {
     common::real_data();
-    let path = common::repo().join("configs/optimize/half.toml");
+    let path = common::repo().join("configs/studies/half.toml");
     let mut cfg = OptimizeConfig::load(&path).unwrap();
     cfg.views.train = cfg.views.train[1..3].to_vec();
     cfg.views.test = cfg.views.test[..1].to_vec();

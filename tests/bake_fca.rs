@@ -49,7 +49,7 @@ fn baked_appearance_predicts_a_photo_it_never_saw() {
 #[test]
 fn turned_views_are_built_from_training_photos_and_stay_cars() {
     common::real_data();
-    let mut cfg = OptimizeConfig::load(&common::repo().join("configs/optimize/half-turns.toml")).unwrap();
+    let mut cfg = OptimizeConfig::load(&common::repo().join("configs/studies/half-turns.toml")).unwrap();
     cfg.views.train = cfg.views.train[1..4].to_vec();
     cfg.views.test = cfg.views.test[..1].to_vec();
     let mut twice = cfg.clone();

@@ -78,7 +78,7 @@ fn eval_digital_resamples_a_texture_of_another_size() {
     std::fs::create_dir_all(&yolox_run).unwrap();
     std::fs::copy(shared.join("rauca-e2e/RAUCA_E2E.png"), yolox_run.join("texture.png")).unwrap();
     let record = format!(
-        "cwd = {:?}\n[config]\npath = \"configs/optimize/half-turns-yolox.toml\"\n",
+        "cwd = {:?}\n[config]\npath = \"configs/studies/half-turns-yolox.toml\"\n",
         common::repo().display().to_string()
     );
     std::fs::write(yolox_run.join("run.toml"), record).unwrap();
@@ -87,7 +87,7 @@ fn eval_digital_resamples_a_texture_of_another_size() {
         .args([
             "eval-digital",
             "--config",
-            "configs/optimize/half-turns.toml",
+            "configs/studies/half-turns.toml",
             "-d",
             "configs/detectors/yolov3-tiny.toml",
         ])
@@ -207,7 +207,7 @@ fn paint_puts_a_texture_on_the_region_and_keeps_the_car_paint_elsewhere() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("painted.png");
     let o = pav()
-        .args(["paint", "--config", "configs/optimize/half-turns-ensemble-pbr.toml"])
+        .args(["paint", "--config", "configs/studies/half-turns-ensemble-pbr.toml"])
         .args(["--texture", "data:rauca-e2e/RAUCA_E2E.png", "-o"])
         .arg(&out)
         .output()
@@ -237,7 +237,7 @@ fn paint_puts_a_texture_on_the_region_and_keeps_the_car_paint_elsewhere() {
     assert_eq!(other, 0);
     assert!(from_tex > n / 6 && from_tex < n / 4, "{from_tex} of {n}");
     let o = pav()
-        .args(["paint", "--config", "configs/optimize/half-turns-ensemble-pbr.toml", "--texture", "nope.png", "-o"])
+        .args(["paint", "--config", "configs/studies/half-turns-ensemble-pbr.toml", "--texture", "nope.png", "-o"])
         .arg(&out)
         .output()
         .unwrap();

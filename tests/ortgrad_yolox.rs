@@ -93,7 +93,7 @@ fn gradient_matches_central_differences_along_directions() {
         // order in ε (measured: −2.716, −2.764, −2.838 e-4 at ε = 0.01, 0.03, 0.1 levels), so it is
         // extrapolated to ε → 0 from two steps. On the patch, f32 rounding dominates small steps,
         // so it takes a larger one. The extrapolation is good to about a percent: on an AMD EPYC
-        // (session 13) the graph gave −2.686e-4 against −2.717e-4 (1.1 %), so 2 % is allowed.
+        // the graph gave −2.686e-4 against −2.717e-4 (1.1 %), so 2 % is allowed.
         for (k, d, eps, tol) in [(0, &dirs[0], 0.01f32, 2e-2), (1, &dirs[1], 0.3, 3e-2)] {
             let fd = common::central_difference(&mut g, &w, &input, d, eps, k == 0);
             let an: f64 = grad.iter().zip(d).map(|(a, b)| *a as f64 * *b as f64).sum();

@@ -53,7 +53,7 @@ fn uv_mapped_etron_is_the_fca_audi() {
     }
 }
 
-/// `mesh.parts` (configs/optimize/half.toml: doors and roof-like faces) cuts the e-tron's body
+/// `mesh.parts` (configs/studies/half.toml: doors and roof-like faces) cuts the e-tron's body
 /// region down to a strict subset that every FCA view still sees.
 #[test]
 fn a_parts_region_is_a_visible_subset_of_the_body() {
@@ -61,10 +61,10 @@ fn a_parts_region_is_a_visible_subset_of_the_body() {
     use pav::attack::setup::Setup;
     common::shared_data();
     let load = |name: &str| {
-        let cfg = OptimizeConfig::load(&common::repo().join("configs/optimize").join(name)).unwrap();
+        let cfg = OptimizeConfig::load(&common::repo().join("configs").join(name)).unwrap();
         Setup::load(&cfg, Some(128)).unwrap_or_else(|e| panic!("{name}: {e}"))
     };
-    let (full, half) = (load("paper.toml"), load("half.toml"));
+    let (full, half) = (load("optimize/paper.toml"), load("studies/half.toml"));
     assert!(half.region.iter().zip(&full.region).all(|(h, f)| *h <= *f), "not a subset");
     let share = half.region_values.len() as f64 / full.region_values.len() as f64;
     // Measured: 0.75 (the bumpers, the fender ends and the front and rear faces drop out).

@@ -93,7 +93,7 @@ fn the_yolov8n_and_deimv2_surrogates_are_float_and_score_like_their_int8_models(
     let (mean, worst, disagree) = distance(&shared, &dcfg, &dfloat);
     // Measured on this machine: mean 0.060, worst 0.19, one photo on either side of 0.5 (int8
     // 0.622, float 0.435). The weights are exact: ONNX Runtime's own `quantize_dynamic` of this
-    // surrogate gives back the int8 model's scores to the bit (README). What differs is the 8-bit
+    // surrogate gives back the int8 model's scores to the bit (docs/method.md). What differs is the 8-bit
     // rounding of every activation, which moves a DETR more than a YOLO: its queries are picked
     // by a TopK over rounded encoder scores. Wrong weights would leave the car near 0.
     assert!(mean < 0.1 && worst < 0.3, "DEIMv2: mean {mean} worst {worst}");

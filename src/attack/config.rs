@@ -87,6 +87,10 @@ pub struct ViewsConfig {
     /// on real photos.
     #[serde(default)]
     pub pbr: Vec<PathBuf>,
+    /// The `pav views render` configs that make the `pbr` folders, in the same order: when a
+    /// folder has not been rendered yet, `pav optimize` names the command that renders it.
+    #[serde(default)]
+    pub render: Vec<PathBuf>,
     /// Keep a rendered view only when some white-box detector finds a car in it as rendered
     /// (before any texture) at this score or above (`detect::detected`): a view whose unattacked
     /// car goes unseen gives L1 and L2 nothing to push on. Default: keep every view.
@@ -173,7 +177,7 @@ pub struct OptimizerConfig {
     #[serde(default)]
     pub white_boxes_per_step: Option<usize>,
     /// Output the pixel mean of the textures after step `from`, every `every` steps after it and
-    /// the last, instead of the last alone (README "Averaged snapshots": over four seeds no
+    /// the last, instead of the last alone (docs/reports/transfer.md, "Averaged snapshots": over four seeds no
     /// gain on the held-out detector). Absent: the last texture.
     #[serde(default)]
     pub average: Option<AverageConfig>,
@@ -211,7 +215,9 @@ fn clamp_default() -> [f32; 2] {
     [1e-4, 1.0 - 1e-4]
 }
 
-/// A whole optimization config.
+/// A whole optimization config. `extends = "base.toml"` (relative to the file) starts from
+/// another config: tables merge key by key, and every value the file sets (arrays included)
+/// replaces the base's.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct OptimizeConfig {
@@ -227,6 +233,9 @@ pub struct OptimizeConfig {
     pub loss: LossConfig,
     /// Optimizer.
     pub optimizer: OptimizerConfig,
+    /// The config files read: the file loaded, then each one it `extends` (filled by [`Self::load`]).
+    #[serde(skip)]
+    pub files: Vec<PathBuf>,
 }
 
 /// Errors reading a config.
@@ -272,11 +281,19 @@ pub enum ConfigError {
 pub struct InvalidConfig(pub String);
 
 impl OptimizeConfig {
-    /// Reads, resolves relative paths against the file's folder, and checks the values.
+    /// Reads the file and the chain of configs it `extends`, resolves relative paths against the
+    /// folder of the file that names them, and checks the values.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: path.into(), source })?;
-        let mut c: OptimizeConfig =
-            toml::from_str(&text).map_err(|source| ConfigError::Parse { path: path.into(), source })?;
+        let (table, files) = read_merged(path)?;
+        let parse = |source| ConfigError::Parse { path: path.into(), source };
+        let mut c: OptimizeConfig = if files.len() == 1 {
+            // Parsed from the text again so that an error points at its line.
+            let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: path.into(), source })?;
+            toml::from_str(&text).map_err(parse)?
+        } else {
+            toml::Value::Table(table).try_into().map_err(parse)?
+        };
+        c.files = files;
         let dir = path.parent().unwrap_or(Path::new("."));
         let mut first_err = None;
         let mut fix = |p: &mut PathBuf| match crate::data::resolve(dir, p) {
@@ -291,6 +308,7 @@ impl OptimizeConfig {
         c.views.train.iter_mut().for_each(&mut fix);
         c.views.test.iter_mut().for_each(&mut fix);
         c.views.pbr.iter_mut().for_each(&mut fix);
+        c.views.render.iter_mut().for_each(&mut fix);
         c.views.pbr_test.iter_mut().for_each(&mut fix);
         if let Some(l) = c.views.labels.as_mut() {
             fix(l);
@@ -310,7 +328,8 @@ impl OptimizeConfig {
     /// rendered views, and each white box's config and model (for `run.toml`).
     #[cfg(feature = "eval")]
     pub fn inputs(&self) -> Vec<PathBuf> {
-        let mut v = vec![self.scene.clone(), self.mesh.obj.clone(), self.mesh.region.clone()];
+        let mut v: Vec<PathBuf> = self.files.iter().skip(1).cloned().collect();
+        v.extend([self.scene.clone(), self.mesh.obj.clone(), self.mesh.region.clone()]);
         if let Init::File(p) = &self.mesh.init {
             v.push(p.clone());
         }
@@ -424,6 +443,163 @@ impl OptimizeConfig {
     }
 }
 
+/// Keys whose values are paths relative to the file that sets them (`[[white_box]]` entries
+/// included).
+const PATH_KEYS: &[&[&str]] = &[
+    &["scene"],
+    &["mesh", "obj"],
+    &["mesh", "region"],
+    &["mesh", "init"],
+    &["views", "train"],
+    &["views", "test"],
+    &["views", "pbr"],
+    &["views", "render"],
+    &["views", "pbr_test"],
+    &["views", "labels"],
+    &["white_box", "detector"],
+];
+
+/// The longest `extends` chain followed; a longer one is almost surely a mistake.
+const MAX_EXTENDS: usize = 16;
+
+/// The TOML of `path` merged over the configs it `extends` (the key removed), and the files read,
+/// `path` first. A base's relative paths are rewritten relative to `path`'s folder, so each path
+/// means what it meant in the file that set it.
+pub fn read_merged(path: &Path) -> Result<(toml::Table, Vec<PathBuf>), ConfigError> {
+    let mut chain: Vec<(PathBuf, toml::Table)> = Vec::new();
+    let mut next = Some(path.to_path_buf());
+    // Where the current file lies, relative to the first file's folder.
+    let mut rel = PathBuf::new();
+    while let Some(file) = next.take() {
+        if chain.iter().any(|(f, _)| crate::provenance::tidy(f) == crate::provenance::tidy(&file)) {
+            let names: Vec<String> = chain.iter().map(|(f, _)| f.display().to_string()).collect();
+            return Err(ConfigError::Invalid {
+                path: path.into(),
+                source: InvalidConfig(format!("extends: {} comes back to {}", names.join(" → "), file.display())),
+            });
+        }
+        if chain.len() == MAX_EXTENDS {
+            return Err(ConfigError::Invalid {
+                path: path.into(),
+                source: InvalidConfig(format!("extends: more than {MAX_EXTENDS} configs in the chain")),
+            });
+        }
+        let text = std::fs::read_to_string(&file).map_err(|source| ConfigError::Read { path: file.clone(), source })?;
+        let mut table: toml::Table =
+            toml::from_str(&text).map_err(|source| ConfigError::Parse { path: file.clone(), source })?;
+        if !chain.is_empty() {
+            for key in PATH_KEYS {
+                anchor(&mut table, key, &rel);
+            }
+        }
+        match table.remove("extends") {
+            None => {}
+            Some(toml::Value::String(base)) => {
+                let dir = file.parent().unwrap_or(Path::new(""));
+                rel = crate::provenance::tidy(&rel.join(Path::new(&base).parent().unwrap_or(Path::new(""))));
+                next = Some(crate::provenance::tidy(&dir.join(&base)));
+            }
+            Some(other) => {
+                return Err(ConfigError::Invalid {
+                    path: file.clone(),
+                    source: InvalidConfig(format!("extends must be a config's path, got {other}")),
+                })
+            }
+        }
+        chain.push((file, table));
+    }
+    let files = chain.iter().map(|(f, _)| f.clone()).collect();
+    let mut merged = toml::Table::new();
+    for (_, t) in chain.into_iter().rev() {
+        merge(&mut merged, t);
+    }
+    Ok((merged, files))
+}
+
+/// `over`'s keys win; tables merge key by key.
+fn merge(base: &mut toml::Table, over: toml::Table) {
+    for (k, v) in over {
+        match (base.get_mut(&k), v) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge(b, o),
+            (_, v) => {
+                base.insert(k, v);
+            }
+        }
+    }
+}
+
+/// Prefixes `rel` to the relative paths at `key` (through arrays of tables and arrays of paths).
+fn anchor(table: &mut toml::Table, key: &[&str], rel: &Path) {
+    let Some(v) = table.get_mut(key[0]) else { return };
+    anchor_value(v, &key[1..], rel);
+}
+
+fn anchor_value(v: &mut toml::Value, key: &[&str], rel: &Path) {
+    match v {
+        toml::Value::Array(items) => items.iter_mut().for_each(|i| anchor_value(i, key, rel)),
+        toml::Value::Table(t) if !key.is_empty() => anchor(t, key, rel),
+        toml::Value::String(s) if key.is_empty() => {
+            let p = Path::new(s.as_str());
+            // `data:` entries, absolute paths and named starts ("random") are not relative paths.
+            if !(s.starts_with(crate::data::SCHEME) || p.is_absolute() || s == "random") {
+                *s = crate::provenance::tidy(&rel.join(p)).display().to_string();
+            }
+        }
+        _ => {}
+    }
+}
+
+/// A `views.pbr` folder not rendered yet, and the `pav views render` command that renders it
+/// when the config names its views config (`views.render`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MissingViews {
+    /// The folder.
+    pub dir: PathBuf,
+    /// Its views config, when `views.render` names it.
+    pub config: Option<PathBuf>,
+}
+
+impl std::fmt::Display for MissingViews {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let dir = crate::provenance::tidy(&self.dir);
+        let dir = dir.display();
+        match &self.config {
+            Some(c) => write!(
+                f,
+                "views.pbr {dir} has not been rendered yet: run `pav views render {} -o {dir}` first",
+                crate::provenance::tidy(c).display()
+            ),
+            None => write!(
+                f,
+                "views.pbr {dir} has not been rendered yet: render it with `pav views render VIEWS.toml -o {dir}` (views.render can name the config)"
+            ),
+        }
+    }
+}
+
+impl OptimizeConfig {
+    /// The bytes of every config file read, the loaded one first: a checkpoint's fingerprint,
+    /// so that a change to a base config is a change of config.
+    pub fn file_bytes(&self) -> Result<Vec<u8>, (PathBuf, std::io::Error)> {
+        let mut out = Vec::new();
+        for f in &self.files {
+            out.extend(std::fs::read(f).map_err(|e| (f.clone(), e))?);
+        }
+        Ok(out)
+    }
+
+    /// The `views.pbr` and `views.pbr_test` folders that hold no rendered view set yet.
+    pub fn missing_views(&self) -> Vec<MissingViews> {
+        let rendered = |d: &Path| d.join("views.toml").is_file();
+        let pbr = self.views.pbr.iter().enumerate().map(|(i, d)| (d, self.views.render.get(i)));
+        let test = self.views.pbr_test.iter().map(|d| (d, None));
+        pbr.chain(test)
+            .filter(|(d, _)| !rendered(d))
+            .map(|(d, c)| MissingViews { dir: d.clone(), config: c.cloned() })
+            .collect()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -432,35 +608,115 @@ mod tests {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/optimize").join(name)
     }
 
+    fn study(name: &str) -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/studies").join(name)
+    }
+
     #[test]
     fn shipped_configs_load_and_resolve_paths() {
-        for name in ["paper.toml", "authors.toml", "half.toml", "half-random.toml", "half-turns.toml"] {
-            let c = OptimizeConfig::load(&shipped(name)).unwrap_or_else(|e| panic!("{e}"));
+        for p in [shipped("paper.toml"), shipped("authors.toml"), study("half.toml"), study("half-random.toml")] {
+            let c = OptimizeConfig::load(&p).unwrap_or_else(|e| panic!("{e}"));
             // `data:` entries resolve into the data store, relative paths against the config.
-            assert!(c.mesh.obj.starts_with(crate::data::store::Store::from_env().root), "{name}: {:?}", c.mesh.obj);
-            assert!(c.scene.starts_with(shipped("")), "{name}: {:?}", c.scene);
+            assert!(c.mesh.obj.starts_with(crate::data::store::Store::from_env().root), "{p:?}: {:?}", c.mesh.obj);
+            let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/scenes");
+            assert!(crate::provenance::tidy(&c.scene).starts_with(&scenes), "{p:?}: {:?}", c.scene);
         }
-        let half = OptimizeConfig::load(&shipped("half.toml")).unwrap();
+        let half = OptimizeConfig::load(&study("half.toml")).unwrap();
         assert_eq!(half.parts().unwrap().len(), 2);
-        let turns = OptimizeConfig::load(&shipped("half-turns.toml")).unwrap();
+        let turns = OptimizeConfig::load(&study("half-turns.toml")).unwrap();
         assert_eq!((half.views.turns.len(), turns.views.turns.len()), (0, 4));
         // Rendered views resolve like every other path (the folder is made by `pav views render`).
-        let pbr = OptimizeConfig::load(&shipped("half-turns-pbr.toml")).unwrap();
-        assert_eq!(pbr.views.pbr, [shipped("../../out/views_etron")]);
+        let pbr = OptimizeConfig::load(&study("half-turns-pbr.toml")).unwrap();
+        assert_eq!(pbr.views.pbr, [study("../../out/views_etron")]);
         assert_eq!((pbr.views.train, pbr.mesh, pbr.loss), (turns.views.train, turns.mesh, turns.loss.clone()));
-        let pair = OptimizeConfig::load(&shipped("half-turns-ensemble-pbr.toml")).unwrap();
+        let pair = OptimizeConfig::load(&study("half-turns-ensemble-pbr.toml")).unwrap();
         assert_eq!((pair.views.pbr.len(), pair.white_box.len(), pair.loss), (1, 2, turns.loss));
+    }
+
+    /// A config that `extends` another is the base with the file's keys on top: tables merge key
+    /// by key, arrays (of tables too) replace, and a base's relative paths keep their meaning.
+    #[test]
+    fn extends_merges_over_the_base_and_keeps_its_paths() {
+        let dir = tempfile::tempdir().unwrap();
+        let sub = dir.path().join("variants");
+        std::fs::create_dir(&sub).unwrap();
+        let paper = std::fs::read_to_string(shipped("paper.toml")).unwrap();
+        // The base sits in another folder than the shipped one, so its `../scenes` path must be
+        // rewritten for the variant's folder to mean the same file.
+        let base_dir = dir.path().join("configs/optimize");
+        std::fs::create_dir_all(&base_dir).unwrap();
+        std::fs::create_dir_all(dir.path().join("configs/scenes")).unwrap();
+        std::fs::copy(shipped("../scenes/pav-eot.toml"), dir.path().join("configs/scenes/pav-eot.toml")).unwrap();
+        std::fs::write(base_dir.join("base.toml"), &paper).unwrap();
+        let variant = sub.join("v.toml");
+        std::fs::write(
+            &variant,
+            "extends = \"../configs/optimize/base.toml\"\n[mesh]\ntexture_size = 256\n[optimizer]\nepochs = 2\n",
+        )
+        .unwrap();
+        let base = OptimizeConfig::load(&base_dir.join("base.toml")).unwrap();
+        let v = OptimizeConfig::load(&variant).unwrap();
+        assert_eq!((v.mesh.texture_size, v.optimizer.epochs), (256, 2));
+        assert_eq!((v.optimizer.lr, v.views.clone(), v.loss.clone()), (base.optimizer.lr, base.views.clone(), base.loss));
+        assert_eq!(crate::provenance::tidy(&v.scene), crate::provenance::tidy(&base.scene));
+        assert!(v.scene.is_file() || crate::provenance::tidy(&v.scene).is_file(), "{:?}", v.scene);
+        assert_eq!(v.files, [variant.clone(), crate::provenance::tidy(&sub.join("../configs/optimize/base.toml"))]);
+        // A two-level chain, and an array that replaces the base's.
+        let v2 = sub.join("v2.toml");
+        std::fs::write(&v2, "extends = \"v.toml\"\nwhite_box = [{ detector = \"../../detectors/yolox_nano.toml\" }]\n").unwrap();
+        let c = OptimizeConfig::load(&v2).unwrap();
+        assert_eq!((c.mesh.texture_size, c.white_box.len()), (256, 1));
+        assert!(c.white_box[0].detector.ends_with("detectors/yolox_nano.toml"));
+        // The checkpoint fingerprint covers the base: a change there is a change of config.
+        let before = c.file_bytes().unwrap();
+        std::fs::write(base_dir.join("base.toml"), paper.replace("lr = 0.015", "lr = 0.02")).unwrap();
+        assert_ne!(OptimizeConfig::load(&v2).map(|c| c.file_bytes().unwrap()).unwrap_or_default(), before);
+    }
+
+    #[test]
+    fn extends_refuses_a_cycle_a_missing_base_and_a_non_path() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (dir.path().join("a.toml"), dir.path().join("b.toml"));
+        std::fs::write(&a, "extends = \"b.toml\"\n").unwrap();
+        std::fs::write(&b, "extends = \"./a.toml\"\n").unwrap();
+        let e = OptimizeConfig::load(&a).unwrap_err().to_string();
+        assert!(e.contains("comes back to"), "{e}");
+        std::fs::write(&b, "extends = \"nope.toml\"\n").unwrap();
+        let e = OptimizeConfig::load(&a).unwrap_err().to_string();
+        assert!(e.contains("nope.toml"), "{e}");
+        std::fs::write(&b, "extends = 3\n").unwrap();
+        let e = OptimizeConfig::load(&a).unwrap_err().to_string();
+        assert!(e.contains("extends must be a config's path"), "{e}");
+    }
+
+    #[test]
+    fn missing_views_name_the_command_that_renders_them() {
+        let c = OptimizeConfig::load(&shipped("recommended.toml")).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let mut c2 = c.clone();
+        c2.views.pbr = vec![dir.path().join("not-rendered")];
+        let m = c2.missing_views();
+        assert_eq!(m.len(), 1);
+        let text = m[0].to_string();
+        assert!(text.contains("pav views render") && text.contains("etron-plates-wide.toml"), "{text}");
+        assert!(text.contains("not-rendered"), "{text}");
+        // A folder with a view set is not missing.
+        std::fs::create_dir(dir.path().join("not-rendered")).unwrap();
+        std::fs::write(dir.path().join("not-rendered/views.toml"), "").unwrap();
+        assert!(c2.missing_views().is_empty());
     }
 
     #[test]
     fn every_shipped_config_and_its_scene_load() {
         let mut n = 0;
-        for e in std::fs::read_dir(shipped("")).unwrap() {
-            let p = e.unwrap().path();
-            if p.extension().is_some_and(|x| x == "toml") {
-                let c = OptimizeConfig::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
-                crate::scene::Scene::load(&c.scene).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
-                n += 1;
+        for folder in ["", "../studies"] {
+            for e in std::fs::read_dir(shipped(folder)).unwrap() {
+                let p = e.unwrap().path();
+                if p.extension().is_some_and(|x| x == "toml") {
+                    let c = OptimizeConfig::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+                    crate::scene::Scene::load(&c.scene).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+                    n += 1;
+                }
             }
         }
         assert!(n >= 17, "{n} configs");
@@ -468,7 +724,7 @@ mod tests {
 
     #[test]
     fn a_zero_or_full_turn_is_refused() {
-        let mut c = OptimizeConfig::load(&shipped("half-turns.toml")).unwrap();
+        let mut c = OptimizeConfig::load(&study("half-turns.toml")).unwrap();
         for bad in [0.0, 180.0, f64::NAN] {
             c.views.turns = vec![15.0, bad];
             let e = c.check().unwrap_err().to_string();
@@ -480,11 +736,11 @@ mod tests {
 
     #[test]
     fn white_boxes_loss_shapes_and_an_initial_texture_file_load() {
-        let c = OptimizeConfig::load(&shipped("half-turns-ensemble.toml")).unwrap();
+        let c = OptimizeConfig::load(&study("half-turns-ensemble.toml")).unwrap();
         let names: Vec<&str> = c.white_box.iter().filter_map(|w| w.detector.file_stem()?.to_str()).collect();
         assert_eq!(names, ["yolov3-tiny", "yolox_nano"]);
-        assert!(c.white_box.iter().all(|w| w.detector.is_absolute() || w.detector.starts_with(shipped(""))));
-        let text = std::fs::read_to_string(shipped("half-turns.toml")).unwrap();
+        assert!(c.white_box.iter().all(|w| w.detector.is_file()), "{:?}", c.white_box);
+        let text = std::fs::read_to_string(shipped("paper.toml")).unwrap();
         let dir = tempfile::tempdir().unwrap();
         let variant = |from: &str, to: &str| {
             let p = dir.path().join("v.toml");
@@ -517,10 +773,10 @@ mod tests {
         assert_eq!(variant("init = 0.5", "init = \"random\"").unwrap().mesh.init, Init::Named(InitName::Random));
         let e = variant("weight = 1.0", "weight = 0.0").unwrap_err().to_string();
         assert!(e.contains("white_box weights"), "{e}");
-        // Levels default to one (texels); more must halve the atlas evenly (256 → 8 at 6 levels).
+        // Levels default to one (texels); more must halve the atlas evenly (1024 → 32 at 6 levels).
         assert_eq!(variant("seed = 0", "seed = 0").unwrap().optimizer.levels, 1);
         assert_eq!(variant("seed = 0", "seed = 0\nlevels = 6").unwrap().optimizer.levels, 6);
-        let e = variant("seed = 0", "seed = 0\nlevels = 9").unwrap_err().to_string();
+        let e = variant("seed = 0", "seed = 0\nlevels = 12").unwrap_err().to_string();
         assert!(e.contains("optimizer.levels") && e.contains("halve"), "{e}");
         // A subset of white boxes per step: at least one, at most the one listed.
         assert_eq!(variant("seed = 0", "seed = 0").unwrap().optimizer.white_boxes_per_step, None);
@@ -545,13 +801,11 @@ mod tests {
 
     #[test]
     fn a_bad_part_is_refused_by_name() {
-        let text = std::fs::read_to_string(shipped("half.toml")).unwrap().replace("\"top\"", "\"roof\"");
-        let dir = std::env::temp_dir().join(format!("pav-config-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let p = dir.join("bad.toml");
-        std::fs::write(&p, text).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("bad.toml");
+        let base = shipped("paper.toml").display().to_string();
+        std::fs::write(&p, format!("extends = {base:?}\n[mesh]\nparts = [\"side:0.2-0.8\", \"roof\"]\n")).unwrap();
         let e = OptimizeConfig::load(&p).unwrap_err().to_string();
         assert!(e.contains("mesh.parts") && e.contains("roof"), "{e}");
-        std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -351,8 +351,12 @@ pub fn optimize_texture(
     stop: &AtomicBool,
 ) -> Result<Outcome, OptimizeError> {
     std::fs::create_dir_all(&opts.out).map_err(|source| OptimizeError::Io { path: opts.out.clone(), source })?;
-    let hash =
-        fingerprint(&std::fs::read(cfg_path).map_err(|source| OptimizeError::Io { path: cfg_path.into(), source })?);
+    let bytes = if cfg.files.is_empty() {
+        std::fs::read(cfg_path).map_err(|source| OptimizeError::Io { path: cfg_path.into(), source })?
+    } else {
+        cfg.file_bytes().map_err(|(path, source)| OptimizeError::Io { path, source })?
+    };
+    let hash = fingerprint(&bytes);
     let ckpt_path = opts.out.join("checkpoint.bin");
     let n_values = setup.tex_size * setup.tex_size * 3;
     let pyramid = Pyramid::new(setup.tex_size, cfg.optimizer.levels)?;

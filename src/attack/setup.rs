@@ -221,7 +221,12 @@ fn pbr_views(
         CameraConvention::Fca => "bbox",
         CameraConvention::PavCamou => "pav",
     };
+    let missing = cfg.missing_views();
     for dir in dirs {
+        // Named with the command that renders it, rather than as a file the reader lacks.
+        if let Some(m) = missing.iter().find(|m| &m.dir == dir) {
+            return Err(SetupError::Views(m.to_string().trim_start_matches("views.pbr ").to_string()));
+        }
         let (info, rows) = crate::scene::views::read_view_set(dir)?;
         if !info.shows(&cfg.mesh.obj) || info.normalize != normalize {
             return Err(SetupError::Views(format!(

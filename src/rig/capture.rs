@@ -788,7 +788,7 @@ mod tests {
         }
         probes(&mut tr, 29.5);
         // The fitted rate with the offset bounded at that rate, as captures stated it before
-        // session 19: its half width does not cover the frames at the ends.
+        // the clock range: its half width does not cover the frames at the ends.
         let m = tr.map.unwrap();
         let (lo, hi) = tr.offsets_at(m);
         let hi = hi.unwrap();

@@ -155,7 +155,7 @@ impl SimTurntable {
         };
         let (stop2, truth2) = (stop.clone(), truth.clone());
         let thread = std::thread::Builder::new().name("sim-turntable".into()).spawn(move || {
-            // Keep the slave end open so the master never reads EIO between host sessions.
+            // Keep the slave end open so the master never reads EIO between host connections.
             let _slave = slave;
             serve(master, opts, stop2, truth2);
         })?;

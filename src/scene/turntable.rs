@@ -145,7 +145,7 @@ pub struct CarScene {
 }
 
 /// Room light: a key light from above the camera's left shoulder and some ambient. Of the few
-/// settings tried, this one's contrast got the rasterized car detected most (README).
+/// settings tried, this one's contrast got the rasterized car detected most (docs/reports/simulated-turntable.md).
 const ROOM: Lights = Lights { ambient: 0.35, diffuse: 0.8, specular: 0.3, direction: [0.6, 1.0, 0.8], shininess: 32.0 };
 
 impl CarScene {

@@ -2,6 +2,7 @@
 
 use crate::common::{ctrl_c_flag, Bar};
 use anyhow::{bail, Context, Result};
+use pav::attack::config::OptimizeConfig;
 use pav::attack::export::PrintSpec;
 use pav::attack::optimize::Finish;
 use pav::experiments::outputs::{optimize_and_report, OptimizeRun, Prepared};
@@ -33,9 +34,26 @@ pub struct Args {
     /// Printer resolution of the sheet.
     #[arg(long, default_value_t = 300.0)]
     dpi: f64,
+    /// Render the config's missing `views.pbr` folders first (Blender; minutes per hundred views).
+    #[arg(long)]
+    render_views: bool,
 }
 
 pub fn run(a: &Args) -> Result<()> {
+    let missing = OptimizeConfig::load(&a.config)?.missing_views();
+    if !missing.is_empty() && !a.render_views {
+        let lines: Vec<String> = missing.iter().map(|m| format!("  {m}")).collect();
+        bail!(
+            "{} needs rendered views that are not there yet (or pass --render-views to render them now):\n{}",
+            a.config.display(),
+            lines.join("\n")
+        );
+    }
+    for m in &missing {
+        let Some(views) = &m.config else { bail!("{m}") };
+        eprintln!("rendering {} into {}", views.display(), m.dir.display());
+        crate::views::render_config(views, &m.dir)?;
+    }
     let p = Prepared::load(&a.config, a.size)?;
     let s = &p.setup;
     eprintln!(

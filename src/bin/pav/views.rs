@@ -57,6 +57,12 @@ pub struct TurntableArgs {
     period: f64,
 }
 
+/// Renders the views config at `config` into `out` (resuming), as `pav views render` does.
+#[cfg(feature = "optimize")]
+pub fn render_config(config: &std::path::Path, out: &std::path::Path) -> Result<()> {
+    render(&ViewsConfig::load(config)?, config, out, None)
+}
+
 /// Renders `cfg` into `out` with provenance, printing the summary.
 fn render(
     cfg: &ViewsConfig,

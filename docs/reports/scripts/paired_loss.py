@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Two `pav optimize` runs of one config and seed (same views, same EoT draws), step by step:
 the loss terms and each white box's best detection score, A and B, and B − A with a 95 %
-paired-bootstrap interval over steps. Usage: paired_loss.py RUN_A RUN_B (README "Where the miss sits")."""
+paired-bootstrap interval over steps. Usage: paired_loss.py RUN_A RUN_B (docs/reports/transfer.md, "Where the miss sits")."""
 import csv
 import random
 import sys

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Do two OBJ meshes of one car correspond face by face, and is one a mirror of the other?
 
-    python3 scripts/mesh_correspondence.py $(pav data path fca/audi_et_te.obj) \
+    python3 docs/reports/scripts/mesh_correspondence.py $(pav data path fca/audi_et_te.obj) \
         $(pav data path rauca-e2e/pytorch3d_Etron.obj)
 
 Fits the scale between the two meshes' face centroids (faces taken in file order). It then
