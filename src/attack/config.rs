@@ -288,7 +288,8 @@ impl OptimizeConfig {
         let parse = |source| ConfigError::Parse { path: path.into(), source };
         let mut c: OptimizeConfig = if files.len() == 1 {
             // Parsed from the text again so that an error points at its line.
-            let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: path.into(), source })?;
+            let text =
+                std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: path.into(), source })?;
             toml::from_str(&text).map_err(parse)?
         } else {
             toml::Value::Table(table).try_into().map_err(parse)?
@@ -657,13 +658,17 @@ mod tests {
         let base = OptimizeConfig::load(&base_dir.join("base.toml")).unwrap();
         let v = OptimizeConfig::load(&variant).unwrap();
         assert_eq!((v.mesh.texture_size, v.optimizer.epochs), (256, 2));
-        assert_eq!((v.optimizer.lr, v.views.clone(), v.loss.clone()), (base.optimizer.lr, base.views.clone(), base.loss));
+        assert_eq!(
+            (v.optimizer.lr, v.views.clone(), v.loss.clone()),
+            (base.optimizer.lr, base.views.clone(), base.loss)
+        );
         assert_eq!(crate::provenance::tidy(&v.scene), crate::provenance::tidy(&base.scene));
         assert!(v.scene.is_file() || crate::provenance::tidy(&v.scene).is_file(), "{:?}", v.scene);
         assert_eq!(v.files, [variant.clone(), crate::provenance::tidy(&sub.join("../configs/optimize/base.toml"))]);
         // A two-level chain, and an array that replaces the base's.
         let v2 = sub.join("v2.toml");
-        std::fs::write(&v2, "extends = \"v.toml\"\nwhite_box = [{ detector = \"../../detectors/yolox_nano.toml\" }]\n").unwrap();
+        std::fs::write(&v2, "extends = \"v.toml\"\nwhite_box = [{ detector = \"../../detectors/yolox_nano.toml\" }]\n")
+            .unwrap();
         let c = OptimizeConfig::load(&v2).unwrap();
         assert_eq!((c.mesh.texture_size, c.white_box.len()), (256, 1));
         assert!(c.white_box[0].detector.ends_with("detectors/yolox_nano.toml"));

@@ -35,7 +35,7 @@
 //! prediction whose detection score for a target class reaches `box_threshold`, whatever its most
 //! likely class. The paper's set leaves out a box rated "truck 0.4, car 0.15", which P@0.5 and the
 //! mean best car score still count as a car at 0.15 (`detect::decode::Proposals::target_detections`); in the
-//! second half of a session-16 run, 21 of DEIMv2's 127 steps had no paper proposal while its
+//! second half of a four-white-box crossval fold, 21 of DEIMv2's 127 steps had no paper proposal while its
 //! best car score was ≥ 0.05, so L2 pushed nothing there.
 
 use crate::detect::nms::iou;
