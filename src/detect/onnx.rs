@@ -105,6 +105,10 @@ impl OnnxDetector {
             )));
         }
         let session = session_builder(&cfg.name, threads)?
+            // evaluate decodes and prepares the next frame on another thread meanwhile: a pool
+            // spinning between runs would take its core.
+            .with_intra_op_spinning(false)
+            .map_err(session_err(&cfg.name, "turning spinning off"))?
             .commit_from_file(&cfg.model)
             .map_err(session_err(&cfg.name, "loading the ONNX model"))?;
         let names: Vec<String> = session.inputs().iter().map(|i| i.name().to_string()).collect();

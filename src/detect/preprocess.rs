@@ -2,7 +2,7 @@
 
 use super::config::{Align, ChannelOrder, InputConfig, Resize};
 use super::BBox;
-use crate::image::resize::resize;
+use crate::image::resize::{resize, resize_pil_u8, Interpolation};
 use crate::image::Frame;
 
 /// Maps boxes from model-input pixels back to frame pixels: `frame = (input - pad) / scale`.
@@ -32,7 +32,21 @@ impl InputMap {
 }
 
 /// Builds the NCHW float input (batch 1) for `frame` and the map back to frame pixels.
+///
+/// One pass: the frame is resized to 8 bits (OpenCV's `INTER_LINEAR`, as the models' upstream
+/// code resizes, or PIL's antialiased bilinear), then each sample goes through a 256-entry table
+/// of its channel's normalization straight into its plane.
 pub fn prepare(frame: &Frame, cfg: &InputConfig) -> (Vec<f32>, InputMap) {
+    prepare_with(frame, cfg, true)
+}
+
+/// [`prepare`] with pav's own float bilinear (OpenCV's result to within one level) instead of
+/// OpenCV's: what `prepare` did before it called OpenCV, kept to measure what the switch moved.
+pub fn prepare_exact(frame: &Frame, cfg: &InputConfig) -> (Vec<f32>, InputMap) {
+    prepare_with(frame, cfg, false)
+}
+
+fn prepare_with(frame: &Frame, cfg: &InputConfig, opencv: bool) -> (Vec<f32>, InputMap) {
     let (w, h) = (frame.width, frame.height);
     let (iw, ih) = (cfg.width, cfg.height);
     let (nw, nh, px, py) = match cfg.resize {
@@ -53,23 +67,30 @@ pub fn prepare(frame: &Frame, cfg: &InputConfig) -> (Vec<f32>, InputMap) {
         ChannelOrder::Rgb => [2, 1, 0],
     };
     let norm = |c: usize, v: f32| (v * cfg.scale - cfg.mean[c]) / cfg.std[c];
+    let lut: [[f32; 256]; 3] = std::array::from_fn(|c| std::array::from_fn(|v| norm(c, v as f32)));
     let plane = iw * ih;
     let mut out = vec![0f32; 3 * plane];
-    for c in 0..3 {
-        out[c * plane..(c + 1) * plane].fill(norm(c, cfg.pad_value as f32));
+    if (nw, nh) != (iw, ih) {
+        for c in 0..3 {
+            out[c * plane..(c + 1) * plane].fill(norm(c, cfg.pad_value as f32));
+        }
     }
-    let resized = if (nw, nh) == (w, h) {
-        frame.bgr.iter().map(|&v| v as f32).collect()
+    let resized;
+    let pixels: &[u8] = if (nw, nh) == (w, h) {
+        &frame.bgr
     } else {
-        resize(frame, nw, nh, cfg.interpolation)
+        resized = resize_u8(frame, nw, nh, cfg.interpolation, opencv);
+        &resized
     };
-    for y in 0..nh {
-        for x in 0..nw {
-            let p = &resized[(y * nw + x) * 3..(y * nw + x) * 3 + 3];
-            let at = (y + py) * iw + x + px;
-            for (c, &sc) in src_ch.iter().enumerate() {
-                out[c * plane + at] = norm(c, p[sc]);
-            }
+    let (p0, rest) = out.split_at_mut(plane);
+    let (p1, p2) = rest.split_at_mut(plane);
+    for (y, row) in pixels.chunks_exact(nw * 3).take(nh).enumerate() {
+        let at = (y + py) * iw + px;
+        let (o0, o1, o2) = (&mut p0[at..at + nw], &mut p1[at..at + nw], &mut p2[at..at + nw]);
+        for (x, p) in row.chunks_exact(3).enumerate() {
+            o0[x] = lut[0][p[src_ch[0]] as usize];
+            o1[x] = lut[1][p[src_ch[1]] as usize];
+            o2[x] = lut[2][p[src_ch[2]] as usize];
         }
     }
     let map = InputMap {
@@ -83,10 +104,42 @@ pub fn prepare(frame: &Frame, cfg: &InputConfig) -> (Vec<f32>, InputMap) {
     (out, map)
 }
 
+/// `frame` resized to `nw × nh`, 8-bit BGR; bilinear by OpenCV when `opencv` and the `video`
+/// feature allow.
+fn resize_u8(frame: &Frame, nw: usize, nh: usize, filter: Interpolation, opencv: bool) -> Vec<u8> {
+    match filter {
+        Interpolation::Antialias => resize_pil_u8(frame, nw, nh),
+        Interpolation::Bilinear => {
+            #[cfg(feature = "video")]
+            if opencv {
+                if let Ok(v) = resize_opencv(frame, nw, nh) {
+                    return v;
+                }
+            }
+            #[cfg(not(feature = "video"))]
+            let _ = opencv;
+            // Within one level of OpenCV's fixed-point result.
+            resize(frame, nw, nh, filter).into_iter().map(|v| v as u8).collect()
+        }
+    }
+}
+
+/// OpenCV's `resize` with `INTER_LINEAR`: fixed point and vectorized, what the models' reference
+/// code calls.
+#[cfg(feature = "video")]
+fn resize_opencv(frame: &Frame, nw: usize, nh: usize) -> opencv::Result<Vec<u8>> {
+    use opencv::core::{Mat, Size};
+    use opencv::prelude::*;
+    let flat = Mat::from_slice(&frame.bgr)?;
+    let src = flat.reshape(3, frame.height as i32)?;
+    let mut dst = Mat::default();
+    opencv::imgproc::resize(&src, &mut dst, Size::new(nw as i32, nh as i32), 0.0, 0.0, opencv::imgproc::INTER_LINEAR)?;
+    Ok(dst.data_bytes()?.to_vec())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::image::resize::Interpolation;
 
     fn cfg(resize: Resize, align: Align, channels: ChannelOrder) -> InputConfig {
         InputConfig {
@@ -118,6 +171,25 @@ mod tests {
         assert_eq!(t[64 + 2 * 8], 20.0); // G
         assert_eq!(t[128 + 7 * 8], 114.0);
         assert_eq!(m.to_frame([0.0, 2.0, 8.0, 6.0]), [0.0, 0.0, 16.0, 8.0]);
+    }
+
+    /// OpenCV's fixed-point bilinear and pav's float one agree to within one 8-bit level on a
+    /// textured frame, at a downscale and an upscale.
+    #[test]
+    fn opencv_and_exact_bilinear_agree_within_one_level() {
+        let (w, h) = (97, 61);
+        let f =
+            Frame { width: w, height: h, bgr: (0..w * h * 3).map(|i| ((i * 37 + i / 7 * 11) % 256) as u8).collect() };
+        for size in [40, 150] {
+            let mut c = cfg(Resize::Letterbox, Align::Center, ChannelOrder::Rgb);
+            (c.width, c.height) = (size, size);
+            let (a, ma) = prepare(&f, &c);
+            let (b, mb) = prepare_exact(&f, &c);
+            assert_eq!(ma, mb);
+            let worst = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0f32, f32::max);
+            assert!(worst <= 1.0, "size {size}: {worst}");
+            assert!(a.iter().zip(&b).filter(|(x, y)| x != y).count() < a.len() / 2);
+        }
     }
 
     #[test]

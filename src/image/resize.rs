@@ -97,33 +97,51 @@ fn resize_float(frame: &Frame, nw: usize, nh: usize) -> Vec<f32> {
     out
 }
 
-/// PIL's 8-bit resampler: 22-bit fixed-point weights, horizontal pass rounded to 8 bits, then vertical.
+/// PIL's 8-bit resampler, on the 0–255 scale as floats (see [`resize_pil_u8`]).
 fn resize_pil(frame: &Frame, nw: usize, nh: usize) -> Vec<f32> {
+    resize_pil_u8(frame, nw, nh).into_iter().map(f32::from).collect()
+}
+
+/// PIL's 8-bit resampler: 22-bit fixed-point weights, horizontal pass rounded to 8 bits, then
+/// vertical. The weights are non-negative and sum to about 2²², so a sum over 8-bit samples fits
+/// an `i32`.
+pub fn resize_pil_u8(frame: &Frame, nw: usize, nh: usize) -> Vec<u8> {
     const BITS: u32 = 22;
-    let fixed = |taps: Vec<Taps>| -> Vec<(usize, Vec<i64>)> {
+    let fixed = |taps: Vec<Taps>| -> Vec<(usize, Vec<i32>)> {
         taps.into_iter()
-            .map(|t| (t.start, t.weights.iter().map(|&w| (w * (1u64 << BITS) as f64 + 0.5).floor() as i64).collect()))
+            .map(|t| (t.start, t.weights.iter().map(|&w| (w * (1u64 << BITS) as f64 + 0.5).floor() as i32).collect()))
             .collect()
     };
     let (w, h) = (frame.width, frame.height);
     let xs = fixed(axis_taps(w, nw, Interpolation::Antialias));
     let ys = fixed(axis_taps(h, nh, Interpolation::Antialias));
-    let round = |acc: i64| ((acc + (1 << (BITS - 1))) >> BITS).clamp(0, 255) as u8;
+    let round = |acc: i32| ((acc + (1 << (BITS - 1))) >> BITS).clamp(0, 255) as u8;
     let mut mid = vec![0u8; h * nw * 3];
-    for y in 0..h {
-        let row = &frame.bgr[y * w * 3..(y + 1) * w * 3];
-        for (dx, (start, ks)) in xs.iter().enumerate() {
-            for c in 0..3 {
-                let acc: i64 = ks.iter().enumerate().map(|(k, &wt)| row[(start + k) * 3 + c] as i64 * wt).sum();
-                mid[(y * nw + dx) * 3 + c] = round(acc);
+    for (row, out) in frame.bgr.chunks_exact(w * 3).zip(mid.chunks_exact_mut(nw * 3)) {
+        for ((start, ks), o) in xs.iter().zip(out.chunks_exact_mut(3)) {
+            let src = &row[start * 3..(start + ks.len()) * 3];
+            let mut acc = [0i32; 3];
+            for (p, &wt) in src.chunks_exact(3).zip(ks) {
+                acc[0] += p[0] as i32 * wt;
+                acc[1] += p[1] as i32 * wt;
+                acc[2] += p[2] as i32 * wt;
             }
+            o.copy_from_slice(&[round(acc[0]), round(acc[1]), round(acc[2])]);
         }
     }
-    let mut out = vec![0f32; nh * nw * 3];
-    for (dy, (start, ks)) in ys.iter().enumerate() {
-        for i in 0..nw * 3 {
-            let acc: i64 = ks.iter().enumerate().map(|(k, &wt)| mid[(start + k) * nw * 3 + i] as i64 * wt).sum();
-            out[dy * nw * 3 + i] = round(acc) as f32;
+    let stride = nw * 3;
+    let mut out = vec![0u8; nh * stride];
+    let mut acc = vec![0i32; stride];
+    for ((start, ks), o) in ys.iter().zip(out.chunks_exact_mut(stride)) {
+        acc.fill(0);
+        for (k, &wt) in ks.iter().enumerate() {
+            let src = &mid[(start + k) * stride..(start + k + 1) * stride];
+            for (a, &v) in acc.iter_mut().zip(src) {
+                *a += v as i32 * wt;
+            }
+        }
+        for (o, &a) in o.iter_mut().zip(&acc) {
+            *o = round(a);
         }
     }
     out
