@@ -90,10 +90,11 @@ log "building the RP2040 firmware"
 
 log "building pav-rig and pav (release)"
 cargo build --release --bin pav-rig --bin pav
+BIN="${CARGO_TARGET_DIR:-target}/release"
 
 if [ ! -f "$MODEL_DIR/yolov3-tiny.onnx" ] || [ "$MODEL_DIR/yolov3-tiny.weights" -nt "$MODEL_DIR/yolov3-tiny.onnx" ]; then
   log "YOLOv3-tiny: converting darknet cfg+weights to ONNX"
-  ./target/release/pav-rig model darknet2onnx \
+  "$BIN/pav-rig" model darknet2onnx \
     --cfg "$MODEL_DIR/yolov3-tiny.cfg" --weights "$MODEL_DIR/yolov3-tiny.weights" \
     --out "$MODEL_DIR/yolov3-tiny.onnx"
 fi
@@ -103,7 +104,7 @@ if [ -z "$MIRROR" ] && [ -f "$ROOT/../shared/data/MANIFEST.tsv" ]; then MIRROR="
 log "data: pav data fetch ${MIRROR:+--mirror $MIRROR}"
 # A failed fetch does not stop the set-up: the tests that need a missing file then fail, each
 # naming it and the command that fetches it.
-./target/release/pav data fetch ${MIRROR:+--mirror "$MIRROR"} \
+"$BIN/pav" data fetch ${MIRROR:+--mirror "$MIRROR"} \
   || echo "WARNING: pav's data is incomplete (see above); the tests that need it will fail until \`pav data fetch\` succeeds" >&2
 
 log "done. ONNX Runtime: $ORT_DIR/libonnxruntime.so (pav finds it there; or set ORT_DYLIB_PATH)"
