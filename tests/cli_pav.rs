@@ -3,16 +3,12 @@
 
 mod common;
 
-use std::process::{Command, Output};
+use std::process::Command;
 
 fn pav() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_pav"));
     c.current_dir(common::repo()).env("RUST_BACKTRACE", "0");
     c
-}
-
-fn text(o: &Output) -> String {
-    format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
 }
 
 #[test]
@@ -21,7 +17,7 @@ fn render_and_uv_commands_write_their_files() {
     let tmp = tempfile::tempdir().unwrap();
     let png = tmp.path().join("r.png");
     let o = pav().args(["render", "--size", "200", "-o"]).arg(&png).output().unwrap();
-    assert!(o.status.success(), "{}", text(&o));
+    assert!(o.status.success(), "{}", common::output_text(&o));
     let img = image::open(&png).unwrap().to_rgb8();
     assert_eq!(img.dimensions(), (200, 200));
     // The car is drawn: not every pixel is the white background.
@@ -29,7 +25,7 @@ fn render_and_uv_commands_write_their_files() {
     assert!(tmp.path().join("r_mask.png").exists());
 
     let o = pav().args(["uv", "adjust", "-o"]).arg(tmp.path().join("adj")).output().unwrap();
-    let out = text(&o);
+    let out = common::output_text(&o);
     assert!(o.status.success(), "{out}");
     assert!(out.contains("adjusted 281 faces: mean |log2 stretch| 0.474 -> 0.002"), "{out}");
     // The new mask marks every patch face again, thin strips included.
@@ -50,20 +46,28 @@ fn bad_meshes_are_clear_errors() {
     let tmp = tempfile::tempdir().unwrap();
     let o = pav().args(["render", "--mesh", "no/such.obj"]).output().unwrap();
     assert!(!o.status.success());
-    assert!(text(&o).contains("cannot read no/such.obj"), "{}", text(&o));
+    assert!(common::output_text(&o).contains("cannot read no/such.obj"), "{}", common::output_text(&o));
     let obj = tmp.path().join("nouv.obj");
     std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
     let o = pav().args(["uv", "check", "--mesh"]).arg(&obj).output().unwrap();
     assert!(!o.status.success());
-    assert!(text(&o).contains("nouv.obj:4: face corner `1` has no UV index; the mesh needs UVs"), "{}", text(&o));
+    assert!(
+        common::output_text(&o).contains("nouv.obj:4: face corner `1` has no UV index; the mesh needs UVs"),
+        "{}",
+        common::output_text(&o)
+    );
     let obj = tmp.path().join("badidx.obj");
     std::fs::write(&obj, "v 0 0 0\nvt 0 0\nf 1/1 2/1 3/1\n").unwrap();
     let o = pav().args(["render", "--mesh"]).arg(&obj).output().unwrap();
-    assert!(text(&o).contains("vertex index `2/1` is out of range (1 positions)"), "{}", text(&o));
+    assert!(
+        common::output_text(&o).contains("vertex index `2/1` is out of range (1 positions)"),
+        "{}",
+        common::output_text(&o)
+    );
     let obj = tmp.path().join("nan.obj");
     std::fs::write(&obj, "v 0 nan 0\n").unwrap();
     let o = pav().args(["render", "--mesh"]).arg(&obj).output().unwrap();
-    assert!(text(&o).contains("nan.obj:1: non-finite value NaN"), "{}", text(&o));
+    assert!(common::output_text(&o).contains("nan.obj:1: non-finite value NaN"), "{}", common::output_text(&o));
 }
 
 /// `pav eval-digital` with a peer's texture at its own size (RAUCA-E2E's 2048² atlas on a 256²
@@ -97,7 +101,7 @@ fn eval_digital_resamples_a_texture_of_another_size() {
         .arg(&out_dir)
         .output()
         .unwrap();
-    let out = text(&o);
+    let out = common::output_text(&o);
     assert!(o.status.success(), "{out}");
 
     // The run's record names the texture by manifest entry and hash, and the models it ran.
@@ -162,7 +166,7 @@ fn eval_digital_resamples_a_texture_of_another_size() {
     eprintln!("RAUCA-E2E − original {d_orig:.3}, − random32 (2 seeds) {d_rand:.3}");
     assert!((mean_vs("original") - d_orig).abs() < 1e-5 && (mean_vs("random32") - d_rand).abs() < 1e-5, "{paired}");
     assert!(d_orig < -0.3, "RAUCA-E2E hides the car on held-out views: {d_orig}");
-    assert!(text(&o).contains("rauca-e2e against each other texture"), "{}", text(&o));
+    assert!(common::output_text(&o).contains("rauca-e2e against each other texture"), "{}", common::output_text(&o));
 }
 
 /// Ctrl-C during `pav optimize` saves the state and exits non-zero, so a following command in
@@ -189,7 +193,7 @@ fn an_interrupted_optimize_saves_and_exits_non_zero() {
     let kill = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
     assert!(kill.success());
     let o = child.wait_with_output().unwrap();
-    let msg = text(&o);
+    let msg = common::output_text(&o);
     assert!(!o.status.success() && msg.contains("stopped: state saved"), "{msg}");
     let done = pav::attack::checkpoint::Checkpoint::load(&out.join("checkpoint.bin")).unwrap().steps_done;
     assert!((6..360).contains(&done), "{done} steps saved");
@@ -212,9 +216,9 @@ fn paint_puts_a_texture_on_the_region_and_keeps_the_car_paint_elsewhere() {
         .arg(&out)
         .output()
         .unwrap();
-    assert!(o.status.success(), "{}", text(&o));
+    assert!(o.status.success(), "{}", common::output_text(&o));
     // The config's region: mask.png's white on the sides' middle and the top, at 256² texels.
-    assert!(text(&o).contains("over 14421 of 65536 region texels"), "{}", text(&o));
+    assert!(common::output_text(&o).contains("over 14421 of 65536 region texels"), "{}", common::output_text(&o));
     let (p, base, tex) = (
         image::open(&out).unwrap().to_rgb8(),
         image::open(data.join("rauca-e2e/img_optim.png")).unwrap().to_rgb8(),
@@ -241,5 +245,5 @@ fn paint_puts_a_texture_on_the_region_and_keeps_the_car_paint_elsewhere() {
         .arg(&out)
         .output()
         .unwrap();
-    assert!(!o.status.success() && text(&o).contains("nope.png"), "{}", text(&o));
+    assert!(!o.status.success() && common::output_text(&o).contains("nope.png"), "{}", common::output_text(&o));
 }

@@ -3,14 +3,10 @@
 
 mod common;
 
-use std::process::{Command, Output};
+use std::process::Command;
 
 fn pav_rig() -> Command {
     Command::new(env!("CARGO_BIN_EXE_pav-rig"))
-}
-
-fn text(o: &Output) -> String {
-    format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
 }
 
 #[test]
@@ -38,7 +34,7 @@ fn capture_on_the_simulator_then_evaluate_uses_the_sidecar() {
         .env("RUST_BACKTRACE", "0")
         .output()
         .unwrap();
-    let out = text(&o);
+    let out = common::output_text(&o);
     assert!(o.status.success(), "{out}");
     assert!(out.contains("table ended at 360.000°"), "{out}");
     let rows = pav::sidecar::read(&pav::sidecar::sidecar_path(&video)).unwrap();
@@ -58,7 +54,7 @@ fn capture_on_the_simulator_then_evaluate_uses_the_sidecar() {
         .arg(tmp.path().join("eval"))
         .output()
         .unwrap();
-    assert!(o.status.success(), "{}", text(&o));
+    assert!(o.status.success(), "{}", common::output_text(&o));
     let md = std::fs::read_to_string(tmp.path().join("eval/summary.md")).unwrap();
     assert!(md.contains("Angles for **spin**: sidecar"), "{md}");
     let run = common::run_record(&tmp.path().join("eval/run.toml"));
@@ -82,7 +78,7 @@ fn missing_hardware_is_a_clear_error() {
         .output()
         .unwrap();
     assert!(!o.status.success());
-    let out = text(&o);
+    let out = common::output_text(&o);
     assert!(out.contains("cannot open turntable port /dev/no-such-tty"), "{out}");
     let o = pav_rig()
         .args(["capture", "--port", "sim", "--camera", "v4l2:/dev/video-none", "-o", "/tmp/never.mp4"])
@@ -90,23 +86,27 @@ fn missing_hardware_is_a_clear_error() {
         .output()
         .unwrap();
     assert!(!o.status.success());
-    assert!(text(&o).contains("no V4L2 camera at /dev/video-none"), "{}", text(&o));
+    assert!(common::output_text(&o).contains("no V4L2 camera at /dev/video-none"), "{}", common::output_text(&o));
     assert!(!std::path::Path::new("/tmp/never.mp4").exists());
     let o = pav_rig()
         .args(["capture", "--port", "/dev/ttyS99", "--camera", "sim", "-o", "/tmp/never.mp4"])
         .output()
         .unwrap();
-    assert!(text(&o).contains("--camera sim films the simulated turntable"), "{}", text(&o));
+    assert!(
+        common::output_text(&o).contains("--camera sim films the simulated turntable"),
+        "{}",
+        common::output_text(&o)
+    );
 }
 
 #[test]
 fn turntable_commands_on_the_simulator() {
     let o =
         pav_rig().args(["turntable", "--port", "sim", "--time-scale", "20", "rotate", "--", "-90"]).output().unwrap();
-    assert!(o.status.success(), "{}", text(&o));
-    assert!(text(&o).contains("done at -800 microsteps = -90.000°"), "{}", text(&o));
+    assert!(o.status.success(), "{}", common::output_text(&o));
+    assert!(common::output_text(&o).contains("done at -800 microsteps = -90.000°"), "{}", common::output_text(&o));
     let o = pav_rig().args(["turntable", "--port", "sim", "status"]).output().unwrap();
-    assert!(text(&o).contains("state Idle  position 0 microsteps"), "{}", text(&o));
+    assert!(common::output_text(&o).contains("state Idle  position 0 microsteps"), "{}", common::output_text(&o));
 }
 
 #[test]
@@ -120,7 +120,7 @@ fn simulator_options_out_of_range_are_refused() {
         ("--time-scale", "0", "time scale must be positive and finite, not 0"),
     ] {
         let o = pav_rig().args(["simulate", &format!("{flag}={value}")]).env("RUST_BACKTRACE", "0").output().unwrap();
-        let out = text(&o);
+        let out = common::output_text(&o);
         assert_eq!(o.status.code(), Some(1), "{flag} {value}: {out}");
         assert!(out.contains(needle), "{flag} {value}: {out}");
         assert!(!out.contains("panicked"), "{out}");
@@ -187,7 +187,7 @@ fn sigterm_stops_the_table_and_closes_the_files() {
     // SAFETY: kill(2) on a child's pid.
     assert_eq!(unsafe { libc::kill(cap.id() as i32, libc::SIGTERM) }, 0);
     let o = cap.wait_with_output().unwrap();
-    let out = text(&o);
+    let out = common::output_text(&o);
     assert!(!o.status.success(), "{out}");
     assert!(out.contains("interrupted (Ctrl-C or SIGTERM)") && out.contains("saved"), "{out}");
     // The table was told to stop, and both files hold every frame.
@@ -195,7 +195,7 @@ fn sigterm_stops_the_table_and_closes_the_files() {
     let st = pav_rig().args(["turntable", "--port", &port, "status"]).output().unwrap();
     let _ = sim.kill();
     let _ = sim.wait();
-    assert!(text(&st).contains("Idle"), "{}", text(&st));
+    assert!(common::output_text(&st).contains("Idle"), "{}", common::output_text(&st));
     // Every frame decodes; each has a sidecar row, but for the frames after the last angle
     // report, which the error counts.
     let rows = pav::sidecar::read(&pav::sidecar::sidecar_path(&video)).unwrap();
@@ -222,7 +222,7 @@ fn the_simulated_car_is_filmed_at_the_angles_its_sidecar_states() {
         .arg(&video)
         .output()
         .unwrap();
-    let out = text(&o);
+    let out = common::output_text(&o);
     assert!(o.status.success(), "{out}");
     assert!(out.contains("pav's rasterizer, car at distance 5, elevation 20°"), "{out}");
     let rows = pav::sidecar::read(&pav::sidecar::sidecar_path(&video)).unwrap();
@@ -254,11 +254,15 @@ fn the_simulated_car_is_filmed_at_the_angles_its_sidecar_states() {
         .arg(tmp.path().join("x.mp4"))
         .output()
         .unwrap();
-    assert!(!o.status.success() && text(&o).contains("filmed by --camera sim only"), "{}", text(&o));
+    assert!(
+        !o.status.success() && common::output_text(&o).contains("filmed by --camera sim only"),
+        "{}",
+        common::output_text(&o)
+    );
     let o = pav_rig()
         .args(["capture", "--port", "sim", "--camera", "sim", "--elevation", "20", "-o"])
         .arg(tmp.path().join("y.mp4"))
         .output()
         .unwrap();
-    assert!(!o.status.success() && text(&o).contains("--car"), "{}", text(&o));
+    assert!(!o.status.success() && common::output_text(&o).contains("--car"), "{}", common::output_text(&o));
 }

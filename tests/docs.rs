@@ -288,10 +288,6 @@ fn run_script(dir: &Path, script: &str) -> Output {
         .unwrap()
 }
 
-fn text(o: &Output) -> String {
-    format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
-}
-
 /// summary.csv's rows as maps from column to value.
 fn summary(path: &Path) -> Vec<std::collections::HashMap<String, String>> {
     let mut rd = csv::Reader::from_path(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
@@ -328,10 +324,10 @@ fn the_main_job_scores_the_turntable_fixture() {
     let job = line.split_once("-- ").unwrap().1;
     let tmp = scratch();
     let o = run_script(tmp.path(), &format!("pav-rig {job}"));
-    assert!(o.status.success(), "{}", text(&o));
+    assert!(o.status.success(), "{}", common::output_text(&o));
     let out = tmp.path().join("out/evaluate");
     let video = Path::new(job.split_whitespace().nth(1).unwrap()).file_stem().unwrap().to_str().unwrap().to_string();
-    assert_scored(&summary(&out.join("summary.csv")), &video, &text(&o));
+    assert_scored(&summary(&out.join("summary.csv")), &video, &common::output_text(&o));
     assert!(out.join(format!("polar_{video}.png")).is_file());
 }
 
@@ -344,11 +340,11 @@ fn the_quick_start_runs_as_written() {
     assert!(script.contains("pav optimize") && script.contains("pav-rig evaluate"), "{script}");
     let tmp = scratch();
     let o = run_script(tmp.path(), &script);
-    assert!(o.status.success(), "{}", text(&o));
+    assert!(o.status.success(), "{}", common::output_text(&o));
     let out = tmp.path().join("out");
     // What the README says each step leaves.
     for f in ["paper/texture.png", "paper/texture_print.png", "paper/preview.png", "paper/loss.png", "paper/run.toml"] {
-        assert!(out.join(f).is_file(), "{f} missing: {}", text(&o));
+        assert!(out.join(f).is_file(), "{f} missing: {}", common::output_text(&o));
     }
     assert!(out.join("digital/run.toml").is_file());
     for v in ["original", "camo"] {
@@ -357,8 +353,8 @@ fn the_quick_start_runs_as_written() {
     }
     let eval = out.join("sim/eval");
     let rows = summary(&eval.join("summary.csv"));
-    assert_scored(&rows, "original", &text(&o));
-    assert_scored(&rows, "camouflaged", &text(&o));
+    assert_scored(&rows, "original", &common::output_text(&o));
+    assert_scored(&rows, "camouflaged", &common::output_text(&o));
     for f in ["summary.md", "accuracy.png", "polar_original.png", "polar_camouflaged.png"] {
         assert!(eval.join(f).is_file(), "{f} missing");
     }

@@ -550,10 +550,12 @@ fn anchor_value(v: &mut toml::Value, key: &[&str], rel: &Path) {
     }
 }
 
-/// A `views.pbr` folder not rendered yet, and the `pav views render` command that renders it
-/// when the config names its views config (`views.render`).
+/// A `views.pbr` or `views.pbr_test` folder not rendered yet, and the `pav views render` command
+/// that renders it when the config names its views config (`views.render`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct MissingViews {
+    /// The config key that lists it.
+    pub key: &'static str,
     /// The folder.
     pub dir: PathBuf,
     /// Its views config, when `views.render` names it.
@@ -562,17 +564,17 @@ pub struct MissingViews {
 
 impl std::fmt::Display for MissingViews {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let dir = crate::provenance::tidy(&self.dir);
+        let (key, dir) = (self.key, crate::provenance::tidy(&self.dir));
         let dir = dir.display();
         match &self.config {
             Some(c) => write!(
                 f,
-                "views.pbr {dir} has not been rendered yet: run `pav views render {} -o {dir}` first",
+                "{key} {dir} has not been rendered yet: run `pav views render {} -o {dir}` first",
                 crate::provenance::tidy(c).display()
             ),
             None => write!(
                 f,
-                "views.pbr {dir} has not been rendered yet: render it with `pav views render VIEWS.toml -o {dir}` (views.render can name the config)"
+                "{key} {dir} has not been rendered yet: render it with `pav views render VIEWS.toml -o {dir}` (views.render can name the config)"
             ),
         }
     }
@@ -592,11 +594,11 @@ impl OptimizeConfig {
     /// The `views.pbr` and `views.pbr_test` folders that hold no rendered view set yet.
     pub fn missing_views(&self) -> Vec<MissingViews> {
         let rendered = |d: &Path| d.join("views.toml").is_file();
-        let pbr = self.views.pbr.iter().enumerate().map(|(i, d)| (d, self.views.render.get(i)));
-        let test = self.views.pbr_test.iter().map(|d| (d, None));
+        let pbr = self.views.pbr.iter().enumerate().map(|(i, d)| ("views.pbr", d, self.views.render.get(i)));
+        let test = self.views.pbr_test.iter().map(|d| ("views.pbr_test", d, None));
         pbr.chain(test)
-            .filter(|(d, _)| !rendered(d))
-            .map(|(d, c)| MissingViews { dir: d.clone(), config: c.cloned() })
+            .filter(|(_, d, _)| !rendered(d))
+            .map(|(key, d, c)| MissingViews { key, dir: d.clone(), config: c.cloned() })
             .collect()
     }
 }

@@ -83,6 +83,9 @@ pub enum SetupError {
     /// The views or the region do not make a problem (nothing to optimize, a view listed twice).
     #[error("{0}")]
     Views(String),
+    /// A folder of rendered views that is not there yet, with the command that renders it.
+    #[error("{0}")]
+    NotRendered(super::config::MissingViews),
     /// A folder of rendered views (`views.pbr`).
     #[error("views.pbr: {0}")]
     Pbr(#[from] crate::scene::views::ViewsError),
@@ -225,7 +228,7 @@ fn pbr_views(
     for dir in dirs {
         // Named with the command that renders it, rather than as a file the reader lacks.
         if let Some(m) = missing.iter().find(|m| &m.dir == dir) {
-            return Err(SetupError::Views(m.to_string().trim_start_matches("views.pbr ").to_string()));
+            return Err(SetupError::NotRendered(m.clone()));
         }
         let (info, rows) = crate::scene::views::read_view_set(dir)?;
         if !info.shows(&cfg.mesh.obj) || info.normalize != normalize {

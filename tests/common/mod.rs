@@ -60,6 +60,11 @@ pub fn real_data() -> PathBuf {
     s
 }
 
+/// A finished command's stdout and stderr, one after the other, for assertions and messages.
+pub fn output_text(o: &std::process::Output) -> String {
+    format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
 /// A detector config from configs/detectors.
 pub fn detector_config(name: &str) -> PathBuf {
     repo().join("configs/detectors").join(format!("{name}.toml"))
