@@ -5,8 +5,8 @@
 //!
 //! | layer | modules |
 //! |---|---|
-//! | 0 base | [`data`], [`provenance`], [`image`], [`video`], [`geometry`], [`rng`], [`sidecar`], [`table`], [`plot`], [`progress`] |
-//! | 1 method blocks | [`render`], [`scene`], [`dataset`], [`detect`] |
+//! | 0 base | [`colour`], [`data`], [`provenance`], [`image`], [`video`], [`geometry`], [`rng`], [`sidecar`], [`table`], [`plot`], [`progress`] |
+//! | 1 method blocks | [`print`], [`render`], [`scene`], [`dataset`], [`detect`] |
 //! | 2 jobs | [`attack`] (the optimizer), [`eval`] (scoring), [`rig`] (turntable and capture); no job uses another |
 //! | 3 experiments | [`experiments`]: what combines the optimizer and scoring |
 //!
@@ -14,6 +14,7 @@
 //! → loss → texture; and video → frames → detections → metrics → reports.
 #![warn(missing_docs)]
 
+pub mod colour;
 pub mod data;
 pub mod geometry;
 pub mod image;
@@ -29,6 +30,7 @@ pub mod video;
 
 pub mod dataset;
 pub mod detect;
+pub mod print;
 pub mod render;
 pub mod scene;
 

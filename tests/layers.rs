@@ -7,8 +7,8 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
 const LAYERS: [&[&str]; 4] = [
-    &["data", "provenance", "image", "video", "geometry", "rng", "sidecar", "table", "plot", "progress"],
-    &["render", "scene", "dataset", "detect"],
+    &["colour", "data", "provenance", "image", "video", "geometry", "rng", "sidecar", "table", "plot", "progress"],
+    &["print", "render", "scene", "dataset", "detect"],
     &["attack", "eval", "rig"],
     &["experiments"],
 ];

@@ -3,6 +3,7 @@
 use super::loss::{Proposals, Reduce};
 use super::smooth::SmoothNorm;
 use crate::geometry::camera::CameraConvention;
+use crate::print::channel::PrintConfig;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -233,6 +234,10 @@ pub struct OptimizeConfig {
     pub loss: LossConfig,
     /// Optimizer.
     pub optimizer: OptimizerConfig,
+    /// The print channel: when present, the detectors see the texture as this printer prints it
+    /// (`print::channel`), and the gamut term pulls texels towards colours it can print.
+    #[serde(default)]
+    pub print: Option<PrintConfig>,
     /// The config files read: the file loaded, then each one it `extends` (filled by [`Self::load`]).
     #[serde(skip)]
     pub files: Vec<PathBuf>,
@@ -318,6 +323,9 @@ impl OptimizeConfig {
         if let Init::File(p) = &mut c.mesh.init {
             fix(p);
         }
+        if let Some(p) = c.print.as_mut() {
+            fix(&mut p.profile);
+        }
         if let Some(source) = first_err {
             return Err(ConfigError::Data { path: path.into(), source: Box::new(source) });
         }
@@ -338,6 +346,7 @@ impl OptimizeConfig {
             self.views.train.iter().chain(&self.views.test).chain(&self.views.pbr).chain(&self.views.pbr_test).cloned(),
         );
         v.extend(self.views.labels.clone());
+        v.extend(self.print.as_ref().map(|p| p.profile.clone()));
         let boxes: Vec<PathBuf> = self.white_box.iter().map(|w| w.detector.clone()).collect();
         v.extend(crate::detect::load::detector_inputs(&boxes));
         v
@@ -430,6 +439,9 @@ impl OptimizeConfig {
         if !(self.mesh.parts_min_cos > 0.0 && self.mesh.parts_min_cos <= 1.0) {
             return Err(format!("mesh.parts_min_cos must be in (0, 1], got {}", self.mesh.parts_min_cos));
         }
+        if let Some(p) = &self.print {
+            p.check()?;
+        }
         Ok(())
     }
 
@@ -458,6 +470,7 @@ const PATH_KEYS: &[&[&str]] = &[
     &["views", "pbr_test"],
     &["views", "labels"],
     &["white_box", "detector"],
+    &["print", "profile"],
 ];
 
 /// The longest `extends` chain followed; a longer one is almost surely a mistake.

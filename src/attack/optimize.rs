@@ -38,7 +38,10 @@ pub struct StepLog {
     pub l2: f32,
     /// Ls: smoothness of the texture.
     pub ls: f64,
-    /// L1 + β·L2 + γ·Ls.
+    /// The print channel's gamut term, weighted (0 without `[print]`).
+    #[serde(default)]
+    pub gamut: f64,
+    /// L1 + β·L2 + γ·Ls + the gamut term.
     pub total: f64,
     /// Boxes (n_o).
     pub boxes: usize,
@@ -251,7 +254,8 @@ pub fn step(
 ) -> Result<StepLog, OptimizeError> {
     let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
     let t = Instant::now();
-    let mut img = view.render_plain(tex);
+    let printed = setup.print.as_ref().map(|p| p.printed(tex));
+    let mut img = view.render_plain(printed.as_deref().unwrap_or(tex));
     let render_ms = ms(t);
     let t = Instant::now();
     let tape = eot::apply(&setup.scene, &mut img, 3, &view.active, rng);
@@ -261,10 +265,17 @@ pub fn step(
     let car = view.car_box.map(|b| zoomed.as_ref().map_or(b, |z| z.map_box(b, view.size)));
     let EnsembleGrad { sum: g, per_detector } = wb.loss_and_grad_of(&drawn, &img, view.size, cfg.loss.beta, car)?;
     let t = Instant::now();
+    // Through the print channel the render's adjoint lands on the printed texture first.
+    let mut grad_printed = setup.print.as_ref().map(|_| vec![0f32; grad.len()]);
+    let into = grad_printed.as_deref_mut().unwrap_or(grad);
     match &zoomed {
-        Some(z) => view.backward(&tape, &zoom::backward(z, &g.grad, view.size), grad),
-        None => view.backward(&tape, &g.grad, grad),
+        Some(z) => view.backward(&tape, &zoom::backward(z, &g.grad, view.size), into),
+        None => view.backward(&tape, &g.grad, into),
     }
+    let gamut = match (&setup.print, &grad_printed) {
+        (Some(p), Some(gp)) => p.backward(tex, gp, &setup.region_texels, grad),
+        _ => 0.0,
+    };
     let adjoint_ms = ms(t);
     let t = Instant::now();
     let ls = smoothness(tex, setup.tex_size, setup.tex_size, cfg.loss.smoothness, cfg.loss.gamma, grad);
@@ -292,7 +303,8 @@ pub fn step(
         l1: d.l1,
         l2: d.l2,
         ls,
-        total: d.l1 as f64 + cfg.loss.beta as f64 * d.l2 as f64 + cfg.loss.gamma as f64 * ls,
+        gamut,
+        total: d.l1 as f64 + cfg.loss.beta as f64 * d.l2 as f64 + cfg.loss.gamma as f64 * ls + gamut,
         boxes: d.boxes,
         proposals: d.proposals,
         max_score: d.max_score,

@@ -14,6 +14,7 @@ use crate::geometry::parts::select_faces;
 use crate::geometry::uv::faces_mask;
 use crate::image::resize::{resize, Interpolation};
 use crate::image::{to_u8, Frame, ImageError, Rgb};
+use crate::print::channel::{region_texels, PrintChannel};
 use crate::render::bake::{bake, BakeError, Plate, Shot, BAKE_SIZE};
 use crate::render::mask::MaskError;
 use crate::render::shade::{vertex_normals, Lights};
@@ -89,6 +90,9 @@ pub enum SetupError {
     /// A folder of rendered views (`views.pbr`).
     #[error("views.pbr: {0}")]
     Pbr(#[from] crate::scene::views::ViewsError),
+    /// The `[print]` table's profile.
+    #[error("print.profile: {0}")]
+    Print(#[from] crate::print::proof::ProofError),
 }
 
 /// The prepared problem.
@@ -115,6 +119,13 @@ pub struct Setup {
     pub boxes: HashMap<String, BBox>,
     /// Rendered views laid over a photo's background plate: view name → the photo's stem.
     pub plates: HashMap<String, String>,
+    /// The `[print]` table's channel: the white boxes see the texture through it in training.
+    pub print: Option<PrintChannel>,
+    /// The channel scores see textures through (`experiments`): the `[print]` table's unless a
+    /// command names another.
+    pub print_scored: Option<PrintChannel>,
+    /// The optimizable texels (the region's, as texel indices), for the print channel's adjoint.
+    pub region_texels: Vec<u32>,
     /// The photos behind `train` and `test` by view name, for synthetic views of any subset.
     samples: Arc<HashMap<String, CarlaSample>>,
     maker: ViewMaker,
@@ -379,9 +390,13 @@ impl Setup {
         let mut plates = HashMap::new();
         let pbr = pbr_views(cfg, &cfg.views.pbr, &maker, &mesh, &region, None, &mut plates)?;
         test.extend(pbr_views(cfg, &cfg.views.pbr_test, &maker, &mesh, &region, Some(&mut boxes), &mut plates)?);
+        let print = cfg.print.as_ref().map(PrintChannel::open).transpose()?;
         Ok(Setup {
             mesh,
             tex_size: ts,
+            print_scored: print.clone(),
+            print,
+            region_texels: region_texels(&region),
             region,
             region_values,
             scene,
@@ -526,6 +541,9 @@ impl Setup {
             test,
             boxes: self.boxes.clone(),
             plates: self.plates.clone(),
+            print: self.print.clone(),
+            print_scored: self.print_scored.clone(),
+            region_texels: self.region_texels.clone(),
             samples: self.samples.clone(),
             maker: self.maker.clone(),
         }

@@ -318,6 +318,7 @@ pub fn crossval_report(
         )));
     }
     let mut setup = Setup::load_photos(&cfg, None)?;
+    scoring.apply_print(&mut setup)?;
     let wb = Ensemble::load(&cfg, cfg.views.size)?;
     let pbr_kept = cfg.views.pbr_min_score.map(|t| setup.keep_detected_pbr(&wb, t)).transpose()?;
     if let Some(k) = &pbr_kept {

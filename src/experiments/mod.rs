@@ -9,6 +9,8 @@ pub mod per_view;
 pub mod table1;
 pub mod table2;
 
+use crate::attack::setup::Setup;
+use crate::print::channel::{PrintChannel, PrintConfig};
 use std::path::{Path, PathBuf};
 
 /// Why an experiment failed.
@@ -41,6 +43,9 @@ pub enum ExperimentError {
     /// A CSV table.
     #[error(transparent)]
     Table(#[from] crate::table::TableError),
+    /// The print channel's profile.
+    #[error("print profile: {0}")]
+    Print(#[from] crate::print::proof::ProofError),
     /// A file or folder.
     #[error("{path}: {source}")]
     Io {
@@ -78,6 +83,19 @@ pub struct Scoring {
     pub detectors: Vec<PathBuf>,
     /// A car counts as detected when its score reaches this (`detect::detected`).
     pub threshold: f32,
+    /// Score textures as this printer prints them; `None`: as the config's `[print]` table
+    /// says (unprinted without one).
+    pub print: Option<PrintConfig>,
+}
+
+impl Scoring {
+    /// Sets the channel `setup`'s scores see textures through.
+    pub fn apply_print(&self, setup: &mut Setup) -> Result<(), ExperimentError> {
+        if let Some(p) = &self.print {
+            setup.print_scored = Some(PrintChannel::open(p)?);
+        }
+        Ok(())
+    }
 }
 
 /// Creates `dir` and its parents.

@@ -1,6 +1,6 @@
 //! A whole `pav optimize` run and what it leaves behind besides the checkpoint: the region and
-//! texture PNGs, loss and score curves, a before/after preview of every view, the white-box
-//! scores per view, and the printable sheet.
+//! texture PNGs (and the texture as printed, with `[print]`), loss and score curves, a
+//! before/after preview of every view, the white-box scores per view, and the printable sheet.
 
 use super::{create_dir, ExperimentError};
 use crate::attack::config::OptimizeConfig;
@@ -11,12 +11,16 @@ use crate::attack::view::View;
 use crate::attack::whitebox::{Ensemble, WhiteBox, WhiteBoxError};
 use crate::image::{halve, save_rgb, tile, ImageError};
 use crate::plot::{loss_curve, PlotError};
+use crate::print::channel::Shift;
 use crate::progress::Progress;
 use crate::scene::Scene;
 use crate::table::write_csv;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
+
+/// The texture as the config's printer prints it, beside `texture.png` (with `[print]`).
+pub const PROOF: &str = "texture_proof.png";
 
 /// White-box score of one view under three textures.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -140,6 +144,8 @@ pub struct OptimizeReport {
     pub scores: Vec<ViewScore>,
     /// The printable sheet (when finished).
     pub sheet: Option<Sheet>,
+    /// How far printing moves the region's texels (with `[print]`).
+    pub shift: Option<Shift>,
     /// The files written, in `out`.
     pub files: Vec<&'static str>,
 }
@@ -174,24 +180,32 @@ pub fn optimize_and_report(
         files.push(LAST_ITERATE);
     }
     if matches!(o.finish, Finish::Stopped) {
-        return Ok(OptimizeReport { finish: o.finish, scores: Vec::new(), sheet: None, files });
+        return Ok(OptimizeReport { finish: o.finish, scores: Vec::new(), sheet: None, shift: None, files });
+    }
+    // With a print channel, previews and scores show the texture as printed: what a camera sees.
+    let seen = |tex: &[f32]| setup.print.as_ref().map_or_else(|| tex.to_vec(), |c| c.printed(tex));
+    let printed = seen(&o.texture);
+    let shift = setup.print.as_ref().map(|c| c.shift(&o.texture, Some(&setup.region)));
+    if setup.print.is_some() {
+        save_rgb(&out.join(PROOF), n, n, &printed)?;
+        files.push(PROOF);
     }
     let scene = setup.eval_scene();
     let views: Vec<&View> = setup.train.iter().chain(&setup.test).collect();
-    preview(&out.join("preview.png"), &views, &o.texture, &scene)?;
+    preview(&out.join("preview.png"), &views, &printed, &scene)?;
     files.push("preview.png");
     if !setup.synthetic.is_empty() {
         let synthetic: Vec<&View> = setup.synthetic.iter().collect();
-        preview(&out.join("synthetic.png"), &synthetic, &o.texture, &scene)?;
+        preview(&out.join("synthetic.png"), &synthetic, &printed, &scene)?;
         files.push("synthetic.png");
     }
     let initial = setup.initial_texture(&p.cfg.mesh.init, p.cfg.optimizer.seed)?;
-    let scores = score_views(setup, p.wb.first(), &initial, &o.texture)?;
+    let scores = score_views(setup, p.wb.first(), &seen(&initial), &printed)?;
     write_csv(&out.join("scores.csv"), &scores)?;
     files.push("scores.csv");
     let (side, spread) = atlas_side_m(&setup.mesh, &setup.region, n, p.cfg.mesh.car_length_m)
         .ok_or_else(|| ExperimentError::Invalid("the optimizable region covers no face with area".into()))?;
     let sheet = write_sheet(&out.join("texture_print.png"), &o.texture, n, side, spread, run.print)?;
     files.push("texture_print.png");
-    Ok(OptimizeReport { finish: o.finish, scores, sheet: Some(sheet), files })
+    Ok(OptimizeReport { finish: o.finish, scores, sheet: Some(sheet), shift, files })
 }

@@ -51,7 +51,10 @@ pub struct DigitalRow {
 /// The composite of `view` with `tex` (or the photo itself) as an 8-bit BGR frame.
 fn frame(view: &View, tex: Option<&[f32]>, setup: &Setup) -> Frame {
     let img = match tex {
-        Some(t) => view.composite(t, &setup.eval_scene()),
+        Some(t) => match &setup.print_scored {
+            Some(p) => view.composite(&p.printed(t), &setup.eval_scene()),
+            None => view.composite(t, &setup.eval_scene()),
+        },
         None => view.photo.clone(),
     };
     Frame {
@@ -219,7 +222,8 @@ pub fn eval_digital(
 ) -> Result<String, ExperimentError> {
     let threshold = scoring.threshold;
     let cfg = OptimizeConfig::load(config)?;
-    let setup = Setup::load_photos(&cfg, None)?;
+    let mut setup = Setup::load_photos(&cfg, None)?;
+    scoring.apply_print(&mut setup)?;
     let mut conditions = vec![Condition { name: "original".into(), seed: 0, texture: None }];
     for seed in 1..=random_seeds.max(1) {
         for (name, block) in [("random", setup.random_block()), ("random32", setup.paper_random_block())] {

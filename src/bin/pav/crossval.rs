@@ -57,6 +57,8 @@ pub fn run(a: &Args) -> Result<()> {
         .setting("curve_every", a.curve_every)
         .setting("curve_mean_from", a.curve_mean_from.map_or("none".to_string(), |m| m.to_string()))
         .setting("threshold", a.scoring.threshold)
+        .setting("print", a.scoring.print || a.scoring.print_profile.is_some())
+        .inputs(a.scoring.print_profile.iter().map(|p| p.as_path()))
         .tool("onnxruntime", pav::detect::onnx::runtime_version());
     let record_path = a.out.join(pav::provenance::FILE);
     record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
@@ -68,7 +70,7 @@ pub fn run(a: &Args) -> Result<()> {
         &a.references,
         &a.held_out_views,
         pav::experiments::curve::CurveOptions { every: a.curve_every, mean_from: a.curve_mean_from },
-        &a.scoring.to_lib(),
+        &a.scoring.to_lib(&a.config)?,
         &a.out,
         &Bar::default(),
         &stop,

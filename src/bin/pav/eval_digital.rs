@@ -31,11 +31,14 @@ pub fn run(a: &Args) -> Result<()> {
         .inputs(cfg.inputs().iter().chain(&a.textures).map(|p| p.as_path()))
         .inputs(pav::detect::load::detector_inputs(&a.scoring.detectors).iter().map(|p| p.as_path()))
         .setting("threshold", a.scoring.threshold)
+        .setting("print", a.scoring.print || a.scoring.print_profile.is_some())
+        .inputs(a.scoring.print_profile.iter().map(|p| p.as_path()))
         .setting("random_seeds", a.random_seeds)
         .tool("onnxruntime", pav::detect::onnx::runtime_version());
     let record_path = a.out.join(pav::provenance::FILE);
     record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
-    let md = eval_digital(&a.config, &a.textures, a.random_seeds, &a.scoring.to_lib(), &a.out, &Bar::default())?;
+    let md =
+        eval_digital(&a.config, &a.textures, a.random_seeds, &a.scoring.to_lib(&a.config)?, &a.out, &Bar::default())?;
     println!("{md}");
     eprintln!("wrote {}/digital.csv, digital_views.csv, digital_paired.csv and digital.md", a.out.display());
     Ok(())

@@ -17,6 +17,7 @@ mod eval_digital;
 #[cfg(feature = "optimize")]
 mod optimize;
 mod paint;
+mod print;
 mod render;
 #[cfg(feature = "optimize")]
 mod table1;
@@ -70,6 +71,9 @@ enum Cmd {
     /// Physically based views of the car by Blender Cycles (headless): photos, masks, manifest.
     #[command(subcommand)]
     Views(views::Cmd),
+    /// The print channel: a texture as a printer prints it (ICC soft proof).
+    #[command(subcommand)]
+    Print(print::Cmd),
     /// The external data (models, meshes, CARLA samples, textures) by manifest: list, fetch
     /// with checksums, find.
     #[command(subcommand)]
@@ -86,12 +90,29 @@ struct Scoring {
     /// A car counts as detected when its score reaches this (paper 0.5; the authors' code 0.6).
     #[arg(long, default_value_t = 0.5)]
     threshold: f32,
+    /// Score every texture as printed: through the config's [print] table, else Ghostscript's
+    /// CMYK profile (a config with [print] is always scored as printed).
+    #[arg(long)]
+    print: bool,
+    /// Score as printed through this ICC output profile (implies --print).
+    #[arg(long, value_parser = pav::data::arg_path)]
+    print_profile: Option<std::path::PathBuf>,
 }
 
 #[cfg(feature = "optimize")]
 impl Scoring {
-    fn to_lib(&self) -> pav::experiments::Scoring {
-        pav::experiments::Scoring { detectors: self.detectors.clone(), threshold: self.threshold }
+    /// The library's scoring options; `config` is the optimize config whose [print] table --print reads.
+    fn to_lib(&self, config: &std::path::Path) -> anyhow::Result<pav::experiments::Scoring> {
+        let print = if self.print || self.print_profile.is_some() {
+            let mut p = pav::attack::config::OptimizeConfig::load(config)?.print.unwrap_or_default();
+            if let Some(f) = &self.print_profile {
+                p.profile = f.clone();
+            }
+            Some(p)
+        } else {
+            None
+        };
+        Ok(pav::experiments::Scoring { detectors: self.detectors.clone(), threshold: self.threshold, print })
     }
 }
 
@@ -112,6 +133,7 @@ fn main() -> Result<()> {
         Cmd::Render(a) => render::run(&a),
         Cmd::Paint(a) => paint::run(&a),
         Cmd::Views(c) => views::run(&c),
+        Cmd::Print(c) => print::run(&c),
         Cmd::Data(c) => data::run(&c),
     }
 }

@@ -123,6 +123,9 @@ pub fn run(a: &Args) -> Result<()> {
             sheet.density_spread
         );
     }
+    if let Some(shift) = r.shift {
+        println!("as printed (print.profile), the region's {shift}");
+    }
     eprintln!("wrote {} in {}", r.files.join(", "), a.out.display());
     Ok(())
 }

@@ -18,6 +18,11 @@ pub struct Args {
     /// The car's paint outside the region (default: the mesh's own map_Kd).
     #[arg(long, value_parser = pav::data::arg_path)]
     base: Option<PathBuf>,
+    /// Stick on the texture as printed (the config's [print] table, or the printer options).
+    #[arg(long)]
+    print: bool,
+    #[command(flatten)]
+    printer: crate::print::PrinterArgs,
     /// Output PNG, at the base's resolution.
     #[arg(long, short = 'o')]
     out: PathBuf,
@@ -33,7 +38,18 @@ pub fn run(a: &Args) -> Result<()> {
                 format!("{} names no map_Kd: give the car's paint with --base", cfg.mesh.obj.display())
             })?,
         };
-    let (base_img, texture) = (Rgb::load(&base)?, Rgb::load(&a.texture)?);
+    let (base_img, mut texture) = (Rgb::load(&base)?, Rgb::load(&a.texture)?);
+    if a.print {
+        let p = a.printer.resolve(&cfg);
+        let channel = pav::print::channel::PrintChannel::open(&p)?;
+        let region = crate::print::region_at(&cfg, texture.width, texture.height)?;
+        println!(
+            "as printed ({}): the region's {}",
+            p.profile.display(),
+            channel.shift(&texture.rgb, region.as_deref())
+        );
+        texture.rgb = channel.printed(&texture.rgb);
+    }
     let painted = on_the_car(&base_img, &texture, &region, cfg.mesh.texture_size);
     save_rgb(&a.out, painted.width, painted.height, &painted.rgb)?;
     let on = region.iter().filter(|r| **r > 0.5).count();
