@@ -325,6 +325,9 @@ impl OptimizeConfig {
         }
         if let Some(p) = c.print.as_mut() {
             fix(&mut p.profile);
+            if let Some(k) = p.calibration.as_mut() {
+                fix(k);
+            }
         }
         if let Some(source) = first_err {
             return Err(ConfigError::Data { path: path.into(), source: Box::new(source) });
@@ -346,7 +349,9 @@ impl OptimizeConfig {
             self.views.train.iter().chain(&self.views.test).chain(&self.views.pbr).chain(&self.views.pbr_test).cloned(),
         );
         v.extend(self.views.labels.clone());
-        v.extend(self.print.as_ref().map(|p| p.profile.clone()));
+        if let Some(p) = &self.print {
+            v.extend(p.calibration.clone().or(Some(p.profile.clone())));
+        }
         let boxes: Vec<PathBuf> = self.white_box.iter().map(|w| w.detector.clone()).collect();
         v.extend(crate::detect::load::detector_inputs(&boxes));
         v
@@ -471,6 +476,7 @@ const PATH_KEYS: &[&[&str]] = &[
     &["views", "labels"],
     &["white_box", "detector"],
     &["print", "profile"],
+    &["print", "calibration"],
 ];
 
 /// The longest `extends` chain followed; a longer one is almost surely a mistake.

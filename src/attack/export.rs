@@ -5,7 +5,7 @@
 use crate::geometry::mesh::Mesh;
 use crate::geometry::uv::faces_in_mask;
 use crate::image::resize::{resize, Interpolation};
-use crate::image::{to_u8, Frame, Rgb};
+use crate::image::{draw_scale_bar, save_png_dpi, to_u8, Frame, Rgb};
 use std::path::Path;
 
 /// Print settings.
@@ -29,14 +29,6 @@ pub enum SheetError {
         atlas_mm: f64,
         /// The resolution asked for.
         dpi: f64,
-    },
-    /// The file could not be created.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: std::path::PathBuf,
-        /// Why.
-        source: std::io::Error,
     },
     /// The PNG encoder failed.
     #[error("{path}: {source}")]
@@ -126,37 +118,9 @@ pub fn write_sheet(
             }
         }
     }
-    // 10 mm × 1 mm bar with 1 mm ticks, 5 mm below the atlas, 1 mm from the left edge.
-    let (bx, by) = ((1.0 * px_per_mm) as usize, side + (5.0 * px_per_mm) as usize);
-    let len = (10.0 * px_per_mm).round() as usize;
-    let thick = px_per_mm.round().max(1.0) as usize;
-    let mut ink = |x: usize, y: usize| {
-        if x < w && y < h {
-            rgb[(y * w + x) * 3..(y * w + x) * 3 + 3].fill(0);
-        }
-    };
-    for y in by..by + thick {
-        for x in bx..bx + len {
-            ink(x, y);
-        }
-    }
-    for k in 0..=10 {
-        let x = bx + (k as f64 * px_per_mm).round() as usize;
-        let tick = if k % 5 == 0 { 2 * thick } else { thick };
-        for y in by - tick..by {
-            ink(x.min(bx + len - 1), y);
-        }
-    }
-    let file = std::fs::File::create(path).map_err(|source| SheetError::Io { path: path.into(), source })?;
-    let png_err = |source| SheetError::Png { path: path.into(), source };
-    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w as u32, h as u32);
-    enc.set_color(png::ColorType::Rgb);
-    enc.set_depth(png::BitDepth::Eight);
-    let ppm = (spec.dpi / 0.0254).round() as u32;
-    enc.set_pixel_dims(Some(png::PixelDimensions { xppu: ppm, yppu: ppm, unit: png::Unit::Meter }));
-    let mut wr = enc.write_header().map_err(png_err)?;
-    wr.write_image_data(&rgb).map_err(png_err)?;
-    wr.finish().map_err(png_err)?;
+    // The 10 mm bar 5 mm below the atlas, 1 mm from the left edge.
+    draw_scale_bar(&mut rgb, w, h, (1.0 * px_per_mm) as usize, side + (5.0 * px_per_mm) as usize, px_per_mm);
+    save_png_dpi(path, w, h, &rgb, spec.dpi).map_err(|source| SheetError::Png { path: path.into(), source })?;
     Ok(Sheet { atlas_side_m: side_m, atlas_mm, width_px: w as u32, height_px: h as u32, density_spread: spread })
 }
 

@@ -126,6 +126,44 @@ pub fn save_rgb8(path: &Path, w: usize, h: usize, rgb: Vec<u8>) -> Result<(), Im
         .map_err(|source| ImageError::Write { path: path.into(), source })
 }
 
+/// Draws a 10 mm × 1 mm black bar with 1 mm ticks (5 mm ticks twice as tall) into an 8-bit
+/// RGB image `w × h`, its left end at `(x, y)`: printed at 100 %, it measures 10 mm.
+pub fn draw_scale_bar(rgb: &mut [u8], w: usize, h: usize, x: usize, y: usize, px_per_mm: f64) {
+    let len = (10.0 * px_per_mm).round() as usize;
+    let thick = px_per_mm.round().max(1.0) as usize;
+    let mut ink = |px: usize, py: usize| {
+        if px < w && py < h {
+            rgb[(py * w + px) * 3..(py * w + px) * 3 + 3].fill(0);
+        }
+    };
+    for py in y..y + thick {
+        for px in x..x + len {
+            ink(px, py);
+        }
+    }
+    for k in 0..=10 {
+        let px = x + (k as f64 * px_per_mm).round() as usize;
+        let tick = if k % 5 == 0 { 2 * thick } else { thick };
+        for py in y.saturating_sub(tick)..y {
+            ink(px.min(x + len - 1), py);
+        }
+    }
+}
+
+/// Writes an interleaved 8-bit RGB image as PNG whose pHYs chunk says `dpi`, so that printing it
+/// at 100 % gives its physical size.
+pub fn save_png_dpi(path: &Path, w: usize, h: usize, rgb: &[u8], dpi: f64) -> Result<(), png::EncodingError> {
+    let file = std::fs::File::create(path)?;
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w as u32, h as u32);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    let ppm = (dpi / 0.0254).round() as u32;
+    enc.set_pixel_dims(Some(png::PixelDimensions { xppu: ppm, yppu: ppm, unit: png::Unit::Meter }));
+    let mut wr = enc.write_header()?;
+    wr.write_image_data(rgb)?;
+    wr.finish()
+}
+
 /// Writes an interleaved RGB image in [0, 1] as PNG.
 pub fn save_rgb(path: &Path, w: usize, h: usize, rgb: &[f32]) -> Result<(), ImageError> {
     save_rgb8(path, w, h, rgb.iter().map(|v| to_u8(*v)).collect())

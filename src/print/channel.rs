@@ -2,6 +2,7 @@
 //! channels are the printed colour and whose fourth is how far printing moves that colour
 //! (ΔE2000), so one trilinear lookup and its adjoint give both the render's input and the gamut term.
 
+use super::fit::Calibration;
 use super::lut::Lut3;
 use super::proof::{ProofError, RenderingIntent, SoftProof, DEFAULT_PROFILE};
 use crate::colour::{delta_e2000_srgb, spread};
@@ -27,6 +28,10 @@ pub struct PrintConfig {
     /// Weight of the gamut term: the mean ΔE2000 over the region between a texel and its proof.
     #[serde(default)]
     pub gamut_weight: f32,
+    /// A `pav print calibrate` file: its fitted map (printer + camera, measured from photos of
+    /// pav's chart) replaces the profile.
+    #[serde(default)]
+    pub calibration: Option<PathBuf>,
 }
 
 fn default_profile() -> PathBuf {
@@ -45,6 +50,7 @@ impl Default for PrintConfig {
             black_point_compensation: false,
             lut_size: lut_size(),
             gamut_weight: 0.0,
+            calibration: None,
         }
     }
 }
@@ -98,8 +104,15 @@ impl std::fmt::Display for Shift {
 }
 
 impl PrintChannel {
-    /// Samples the config's soft proof into the LUT.
+    /// Samples the config's soft proof (or its calibration's map) into the LUT.
     pub fn open(cfg: &PrintConfig) -> Result<Self, ProofError> {
+        if let Some(path) = &cfg.calibration {
+            let c = Calibration::load(path)
+                .map_err(|e| ProofError::Calibration { path: path.clone(), why: e.to_string() })?;
+            return Ok(Self::from_map(cfg.lut_size, cfg.gamut_weight, |rgb| {
+                rgb.iter().map(|p| c.map.apply(*p)).collect()
+            }));
+        }
         let proof = SoftProof::open(&cfg.profile, cfg.intent, cfg.black_point_compensation)?;
         Ok(Self::from_map(cfg.lut_size, cfg.gamut_weight, |rgb| proof.proof(rgb)))
     }

@@ -65,6 +65,12 @@ impl Lut3 {
         })
     }
 
+    /// The trilinear weights of one point and the value offsets of their nodes.
+    pub fn weights(&self, rgb: &[f32]) -> [(f32, usize); 8] {
+        let c = self.cell(rgb);
+        self.corners(&c).map(|(w, at)| (w, at / self.channels))
+    }
+
     /// The table at one point (inputs outside [0, 1] are clamped), into `out` (`channels` long).
     pub fn eval(&self, rgb: &[f32], out: &mut [f32]) {
         let c = self.cell(rgb);

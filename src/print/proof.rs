@@ -97,6 +97,14 @@ pub enum ProofError {
         /// Its colour space.
         space: String,
     },
+    /// The calibration file named instead of a profile.
+    #[error("print calibration {path}: {why}")]
+    Calibration {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        why: String,
+    },
     /// LittleCMS refused the transform.
     #[error("{path}: LittleCMS could not build the transform: {source}")]
     Transform {

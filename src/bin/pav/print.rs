@@ -1,11 +1,13 @@
-//! `pav print`: the print channel's tools.
+//! `pav print proof`, `pav print chart` and `pav print calibrate`.
 
 use anyhow::{Context, Result};
 use clap::Subcommand;
 use pav::attack::config::OptimizeConfig;
 use pav::attack::setup::mesh_and_region;
 use pav::image::{save_rgb, Rgb};
+use pav::print::calibrate::{report_image, Target};
 use pav::print::channel::{PrintChannel, PrintConfig};
+use pav::print::chart::{frequent_colours, Chart, ChartSpec};
 use pav::print::proof::RenderingIntent;
 use std::path::{Path, PathBuf};
 
@@ -23,6 +25,9 @@ pub struct PrinterArgs {
     /// Black-point compensation on the way to the printer.
     #[arg(long)]
     black_point_compensation: bool,
+    /// A `pav print calibrate` file whose fitted map replaces the profile.
+    #[arg(long)]
+    calibration: Option<PathBuf>,
 }
 
 impl PrinterArgs {
@@ -36,6 +41,9 @@ impl PrinterArgs {
             p.intent = i;
         }
         p.black_point_compensation |= self.black_point_compensation;
+        if let Some(c) = &self.calibration {
+            p.calibration = Some(c.clone());
+        }
         p
     }
 }
@@ -57,12 +65,145 @@ pub enum Cmd {
         #[arg(long, short = 'o')]
         out: PathBuf,
     },
+    /// A printable colour chart: ArUco markers at the corners, patches spanning the RGB cube,
+    /// greys and a texture's most frequent colours, each with its ID; the layout and intended
+    /// colours beside it.
+    Chart(ChartArgs),
+    /// Fit the colour map of printer + camera from photos of the printed chart (or of the camera
+    /// alone from a ColorChecker): affine, second-order polynomial and smoothed 3D LUT compared
+    /// on held-out patches; writes calibration.toml, a per-patch CSV and a report PNG.
+    Calibrate(CalibrateArgs),
 }
 
 pub fn run(c: &Cmd) -> Result<()> {
     match c {
         Cmd::Proof { config, texture, printer, out } => proof(config, texture, printer, out),
+        Cmd::Chart(a) => chart(a),
+        Cmd::Calibrate(a) => calibrate(a),
     }
+}
+
+#[derive(clap::Args)]
+pub struct ChartArgs {
+    /// Output folder: chart.png (print it at 100 %), chart.toml (layout), chart.csv (intended colours).
+    #[arg(long, short = 'o', default_value = "out/chart")]
+    out: PathBuf,
+    /// Add the most frequent colours of this texture (over its config's region with --config).
+    #[arg(long, value_parser = pav::data::arg_path)]
+    texture: Option<PathBuf>,
+    /// The optimize config whose region --texture is read over.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Printer resolution of the PNG (its pHYs chunk).
+    #[arg(long, default_value_t = 300.0)]
+    dpi: f64,
+    /// Page size in millimetres, WIDTHxHEIGHT (A4: 210x297, A3: 297x420).
+    #[arg(long, default_value = "210x297")]
+    page: String,
+    /// Patch side in millimetres.
+    #[arg(long, default_value_t = 8.0)]
+    patch_mm: f64,
+}
+
+#[derive(clap::Args)]
+pub struct CalibrateArgs {
+    /// Photos of the printed chart (or videos of it, e.g. on the turntable: a dozen frames each are read).
+    #[arg(required = true, value_parser = pav::data::arg_path)]
+    photos: Vec<PathBuf>,
+    /// The chart's folder (`pav print chart -o`).
+    #[arg(long, conflicts_with = "colorchecker")]
+    chart: Option<PathBuf>,
+    /// The photos show an X-Rite ColorChecker Classic on a sheet with four ArUco markers
+    /// (DICT_4X4_50, IDs 0–3): fit the camera alone against the chart's published values.
+    #[arg(long)]
+    colorchecker: bool,
+    /// The ColorChecker's published CIELAB (D50) values (id,square,Lab_l,Lab_a,Lab_b).
+    #[arg(long, value_parser = pav::data::arg_path, default_value = "data:charts/reference/jtvd_reference_values.csv")]
+    reference: PathBuf,
+    /// Refuse a fit whose held-out median ΔE2000 exceeds this.
+    #[arg(long, default_value_t = 5.0)]
+    max_delta_e: f64,
+    /// Keep a fit above --max-delta-e (the bound and the miss are written into the file).
+    #[arg(long)]
+    force: bool,
+    /// Output calibration file; the per-patch CSV and the report PNG go beside it.
+    #[arg(long, short = 'o', default_value = "out/calibration/calibration.toml")]
+    out: PathBuf,
+}
+
+fn chart(a: &ChartArgs) -> Result<()> {
+    let page: Vec<f64> = a.page.split(['x', 'X']).filter_map(|v| v.trim().parse().ok()).collect();
+    let [w, h] = page[..] else { anyhow::bail!("--page must be WIDTHxHEIGHT in millimetres, got {:?}", a.page) };
+    let mut spec = ChartSpec { page_mm: [w, h], dpi: a.dpi, patch_mm: a.patch_mm, ..Default::default() };
+    if let Some(t) = &a.texture {
+        let tex = Rgb::load(t)?;
+        let region = match &a.config {
+            Some(c) => region_at(&OptimizeConfig::load(c)?, tex.width, tex.height)?,
+            None => None,
+        };
+        spec.texture_colours = frequent_colours(&tex.rgb, region.as_deref(), usize::MAX);
+    }
+    let c = Chart::new(&spec)?;
+    let png = c.write(&a.out)?;
+    let count = |s: &str| c.patches.iter().filter(|p| p.source == s).count();
+    println!(
+        "wrote {} ({:.0}×{:.0} mm at {} dpi: print at 100 %, the bar is 10 mm), {} and {}: {} patches ({} spanning the cube, {} greys, {} from the texture, {} to fill)",
+        png.display(),
+        w,
+        h,
+        a.dpi,
+        a.out.join(pav::print::chart::LAYOUT_FILE).display(),
+        a.out.join(pav::print::chart::PATCHES_FILE).display(),
+        c.patches.len(),
+        count("cube"),
+        count("grey"),
+        count("texture"),
+        count("fill")
+    );
+    Ok(())
+}
+
+fn calibrate(a: &CalibrateArgs) -> Result<()> {
+    let chart = a.chart.as_ref().map(|c| Chart::load(c)).transpose()?;
+    let target = match (&chart, a.colorchecker) {
+        (Some(c), _) => Target::Chart(c),
+        (None, true) => Target::ColorChecker { reference: &a.reference },
+        (None, false) => anyhow::bail!("name the chart the photos show: --chart DIR (pav's) or --colorchecker"),
+    };
+    let (cal, rows) = pav::print::calibrate::calibrate(target, &a.photos, a.max_delta_e, a.force)?;
+    if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    cal.save(&a.out)?;
+    let csv = a.out.with_extension("csv");
+    pav::table::write_csv(&csv, &rows)?;
+    let png = a.out.with_extension("png");
+    let r = cal.residual();
+    let title = format!(
+        "{}: {:?}, held-out dE2000 median {:.2}, p90 {:.2}, max {:.2} (swatches: intended | photo | fitted)",
+        cal.measures, r.model, r.median, r.p90, r.max
+    );
+    report_image(&png, &rows, &title)?;
+    for h in &cal.held_out {
+        println!(
+            "  {:7} held-out ΔE2000 median {:.2}, p90 {:.2}, max {:.2}",
+            format!("{:?}", h.model),
+            h.median,
+            h.p90,
+            h.max
+        );
+    }
+    println!(
+        "kept {:?} ({} map from {} patches; {} clipped and {} unreadable left out){}",
+        r.model,
+        cal.measures,
+        cal.patches,
+        cal.clipped.len(),
+        cal.unreadable.len(),
+        if cal.forced { format!("; above the bound {} (--force)", cal.bound) } else { String::new() }
+    );
+    println!("wrote {}, {} and {}", a.out.display(), csv.display(), png.display());
+    Ok(())
 }
 
 /// The texture's proof at its own size, and the region (resampled to it) for the shift.
