@@ -204,3 +204,27 @@ fn the_average_is_the_mean_of_the_counted_iterates_and_survives_a_resume() {
     assert!(e.contains("optimizer.average.from = 7") && e.contains("6 steps"), "{e}");
     assert!(!dir.path().join("c/checkpoint.bin").exists());
 }
+
+#[test]
+fn through_the_print_channel_the_printed_texture_hides_the_car_and_the_gamut_term_is_logged() {
+    let (path, mut cfg, _, _) = problem();
+    cfg.print = Some(pav::print::channel::PrintConfig { gamut_weight: 0.05, ..Default::default() });
+    let s = Setup::load(&cfg, None).unwrap();
+    let wb = Ensemble::load(&cfg, cfg.views.size).unwrap();
+    let channel = s.print.as_ref().expect("the [print] table opens a channel");
+    let never = AtomicBool::new(false);
+    let dir = tempfile::tempdir().unwrap();
+    let o = optimize_texture(&path, &cfg, &s, &wb, &opts(dir.path(), 3, false), &Silent, &never).unwrap();
+    // Every step carries the weighted gamut term: 0.05 × a mean ΔE2000 of a few units.
+    assert!(
+        o.log.iter().all(|r| r.gamut > 0.0 && r.gamut < 0.05 * 40.0),
+        "{:?}",
+        o.log.iter().map(|r| r.gamut).collect::<Vec<_>>()
+    );
+    let init = s.initial_texture(&cfg.mesh.init, cfg.optimizer.seed).unwrap();
+    let scores = score_views(&s, wb.first(), &channel.printed(&init), &channel.printed(&o.texture)).unwrap();
+    for v in &scores {
+        eprintln!("{} as printed: initial {:.3}, optimized {:.3}", v.view, v.initial, v.optimized);
+    }
+    assert!(scores.iter().all(|v| v.optimized < 0.5 * v.initial && v.optimized < 0.3), "{scores:?}");
+}

@@ -422,6 +422,46 @@ mod tests {
         let r = cal.residual();
         assert!(r.median < 2.0, "{:?}", cal.held_out);
         report_image(&dir.path().join("r.png"), &rows, "t").unwrap();
+        // As `[print] calibration`, the fitted map is what the print channel applies.
+        let file = dir.path().join("calibration.toml");
+        cal.save(&file).unwrap();
+        let cfg = crate::print::channel::PrintConfig { calibration: Some(file), ..Default::default() };
+        let channel = crate::print::channel::PrintChannel::open(&cfg).unwrap();
+        let xs: Vec<f32> = (0..3 * 500).map(|_| rng.unit()).collect();
+        let printed = channel.printed(&xs);
+        let de: Vec<f64> = xs
+            .chunks_exact(3)
+            .zip(printed.chunks_exact(3))
+            .map(|(x, p)| {
+                let want = cal.map.apply([x[0], x[1], x[2]].map(|v| v as f64));
+                delta_e2000_srgb(want, [p[0], p[1], p[2]].map(|v| v as f64))
+            })
+            .collect();
+        assert!(
+            crate::colour::spread(&de, 1.0).0 < 0.3,
+            "LUT of the calibration vs the calibration: {:?}",
+            crate::colour::spread(&de, 1.0)
+        );
+    }
+
+    #[test]
+    fn a_video_of_the_chart_is_read_frame_by_frame_and_frames_without_it_are_skipped() {
+        let c = chart();
+        let dir = tempfile::tempdir().unwrap();
+        let shots: Vec<Mat> =
+            (0..4).map(|i| photograph(&c, &Shot { blur: 1.0, gain: 1.0, crop_right: 0.0 }, 10 + i)).collect();
+        let (w, h) = (shots[0].cols() as usize, shots[0].rows() as usize);
+        let path = dir.path().join("turntable.mp4");
+        let mut wr = crate::video::VideoWriter::create(&path, ['a', 'v', 'c', '1'], 4.0, (w, h)).unwrap();
+        let blank = Frame { width: w, height: h, bgr: vec![90; w * h * 3] };
+        wr.write(&blank).unwrap();
+        for m in &shots {
+            wr.write(&crate::video::mat_to_frame(m).unwrap()).unwrap();
+        }
+        wr.finish().unwrap();
+        let (cal, rows) = calibrate(Target::Chart(&c), &[path], 5.0, false).unwrap();
+        assert_eq!(rows.len(), c.patches.len());
+        assert!(cal.residual().median < 2.0, "{:?}", cal.held_out);
     }
 
     #[test]
