@@ -358,4 +358,15 @@ fn the_quick_start_runs_as_written() {
     for f in ["summary.md", "accuracy.png", "polar_original.png", "polar_camouflaged.png"] {
         assert!(eval.join(f).is_file(), "{f} missing");
     }
+    // The print step: the proof, a texture trained through the printer with its proof, both
+    // scored as printed, and the chart with its layout and colours.
+    for f in
+        ["paper/proof.png", "paper-printed/texture_proof.png", "chart/chart.png", "chart/chart.toml", "chart/chart.csv"]
+    {
+        assert!(out.join(f).is_file(), "{f} missing: {}", common::output_text(&o));
+    }
+    let digital = std::fs::read_to_string(out.join("digital-printed/digital.md")).unwrap();
+    assert!(digital.contains("paper-printed"), "{digital}");
+    let record = std::fs::read_to_string(out.join("digital-printed/run.toml")).unwrap();
+    assert!(record.contains("print = \"true\""), "{record}");
 }

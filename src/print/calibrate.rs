@@ -3,7 +3,9 @@
 //! file, a per-patch CSV and a report image of intended, photographed and fitted swatches.
 
 use super::chart::{Chart, ChartError};
-use super::colorchecker::{pairs as checker_pairs, read_checker, read_reference, reference_srgb, CheckerError};
+use super::colorchecker::{
+    pairs as checker_pairs, read_checker, read_checker_mcc, read_reference, reference_srgb, CheckerError,
+};
 use super::fit::{Calibration, FitError, Pair};
 use super::photo::{Photo, PhotoError};
 use crate::colour::delta_e2000_srgb;
@@ -174,7 +176,17 @@ pub fn calibrate(
                     .collect()),
                 Target::ColorChecker { .. } => {
                     let rs = reference.as_ref().expect("read above");
-                    let reading = read_checker(&photo, Path::new("photo"), rs)?;
+                    let reading = match read_checker(&photo, photo.path(), rs) {
+                        // Without a marker sheet, OpenCV's ColorChecker detector may still find it.
+                        Err(CheckerError::Photo(e)) if matches!(*e, PhotoError::NoMarkers { .. }) => {
+                            let found = read_checker_mcc(&photo).map_err(|err| CalibrateError::Write {
+                                path: photo.path().into(),
+                                why: err.to_string(),
+                            })?;
+                            found.ok_or_else(|| CheckerError::NoChecker { path: photo.path().into() })?
+                        }
+                        other => other?,
+                    };
                     Ok(checker_pairs(&reading, rs))
                 }
             });

@@ -27,6 +27,14 @@ pub enum CheckerError {
         /// Why.
         why: String,
     },
+    /// Neither a marker sheet nor a checker OpenCV's detector recognizes.
+    #[error(
+        "{path}: no ArUco marker sheet, and OpenCV's ColorChecker detector (mcc) finds no ColorChecker Classic either"
+    )]
+    NoChecker {
+        /// The file.
+        path: PathBuf,
+    },
     /// No 4 × 6 grid between the markers.
     #[error("{path}: no ColorChecker grid between the markers ({why})")]
     NoGrid {
@@ -284,4 +292,31 @@ fn largest_component(mask: &[bool], w: usize, h: usize) -> Option<Vec<bool>> {
         }
     }
     (best.0 > 0).then(|| label.iter().map(|l| *l == best.1).collect())
+}
+
+/// Finds the checker without a marker sheet, by OpenCV's `mcc` detector (which reports the
+/// patches in the chart's published order); None when it finds none.
+pub fn read_checker_mcc(photo: &Photo) -> Result<Option<CheckerReading>, opencv::Error> {
+    use opencv::mcc::{MCC_CCheckerDetector, MCC_TYPECHART};
+    use opencv::prelude::*;
+    let mut det = MCC_CCheckerDetector::create()?;
+    if !det.process_def(photo.bgr(), MCC_TYPECHART::MCC24)? {
+        return Ok(None);
+    }
+    let mut best = det.get_best_color_checker()?;
+    let charts = best.get_charts_rgb()?;
+    // Three rows per patch (one per channel: R, G, B), columns: size, mean, std, max, min.
+    if charts.rows() != 72 {
+        return Ok(None);
+    }
+    let mut reading = CheckerReading { captured: [[0.0; 3]; 24], mad: [0.0; 24] };
+    for i in 0..24 {
+        for c in 0..3 {
+            let row = (3 * i + c) as i32;
+            reading.captured[i][c] = *charts.at_2d::<f64>(row, 1)? / 255.0;
+            // The standard deviation stands in for the median absolute deviation (≈ 1.48×).
+            reading.mad[i] = reading.mad[i].max(*charts.at_2d::<f64>(row, 2)? / 255.0 / 1.4826);
+        }
+    }
+    Ok(Some(reading))
 }

@@ -146,6 +146,16 @@ impl Photo {
         Ok(Photo { width: w, height: h, rgb, bgr8: m, path: path.into() })
     }
 
+    /// The file it came from.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The photo as OpenCV's 8-bit BGR image.
+    pub fn bgr(&self) -> &Mat {
+        &self.bgr8
+    }
+
     /// The ArUco markers of `dict`.
     pub fn markers(&self, dict: &str) -> Result<Markers, PhotoError> {
         let err = |source: ChartError| PhotoError::Chart { path: self.path.clone(), source: Box::new(source) };

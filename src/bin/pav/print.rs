@@ -113,8 +113,9 @@ pub struct CalibrateArgs {
     /// The chart's folder (`pav print chart -o`).
     #[arg(long, conflicts_with = "colorchecker")]
     chart: Option<PathBuf>,
-    /// The photos show an X-Rite ColorChecker Classic on a sheet with four ArUco markers
-    /// (DICT_4X4_50, IDs 0–3): fit the camera alone against the chart's published values.
+    /// The photos show an X-Rite ColorChecker Classic, on a sheet with four ArUco markers
+    /// (DICT_4X4_50, IDs 0–3) or alone (found by OpenCV's mcc): fit the camera alone against
+    /// the chart's published values.
     #[arg(long)]
     colorchecker: bool,
     /// The ColorChecker's published CIELAB (D50) values (id,square,Lab_l,Lab_a,Lab_b).
