@@ -215,6 +215,11 @@ mod tests {
             .collect();
         let (median, _, _) = spread(&de, 2.0);
         let max = de.iter().cloned().fold(0.0, f64::max);
+        eprintln!(
+            "LUT {}³ vs LittleCMS over {} colours: ΔE2000 median {median:.3}, max {max:.3}",
+            cfg.lut_size,
+            de.len()
+        );
         assert!(median < 0.5 && max < 2.0, "LUT vs LittleCMS: median ΔE2000 {median:.3}, max {max:.3}");
     }
 

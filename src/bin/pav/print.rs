@@ -146,6 +146,13 @@ fn chart(a: &ChartArgs) -> Result<()> {
     }
     let c = Chart::new(&spec)?;
     let png = c.write(&a.out)?;
+    let record = pav::provenance::Run::start()
+        .inputs(a.texture.iter().chain(&a.config).map(|p| p.as_path()))
+        .setting("dpi", a.dpi)
+        .setting("page_mm", &a.page)
+        .setting("patch_mm", a.patch_mm);
+    let record_path = a.out.join(pav::provenance::FILE);
+    record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
     let count = |s: &str| c.patches.iter().filter(|p| p.source == s).count();
     println!(
         "wrote {} ({:.0}×{:.0} mm at {} dpi: print at 100 %, the bar is 10 mm), {} and {}: {} patches ({} spanning the cube, {} greys, {} from the texture, {} to fill)",
@@ -176,6 +183,22 @@ fn calibrate(a: &CalibrateArgs) -> Result<()> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     cal.save(&a.out)?;
+    let record = pav::provenance::Run::start()
+        .inputs(a.photos.iter().map(|p| p.as_path()))
+        .inputs(
+            a.chart
+                .iter()
+                .map(|c| c.join(pav::print::chart::PATCHES_FILE))
+                .collect::<Vec<_>>()
+                .iter()
+                .map(|p| p.as_path()),
+        )
+        .inputs(a.colorchecker.then_some(a.reference.as_path()))
+        .setting("max_delta_e", a.max_delta_e)
+        .setting("force", a.force)
+        .tool("opencv", pav::video::opencv_version());
+    let record_path = a.out.with_file_name(pav::provenance::FILE);
+    record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
     let csv = a.out.with_extension("csv");
     pav::table::write_csv(&csv, &rows)?;
     let png = a.out.with_extension("png");
