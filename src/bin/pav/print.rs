@@ -5,8 +5,10 @@ use clap::Subcommand;
 use pav::attack::config::OptimizeConfig;
 use pav::attack::setup::mesh_and_region;
 use pav::image::{save_rgb, Rgb};
+#[cfg(feature = "video")]
 use pav::print::calibrate::{report_image, Target};
 use pav::print::channel::{PrintChannel, PrintConfig};
+#[cfg(feature = "video")]
 use pav::print::chart::{frequent_colours, Chart, ChartSpec};
 use pav::print::proof::RenderingIntent;
 use std::path::{Path, PathBuf};
@@ -68,21 +70,26 @@ pub enum Cmd {
     /// A printable colour chart: ArUco markers at the corners, patches spanning the RGB cube,
     /// greys and a texture's most frequent colours, each with its ID; the layout and intended
     /// colours beside it.
+    #[cfg(feature = "video")]
     Chart(ChartArgs),
     /// Fit the colour map of printer + camera from photos of the printed chart (or of the camera
     /// alone from a ColorChecker): affine, second-order polynomial and smoothed 3D LUT compared
     /// on held-out patches; writes calibration.toml, a per-patch CSV and a report PNG.
+    #[cfg(feature = "video")]
     Calibrate(CalibrateArgs),
 }
 
 pub fn run(c: &Cmd) -> Result<()> {
     match c {
         Cmd::Proof { config, texture, printer, out } => proof(config, texture, printer, out),
+        #[cfg(feature = "video")]
         Cmd::Chart(a) => chart(a),
+        #[cfg(feature = "video")]
         Cmd::Calibrate(a) => calibrate(a),
     }
 }
 
+#[cfg(feature = "video")]
 #[derive(clap::Args)]
 pub struct ChartArgs {
     /// Output folder: chart.png (print it at 100 %), chart.toml (layout), chart.csv (intended colours).
@@ -105,6 +112,7 @@ pub struct ChartArgs {
     patch_mm: f64,
 }
 
+#[cfg(feature = "video")]
 #[derive(clap::Args)]
 pub struct CalibrateArgs {
     /// Photos of the printed chart (or videos of it, e.g. on the turntable: a dozen frames each are read).
@@ -132,6 +140,7 @@ pub struct CalibrateArgs {
     out: PathBuf,
 }
 
+#[cfg(feature = "video")]
 fn chart(a: &ChartArgs) -> Result<()> {
     let page: Vec<f64> = a.page.split(['x', 'X']).filter_map(|v| v.trim().parse().ok()).collect();
     let [w, h] = page[..] else { anyhow::bail!("--page must be WIDTHxHEIGHT in millimetres, got {:?}", a.page) };
@@ -171,6 +180,7 @@ fn chart(a: &ChartArgs) -> Result<()> {
     Ok(())
 }
 
+#[cfg(feature = "video")]
 fn calibrate(a: &CalibrateArgs) -> Result<()> {
     let chart = a.chart.as_ref().map(|c| Chart::load(c)).transpose()?;
     let target = match (&chart, a.colorchecker) {
