@@ -9,6 +9,7 @@ pub mod decode;
 pub mod fold;
 #[cfg(feature = "eval")]
 pub mod gradops;
+pub mod inspect;
 #[cfg(feature = "eval")]
 pub mod load;
 pub mod nms;

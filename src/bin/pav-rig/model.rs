@@ -10,6 +10,23 @@ use std::path::PathBuf;
 
 #[derive(Subcommand)]
 pub enum Cmd {
+    /// What an ONNX detector takes and gives: inputs and outputs (names, types, declared shapes
+    /// and the shapes of one run on a blank image), opset and operators, a guess at its output
+    /// layout, and a detector-config skeleton to complete.
+    Inspect {
+        /// The ONNX model (`data:NAME` for a manifest entry).
+        #[arg(value_parser = pav::data::arg_path)]
+        model: PathBuf,
+        /// Image side for the run when the model's input size is symbolic.
+        #[arg(long, default_value_t = 640)]
+        size: usize,
+        /// Read the file only; do not run it with ONNX Runtime.
+        #[arg(long)]
+        no_run: bool,
+        /// Write the skeleton config here instead of printing it.
+        #[arg(long, short = 'o')]
+        out: Option<PathBuf>,
+    },
     /// Convert a darknet cfg + weights (YOLOv3/YOLOv3-tiny) to an ONNX graph with raw head outputs.
     Darknet2onnx {
         /// Darknet .cfg file.
@@ -35,6 +52,7 @@ pub enum Cmd {
 
 pub fn run(c: &Cmd) -> Result<()> {
     match c {
+        Cmd::Inspect { model, size, no_run, out } => inspect(model, *size, *no_run, out.as_deref())?,
         Cmd::Darknet2onnx { cfg, weights, out } => {
             let r = convert(cfg, weights, out)?;
             eprintln!(
@@ -60,6 +78,51 @@ pub fn run(c: &Cmd) -> Result<()> {
                 b.len() as f64 / 1e6
             );
         }
+    }
+    Ok(())
+}
+
+fn inspect(model: &std::path::Path, size: usize, no_run: bool, out: Option<&std::path::Path>) -> Result<()> {
+    use pav::detect::inspect::{from_session, inspect_file, probe};
+    let mut insp = match inspect_file(model) {
+        Ok(i) => i,
+        // A graph pav's reader does not parse may still load in ONNX Runtime.
+        Err(e) if !no_run => {
+            eprintln!("{e}; reading its inputs and outputs through ONNX Runtime instead");
+            from_session(model)?
+        }
+        Err(e) => anyhow::bail!(e),
+    };
+    let side = insp.fixed_side().unwrap_or(size);
+    if !no_run {
+        probe(model, &mut insp, side)?;
+    }
+    let opset = if insp.opset > 0 { insp.opset.to_string() } else { "unknown".into() };
+    println!(
+        "{}: opset {opset}{}{}",
+        model.display(),
+        insp.domains.iter().map(|(d, v)| format!(", {d} {v}")).collect::<String>(),
+        if insp.producer.is_empty() { String::new() } else { format!(", exported by {}", insp.producer) }
+    );
+    let dims = |d: &[String]| format!("[{}]", d.join(", "));
+    for (what, ports) in [("input", &insp.inputs), ("output", &insp.outputs)] {
+        for p in ports.iter() {
+            let ran = p.ran.as_ref().map(|r| format!(", ran {:?}", r)).unwrap_or_default();
+            println!("  {what:6} {:28} {:8} {}{ran}", p.name, p.dtype, dims(&p.declared));
+        }
+    }
+    let ops: Vec<String> = insp.ops.iter().map(|(o, n)| format!("{o} {n}")).collect();
+    println!("  operators: {}", ops.join(", "));
+    let guess = insp.guess(side);
+    println!("layout: {} ({})", guess.layout.unwrap_or("none of pav's"), guess.why);
+    let stem = model.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "model".into());
+    let skeleton = insp.skeleton(&stem, &model.display().to_string(), side, &guess);
+    match out {
+        Some(o) => {
+            std::fs::write(o, &skeleton).with_context(|| format!("writing {}", o.display()))?;
+            println!("wrote {} (complete the values marked CHECK)", o.display());
+        }
+        None => println!("\n{skeleton}"),
     }
     Ok(())
 }

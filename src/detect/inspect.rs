@@ -1,0 +1,323 @@
+//! `pav-rig model inspect`: what an ONNX detector takes and gives (names, element types, shapes,
+//! opset, operators), the output shapes of one run on a blank image, a guess at which of pav's
+//! output layouts it follows, and a detector-config skeleton to complete.
+
+use super::onnx_proto::{Dim, Model, ProtoError, ValueInfo, FLOAT, INT64};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// One graph input or output.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Port {
+    /// Its name.
+    pub name: String,
+    /// Element type ("float32", "int64", …).
+    pub dtype: String,
+    /// Dimensions as declared: a number, or the symbol's name.
+    pub declared: Vec<String>,
+    /// Dimensions of one run on a blank image (outputs, after [`Inspection::probe`]).
+    pub ran: Option<Vec<usize>>,
+}
+
+/// What a model file says about itself.
+#[derive(Clone, Debug)]
+pub struct Inspection {
+    /// Who exported it.
+    pub producer: String,
+    /// Default-domain opset.
+    pub opset: i64,
+    /// Further operator sets.
+    pub domains: Vec<(String, i64)>,
+    /// Operator counts.
+    pub ops: BTreeMap<String, usize>,
+    /// Inputs (initializers excluded).
+    pub inputs: Vec<Port>,
+    /// Outputs.
+    pub outputs: Vec<Port>,
+}
+
+/// pav's guess at a model's output layout.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Guess {
+    /// A layout pav decodes (`darknet`, `yolox`, `ultralytics`, `detr`), or None.
+    pub layout: Option<&'static str>,
+    /// What in the shapes led to it.
+    pub why: String,
+}
+
+fn dtype(code: i32) -> String {
+    match code {
+        FLOAT => "float32".into(),
+        INT64 => "int64".into(),
+        2 => "uint8".into(),
+        3 => "int8".into(),
+        6 => "int32".into(),
+        10 => "float16".into(),
+        0 => "?".into(),
+        other => format!("type {other}"),
+    }
+}
+
+fn port(v: &ValueInfo) -> Port {
+    Port {
+        name: v.name.clone(),
+        dtype: dtype(v.elem_type),
+        declared: v
+            .dims
+            .iter()
+            .map(|d| match d {
+                Dim::Fixed(n) => n.to_string(),
+                Dim::Symbolic(s) if s.is_empty() => "?".into(),
+                Dim::Symbolic(s) => s.clone(),
+            })
+            .collect(),
+        ran: None,
+    }
+}
+
+impl Inspection {
+    /// Reads a model's bytes.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Inspection, ProtoError> {
+        let m = Model::from_bytes(bytes)?;
+        let inits: std::collections::HashSet<&str> = m.initializers.iter().map(|i| i.name.as_str()).collect();
+        let mut ops = BTreeMap::new();
+        for n in &m.nodes {
+            *ops.entry(n.op_type.clone()).or_insert(0) += 1;
+        }
+        Ok(Inspection {
+            producer: m.producer.clone(),
+            opset: m.opset,
+            domains: m.domains.clone(),
+            ops,
+            inputs: m.inputs.iter().filter(|i| !inits.contains(i.name.as_str())).map(port).collect(),
+            outputs: m.outputs.iter().map(port).collect(),
+        })
+    }
+
+    /// The image input: the first 4-D float input.
+    pub fn image_input(&self) -> Option<&Port> {
+        self.inputs.iter().find(|p| p.dtype == "float32" && p.declared.len() == 4)
+    }
+
+    /// The image input's side when fixed (its height).
+    pub fn fixed_side(&self) -> Option<usize> {
+        self.image_input().and_then(|p| p.declared[2].parse().ok())
+    }
+
+    /// Output shapes: the run's when probed, else the declared fixed ones.
+    fn shape(&self, p: &Port) -> Option<Vec<usize>> {
+        p.ran.clone().or_else(|| p.declared.iter().map(|d| d.parse().ok()).collect())
+    }
+
+    /// Guesses the layout from the output shapes, for an image side `side`.
+    pub fn guess(&self, side: usize) -> Guess {
+        let shapes: Vec<(&Port, Option<Vec<usize>>)> = self.outputs.iter().map(|p| (p, self.shape(p))).collect();
+        let g = |layout: Option<&'static str>, why: String| Guess { layout, why };
+        if shapes.iter().any(|(_, s)| s.is_none()) {
+            return g(
+                None,
+                "some output shapes are symbolic: run `model inspect` with ONNX Runtime (the default) to see them"
+                    .into(),
+            );
+        }
+        let shapes: Vec<(&Port, Vec<usize>)> = shapes.into_iter().map(|(p, s)| (p, s.unwrap())).collect();
+        let rows = |strides: &[usize]| strides.iter().map(|s| (side / s) * (side / s)).sum::<usize>();
+        let has_int = shapes.iter().any(|(p, _)| p.dtype == "int64");
+        let box4 = shapes.iter().any(|(_, s)| s.last() == Some(&4));
+        if has_int && box4 && shapes.len() >= 3 {
+            return g(
+                Some("detr"),
+                "an int64 output (labels) beside a [.., 4] output (boxes) and scores: DETR-style per-query detections"
+                    .into(),
+            );
+        }
+        if shapes.len() == 1 {
+            let s = &shapes[0].1;
+            if s.len() == 3 {
+                let (a, b) = (s[1], s[2]);
+                if a == rows(&[8, 16, 32]) && b > 5 {
+                    return g(Some("yolox"), format!("one [1, {a}, {b}] output: {a} rows = the grid cells of strides 8, 16, 32 at {side}², {b} = 4 box + objectness + {} classes", b - 5));
+                }
+                if b == rows(&[8, 16, 32]) && a > 4 {
+                    return g(Some("ultralytics"), format!("one [1, {a}, {b}] output: {b} columns = the grid cells of strides 8, 16, 32 at {side}², {a} = 4 box + {} classes, no objectness", a - 4));
+                }
+            }
+        }
+        if shapes.iter().all(|(_, s)| s.len() == 4 && s[2] * 32 >= side && side % s[2] == 0)
+            && shapes.iter().all(|(_, s)| s[1] % 3 == 0 && s[1] / 3 > 5)
+        {
+            let c = shapes[0].1[1] / 3 - 5;
+            return g(
+                Some("darknet"),
+                format!(
+                    "{} [1, 3·(5+{c}), H, W] heads: darknet YOLO with 3 anchors per cell, raw logits",
+                    shapes.len()
+                ),
+            );
+        }
+        // Layouts pav does not decode yet, named so the user knows what they have.
+        if shapes.iter().any(|(_, s)| s.len() == 2 && s[1] == 6) {
+            return g(None, "an [N, 6] output (class, score, box per row, likely with a count output): detections after an NMS inside the graph; not one of pav's layouts yet".into());
+        }
+        let per_cell: Vec<usize> = shapes.iter().filter(|(_, s)| s.len() == 3).map(|(_, s)| s[1]).collect();
+        if !per_cell.is_empty() && per_cell.iter().sum::<usize>() % rows(&[8, 16, 32]) == 0 {
+            let widths: Vec<usize> = shapes.iter().filter(|(_, s)| s.len() == 3).map(|(_, s)| s[2]).collect();
+            if widths.iter().any(|w| w % 4 == 0 && *w > 4 && *w <= 64) {
+                return g(None, format!("outputs per grid level of strides 8, 16, 32 with widths {widths:?}: a class map and a box map of 4 binned distances (GFL head, as NanoDet); not one of pav's layouts yet"));
+            }
+        }
+        g(
+            None,
+            format!(
+                "output shapes {:?} match none of pav's layouts",
+                shapes.iter().map(|(_, s)| s.clone()).collect::<Vec<_>>()
+            ),
+        )
+    }
+
+    /// A detector config to complete: the input from the model, the output from the guess.
+    pub fn skeleton(&self, name: &str, model: &str, side: usize, guess: &Guess) -> String {
+        let mut t = format!(
+            "# Completed from `pav-rig model inspect`: check every value marked CHECK against the model's\n# upstream demo code.\nname = \"{name}\"\ndescription = \"{}{}\"\nmodel = \"{model}\"\n\n[input]\n",
+            if self.producer.is_empty() { "ONNX model".to_string() } else { format!("exported by {}", self.producer) },
+            if self.opset > 0 { format!(", opset {}", self.opset) } else { String::new() }
+        );
+        if let Some(p) = self.image_input() {
+            t.push_str(&format!("name = \"{}\"\n", p.name));
+        }
+        t.push_str(&format!(
+            "width = {side}\nheight = {side}\nchannels = \"rgb\"        # CHECK: rgb or bgr\nscale = 0.00392156862745098   # CHECK: 1/255, or 1.0 with mean and std\nresize = \"letterbox\"      # CHECK: letterbox or stretch\ninterpolation = \"bilinear\"\npad_value = 114\n\n[output]\n"
+        ));
+        match guess.layout {
+            Some("detr") => {
+                let find = |dt: &str, last: Option<usize>| {
+                    self.outputs
+                        .iter()
+                        .find(|p| {
+                            p.dtype == dt
+                                && last.is_none_or(|l| self.shape(p).and_then(|s| s.last().copied()) == Some(l))
+                        })
+                        .map(|p| p.name.clone())
+                        .unwrap_or_default()
+                };
+                let boxes = find("float32", Some(4));
+                let scores = self
+                    .outputs
+                    .iter()
+                    .find(|p| p.dtype == "float32" && p.name != boxes)
+                    .map(|p| p.name.clone())
+                    .unwrap_or_default();
+                t.push_str(&format!(
+                    "layout = \"detr\"\nlabels = \"{}\"\nboxes = \"{boxes}\"\nscores = \"{scores}\"\n",
+                    find("int64", None)
+                ));
+                if let Some(s) = self.inputs.iter().find(|p| p.dtype == "int64") {
+                    t.push_str(&format!("size_input = \"{}\"\n", s.name));
+                }
+            }
+            Some("darknet") => {
+                t.push_str("layout = \"darknet\"\n");
+                for p in &self.outputs {
+                    t.push_str(&format!("[[output.heads]]\noutput = \"{}\"\nanchors = []      # CHECK: the cfg's anchors of this head, [[w, h], ...] in input pixels\n", p.name));
+                }
+            }
+            Some(l) => t.push_str(&format!("layout = \"{l}\"\noutput = \"{}\"\n", self.outputs[0].name)),
+            None => t.push_str(&format!("# {}\nlayout = \"\"   # CHECK: no layout of pav's fits\n", guess.why)),
+        }
+        t.push_str("\n[classes]\nnames = \"coco80\"\ntarget = [\"car\"]\n");
+        t
+    }
+}
+
+/// Runs the model once on a blank image of side `side` (every other input fed a plausible
+/// constant: an int64 size input the side, a float input of two values the scale 1) and records
+/// each output's shape.
+#[cfg(feature = "eval")]
+pub fn probe(model: &Path, insp: &mut Inspection, side: usize) -> Result<(), super::DetectError> {
+    use ort::value::Tensor;
+    let name = model.display().to_string();
+    let err = super::onnx::session_err(&name, "probing the model");
+    let mut session = super::onnx::session_builder(&name, 1)?
+        .commit_from_file(model)
+        .map_err(super::onnx::session_err(&name, "loading the ONNX model"))?;
+    let image = insp.image_input().map(|p| p.name.clone());
+    let mut feed: Vec<(String, ort::session::SessionInputValue<'_>)> = Vec::new();
+    for p in &insp.inputs {
+        let dims: Vec<usize> = p
+            .declared
+            .iter()
+            .enumerate()
+            .map(|(i, d)| d.parse().unwrap_or(if Some(&p.name) == image.as_ref() && i >= 2 { side } else { 1 }))
+            .collect();
+        let n: usize = dims.iter().product();
+        let value: ort::session::SessionInputValue<'_> = if p.dtype == "int64" {
+            Tensor::from_array((dims, vec![side as i64; n])).map_err(&err)?.into()
+        } else if Some(&p.name) == image.as_ref() {
+            Tensor::from_array((dims, vec![0.5f32; n])).map_err(&err)?.into()
+        } else {
+            Tensor::from_array((dims, vec![1f32; n])).map_err(&err)?.into()
+        };
+        feed.push((p.name.clone(), value));
+    }
+    let outputs = session.run(feed).map_err(&err)?;
+    for (oname, value) in outputs.iter() {
+        if let ort::value::ValueType::Tensor { shape, .. } = value.dtype() {
+            if let Some(p) = insp.outputs.iter_mut().find(|p| p.name == oname) {
+                p.ran = Some(shape.iter().map(|&d| d.max(0) as usize).collect());
+            }
+        }
+    }
+    Ok(())
+}
+
+/// What ONNX Runtime reports of a model's inputs and outputs, for a graph pav's own reader does
+/// not parse (opset and operators then unknown).
+#[cfg(feature = "eval")]
+pub fn from_session(model: &Path) -> Result<Inspection, super::DetectError> {
+    use ort::value::{TensorElementType as T, ValueType};
+    let name = model.display().to_string();
+    let session = super::onnx::session_builder(&name, 1)?
+        .commit_from_file(model)
+        .map_err(super::onnx::session_err(&name, "loading the ONNX model"))?;
+    let port = |n: &str, t: &ValueType| {
+        let (dtype, declared) = match t {
+            ValueType::Tensor { ty, shape, dimension_symbols } => (
+                match ty {
+                    T::Float32 => "float32".to_string(),
+                    T::Int64 => "int64".to_string(),
+                    T::Int32 => "int32".to_string(),
+                    other => format!("{other:?}"),
+                },
+                shape
+                    .iter()
+                    .zip(dimension_symbols.iter())
+                    .map(|(d, s)| {
+                        if *d >= 0 {
+                            d.to_string()
+                        } else if s.is_empty() {
+                            "?".into()
+                        } else {
+                            s.to_string()
+                        }
+                    })
+                    .collect(),
+            ),
+            other => (format!("{other:?}"), Vec::new()),
+        };
+        Port { name: n.to_string(), dtype, declared, ran: None }
+    };
+    Ok(Inspection {
+        producer: String::new(),
+        opset: 0,
+        domains: Vec::new(),
+        ops: BTreeMap::new(),
+        inputs: session.inputs().iter().map(|i| port(i.name(), i.dtype())).collect(),
+        outputs: session.outputs().iter().map(|o| port(o.name(), o.dtype())).collect(),
+    })
+}
+
+/// Reads and inspects a model file (without running it).
+pub fn inspect_file(model: &Path) -> Result<Inspection, String> {
+    let bytes = std::fs::read(model).map_err(|e| format!("{}: {e}", model.display()))?;
+    Inspection::from_bytes(&bytes).map_err(|e| format!("{}: {e}", model.display()))
+}

@@ -1,0 +1,73 @@
+//! `pav-rig model inspect` on every detector in the data set: the four pav decodes are guessed as
+//! their shipped configs' layouts and their skeletons load as detector configs; NanoDet's GFL
+//! head and PicoDet's in-graph NMS are named for what they are; a non-model is a clear error.
+#![cfg(feature = "eval")]
+
+mod common;
+
+use pav::detect::config::OutputLayout;
+use std::process::Command;
+
+fn inspect(model: &str, out: &std::path::Path) -> (bool, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+        .current_dir(common::repo())
+        .env("RUST_BACKTRACE", "0")
+        .args(["model", "inspect", model, "-o"])
+        .arg(out)
+        .output()
+        .unwrap();
+    (o.status.success(), common::output_text(&o))
+}
+
+fn kind(l: &OutputLayout) -> &'static str {
+    match l {
+        OutputLayout::Darknet { .. } => "darknet",
+        OutputLayout::Yolox { .. } => "yolox",
+        OutputLayout::Ultralytics { .. } => "ultralytics",
+        OutputLayout::Detr { .. } => "detr",
+    }
+}
+
+#[test]
+fn known_layouts_are_guessed_and_their_skeletons_load() {
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    for (config, model, layout) in [
+        ("yolox_nano", "data:models-yolox/yolox_nano.onnx", "yolox"),
+        ("yolov8n_int8", "data:models-yolov8n/yolov8n_int8.onnx", "ultralytics"),
+        ("deimv2_atto_int8", "data:models-deimv2/deimv2_atto_coco_int8.onnx", "detr"),
+    ] {
+        let out = tmp.path().join(format!("{config}.toml"));
+        let (ok, text) = inspect(model, &out);
+        assert!(ok, "{text}");
+        assert!(text.contains(&format!("layout: {layout} (")), "{config}: {text}");
+        let shipped = pav::detect::DetectorConfig::load(&common::detector_config(config)).unwrap();
+        assert_eq!(kind(&shipped.output), layout);
+        // The skeleton names the model by its store path: it loads as a config of that layout,
+        // with the shipped config's input size.
+        let skeleton = pav::detect::DetectorConfig::load(&out).unwrap_or_else(|e| panic!("{config}: {e}"));
+        assert_eq!(kind(&skeleton.output), layout);
+        assert_eq!((skeleton.input.width, skeleton.input.height), (shipped.input.width, shipped.input.height));
+    }
+    // YOLOv3-tiny's heads are symbolic in the file; the run at --size gives their grids.
+    let (ok, text) = inspect(".deps/models/yolov3-tiny/yolov3-tiny.onnx", &tmp.path().join("tiny.toml"));
+    assert!(ok && text.contains("layout: darknet (2 [1, 3·(5+80), H, W] heads"), "{text}");
+    assert!(text.contains("ran [1, 255, 20, 20]"), "{text}");
+}
+
+#[test]
+fn layouts_pav_does_not_decode_are_named_and_bad_files_refused() {
+    common::shared_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let (ok, text) = inspect("data:models-nanodet/nanodet_m_416.onnx", &tmp.path().join("n.toml"));
+    assert!(ok && text.contains("GFL head"), "{text}");
+    assert!(text.contains("ran [1, 2704, 32]") && text.contains("ran [1, 169, 80]"), "{text}");
+    // PicoDet's graph has int32 constants pav's reader does not parse: ONNX Runtime reads it.
+    let (ok, text) = inspect("data:models-picodet/picodet_xs_320_lcnet_postprocessed.onnx", &tmp.path().join("p.toml"));
+    assert!(ok && text.contains("through ONNX Runtime instead") && text.contains("NMS inside the graph"), "{text}");
+    assert!(text.contains("scale_factor"), "{text}");
+    let junk = tmp.path().join("junk.onnx");
+    std::fs::write(&junk, b"not a model").unwrap();
+    let (ok, text) = inspect(junk.to_str().unwrap(), &tmp.path().join("j.toml"));
+    assert!(!ok && text.contains("junk.onnx"), "{text}");
+}
