@@ -1,6 +1,6 @@
 //! `pav-rig model inspect` on every detector in the data set: the four pav decodes are guessed as
-//! their shipped configs' layouts and their skeletons load as detector configs; NanoDet's GFL
-//! head and PicoDet's in-graph NMS are named for what they are; a non-model is a clear error.
+//! their shipped configs' layouts and their skeletons load as detector configs, NanoDet's GFL head
+//! too; PicoDet's in-graph NMS is named for what it is; a non-model is a clear error.
 #![cfg(feature = "eval")]
 
 mod common;
@@ -25,6 +25,7 @@ fn kind(l: &OutputLayout) -> &'static str {
         OutputLayout::Yolox { .. } => "yolox",
         OutputLayout::Ultralytics { .. } => "ultralytics",
         OutputLayout::Detr { .. } => "detr",
+        OutputLayout::Gfl { .. } => "gfl",
     }
 }
 
@@ -56,11 +57,13 @@ fn known_layouts_are_guessed_and_their_skeletons_load() {
 }
 
 #[test]
-fn layouts_pav_does_not_decode_are_named_and_bad_files_refused() {
+fn gfl_is_guessed_in_graph_nms_named_and_bad_files_refused() {
     common::shared_data();
     let tmp = tempfile::tempdir().unwrap();
     let (ok, text) = inspect("data:models-nanodet/nanodet_m_416.onnx", &tmp.path().join("n.toml"));
-    assert!(ok && text.contains("GFL head"), "{text}");
+    assert!(ok && text.contains("layout: gfl (") && text.contains("GFL head"), "{text}");
+    let skeleton = pav::detect::DetectorConfig::load(&tmp.path().join("n.toml")).unwrap();
+    assert!(matches!(skeleton.output, OutputLayout::Gfl { bins: 8, .. }), "{:?}", skeleton.output);
     assert!(text.contains("ran [1, 2704, 32]") && text.contains("ran [1, 169, 80]"), "{text}");
     // PicoDet's graph has int32 constants pav's reader does not parse: ONNX Runtime reads it.
     let (ok, text) = inspect("data:models-picodet/picodet_xs_320_lcnet_postprocessed.onnx", &tmp.path().join("p.toml"));

@@ -116,6 +116,19 @@ pub enum OutputLayout {
         /// Output tensor name; the first output when absent.
         output: Option<String>,
     },
+    /// Generalized-focal-loss heads (NanoDet): per grid level of each stride a class map
+    /// `[N, R, C]` (already sigmoid) and a box map `[N, R, 4·bins]` of distances to the left, top,
+    /// right and bottom sides as distributions over `bins` (softmax, expectation, times the
+    /// stride) from the cell centre `(x·s + (s − 1)/2, y·s + (s − 1)/2)`. Outputs are matched by
+    /// shape (R from the stride, the width from the classes or bins), since exporters number them.
+    Gfl {
+        /// Strides of the grid levels.
+        #[serde(default = "default_strides")]
+        strides: Vec<usize>,
+        /// Bins per side distance (NanoDet's `reg_max + 1`).
+        #[serde(default = "eight")]
+        bins: usize,
+    },
     /// DETR family (RT-DETR, D-FINE, DEIM): per-query labels, xyxy boxes and scores.
     Detr {
         /// Labels output (int64).
@@ -149,6 +162,10 @@ pub struct ClassConfig {
     /// Class names that count as a detection of the vehicle.
     #[serde(default = "car")]
     pub target: Vec<String>,
+}
+
+fn eight() -> usize {
+    8
 }
 
 fn coco80() -> String {
@@ -312,6 +329,9 @@ impl DetectorConfig {
             }
             OutputLayout::Yolox { strides, .. } if strides.is_empty() || strides.contains(&0) => {
                 Err(format!("yolox strides {strides:?} must be non-empty and positive"))
+            }
+            OutputLayout::Gfl { strides, bins } if strides.is_empty() || strides.contains(&0) || *bins < 2 => {
+                Err(format!("gfl strides {strides:?} must be non-empty and positive, bins ({bins}) at least 2"))
             }
             _ => Ok(()),
         }

@@ -201,6 +201,52 @@ pub fn decode(
                 }
             }
         }
+        OutputLayout::Gfl { strides, bins } => {
+            let shapes = || outs.iter().map(|o| format!("{} {:?}", o.name, o.shape)).collect::<Vec<_>>().join(", ");
+            // Each level's maps, found by their row count and width.
+            let level = |rows: usize, width: usize| {
+                outs.iter().find(|o| {
+                    let s = &o.shape;
+                    s.len() >= 2
+                        && s[s.len() - 2] == rows
+                        && s[s.len() - 1] == width
+                        && s[..s.len() - 2].iter().all(|d| *d == 1)
+                })
+            };
+            let total: usize = strides.iter().map(|st| (input_h / st) * (input_w / st)).sum();
+            p = Proposals::with_capacity(num_classes, total);
+            for &st in strides {
+                let (gw, gh) = (input_w / st, input_h / st);
+                let rows = gw * gh;
+                let (Some(cls), Some(reg)) = (level(rows, num_classes), level(rows, 4 * bins)) else {
+                    return Err(LayoutError(format!(
+                        "gfl at {input_w}×{input_h}: stride {st} needs a [1, {rows}, {num_classes}] class map and a [1, {rows}, {}] box map; the model's outputs are {}",
+                        4 * bins,
+                        shapes()
+                    )));
+                };
+                let half = (st as f32 - 1.0) / 2.0;
+                for r in 0..rows {
+                    let (cx, cy) = ((r % gw * st) as f32 + half, (r / gw * st) as f32 + half);
+                    let mut d = [0f32; 4];
+                    for (side, dist) in d.iter_mut().enumerate() {
+                        let logits = &reg.data[(r * 4 + side) * bins..(r * 4 + side + 1) * bins];
+                        let m = logits.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+                        let e: Vec<f32> = logits.iter().map(|v| (v - m).exp()).collect();
+                        let z: f32 = e.iter().sum();
+                        *dist = e.iter().enumerate().map(|(k, v)| k as f32 * v).sum::<f32>() / z * st as f32;
+                    }
+                    let clip = |v: f32, hi: usize| v.clamp(0.0, hi as f32);
+                    p.boxes.push(map.to_frame([
+                        clip(cx - d[0], input_w),
+                        clip(cy - d[1], input_h),
+                        clip(cx + d[2], input_w),
+                        clip(cy + d[3], input_h),
+                    ]));
+                    p.scores.extend_from_slice(&cls.data[r * num_classes..(r + 1) * num_classes]);
+                }
+            }
+        }
         OutputLayout::Ultralytics { output } => {
             let o = find(outs, output.as_deref())?;
             let s = squeeze(o, 2, "ultralytics")?;
@@ -301,6 +347,25 @@ mod tests {
         assert_eq!(t.bbox, [4.0, 4.0, 8.0, 8.0]);
         let wrong = decode(&OutputLayout::Yolox { output: None, strides: vec![8] }, &outs, 8, 8, 1, &ID).unwrap_err();
         assert!(wrong.to_string().contains("needs 1×6"), "{wrong}");
+    }
+
+    #[test]
+    fn gfl_takes_the_expected_distance_from_the_cell_centre_and_matches_outputs_by_shape() {
+        // One 2×2 level of stride 4 at 8×8, one class, 2 bins: every side's distribution puts
+        // weight 0.5 on bins 0 and 1, so each distance is 0.5 × 4 = 2.
+        let reg = RawOutput { name: "795".into(), shape: vec![1, 4, 8], data: vec![0.0; 32] };
+        let cls = RawOutput { name: "792".into(), shape: vec![1, 4, 1], data: vec![0.1, 0.9, 0.2, 0.3] };
+        let l = OutputLayout::Gfl { strides: vec![4], bins: 2 };
+        let p = decode(&l, &[reg.clone(), cls.clone()], 8, 8, 1, &ID).unwrap();
+        let t = p.best(&[0]).unwrap();
+        assert!((t.score - 0.9).abs() < 1e-6);
+        // Cell (1, 0): centre (4 + 1.5, 1.5); the box clipped at the top.
+        assert_eq!(t.bbox, [3.5, 0.0, 7.5, 3.5]);
+        let wrong = decode(&OutputLayout::Gfl { strides: vec![4], bins: 4 }, &[reg, cls], 8, 8, 1, &ID).unwrap_err();
+        assert!(
+            wrong.to_string().contains("[1, 4, 16] box map") && wrong.to_string().contains("795 [1, 4, 8]"),
+            "{wrong}"
+        );
     }
 
     #[test]

@@ -39,7 +39,7 @@ pub struct Inspection {
 /// pav's guess at a model's output layout.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Guess {
-    /// A layout pav decodes (`darknet`, `yolox`, `ultralytics`, `detr`), or None.
+    /// A layout pav decodes (`darknet`, `yolox`, `ultralytics`, `detr`, `gfl`), or None.
     pub layout: Option<&'static str>,
     /// What in the shapes led to it.
     pub why: String,
@@ -163,7 +163,7 @@ impl Inspection {
         if !per_cell.is_empty() && per_cell.iter().sum::<usize>() % rows(&[8, 16, 32]) == 0 {
             let widths: Vec<usize> = shapes.iter().filter(|(_, s)| s.len() == 3).map(|(_, s)| s[2]).collect();
             if widths.iter().any(|w| w % 4 == 0 && *w > 4 && *w <= 64) {
-                return g(None, format!("outputs per grid level of strides 8, 16, 32 with widths {widths:?}: a class map and a box map of 4 binned distances (GFL head, as NanoDet); not one of pav's layouts yet"));
+                return g(Some("gfl"), format!("outputs per grid level of strides 8, 16, 32 with widths {widths:?}: a class map and a box map of 4 binned distances (GFL head, as NanoDet)"));
             }
         }
         g(
@@ -220,6 +220,10 @@ impl Inspection {
                 for p in &self.outputs {
                     t.push_str(&format!("[[output.heads]]\noutput = \"{}\"\nanchors = []      # CHECK: the cfg's anchors of this head, [[w, h], ...] in input pixels\n", p.name));
                 }
+            }
+            Some("gfl") => {
+                let bins = self.outputs.iter().filter_map(|p| self.shape(p)?.last().copied()).min().unwrap_or(32) / 4;
+                t.push_str(&format!("layout = \"gfl\"\nstrides = [8, 16, 32]\nbins = {bins}\n"));
             }
             Some(l) => t.push_str(&format!("layout = \"{l}\"\noutput = \"{}\"\n", self.outputs[0].name)),
             None => t.push_str(&format!("# {}\nlayout = \"\"   # CHECK: no layout of pav's fits\n", guess.why)),

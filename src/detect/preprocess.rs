@@ -109,10 +109,10 @@ fn prepare_with(frame: &Frame, cfg: &InputConfig, opencv: bool) -> (Vec<f32>, In
 fn resize_u8(frame: &Frame, nw: usize, nh: usize, filter: Interpolation, opencv: bool) -> Vec<u8> {
     match filter {
         Interpolation::Antialias => resize_pil_u8(frame, nw, nh),
-        Interpolation::Bilinear => {
+        Interpolation::Bilinear | Interpolation::Area => {
             #[cfg(feature = "video")]
             if opencv {
-                if let Ok(v) = resize_opencv(frame, nw, nh) {
+                if let Ok(v) = resize_opencv(frame, nw, nh, filter) {
                     return v;
                 }
             }
@@ -124,22 +124,45 @@ fn resize_u8(frame: &Frame, nw: usize, nh: usize, filter: Interpolation, opencv:
     }
 }
 
-/// OpenCV's `resize` with `INTER_LINEAR`: fixed point and vectorized, what the models' reference
+/// OpenCV's `resize` with `INTER_LINEAR` (or `INTER_AREA`): fixed point and vectorized, what the models' reference
 /// code calls.
 #[cfg(feature = "video")]
-fn resize_opencv(frame: &Frame, nw: usize, nh: usize) -> opencv::Result<Vec<u8>> {
+fn resize_opencv(frame: &Frame, nw: usize, nh: usize, filter: Interpolation) -> opencv::Result<Vec<u8>> {
     use opencv::core::{Mat, Size};
     use opencv::prelude::*;
     let flat = Mat::from_slice(&frame.bgr)?;
     let src = flat.reshape(3, frame.height as i32)?;
     let mut dst = Mat::default();
-    opencv::imgproc::resize(&src, &mut dst, Size::new(nw as i32, nh as i32), 0.0, 0.0, opencv::imgproc::INTER_LINEAR)?;
+    let flag = if filter == Interpolation::Area { opencv::imgproc::INTER_AREA } else { opencv::imgproc::INTER_LINEAR };
+    opencv::imgproc::resize(&src, &mut dst, Size::new(nw as i32, nh as i32), 0.0, 0.0, flag)?;
     Ok(dst.data_bytes()?.to_vec())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[cfg(feature = "video")]
+    #[test]
+    fn area_resampling_matches_opencv_inter_area_within_one_level() {
+        let mut rng = crate::rng::Rng::new(3);
+        // Smooth content with noise, as photos are.
+        let (w, h) = (640, 480);
+        let bgr: Vec<u8> = (0..w * h * 3)
+            .map(|i| {
+                let (x, y) = ((i / 3) % w, (i / 3) / w);
+                let v = 128.0 + 60.0 * ((x as f32) * 0.05).sin() * ((y as f32) * 0.03).cos() + rng.uniform(-20.0, 20.0);
+                v.clamp(0.0, 255.0) as u8
+            })
+            .collect();
+        let f = Frame { width: w, height: h, bgr };
+        for (nw, nh) in [(416, 312), (320, 240), (211, 97)] {
+            let cv = resize_opencv(&f, nw, nh, Interpolation::Area).unwrap();
+            let ours = resize(&f, nw, nh, Interpolation::Area);
+            let worst = cv.iter().zip(&ours).map(|(a, b)| (*a as f32 - b).abs()).fold(0f32, f32::max);
+            assert!(worst <= 1.0, "{nw}×{nh}: {worst}");
+        }
+    }
 
     fn cfg(resize: Resize, align: Align, channels: ChannelOrder) -> InputConfig {
         InputConfig {

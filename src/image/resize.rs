@@ -14,6 +14,9 @@ pub enum Interpolation {
     /// Triangle filter widened by the downscale factor, two passes rounded to 8 bits
     /// (PIL `Image.resize(BILINEAR)`, torchvision on PIL images).
     Antialias,
+    /// Each output pixel the mean of the source area it covers (OpenCV `INTER_AREA`; bilinear
+    /// when enlarging, as OpenCV does).
+    Area,
 }
 
 /// Source taps of one output sample: first source index and normalized weights.
@@ -40,6 +43,15 @@ fn axis_taps(src: usize, dst: usize, filter: Interpolation) -> Vec<Taps> {
                 }
             })
             .collect(),
+        Interpolation::Area if scale > 1.0 => (0..dst)
+            .map(|d| {
+                let (a, b) = (d as f64 * scale, (d as f64 + 1.0) * scale);
+                let (lo, hi) = (a.floor() as usize, (b.ceil() as usize).min(src));
+                let w: Vec<f64> = (lo..hi).map(|x| ((x + 1) as f64).min(b) - (x as f64).max(a)).collect();
+                Taps { start: lo, weights: w.iter().map(|v| v / scale).collect() }
+            })
+            .collect(),
+        Interpolation::Area => axis_taps(src, dst, Interpolation::Bilinear),
         Interpolation::Antialias => {
             // PIL: triangle filter of support `max(scale, 1)`, window truncated at the edges and renormalized.
             let fscale = scale.max(1.0);
@@ -62,16 +74,17 @@ fn axis_taps(src: usize, dst: usize, filter: Interpolation) -> Vec<Taps> {
 /// Resizes an interleaved 3-channel u8 image to `nw × nh`, returning values on the 0–255 scale.
 pub fn resize(frame: &Frame, nw: usize, nh: usize, filter: Interpolation) -> Vec<f32> {
     match filter {
-        Interpolation::Bilinear => resize_float(frame, nw, nh),
+        Interpolation::Bilinear | Interpolation::Area => resize_float(frame, nw, nh, filter),
         Interpolation::Antialias => resize_pil(frame, nw, nh),
     }
 }
 
-/// Separable bilinear in f32 with one final rounding (OpenCV's result to within 1 LSB).
-fn resize_float(frame: &Frame, nw: usize, nh: usize) -> Vec<f32> {
+/// Separable bilinear or area resampling in f32 with one final rounding (OpenCV's result to
+/// within 1 LSB).
+fn resize_float(frame: &Frame, nw: usize, nh: usize, filter: Interpolation) -> Vec<f32> {
     let (w, h) = (frame.width, frame.height);
-    let xs = axis_taps(w, nw, Interpolation::Bilinear);
-    let ys = axis_taps(h, nh, Interpolation::Bilinear);
+    let xs = axis_taps(w, nw, filter);
+    let ys = axis_taps(h, nh, filter);
     let mut mid = vec![0f32; h * nw * 3];
     for y in 0..h {
         let row = &frame.bgr[y * w * 3..(y + 1) * w * 3];

@@ -1,0 +1,55 @@
+//! The detectors outside the main set (configs/detectors-wide) against independent references:
+//! NanoDet-m 416 against scripts/reference_nanodet.py (written from its upstream demo, run with
+//! onnxruntime 1.31.1 and OpenCV 5.0 on FCA's 11 photos and every fourth frame of the turntable
+//! fixture; tests/reference/nanodet_m_416.tsv): the best car score within 0.02 and its box
+//! within 2 px on every image.
+#![cfg(feature = "eval")]
+
+mod common;
+
+use pav::dataset::fca::CarlaSample;
+use pav::detect::onnx::OnnxDetector;
+use pav::detect::{Detector, DetectorConfig};
+use pav::image::Frame;
+
+fn fixture_frames(every: usize) -> Vec<(usize, Frame)> {
+    let mut rd = pav::video::VideoReader::open(&common::repo().join("fixtures/turntable.mp4")).unwrap();
+    let mut out = Vec::new();
+    while let Some((i, f)) = rd.read().unwrap() {
+        if i % every == 0 {
+            out.push((i, f));
+        }
+    }
+    out
+}
+
+#[test]
+fn nanodet_matches_its_upstream_demo_on_photos_and_turntable_frames() {
+    let data = common::real_data();
+    let cfg = DetectorConfig::load(&common::repo().join("configs/detectors-wide/nanodet_m_416.toml")).unwrap();
+    let mut det = OnnxDetector::new(cfg, 1).unwrap();
+    let text = std::fs::read_to_string(common::repo().join("tests/reference/nanodet_m_416.tsv")).unwrap();
+    let frames = fixture_frames(4);
+    let mut checked = 0;
+    let (mut worst_score, mut worst_box) = (0f32, 0f32);
+    for line in text.lines().skip(1) {
+        let f: Vec<&str> = line.split('\t').collect();
+        let want: Vec<f32> = f[1..].iter().map(|v| v.parse().unwrap()).collect();
+        let image = match f[0].split_once('#') {
+            Some((_, k)) => frames.iter().find(|(i, _)| *i == k.parse::<usize>().unwrap()).unwrap().1.clone(),
+            None => {
+                let dir = if f[0] == "data1.npz" { "train" } else { "test" };
+                CarlaSample::load(&data.join("fca/carla_dataset").join(dir).join(f[0])).unwrap().image
+            }
+        };
+        let best = det.propose(&image).unwrap().best(det.target_classes()).unwrap();
+        let db = (0..4).map(|k| (best.bbox[k] - want[1 + k]).abs()).fold(0f32, f32::max);
+        worst_score = worst_score.max((best.score - want[0]).abs());
+        worst_box = worst_box.max(db);
+        assert!((best.score - want[0]).abs() <= 0.02, "{}: score {:.4}, reference {:.4}", f[0], best.score, want[0]);
+        assert!(db <= 2.0, "{}: box {:?}, reference {:?}", f[0], best.bbox, &want[1..]);
+        checked += 1;
+    }
+    eprintln!("{checked} images: largest score difference {worst_score:.4}, largest box difference {worst_box:.2} px");
+    assert_eq!(checked, 22);
+}
