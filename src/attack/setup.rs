@@ -549,6 +549,15 @@ impl Setup {
         }
     }
 
+    /// A texture as scores see it: through [`Setup::print_scored`] when set. Call it once per
+    /// texture, not per view.
+    pub fn scored<'a>(&self, tex: &'a [f32]) -> std::borrow::Cow<'a, [f32]> {
+        match &self.print_scored {
+            Some(p) => std::borrow::Cow::Owned(p.printed(tex)),
+            None => std::borrow::Cow::Borrowed(tex),
+        }
+    }
+
     /// The deterministic scene that scores use: this run's lighting, no EoT.
     pub fn eval_scene(&self) -> Scene {
         Scene { lighting: self.scene.lighting, effects: Vec::new() }

@@ -217,10 +217,13 @@ pub fn crossval(
         for (name, r) in &opts.references {
             textures.push((name.clone(), 0, Some(r)));
         }
+        // Each texture as scores see it, once per fold rather than once per view.
+        let seen: Vec<Option<std::borrow::Cow<[f32]>>> =
+            textures.iter().map(|(_, _, t)| t.map(|t| fs.scored(t))).collect();
         for (role, views) in [("train", &fs.train), ("held-out", &fs.test)] {
             for v in views.iter() {
-                for (tname, seed, tex) in &textures {
-                    let dets = detect_view(v, *tex, &fs, detectors)?;
+                for ((tname, seed, _), tex) in textures.iter().zip(&seen) {
+                    let dets = detect_view(v, tex.as_deref(), &fs, detectors)?;
                     for (d, im) in dets.into_iter().enumerate() {
                         if role == "held-out" {
                             boxes.extend(box_records(f, &v.name, tname, *seed, detectors[d].name(), &im));
@@ -242,8 +245,8 @@ pub fn crossval(
         let held: Vec<&str> = te.iter().map(|&i| all[i].name.as_str()).collect();
         for v in &opts.rendered {
             let Some(photo) = setup.plate_of(&v.name).filter(|p| held.contains(p)) else { continue };
-            for (tname, seed, tex) in &textures {
-                for (d, im) in detect_view(v, *tex, &fs, detectors)?.into_iter().enumerate() {
+            for ((tname, seed, _), tex) in textures.iter().zip(&seen) {
+                for (d, im) in detect_view(v, tex.as_deref(), &fs, detectors)?.into_iter().enumerate() {
                     rendered.push(RenderedRecord {
                         fold: f,
                         photo: photo.to_string(),

@@ -88,7 +88,8 @@ pub fn score_snapshots(
     let shots = snapshots(fold_dir);
     let mut out = Vec::new();
     for (k, (step, path)) in shots.iter().enumerate() {
-        let tex = fs.load_texture(path)?;
+        let loaded = fs.load_texture(path)?;
+        let tex = fs.scored(&loaded);
         for (role, views) in [("train", &fs.train), ("held-out", &fs.test)] {
             for v in views.iter() {
                 for (d, im) in detect_view(v, Some(&tex), fs, detectors)?.into_iter().enumerate() {

@@ -183,8 +183,7 @@ pub fn optimize_and_report(
         return Ok(OptimizeReport { finish: o.finish, scores: Vec::new(), sheet: None, shift: None, files });
     }
     // With a print channel, previews and scores show the texture as printed: what a camera sees.
-    let seen = |tex: &[f32]| setup.print.as_ref().map_or_else(|| tex.to_vec(), |c| c.printed(tex));
-    let printed = seen(&o.texture);
+    let printed = setup.scored(&o.texture);
     let shift = setup.print.as_ref().map(|c| c.shift(&o.texture, Some(&setup.region)));
     if setup.print.is_some() {
         save_rgb(&out.join(PROOF), n, n, &printed)?;
@@ -200,7 +199,7 @@ pub fn optimize_and_report(
         files.push("synthetic.png");
     }
     let initial = setup.initial_texture(&p.cfg.mesh.init, p.cfg.optimizer.seed)?;
-    let scores = score_views(setup, p.wb.first(), &seen(&initial), &printed)?;
+    let scores = score_views(setup, p.wb.first(), &setup.scored(&initial), &printed)?;
     write_csv(&out.join("scores.csv"), &scores)?;
     files.push("scores.csv");
     let (side, spread) = atlas_side_m(&setup.mesh, &setup.region, n, p.cfg.mesh.car_length_m)

@@ -51,10 +51,7 @@ pub struct DigitalRow {
 /// The composite of `view` with `tex` (or the photo itself) as an 8-bit BGR frame.
 fn frame(view: &View, tex: Option<&[f32]>, setup: &Setup) -> Frame {
     let img = match tex {
-        Some(t) => match &setup.print_scored {
-            Some(p) => view.composite(&p.printed(t), &setup.eval_scene()),
-            None => view.composite(t, &setup.eval_scene()),
-        },
+        Some(t) => view.composite(t, &setup.eval_scene()),
         None => view.photo.clone(),
     };
     Frame {
@@ -64,7 +61,8 @@ fn frame(view: &View, tex: Option<&[f32]>, setup: &Setup) -> Frame {
     }
 }
 
-/// The car detections of every detector on `view` composited with `tex` (`None` = the photo).
+/// The car detections of every detector on `view` composited with `tex` (`None` = the photo),
+/// a texture as scores see it ([`Setup::scored`]).
 pub fn detect_view(
     view: &View,
     tex: Option<&[f32]>,
@@ -140,10 +138,11 @@ pub fn score_textures(
     // Per detector, whether the unmodified photo of each view (in view order) is detected.
     let mut original: Option<Vec<Vec<bool>>> = None;
     for c in conditions {
+        let tex = c.texture.as_deref().map(|t| setup.scored(t));
         let mut per: Vec<Vec<(&'static str, ImageDetections)>> = vec![Vec::new(); detectors.len()];
         for (split, views) in [("train", &setup.train), ("test", &setup.test)] {
             for v in views.iter() {
-                for (d, im) in detect_view(v, c.texture.as_deref(), setup, detectors)?.into_iter().enumerate() {
+                for (d, im) in detect_view(v, tex.as_deref(), setup, detectors)?.into_iter().enumerate() {
                     records.push(ViewRecord {
                         fold: 0,
                         role: if split == "test" { "held-out" } else { "train" },

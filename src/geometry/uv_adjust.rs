@@ -3,6 +3,7 @@
 //! island by a similarity transform (so its placement is kept), and all islands are scaled to one
 //! common texel density, as large as still fits every island inside its original bounding box.
 
+use super::linalg::cholesky_solve;
 use super::mesh::Mesh;
 use std::collections::{BTreeSet, HashMap};
 
@@ -63,41 +64,6 @@ fn detach(mesh: &mut Mesh, faces: &[usize]) {
             }
         }
     }
-}
-
-/// Solves the dense symmetric positive-definite system `a·x = b` (Cholesky); `None` if singular.
-fn cholesky_solve(mut a: Vec<f64>, mut b: Vec<f64>, n: usize) -> Option<Vec<f64>> {
-    for j in 0..n {
-        let mut d = a[j * n + j];
-        for k in 0..j {
-            d -= a[j * n + k] * a[j * n + k];
-        }
-        if d.is_nan() || d <= 1e-18 {
-            return None;
-        }
-        let d = d.sqrt();
-        a[j * n + j] = d;
-        for i in j + 1..n {
-            let mut s = a[i * n + j];
-            for k in 0..j {
-                s -= a[i * n + k] * a[j * n + k];
-            }
-            a[i * n + j] = s / d;
-        }
-    }
-    for i in 0..n {
-        for k in 0..i {
-            b[i] -= a[i * n + k] * b[k];
-        }
-        b[i] /= a[i * n + i];
-    }
-    for i in (0..n).rev() {
-        for k in i + 1..n {
-            b[i] -= a[k * n + i] * b[k];
-        }
-        b[i] /= a[i * n + i];
-    }
-    Some(b)
 }
 
 /// LSCM of one island: new (u, v) per UV index, with the two 3D-farthest vertices pinned at

@@ -7,7 +7,7 @@ use super::colorchecker::{
     pairs as checker_pairs, read_checker, read_checker_mcc, read_reference, reference_srgb, CheckerError,
 };
 use super::fit::{Calibration, FitError, Pair};
-use super::photo::{Photo, PhotoError};
+use super::photo::{median, Photo, PhotoError};
 use crate::colour::delta_e2000_srgb;
 use crate::image::Frame;
 use opencv::core::{Mat, Point, Rect, Scalar, CV_8UC3};
@@ -138,12 +138,6 @@ fn photos(paths: &[PathBuf]) -> Result<Vec<Result<Photo, PhotoError>>, Calibrate
     Ok(out)
 }
 
-/// Median of values.
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 /// Reads every photo, merges the patches (median over the photos that read them) and fits.
 pub fn calibrate(
     target: Target,
@@ -226,7 +220,7 @@ pub fn calibrate(
         .map(|m| Pair {
             id: m.id,
             from: m.from,
-            to: std::array::from_fn(|c| median(m.tos.iter().map(|t| t[c]).collect())),
+            to: std::array::from_fn(|c| median(&mut m.tos.iter().map(|t| t[c]).collect::<Vec<_>>())),
             clipped: m.clipped,
             unreadable: m.unreadable,
         })
@@ -323,20 +317,12 @@ fn save_frame(path: &Path, f: &Frame) -> Result<(), CalibrateError> {
 mod tests {
     use super::*;
     use crate::print::chart::ChartSpec;
+    use crate::print::fit::known_print;
     use crate::print::photo::Homography;
     use crate::rng::Rng;
     use opencv::core::{Size, Vector, BORDER_CONSTANT};
     use opencv::imgcodecs;
     use opencv::prelude::*;
-
-    /// A known print + camera: desaturated, a warm cast, lifted blacks, a soft shoulder.
-    fn printer(p: [f64; 3]) -> [f64; 3] {
-        let m = (p[0] + p[1] + p[2]) / 3.0;
-        std::array::from_fn(|c| {
-            let v = 0.8 * p[c] + 0.2 * m;
-            (0.05 + 0.85 * v.powf(1.15) + [0.03, 0.0, -0.04][c] * v).clamp(0.0, 1.0)
-        })
-    }
 
     /// The effects a phone adds to a photo of a printed chart.
     struct Shot {
@@ -345,7 +331,7 @@ mod tests {
         crop_right: f64,
     }
 
-    /// The chart printed through `printer`, photographed at an angle with blur, vignetting,
+    /// The chart printed through `known_print`, photographed at an angle with blur, vignetting,
     /// noise and JPEG.
     fn photograph(chart: &Chart, shot: &Shot, seed: u64) -> Mat {
         let page = chart.render().unwrap();
@@ -356,7 +342,7 @@ mod tests {
         for px in printed.data_bytes_mut().unwrap().chunks_exact_mut(3) {
             let key = [px[0], px[1], px[2]];
             let out = *cache.entry(key).or_insert_with(|| {
-                let o = printer([px[2], px[1], px[0]].map(|v| v as f64 / 255.0));
+                let o = known_print([px[2], px[1], px[0]].map(|v| v as f64 / 255.0));
                 [o[2], o[1], o[0]].map(|v| (v * 255.0).round() as u8)
             });
             px.copy_from_slice(&out);
@@ -425,7 +411,7 @@ mod tests {
         let de: Vec<f64> = (0..2000)
             .map(|_| {
                 let x = [0; 3].map(|_| rng.unit() as f64);
-                delta_e2000_srgb(cal.map.apply(x), printer(x))
+                delta_e2000_srgb(cal.map.apply(x), known_print(x))
             })
             .collect();
         let (median, p90, _) = crate::colour::spread(&de, 2.0);

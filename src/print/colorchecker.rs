@@ -4,7 +4,7 @@
 //! and its orientation taken as the one whose colours an affine map explains best.
 
 use super::fit::{ColourMap, Model, Pair};
-use super::photo::{Homography, Photo, PhotoError};
+use super::photo::{median, median_colour, Homography, Photo, PhotoError};
 use crate::colour::{delta_e2000_srgb, lab_d50_to_srgb};
 use std::path::{Path, PathBuf};
 
@@ -159,8 +159,7 @@ pub fn read_checker(
             .filter(|&(x, y)| comp[y * rw + x])
             .map(|(x, y)| max_c(&img[y * rw + x]))
             .collect();
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
+        median(&mut v)
     };
     let lit = |x: usize, y: usize| max_c(&img[y * rw + x]) > body_level + 0.12;
     let cols: Vec<f64> = (x0..x1).map(|x| (y0..y1).filter(|&y| lit(x, y)).count() as f64).collect();
@@ -182,18 +181,7 @@ pub fn read_checker(
                     (0..3).for_each(|k| ch[k].push(img[y * rw + x][k]));
                 }
             }
-            let med = |v: &mut Vec<f64>| {
-                v.sort_by(f64::total_cmp);
-                v[v.len() / 2]
-            };
-            let mut m = [0.0; 3];
-            let mut mad: f64 = 0.0;
-            for k in 0..3 {
-                m[k] = med(&mut ch[k]);
-                let mut d: Vec<f64> = ch[k].iter().map(|v| (v - m[k]).abs()).collect();
-                mad = mad.max(med(&mut d));
-            }
-            cells.push((m, mad));
+            cells.push(median_colour(ch));
         }
     }
     // Orientation: cell (r, c) of the nr × nc grid is reference patch index(r, c) under one of

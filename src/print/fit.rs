@@ -4,6 +4,7 @@
 
 use super::lut::Lut3;
 use crate::colour::{delta_e2000_srgb, spread};
+use crate::geometry::linalg::Cholesky;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -63,33 +64,6 @@ fn features(m: Model, p: [f64; 3]) -> Vec<f64> {
     }
 }
 
-/// Solves the symmetric positive system `a x = b` (n × n, row-major) by Cholesky; None if singular.
-fn solve_spd(n: usize, a: &[f64], b: &[f64]) -> Option<Vec<f64>> {
-    let mut l = vec![0f64; n * n];
-    for i in 0..n {
-        for j in 0..=i {
-            let s: f64 = a[i * n + j] - (0..j).map(|k| l[i * n + k] * l[j * n + k]).sum::<f64>();
-            if i == j {
-                if s <= 0.0 {
-                    return None;
-                }
-                l[i * n + i] = s.sqrt();
-            } else {
-                l[i * n + j] = s / l[j * n + j];
-            }
-        }
-    }
-    let mut y = vec![0f64; n];
-    for i in 0..n {
-        y[i] = (b[i] - (0..i).map(|k| l[i * n + k] * y[k]).sum::<f64>()) / l[i * n + i];
-    }
-    let mut x = vec![0f64; n];
-    for i in (0..n).rev() {
-        x[i] = (y[i] - (i + 1..n).map(|k| l[k * n + i] * x[k]).sum::<f64>()) / l[i * n + i];
-    }
-    Some(x)
-}
-
 /// LUT nodes per axis for `n` patches: a coarse grid, the smoothness term filling its gaps.
 fn lut_nodes(n: usize) -> usize {
     if n >= 200 {
@@ -118,7 +92,8 @@ impl ColourMap {
                     }
                 }
                 (0..p).for_each(|i| a[i * p + i] += 1e-6);
-                let cols: Vec<Vec<f64>> = (0..3).map(|c| solve_spd(p, &a, &b[c])).collect::<Option<_>>()?;
+                let chol = Cholesky::factor(a, p)?;
+                let cols: Vec<Vec<f64>> = b.into_iter().map(|b| chol.solve(b)).collect();
                 Some(ColourMap {
                     model,
                     coefficients: (0..p).map(|i| [cols[0][i], cols[1][i], cols[2][i]]).collect(),
@@ -132,9 +107,8 @@ impl ColourMap {
                 let mut a = vec![0f64; m * m];
                 let mut b = [vec![0f64; m], vec![0f64; m], vec![0f64; m]];
                 // Data term: trilinear weights of each patch.
-                let probe = Lut3 { n, channels: 1, values: vec![0.0; m] };
                 for (x, y) in from.iter().zip(to) {
-                    let w = probe.weights(&x.map(|v| v as f32));
+                    let w = Lut3::node_weights(n, &x.map(|v| v as f32));
                     for &(wi, i) in &w {
                         for &(wj, j) in &w {
                             a[i * m + j] += (wi * wj) as f64;
@@ -163,7 +137,8 @@ impl ColourMap {
                     }
                 }
                 (0..m).for_each(|i| a[i * m + i] += 1e-9);
-                let cols: Vec<Vec<f64>> = (0..3).map(|c| solve_spd(m, &a, &b[c])).collect::<Option<_>>()?;
+                let chol = Cholesky::factor(a, m)?;
+                let cols: Vec<Vec<f64>> = b.into_iter().map(|b| chol.solve(b)).collect();
                 Some(ColourMap {
                     model,
                     coefficients: Vec::new(),
@@ -181,16 +156,9 @@ impl ColourMap {
                 let f = features(self.model, p);
                 std::array::from_fn(|c| f.iter().zip(&self.coefficients).map(|(f, k)| f * k[c]).sum())
             }
-            Model::Lut => {
-                let lut = Lut3 {
-                    n: self.lut_size,
-                    channels: 3,
-                    values: self.lut.iter().flat_map(|v| v.map(|x| x as f32)).collect(),
-                };
-                let mut o = [0f32; 3];
-                lut.eval(&p.map(|v| v as f32), &mut o);
-                o.map(|v| v as f64)
-            }
+            Model::Lut => Lut3::node_weights(self.lut_size, &p.map(|v| v as f32))
+                .iter()
+                .fold([0.0; 3], |acc, &(w, i)| std::array::from_fn(|c| acc[c] + w as f64 * self.lut[i][c])),
         };
         out.map(|v: f64| v.clamp(0.0, 1.0))
     }
@@ -368,20 +336,21 @@ impl Calibration {
     }
 }
 
+/// A known print + camera map for the tests: desaturated, a warm cast, lifted blacks, a soft
+/// shoulder.
+#[cfg(test)]
+pub(crate) fn known_print(p: [f64; 3]) -> [f64; 3] {
+    let m = (p[0] + p[1] + p[2]) / 3.0;
+    std::array::from_fn(|c| {
+        let v = 0.8 * p[c] + 0.2 * m;
+        (0.05 + 0.85 * v.powf(1.15) + [0.03, 0.0, -0.04][c] * v).clamp(0.0, 1.0)
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::rng::Rng;
-
-    fn printer(p: [f64; 3]) -> [f64; 3] {
-        // A plausible print + camera: desaturation, a warm cast, lifted blacks, a soft shoulder.
-        let m = (p[0] + p[1] + p[2]) / 3.0;
-        std::array::from_fn(|c| {
-            let v = 0.8 * p[c] + 0.2 * m;
-            let cast = [0.03, 0.0, -0.04][c];
-            (0.06 + 0.86 * v.powf(1.1) + cast * v).clamp(0.0, 1.0)
-        })
-    }
 
     #[test]
     fn each_model_recovers_a_smooth_map_and_the_best_is_kept() {
@@ -389,7 +358,7 @@ mod tests {
         let pairs: Vec<Pair> = (0..300)
             .map(|id| {
                 let from = [0; 3].map(|_| rng.unit() as f64);
-                Pair { id, from, to: printer(from), clipped: false, unreadable: false }
+                Pair { id, from, to: known_print(from), clipped: false, unreadable: false }
             })
             .collect();
         let c = Calibration::fit("printer+camera", &pairs, 2.0, false, Vec::new()).unwrap();

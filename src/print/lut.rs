@@ -21,6 +21,29 @@ struct Cell {
     inside: [bool; 3],
 }
 
+fn cell(n: usize, rgb: &[f32]) -> Cell {
+    let s = (n - 1) as f32;
+    let mut c = Cell { base: [0; 3], frac: [0.0; 3], inside: [false; 3] };
+    for (d, &x) in rgb.iter().take(3).enumerate() {
+        c.inside[d] = (0.0..=1.0).contains(&x);
+        let t = x.clamp(0.0, 1.0) * s;
+        let i = (t.floor() as usize).min(n - 2);
+        c.base[d] = i;
+        c.frac[d] = t - i as f32;
+    }
+    c
+}
+
+/// The eight corner weights of a cell and their node indices.
+fn corners(n: usize, c: &Cell) -> [(f32, usize); 8] {
+    std::array::from_fn(|k| {
+        let (dr, dg, db) = (k >> 2, (k >> 1) & 1, k & 1);
+        let w = |d: usize, bit: usize| if bit == 1 { c.frac[d] } else { 1.0 - c.frac[d] };
+        let node = ((c.base[0] + dr) * n + c.base[1] + dg) * n + c.base[2] + db;
+        (w(0, dr) * w(1, dg) * w(2, db), node)
+    })
+}
+
 impl Lut3 {
     /// Samples `f` at the nodes.
     pub fn sample(n: usize, channels: usize, mut f: impl FnMut([f64; 3]) -> Vec<f64>) -> Self {
@@ -40,35 +63,22 @@ impl Lut3 {
     }
 
     fn cell(&self, rgb: &[f32]) -> Cell {
-        let s = (self.n - 1) as f32;
-        let mut c = Cell { base: [0; 3], frac: [0.0; 3], inside: [false; 3] };
-        for (d, &x) in rgb.iter().take(3).enumerate() {
-            c.inside[d] = (0.0..=1.0).contains(&x);
-            let t = x.clamp(0.0, 1.0) * s;
-            let i = (t.floor() as usize).min(self.n - 2);
-            c.base[d] = i;
-            c.frac[d] = t - i as f32;
-        }
-        c
+        cell(self.n, rgb)
     }
 
     fn node(&self, r: usize, g: usize, b: usize) -> usize {
         ((r * self.n + g) * self.n + b) * self.channels
     }
 
-    /// The eight corner weights and node offsets of a cell.
+    /// The eight corner weights and value offsets of a cell.
     fn corners(&self, c: &Cell) -> [(f32, usize); 8] {
-        std::array::from_fn(|k| {
-            let (dr, dg, db) = (k >> 2, (k >> 1) & 1, k & 1);
-            let w = |d: usize, bit: usize| if bit == 1 { c.frac[d] } else { 1.0 - c.frac[d] };
-            (w(0, dr) * w(1, dg) * w(2, db), self.node(c.base[0] + dr, c.base[1] + dg, c.base[2] + db))
-        })
+        corners(self.n, c).map(|(w, node)| (w, node * self.channels))
     }
 
-    /// The trilinear weights of one point and the value offsets of their nodes.
-    pub fn weights(&self, rgb: &[f32]) -> [(f32, usize); 8] {
-        let c = self.cell(rgb);
-        self.corners(&c).map(|(w, at)| (w, at / self.channels))
+    /// The trilinear weights of one point in a table of `n` nodes per axis, and the indices of
+    /// their nodes (red slowest), whatever the table holds at them.
+    pub fn node_weights(n: usize, rgb: &[f32]) -> [(f32, usize); 8] {
+        corners(n, &cell(n, rgb))
     }
 
     /// The table at one point (inputs outside [0, 1] are clamped), into `out` (`channels` long).

@@ -3,6 +3,7 @@
 //! into a wrong calibration silently.
 
 use super::chart::{dictionary, Chart, ChartError};
+use crate::geometry::linalg::cholesky_solve;
 use opencv::core::{Point2f, Vector};
 use opencv::prelude::*;
 use opencv::{aruco, imgcodecs};
@@ -238,18 +239,7 @@ impl Photo {
                 (0..3).for_each(|k| vals[k].push(c[k]));
             }
         }
-        let median = |v: &mut Vec<f64>| {
-            v.sort_by(f64::total_cmp);
-            v[v.len() / 2]
-        };
-        let mut med = [0.0; 3];
-        let mut mad: f64 = 0.0;
-        for k in 0..3 {
-            med[k] = median(&mut vals[k]);
-            let mut dev: Vec<f64> = vals[k].iter().map(|v| (v - med[k]).abs()).collect();
-            mad = mad.max(median(&mut dev));
-        }
-        Some((med, mad))
+        Some(median_colour(vals))
     }
 
     /// Reads every patch of `chart`.
@@ -296,6 +286,25 @@ impl Photo {
     }
 }
 
+/// The upper median of values (sorted in place).
+pub fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// The per-channel median colour of samples and the largest per-channel median absolute
+/// deviation: a patch's robust colour and how far it is from one colour.
+pub fn median_colour(mut channels: [Vec<f64>; 3]) -> ([f64; 3], f64) {
+    let mut med = [0.0; 3];
+    let mut mad: f64 = 0.0;
+    for (m, ch) in med.iter_mut().zip(channels.iter_mut()) {
+        *m = median(ch);
+        let mut dev: Vec<f64> = ch.iter().map(|v| (v - *m).abs()).collect();
+        mad = mad.max(median(&mut dev));
+    }
+    (med, mad)
+}
+
 /// A plane-to-plane projective map.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Homography(pub [f64; 9]);
@@ -328,7 +337,7 @@ impl Homography {
                 }
             }
         }
-        let h = solve8(a)?;
+        let h = cholesky_solve(a.iter().flat_map(|r| r[..8].to_vec()).collect(), a.iter().map(|r| r[8]).collect(), 8)?;
         let hn = [h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], 1.0];
         // H = Td⁻¹ · Hn · Ts.
         let tdi = [1.0 / td[0], 0.0, -td[2] / td[0], 0.0, 1.0 / td[4], -td[5] / td[4], 0.0, 0.0, 1.0];
@@ -349,25 +358,6 @@ fn mul3(a: &[f64; 9], b: &[f64; 9]) -> [f64; 9] {
         let (i, j) = (k / 3, k % 3);
         (0..3).map(|t| a[i * 3 + t] * b[t * 3 + j]).sum()
     })
-}
-
-/// Solves an 8×8 system given as an augmented matrix (Gaussian elimination, partial pivoting).
-fn solve8(mut a: [[f64; 9]; 8]) -> Option<[f64; 8]> {
-    for c in 0..8 {
-        let p = (c..8).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
-        if a[p][c].abs() < 1e-12 {
-            return None;
-        }
-        a.swap(c, p);
-        let pivot = a[c];
-        for (r, row) in a.iter_mut().enumerate() {
-            if r != c {
-                let f = row[c] / pivot[c];
-                row.iter_mut().zip(&pivot).skip(c).for_each(|(v, p)| *v -= f * p);
-            }
-        }
-    }
-    Some(std::array::from_fn(|i| a[i][8] / a[i][i]))
 }
 
 #[cfg(test)]
