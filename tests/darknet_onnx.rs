@@ -8,11 +8,11 @@ use opencv::core::{Mat, Scalar, Size, Vector, CV_32F};
 use opencv::prelude::*;
 use opencv::{dnn, imgcodecs};
 use pav::detect::config::OutputLayout;
-use pav::detect::darknet::{Layer, Network};
 use pav::detect::decode::decode;
 use pav::detect::onnx::OnnxDetector;
 use pav::detect::preprocess::InputMap;
 use pav::detect::DetectorConfig;
+use pav_onnx::darknet::{Layer, Network};
 
 fn model_dir() -> std::path::PathBuf {
     common::repo().join(".deps/models/yolov3-tiny")

@@ -7,13 +7,13 @@
 mod common;
 
 use pav::dataset::fca::CarlaSample;
-use pav::detect::autodiff::{differentiate_with, Kernels};
-use pav::detect::darknet::cfg::Activation;
-use pav::detect::darknet::{to_onnx, Layer, Network, Weights};
 use pav::detect::onnx::OnnxDetector;
-use pav::detect::ortgrad::GradSession;
 use pav::detect::preprocess::prepare;
 use pav::detect::DetectorConfig;
+use pav_onnx::autodiff::{differentiate_with, Kernels};
+use pav_onnx::darknet::cfg::Activation;
+use pav_onnx::darknet::{to_onnx, Layer, Network, Weights};
+use pav_onnx::session::GradSession;
 
 fn session(size: usize) -> GradSession {
     session_with(size, Kernels::Fused)

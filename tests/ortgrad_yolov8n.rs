@@ -9,13 +9,13 @@ mod common;
 use pav::attack::loss::{DetectionLoss, Proposals, Reduce};
 use pav::attack::whitebox::{class_branch, WhiteBox, WhiteBoxOptions};
 use pav::dataset::fca::CarlaSample;
-use pav::detect::autodiff::{differentiate_with, Kernels};
 use pav::detect::onnx::OnnxDetector;
-use pav::detect::onnx_proto::Model;
-use pav::detect::ortgrad::GradSession;
 use pav::detect::preprocess::prepare;
-use pav::detect::surrogate::dequantize;
 use pav::detect::DetectorConfig;
+use pav_onnx::autodiff::{differentiate_with, Kernels};
+use pav_onnx::proto::Model;
+use pav_onnx::session::GradSession;
+use pav_onnx::surrogate::dequantize;
 
 fn config() -> DetectorConfig {
     DetectorConfig::load(&common::detector_config("yolov8n_int8")).unwrap()

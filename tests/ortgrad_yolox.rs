@@ -6,12 +6,12 @@
 mod common;
 
 use pav::dataset::fca::CarlaSample;
-use pav::detect::autodiff::{differentiate_with, Kernels};
 use pav::detect::onnx::OnnxDetector;
-use pav::detect::onnx_proto::Model;
-use pav::detect::ortgrad::GradSession;
 use pav::detect::preprocess::prepare;
 use pav::detect::DetectorConfig;
+use pav_onnx::autodiff::{differentiate_with, Kernels};
+use pav_onnx::proto::Model;
+use pav_onnx::session::GradSession;
 
 fn config() -> DetectorConfig {
     DetectorConfig::load(&common::detector_config("yolox_nano")).unwrap()
@@ -39,7 +39,7 @@ fn the_file_reads_as_the_graph_it_is() {
         .initializers
         .iter()
         .filter_map(|i| match &i.data {
-            pav::detect::onnx_proto::InitData::F32(v) => Some(v.len()),
+            pav_onnx::proto::InitData::F32(v) => Some(v.len()),
             _ => None,
         })
         .sum();

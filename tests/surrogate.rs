@@ -8,9 +8,9 @@ mod common;
 
 use pav::dataset::fca::CarlaSample;
 use pav::detect::onnx::OnnxDetector;
-use pav::detect::onnx_proto::Model;
-use pav::detect::surrogate::{dequantize, SurrogateError};
 use pav::detect::{Detector, DetectorConfig};
+use pav_onnx::proto::Model;
+use pav_onnx::surrogate::{dequantize, SurrogateError};
 
 fn best_car(det: &mut OnnxDetector, s: &CarlaSample) -> f32 {
     det.propose(&s.image).unwrap().best(det.target_classes()).map(|b| b.score).unwrap_or(0.0)
@@ -115,7 +115,7 @@ fn the_yolov8n_and_deimv2_surrogates_are_float_and_score_like_their_int8_models(
 /// Runs `m` on one 320² image (and the size input, where it has one) and returns every output as f32.
 fn run(m: &Model, x: &[f32]) -> Vec<Vec<f32>> {
     use ort::value::Tensor;
-    let mut s = ort::session::Session::builder(pav::detect::onnx::runtime().unwrap())
+    let mut s = ort::session::Session::builder(pav_onnx::runtime::runtime().unwrap())
         .unwrap()
         .commit_from_memory(&m.to_bytes())
         .unwrap();
@@ -131,8 +131,8 @@ fn run(m: &Model, x: &[f32]) -> Vec<Vec<f32>> {
 
 #[test]
 fn the_deimv2_surrogate_folds_to_its_data_path_with_the_same_outputs() {
-    use pav::detect::fold::fold_shapes;
-    use pav::detect::onnx_proto::{ValueInfo, FLOAT};
+    use pav_onnx::fold::fold_shapes;
+    use pav_onnx::proto::{ValueInfo, FLOAT};
     let shared = common::real_data();
     let cfg = DetectorConfig::load(&common::detector_config("deimv2_atto_int8")).unwrap();
     let (mut float, _) = dequantize(&Model::from_bytes(&std::fs::read(&cfg.model).unwrap()).unwrap()).unwrap();
@@ -181,8 +181,8 @@ fn the_deimv2_surrogate_folds_to_its_data_path_with_the_same_outputs() {
 /// DEIMv2's float surrogate cut at `outputs`, shapes folded at 320², and the query selection
 /// frozen at `x` when the cut lies after it.
 fn deim_cut(outputs: &[&str], x: &[f32]) -> Model {
-    use pav::detect::fold::fold_shapes;
-    use pav::detect::onnx_proto::{InitData, Initializer, ValueInfo, FLOAT};
+    use pav_onnx::fold::fold_shapes;
+    use pav_onnx::proto::{InitData, Initializer, ValueInfo, FLOAT};
     let cfg = DetectorConfig::load(&common::detector_config("deimv2_atto_int8")).unwrap();
     let (mut float, _) = dequantize(&Model::from_bytes(&std::fs::read(&cfg.model).unwrap()).unwrap()).unwrap();
     float.outputs = outputs.iter().map(|n| ValueInfo { name: n.to_string(), elem_type: FLOAT, dims: vec![] }).collect();
@@ -198,7 +198,7 @@ fn deim_cut(outputs: &[&str], x: &[f32]) -> Model {
     }
     let mut probe = folded.clone();
     probe.outputs = vec![ValueInfo { name: picked.into(), elem_type: 0, dims: vec![] }];
-    let mut sess = ort::session::Session::builder(pav::detect::onnx::runtime().unwrap())
+    let mut sess = ort::session::Session::builder(pav_onnx::runtime::runtime().unwrap())
         .unwrap()
         .commit_from_memory(&probe.to_bytes())
         .unwrap();
@@ -216,8 +216,8 @@ fn deim_cut(outputs: &[&str], x: &[f32]) -> Model {
 
 #[test]
 fn the_deimv2_surrogate_differentiates_and_its_input_gradient_matches_differences() {
-    use pav::detect::autodiff::{differentiate_with, Kernels};
-    use pav::detect::ortgrad::GradSession;
+    use pav_onnx::autodiff::{differentiate_with, Kernels};
+    use pav_onnx::session::GradSession;
     let shared = common::real_data();
     let cfg = DetectorConfig::load(&common::detector_config("deimv2_atto_int8")).unwrap();
     let s = CarlaSample::load(&shared.join("fca/carla_dataset/test/data12509.npz")).unwrap();

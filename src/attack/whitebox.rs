@@ -12,16 +12,16 @@
 
 use super::config::OptimizeConfig;
 use super::loss::{DetectionLoss, HeadShapeError, Predictions};
-use crate::detect::autodiff::{differentiate_first, AutodiffError, Kernels};
 use crate::detect::config::{ChannelOrder, DetectorConfig, OutputLayout};
 use crate::detect::decode::{decode, LayoutError, RawOutput};
-use crate::detect::fold::fold_shapes;
-use crate::detect::onnx_proto::{Dim, Model, ProtoError, ValueInfo, FLOAT};
-use crate::detect::ortgrad::{GradSession, Pass};
 use crate::detect::preprocess::InputMap;
-use crate::detect::surrogate::dequantize;
 use crate::detect::DetectError;
 use crate::image::resize::Resampler;
+use pav_onnx::autodiff::{differentiate_first, AutodiffError, Kernels};
+use pav_onnx::fold::fold_shapes;
+use pav_onnx::proto::{Dim, Model, ProtoError, ValueInfo, FLOAT};
+use pav_onnx::session::{GradSession, Pass};
+use pav_onnx::surrogate::dequantize;
 use std::path::PathBuf;
 use std::sync::Mutex;
 use std::time::Instant;
@@ -90,6 +90,9 @@ pub enum WhiteBoxError {
     /// A graph without a gradient.
     #[error("white-box detector: {0}")]
     Autodiff(#[from] AutodiffError),
+    /// ONNX Runtime refused the graphs, or their shapes could not be folded.
+    #[error("white-box detector: {0}")]
+    Onnx(#[from] pav_onnx::OnnxError),
     /// Outputs that do not fit the layout.
     #[error("white-box detector: {0}")]
     Heads(#[from] HeadShapeError),

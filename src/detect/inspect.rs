@@ -2,7 +2,7 @@
 //! opset, operators), the output shapes of one run on a blank image, a guess at which of pav's
 //! output layouts it follows, and a detector-config skeleton to complete.
 
-use super::onnx_proto::{Dim, Model, ProtoError, ValueInfo, FLOAT, INT64};
+use pav_onnx::proto::{Dim, Model, ProtoError, ValueInfo, FLOAT, INT64};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -241,7 +241,7 @@ pub fn probe(model: &Path, insp: &mut Inspection, side: usize) -> Result<(), sup
     use ort::value::Tensor;
     let name = model.display().to_string();
     let err = super::onnx::session_err(&name, "probing the model");
-    let mut session = super::onnx::session_builder(&name, 1)?
+    let mut session = pav_onnx::runtime::session_builder(&name, 1)?
         .commit_from_file(model)
         .map_err(super::onnx::session_err(&name, "loading the ONNX model"))?;
     let image = insp.image_input().map(|p| p.name.clone());
@@ -280,7 +280,7 @@ pub fn probe(model: &Path, insp: &mut Inspection, side: usize) -> Result<(), sup
 pub fn from_session(model: &Path) -> Result<Inspection, super::DetectError> {
     use ort::value::{TensorElementType as T, ValueType};
     let name = model.display().to_string();
-    let session = super::onnx::session_builder(&name, 1)?
+    let session = pav_onnx::runtime::session_builder(&name, 1)?
         .commit_from_file(model)
         .map_err(super::onnx::session_err(&name, "loading the ONNX model"))?;
     let port = |n: &str, t: &ValueType| {

@@ -1,25 +1,15 @@
 //! Object detectors: configs, preprocessing, output decoding, NMS and backends.
 
-pub mod autodiff;
 pub mod coco;
 pub mod config;
-pub mod darknet;
 pub mod decode;
-#[cfg(feature = "eval")]
-pub mod fold;
-#[cfg(feature = "eval")]
-pub mod gradops;
 pub mod inspect;
 #[cfg(feature = "eval")]
 pub mod load;
 pub mod nms;
 #[cfg(feature = "eval")]
 pub mod onnx;
-pub mod onnx_proto;
-#[cfg(feature = "eval")]
-pub mod ortgrad;
 pub mod preprocess;
-pub mod surrogate;
 
 pub use config::DetectorConfig;
 pub use decode::Proposals;
@@ -128,9 +118,10 @@ pub enum DetectError {
         /// What is wrong.
         msg: String,
     },
-    /// The inference runtime is unavailable.
-    #[error("{0}")]
-    Runtime(String),
+    /// The ONNX toolchain refused: the runtime is missing, or a graph cannot be read, folded or
+    /// differentiated.
+    #[error(transparent)]
+    Onnx(#[from] pav_onnx::OnnxError),
     /// The runtime refused to load a model or run it.
     #[cfg(feature = "eval")]
     #[error("detector `{detector}`: {what}: {source}")]

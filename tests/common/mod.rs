@@ -121,7 +121,7 @@ pub fn record_input<'a>(v: &'a toml::Value, suffix: &str) -> &'a toml::Value {
 /// is first order in the step (where max-pool and SiLU kinks make it so).
 #[cfg(feature = "eval")]
 pub fn central_difference(
-    g: &mut pav::detect::ortgrad::GradSession,
+    g: &mut pav_onnx::session::GradSession,
     w: &[f32],
     x: &[f32],
     dir: &[f32],

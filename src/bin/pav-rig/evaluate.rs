@@ -116,7 +116,7 @@ pub fn run(a: &Args) -> Result<()> {
         .setting("sampling", frames.tag())
         .setting("rotation_period_s", a.rotation_period)
         .setting("start_angle_deg", a.start_angle)
-        .tool("onnxruntime", pav::detect::onnx::runtime_version())
+        .tool("onnxruntime", pav_onnx::runtime::runtime_version())
         .tool("opencv", pav::video::opencv_version());
     let record_path = a.out.join(pav::provenance::FILE);
     record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;

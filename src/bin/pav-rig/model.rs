@@ -3,9 +3,9 @@
 use anyhow::Context;
 use anyhow::Result;
 use clap::Subcommand;
-use pav::detect::darknet::to_onnx::convert;
-use pav::detect::onnx_proto::Model;
-use pav::detect::surrogate::dequantize;
+use pav_onnx::darknet::to_onnx::convert;
+use pav_onnx::proto::Model;
+use pav_onnx::surrogate::dequantize;
 use std::path::PathBuf;
 
 #[derive(Subcommand)]

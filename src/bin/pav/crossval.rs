@@ -59,7 +59,7 @@ pub fn run(a: &Args) -> Result<()> {
         .setting("threshold", a.scoring.threshold)
         .setting("print", a.scoring.print || a.scoring.print_profile.is_some())
         .inputs(a.scoring.print_profile.iter().map(|p| p.as_path()))
-        .tool("onnxruntime", pav::detect::onnx::runtime_version());
+        .tool("onnxruntime", pav_onnx::runtime::runtime_version());
     let record_path = a.out.join(pav::provenance::FILE);
     record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
     let stop = ctrl_c_flag()?;

@@ -88,7 +88,7 @@ pub fn run(a: &Args) -> Result<()> {
         .inputs(p.cfg.inputs().iter().map(|p| p.as_path()))
         .setting("seed", p.cfg.optimizer.seed)
         .setting("resume", a.resume)
-        .tool("onnxruntime", pav::detect::onnx::runtime_version());
+        .tool("onnxruntime", pav_onnx::runtime::runtime_version());
     let record_path = a.out.join(pav::provenance::FILE);
     record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
     let stop = ctrl_c_flag()?;

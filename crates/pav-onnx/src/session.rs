@@ -1,14 +1,14 @@
 //! Input gradients on ONNX Runtime: the two graphs of [`differentiate`] in two sessions. The
 //! forward's saved tensors stay in ONNX Runtime's memory and feed the backward by reference.
 
-use super::autodiff::{grad_name, Differentiated};
-use super::onnx::{session_builder, session_err};
-use super::DetectError;
+use crate::autodiff::{grad_name, Differentiated};
+use crate::runtime::{session_builder, session_err};
+use crate::OnnxError;
 use ort::session::Session;
 use ort::value::{DynValue, Tensor};
 
 #[cfg(doc)]
-use super::autodiff::differentiate;
+use crate::autodiff::differentiate;
 
 /// A differentiable model: forward to the outputs, backward to the input gradient.
 pub struct GradSession {
@@ -30,13 +30,7 @@ pub struct Pass {
 /// fresh clone's test run, where test threads build white boxes side by side).
 static REGISTERING_PAV_OPS: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
-fn session(
-    name: &str,
-    bytes: &[u8],
-    threads: usize,
-    pav_ops: bool,
-    what: &'static str,
-) -> Result<Session, DetectError> {
+fn session(name: &str, bytes: &[u8], threads: usize, pav_ops: bool, what: &'static str) -> Result<Session, OnnxError> {
     let mut b = session_builder(name, threads)?
         // Two sessions take turns on the same cores: a spinning idle pool would steal them (measured:
         // a 416² YOLOv3-tiny step 190 → 117 ms on 2 cores).
@@ -45,16 +39,16 @@ fn session(
     if !pav_ops {
         return b.commit_from_memory(bytes).map_err(session_err(name, what));
     }
-    let domain = super::gradops::domain().map_err(session_err(name, "creating pav's operators"))?;
+    let domain = crate::gradops::domain().map_err(session_err(name, "creating pav's operators"))?;
     b = b.with_operators(domain).map_err(session_err(name, "registering pav's operators"))?;
     let _one_at_a_time = REGISTERING_PAV_OPS.lock().unwrap_or_else(|e| e.into_inner());
     b.commit_from_memory(bytes).map_err(session_err(name, what))
 }
 
 impl GradSession {
-    /// Loads both graphs of `d` for the detector `name` with `threads` intra-op threads each (0 = the
+    /// Loads both graphs of `d` for the model `name` with `threads` intra-op threads each (0 = the
     /// runtime's default).
-    pub fn new(name: &str, d: Differentiated, threads: usize) -> Result<Self, DetectError> {
+    pub fn new(name: &str, d: Differentiated, threads: usize) -> Result<Self, OnnxError> {
         let forward = session(name, &d.forward.to_bytes(), threads, false, "loading the forward graph")?;
         let fused = !d.backward.domains.is_empty();
         let backward = session(name, &d.backward.to_bytes(), threads, fused, "loading the gradient graph")?;
@@ -64,7 +58,7 @@ impl GradSession {
     /// Runs the model on `input` (of the graphs' input shape); returns each output's values in the
     /// graph's order (the differentiated outputs, then the forward-only ones) and what the
     /// backward needs.
-    pub fn forward(&mut self, input: Vec<f32>) -> Result<(Vec<Vec<f32>>, Pass), DetectError> {
+    pub fn forward(&mut self, input: Vec<f32>) -> Result<(Vec<Vec<f32>>, Pass), OnnxError> {
         let shape: Vec<usize> = self.d.input_shape.iter().map(|&v| v as usize).collect();
         let name = self.name.clone();
         let err = |what| session_err(&name, what);
@@ -86,14 +80,12 @@ impl GradSession {
     }
 
     /// The gradient of the input from `grads`, the gradients of the outputs (in the graph's order).
-    pub fn backward(&mut self, pass: &Pass, grads: Vec<Vec<f32>>) -> Result<Vec<f32>, DetectError> {
+    pub fn backward(&mut self, pass: &Pass, grads: Vec<Vec<f32>>) -> Result<Vec<f32>, OnnxError> {
         if grads.len() != self.d.outputs.len() {
-            return Err(DetectError::Runtime(format!(
-                "{}: {} output gradients for {} outputs",
-                self.name,
-                grads.len(),
-                self.d.outputs.len()
-            )));
+            return Err(OnnxError::Request {
+                model: self.name.clone(),
+                msg: format!("{} output gradients for {} outputs", grads.len(), self.d.outputs.len()),
+            });
         }
         let mut seeds = Vec::with_capacity(grads.len());
         for ((o, s), g) in self.d.outputs.iter().zip(grads) {

@@ -164,6 +164,67 @@ pub struct Model {
     pub outputs: Vec<ValueInfo>,
 }
 
+impl Node {
+    /// `op(inputs) -> outputs` in the default domain, named after its first output.
+    pub fn new(op: &str, inputs: &[&str], outputs: &[&str]) -> Node {
+        Node {
+            op_type: op.into(),
+            name: outputs.first().copied().unwrap_or(op).into(),
+            inputs: inputs.iter().map(|s| s.to_string()).collect(),
+            outputs: outputs.iter().map(|s| s.to_string()).collect(),
+            attrs: Vec::new(),
+            domain: String::new(),
+        }
+    }
+
+    /// The node with attribute `key` set to `value`.
+    pub fn attr(mut self, key: &str, value: Attr) -> Node {
+        self.attrs.push((key.into(), value));
+        self
+    }
+}
+
+impl Initializer {
+    /// A float32 constant.
+    pub fn f32(name: &str, dims: &[i64], values: Vec<f32>) -> Initializer {
+        Initializer { name: name.into(), dims: dims.to_vec(), data: InitData::F32(values) }
+    }
+
+    /// An int64 constant.
+    pub fn i64(name: &str, dims: &[i64], values: Vec<i64>) -> Initializer {
+        Initializer { name: name.into(), dims: dims.to_vec(), data: InitData::I64(values) }
+    }
+}
+
+impl ValueInfo {
+    /// A float32 value of fixed shape.
+    pub fn f32(name: &str, dims: &[i64]) -> ValueInfo {
+        ValueInfo { name: name.into(), elem_type: FLOAT, dims: dims.iter().map(|&d| Dim::Fixed(d)).collect() }
+    }
+}
+
+impl Model {
+    /// A graph of the default domain at `opset`.
+    pub fn graph(
+        opset: i64,
+        nodes: Vec<Node>,
+        initializers: Vec<Initializer>,
+        inputs: Vec<ValueInfo>,
+        outputs: Vec<ValueInfo>,
+    ) -> Model {
+        Model {
+            graph_name: "graph".into(),
+            producer: "pav-onnx".into(),
+            opset,
+            domains: Vec::new(),
+            nodes,
+            initializers,
+            inputs,
+            outputs,
+        }
+    }
+}
+
 fn encode_attr(name: &str, a: &Attr) -> Buf {
     // AttributeProto: name=1, f=2, i=3, s=4, ints=8, type=20 (FLOAT=1, INT=2, STRING=3, INTS=7)
     let mut b = Buf::default();

@@ -1,13 +1,13 @@
 //! Darknet network + weights → ONNX graph (opset 13) whose outputs are the raw YOLO head maps.
 //!
 //! Outputs are named `head0`, `head1`, … in `[yolo]` order, each `[N, A·(5+C), H, W]` logits, so
-//! decoding (sigmoid, anchors) stays in `detect::decode` and the graph is comparable layer for
+//! decoding (sigmoid, anchors) stays with the caller and the graph is comparable layer for
 //! layer with OpenCV DNN's darknet reader.
 
 use super::cfg::{Activation, Layer, Network};
 use super::weights::Weights;
 use super::DarknetError;
-use crate::detect::onnx_proto::{Attr, Dim, InitData, Initializer, Model, Node, ValueInfo, FLOAT};
+use crate::proto::{Attr, Dim, InitData, Initializer, Model, Node, ValueInfo, FLOAT};
 
 /// Name of the graph input.
 pub const INPUT_NAME: &str = "images";

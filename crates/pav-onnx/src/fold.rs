@@ -1,13 +1,13 @@
 //! Fixing a graph's input sizes, and folding what they decide into constants: every value the
 //! data nodes read that is computed from shapes and constants alone (not from any input's values)
 //! is read off one run of ONNX Runtime and becomes an initializer. What is left computes on data
-//! only, with constant shapes, reshape targets and slice bounds, as [`crate::detect::autodiff`]
+//! only, with constant shapes, reshape targets and slice bounds, as [`crate::autodiff`]
 //! needs. Exported detectors compute their reshape targets at run time (`Shape → Gather →
 //! Concat → Reshape`) so that one file serves every batch size.
 
-use super::onnx::{session_builder, session_err};
-use super::onnx_proto::{Dim, InitData, Initializer, Model, ValueInfo, FLOAT, INT64};
-use super::DetectError;
+use crate::proto::{Dim, InitData, Initializer, Model, ValueInfo, FLOAT, INT64};
+use crate::runtime::{session_builder, session_err};
+use crate::OnnxError;
 use ort::value::{DynValue, Tensor};
 use std::collections::HashSet;
 
@@ -20,7 +20,7 @@ pub struct FoldReport {
     pub nodes_removed: usize,
 }
 
-fn read(name: &str, v: &DynValue) -> Result<Initializer, DetectError> {
+fn read(name: &str, v: &DynValue) -> Result<Initializer, OnnxError> {
     let err = |what| session_err(name, what);
     let (shape, data) = if let Ok((s, d)) = v.try_extract_tensor::<f32>() {
         (s.to_vec(), InitData::F32(d.to_vec()))
@@ -37,16 +37,16 @@ fn read(name: &str, v: &DynValue) -> Result<Initializer, DetectError> {
 /// `model` with its inputs fixed to `sizes` (every input some node reads, by name; the others are
 /// dropped) and every value computed without any input's values folded into an initializer;
 /// `what` names the model in errors.
-pub fn fold_shapes(model: &Model, sizes: &[(&str, Vec<i64>)], what: &str) -> Result<(Model, FoldReport), DetectError> {
+pub fn fold_shapes(model: &Model, sizes: &[(&str, Vec<i64>)], what: &str) -> Result<(Model, FoldReport), OnnxError> {
     let mut fixed = model.clone();
     // Inputs nothing reads any more (a post-processor's, once the graph is cut before it) go.
     let consumed: HashSet<&str> = model.nodes.iter().flat_map(|n| n.inputs.iter().map(|i| i.as_str())).collect();
     fixed.inputs.retain(|i| consumed.contains(i.name.as_str()));
     for input in &mut fixed.inputs {
-        let (_, dims) = sizes
-            .iter()
-            .find(|(n, _)| *n == input.name)
-            .ok_or_else(|| DetectError::Runtime(format!("{what}: no size given for the input `{}`", input.name)))?;
+        let (_, dims) = sizes.iter().find(|(n, _)| *n == input.name).ok_or_else(|| OnnxError::Request {
+            model: what.into(),
+            msg: format!("no size given for the input `{}`", input.name),
+        })?;
         input.dims = dims.iter().map(|&d| Dim::Fixed(d)).collect();
     }
     // Values that depend on an input's values; a Shape's output depends only on sizes, now fixed.
@@ -84,13 +84,20 @@ pub fn fold_shapes(model: &Model, sizes: &[(&str, Vec<i64>)], what: &str) -> Res
             let v = match i.elem_type {
                 FLOAT => Tensor::from_array((shape, vec![0f32; n])).map_err(err("preparing an input"))?.into_dyn(),
                 INT64 => Tensor::from_array((shape, vec![0i64; n])).map_err(err("preparing an input"))?.into_dyn(),
-                t => return Err(DetectError::Runtime(format!("{what}: input `{}` has element type {t}", i.name))),
+                t => {
+                    return Err(OnnxError::Request {
+                        model: what.into(),
+                        msg: format!("input `{}` has element type {t}", i.name),
+                    })
+                }
             };
             feed.push((i.name.clone(), v));
         }
         let outs = session.run(feed).map_err(err("running the graph to fold"))?;
         for n in &needed {
-            let v = outs.get(n.as_str()).ok_or_else(|| DetectError::Runtime(format!("{what}: no value `{n}`")))?;
+            let v = outs
+                .get(n.as_str())
+                .ok_or_else(|| OnnxError::Request { model: what.into(), msg: format!("no value `{n}`") })?;
             folded.push(read(n, v)?);
         }
     }

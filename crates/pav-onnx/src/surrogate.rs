@@ -10,7 +10,7 @@
 //! weights came from, up to the weights' own rounding. It is **not** the evaluated model; how far
 //! its scores lie from the int8 model's must be measured and reported wherever it is used.
 
-use super::onnx_proto::{InitData, Initializer, Model, Node};
+use crate::proto::{InitData, Initializer, Model, Node};
 use std::collections::{HashMap, HashSet};
 
 /// Why a model cannot be turned into a float surrogate.

@@ -1,4 +1,4 @@
-//! pav's fused gradient operators for ONNX Runtime (domain `pav`), used by
+//! Fused gradient operators for ONNX Runtime (domain `pav`), used by
 //! [`Kernels::Fused`](super::autodiff::Kernels) gradient graphs: each replaces several element-wise
 //! passes of its standard-ONNX rule by one, on ONNX Runtime's own thread pool.
 //!
@@ -7,7 +7,7 @@
 //! - `MaxPoolGrad(x, y, g; kernel_shape, strides, pads)`: each output's gradient goes to the first
 //!   position of its window (row-major) that equals the window's maximum; padding never wins.
 
-use super::autodiff::PAV_DOMAIN;
+use crate::autodiff::PAV_DOMAIN;
 use ort::operator::{
     BoxedKernel, ComputeContext, KernelContext, Operator, OperatorDomain, OperatorInput, OperatorOutput,
 };
