@@ -44,7 +44,7 @@ fn onnx_heads_match_opencv_darknet_reader() {
         let mut outs: Vector<Mat> = Vector::new();
         let names: Vector<String> = Vector::from_iter(["conv_15", "conv_22", "yolo_16", "yolo_23"]);
         cv.forward(&mut outs, &names).unwrap();
-        let raw = ort.infer(mat_f32(&blob)).unwrap();
+        let raw = ort.infer(mat_f32(&blob), &pav::detect::preprocess::InputMap::identity(416, 416)).unwrap();
         for (k, head) in ["head0", "head1"].iter().enumerate() {
             let ours = raw.iter().find(|o| o.name == *head).unwrap();
             let theirs = mat_f32(&outs.get(k).unwrap());

@@ -1,8 +1,10 @@
-//! The detectors outside the main set (configs/detectors-wide) against independent references:
-//! NanoDet-m 416 against scripts/reference_nanodet.py (written from its upstream demo, run with
-//! onnxruntime 1.31.1 and OpenCV 5.0 on FCA's 11 photos and every fourth frame of the turntable
-//! fixture; tests/reference/nanodet_m_416.tsv): the best car score within 0.02 and its box
-//! within 2 px on every image.
+//! The detectors outside the main set (configs/detectors-wide) against independent references,
+//! each written from the model's upstream demo and run with onnxruntime 1.31.1 and OpenCV 5.0 on
+//! FCA's 11 photos and every fourth frame of the turntable fixture: NanoDet-m 416
+//! (scripts/reference_nanodet.py, tests/reference/nanodet_m_416.tsv) and PP-PicoDet-XS 320 with
+//! its in-graph NMS and `scale_factor` input (scripts/reference_picodet.py,
+//! tests/reference/picodet_xs_320.tsv): the best car score within 0.02 and its box within 2 px on
+//! every image.
 #![cfg(feature = "eval")]
 
 mod common;
@@ -23,12 +25,12 @@ fn fixture_frames(every: usize) -> Vec<(usize, Frame)> {
     out
 }
 
-#[test]
-fn nanodet_matches_its_upstream_demo_on_photos_and_turntable_frames() {
+/// The best car of `config` on every image of `reference` against the reference's.
+fn matches_reference(config: &str, reference: &str) {
     let data = common::real_data();
-    let cfg = DetectorConfig::load(&common::repo().join("configs/detectors-wide/nanodet_m_416.toml")).unwrap();
+    let cfg = DetectorConfig::load(&common::repo().join("configs/detectors-wide").join(config)).unwrap();
     let mut det = OnnxDetector::new(cfg, 1).unwrap();
-    let text = std::fs::read_to_string(common::repo().join("tests/reference/nanodet_m_416.tsv")).unwrap();
+    let text = std::fs::read_to_string(common::repo().join("tests/reference").join(reference)).unwrap();
     let frames = fixture_frames(4);
     let mut checked = 0;
     let (mut worst_score, mut worst_box) = (0f32, 0f32);
@@ -50,6 +52,16 @@ fn nanodet_matches_its_upstream_demo_on_photos_and_turntable_frames() {
         assert!(db <= 2.0, "{}: box {:?}, reference {:?}", f[0], best.bbox, &want[1..]);
         checked += 1;
     }
-    eprintln!("{checked} images: largest score difference {worst_score:.4}, largest box difference {worst_box:.2} px");
+    eprintln!("{config}: {checked} images: largest score difference {worst_score:.4}, largest box difference {worst_box:.2} px");
     assert_eq!(checked, 22);
+}
+
+#[test]
+fn nanodet_matches_its_upstream_demo_on_photos_and_turntable_frames() {
+    matches_reference("nanodet_m_416.toml", "nanodet_m_416.tsv");
+}
+
+#[test]
+fn picodet_with_nms_in_the_graph_matches_its_upstream_demo() {
+    matches_reference("picodet_xs_320.toml", "picodet_xs_320.tsv");
 }

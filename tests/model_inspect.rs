@@ -1,6 +1,7 @@
 //! `pav-rig model inspect` on every detector in the data set: the four pav decodes are guessed as
 //! their shipped configs' layouts and their skeletons load as detector configs, NanoDet's GFL head
-//! too; PicoDet's in-graph NMS is named for what it is; a non-model is a clear error.
+//! too; PicoDet's in-graph NMS is guessed as `rows` with its scale-factor input; a non-model is a
+//! clear error.
 #![cfg(feature = "eval")]
 
 mod common;
@@ -26,6 +27,7 @@ fn kind(l: &OutputLayout) -> &'static str {
         OutputLayout::Ultralytics { .. } => "ultralytics",
         OutputLayout::Detr { .. } => "detr",
         OutputLayout::Gfl { .. } => "gfl",
+        OutputLayout::Rows { .. } => "rows",
     }
 }
 
@@ -57,7 +59,7 @@ fn known_layouts_are_guessed_and_their_skeletons_load() {
 }
 
 #[test]
-fn gfl_is_guessed_in_graph_nms_named_and_bad_files_refused() {
+fn gfl_and_in_graph_nms_are_guessed_and_bad_files_refused() {
     common::shared_data();
     let tmp = tempfile::tempdir().unwrap();
     let (ok, text) = inspect("data:models-nanodet/nanodet_m_416.onnx", &tmp.path().join("n.toml"));
@@ -69,6 +71,14 @@ fn gfl_is_guessed_in_graph_nms_named_and_bad_files_refused() {
     let (ok, text) = inspect("data:models-picodet/picodet_xs_320_lcnet_postprocessed.onnx", &tmp.path().join("p.toml"));
     assert!(ok && text.contains("through ONNX Runtime instead") && text.contains("NMS inside the graph"), "{text}");
     assert!(text.contains("scale_factor"), "{text}");
+    // Its skeleton loads: rows in image pixels, the scale factor fed as an extra input.
+    let skeleton = pav::detect::DetectorConfig::load(&tmp.path().join("p.toml")).unwrap();
+    assert!(
+        matches!(skeleton.output, OutputLayout::Rows { frame: pav::detect::config::BoxFrame::Image, .. }),
+        "{:?}",
+        skeleton.output
+    );
+    assert_eq!(skeleton.input.extra.len(), 1, "{:?}", skeleton.input.extra);
     let junk = tmp.path().join("junk.onnx");
     std::fs::write(&junk, b"not a model").unwrap();
     let (ok, text) = inspect(junk.to_str().unwrap(), &tmp.path().join("j.toml"));

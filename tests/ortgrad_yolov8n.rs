@@ -41,8 +41,8 @@ fn the_class_branch_forward_equals_the_surrogate_on_real_frames() {
     let d = differentiate_with(&branch, &[1, 3, 640, 640], Kernels::Fused).unwrap_or_else(|e| panic!("{e}"));
     let mut g = GradSession::new("yolov8n class branch", d, 2).unwrap();
     for name in ["data12503.npz", "data12510.npz"] {
-        let input = prepare(&frame(name).image, &config().input).0;
-        let raw = plain.infer(input.clone()).unwrap();
+        let (input, map) = prepare(&frame(name).image, &config().input);
+        let raw = plain.infer(input.clone(), &map).unwrap();
         let (outs, _) = g.forward(input).unwrap();
         // [1, 84, 8400]: rows 4.. are the 80 class probabilities.
         let n = 8400;

@@ -53,7 +53,7 @@ fn forward_equals_plain_inference_on_real_frames() {
     let mut g = session(Kernels::Fused);
     for name in ["data12503.npz", "data12508.npz"] {
         let input = frame_input(name);
-        let raw = det.infer(input.clone()).unwrap();
+        let raw = det.infer(input.clone(), &pav::detect::preprocess::InputMap::identity(416, 416)).unwrap();
         let (outs, _) = g.forward(input).unwrap();
         assert_eq!(outs[0].len(), raw[0].data.len());
         let worst = outs[0].iter().zip(&raw[0].data).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);

@@ -69,6 +69,68 @@ pub struct InputConfig {
     /// Letterbox placement.
     #[serde(default)]
     pub align: Align,
+    /// Further inputs the model reads, each fed a value pav computes per frame.
+    #[serde(default)]
+    pub extra: Vec<ExtraInput>,
+}
+
+/// A model input beside the image (PicoDet's `scale_factor`), fed per frame.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExtraInput {
+    /// The input's name in the model.
+    pub name: String,
+    /// What it receives.
+    pub value: ExtraValue,
+}
+
+/// The value of an [`ExtraInput`].
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ExtraValue {
+    /// float32 `[1, 2]`: input height / frame height, input width / frame width (PaddleDetection's
+    /// `scale_factor`, with which a graph maps its boxes back to frame pixels).
+    ScaleYx,
+    /// int64 `[1, 2]`: the input's width and height.
+    SizeWh,
+}
+
+/// One column of a [`OutputLayout::Rows`] output.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Column {
+    /// The class index (a negative one marks an empty row).
+    Class,
+    /// The detection's score.
+    Score,
+    /// Left edge.
+    X1,
+    /// Top edge.
+    Y1,
+    /// Right edge.
+    X2,
+    /// Bottom edge.
+    Y2,
+    /// A column pav does not read.
+    Skip,
+}
+
+/// Which pixels a [`OutputLayout::Rows`] output's boxes are in.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum BoxFrame {
+    /// The model's input (mapped back through the resize and padding).
+    #[default]
+    Input,
+    /// The frame itself (the graph mapped them back, e.g. with a `scale_yx` extra input).
+    Image,
+}
+
+impl Column {
+    /// Class, score, x1, y1, x2, y2: the default row.
+    pub fn xyxy_rows() -> Vec<Column> {
+        vec![Column::Class, Column::Score, Column::X1, Column::Y1, Column::X2, Column::Y2]
+    }
 }
 
 fn one() -> f32 {
@@ -128,6 +190,19 @@ pub enum OutputLayout {
         /// Bins per side distance (NanoDet's `reg_max + 1`).
         #[serde(default = "eight")]
         bins: usize,
+    },
+    /// Final detections, one per row (post-processing and NMS inside the graph, as PicoDet's
+    /// export and YOLO exports with NMS appended): the columns say what each holds.
+    Rows {
+        /// Output tensor name; else the first float output of rank 2 or 3 whose rows are as long
+        /// as `columns`.
+        output: Option<String>,
+        /// What each column holds; must name class, score, x1, y1, x2 and y2 once each.
+        #[serde(default = "Column::xyxy_rows")]
+        columns: Vec<Column>,
+        /// Which pixels the boxes are in.
+        #[serde(default)]
+        frame: BoxFrame,
     },
     /// DETR family (RT-DETR, D-FINE, DEIM): per-query labels, xyxy boxes and scores.
     Detr {
@@ -333,6 +408,19 @@ impl DetectorConfig {
             OutputLayout::Gfl { strides, bins } if strides.is_empty() || strides.contains(&0) || *bins < 2 => {
                 Err(format!("gfl strides {strides:?} must be non-empty and positive, bins ({bins}) at least 2"))
             }
+            OutputLayout::Rows { columns, .. }
+                if [Column::Class, Column::Score, Column::X1, Column::Y1, Column::X2, Column::Y2]
+                    .iter()
+                    .any(|c| columns.iter().filter(|k| *k == c).count() != 1) =>
+            {
+                Err(format!("rows columns {columns:?} must name class, score, x1, y1, x2 and y2 once each"))
+            }
+            // Boxes the graph maps back by scale alone miss a centred letterbox's padding.
+            OutputLayout::Rows { frame: BoxFrame::Image, .. }
+                if i.resize == Resize::Letterbox && i.align == Align::Center =>
+            {
+                Err("rows in image pixels need input.resize = \"stretch\" or a top-left letterbox".into())
+            }
             _ => Ok(()),
         }
     }
@@ -376,5 +464,33 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("std"), "{e}");
+    }
+
+    #[test]
+    fn rows_need_every_column_once_and_image_boxes_no_centred_padding() {
+        let d = tempfile::tempdir().unwrap();
+        let c = DetectorConfig::load(&write(d.path(), &format!("{BASE}[output]\nlayout='rows'\n"))).unwrap();
+        assert!(
+            matches!(c.output, OutputLayout::Rows { ref columns, frame: BoxFrame::Input, .. } if columns.len() == 6)
+        );
+        let e = DetectorConfig::load(&write(
+            d.path(),
+            &format!("{BASE}[output]\nlayout='rows'\ncolumns=['class','score','x1','y1','x2','x2']\n"),
+        ))
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("once each"), "{e}");
+        let centred = BASE.replace("'stretch'", "'letterbox'\nalign='center'");
+        let e = DetectorConfig::load(&write(d.path(), &format!("{centred}[output]\nlayout='rows'\nframe='image'\n")))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("stretch"), "{e}");
+        let e = DetectorConfig::load(&write(
+            d.path(),
+            &format!("{BASE}[[input.extra]]\nname='s'\nvalue='scale'\n[output]\nlayout='rows'\n"),
+        ))
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("scale_yx"), "{e}");
     }
 }

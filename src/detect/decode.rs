@@ -1,6 +1,6 @@
 //! Raw model outputs → scored proposals in frame pixels, for each supported output layout.
 
-use super::config::OutputLayout;
+use super::config::{BoxFrame, Column, OutputLayout};
 use super::nms::nms;
 use super::preprocess::InputMap;
 use super::{BBox, Detection, TargetScore};
@@ -266,6 +266,56 @@ pub fn decode(
                 p.scores.extend((0..num_classes).map(|c| at(4 + c, i)));
             }
         }
+        OutputLayout::Rows { output, columns, frame } => {
+            let width = columns.len();
+            let o = match output {
+                Some(_) => find(outs, output.as_deref())?,
+                None => outs
+                    .iter()
+                    .find(|o| {
+                        let mut s = o.shape.as_slice();
+                        while s.len() > 2 && s[0] == 1 {
+                            s = &s[1..];
+                        }
+                        s.len() == 2 && s[1] == width
+                    })
+                    .ok_or_else(|| {
+                        LayoutError(format!(
+                            "no output holds rows of {width} columns (outputs: {})",
+                            outs.iter().map(|o| format!("`{}` {:?}", o.name, o.shape)).collect::<Vec<_>>().join(", ")
+                        ))
+                    })?,
+            };
+            let s = squeeze(o, 2, "rows")?;
+            if s[1] != width {
+                return Err(LayoutError(format!(
+                    "output `{}` has rows of {} values, the config names {width} columns",
+                    o.name, s[1]
+                )));
+            }
+            let col = |c: Column| columns.iter().position(|k| *k == c).unwrap_or(0);
+            let (ci, si, b) =
+                (col(Column::Class), col(Column::Score), [Column::X1, Column::Y1, Column::X2, Column::Y2]);
+            p = Proposals::with_capacity(num_classes, s[0]);
+            for r in o.data.chunks_exact(width) {
+                let class = r[ci];
+                // Exports pad to a fixed row count with class −1.
+                if class < 0.0 || class as usize >= num_classes {
+                    continue;
+                }
+                let bb = b.map(|c| r[col(c)]);
+                p.boxes.push(match frame {
+                    BoxFrame::Input => map.to_frame(bb),
+                    BoxFrame::Image => {
+                        let (w, h) = (map.frame_w, map.frame_h);
+                        [bb[0].clamp(0.0, w), bb[1].clamp(0.0, h), bb[2].clamp(0.0, w), bb[3].clamp(0.0, h)]
+                    }
+                });
+                let mut row = vec![0f32; num_classes];
+                row[class as usize] = r[si];
+                p.scores.extend(row);
+            }
+        }
         OutputLayout::Detr { labels, boxes, scores, .. } => {
             let (l, b, sc) = (find(outs, Some(labels))?, find(outs, Some(boxes))?, find(outs, Some(scores))?);
             let q = squeeze(l, 1, "detr")?[0];
@@ -392,6 +442,32 @@ mod tests {
         let p = decode(&l, &outs, 32, 32, 2, &ID).unwrap();
         assert_eq!(p.best(&[1]).unwrap().score, 0.9);
         assert_eq!(p.best(&[0]).unwrap().bbox, [2.0, 2.0, 3.0, 3.0]);
+    }
+
+    #[test]
+    fn rows_skip_empty_ones_and_map_boxes_by_their_frame() {
+        // PicoDet's order (class, score, box), padded with a class −1 row, behind a count output.
+        let outs = vec![
+            RawOutput { name: "n".into(), shape: vec![1], data: vec![2.0] },
+            RawOutput {
+                name: "r".into(),
+                shape: vec![3, 6],
+                data: vec![1.0, 0.8, 4.0, 4.0, 8.0, 8.0, 0.0, 0.6, 0.0, 0.0, 2.0, 2.0, -1.0, 0.9, 0.0, 0.0, 1.0, 1.0],
+            },
+        ];
+        let half = InputMap { scale_x: 0.5, scale_y: 0.5, pad_x: 0.0, pad_y: 0.0, frame_w: 100.0, frame_h: 100.0 };
+        let layout =
+            |frame| OutputLayout::Rows { output: None, columns: crate::detect::config::Column::xyxy_rows(), frame };
+        let p = decode(&layout(BoxFrame::Input), &outs, 32, 32, 2, &half).unwrap();
+        assert_eq!(p.len(), 2);
+        assert_eq!(p.best(&[1]).unwrap().bbox, [8.0, 8.0, 16.0, 16.0]);
+        assert_eq!(p.best(&[0]).unwrap().score, 0.6);
+        let p = decode(&layout(BoxFrame::Image), &outs, 32, 32, 2, &half).unwrap();
+        assert_eq!(p.best(&[1]).unwrap().bbox, [4.0, 4.0, 8.0, 8.0]);
+        // Rows of another width are refused by name.
+        let l =
+            OutputLayout::Rows { output: Some("r".into()), columns: vec![Column::Class; 7], frame: BoxFrame::Input };
+        assert!(decode(&l, &outs, 32, 32, 2, &half).unwrap_err().to_string().contains("7 columns"));
     }
 
     #[test]

@@ -155,9 +155,8 @@ impl Inspection {
                 ),
             );
         }
-        // Layouts pav does not decode yet, named so the user knows what they have.
         if shapes.iter().any(|(_, s)| s.len() == 2 && s[1] == 6) {
-            return g(None, "an [N, 6] output (class, score, box per row, likely with a count output): detections after an NMS inside the graph; not one of pav's layouts yet".into());
+            return g(Some("rows"), "an [N, 6] output (class, score, box per row, likely with a count output): detections after an NMS inside the graph".into());
         }
         let per_cell: Vec<usize> = shapes.iter().filter(|(_, s)| s.len() == 3).map(|(_, s)| s[1]).collect();
         if !per_cell.is_empty() && per_cell.iter().sum::<usize>() % rows(&[8, 16, 32]) == 0 {
@@ -186,8 +185,19 @@ impl Inspection {
             t.push_str(&format!("name = \"{}\"\n", p.name));
         }
         t.push_str(&format!(
-            "width = {side}\nheight = {side}\nchannels = \"rgb\"        # CHECK: rgb or bgr\nscale = 0.00392156862745098   # CHECK: 1/255, or 1.0 with mean and std\nresize = \"letterbox\"      # CHECK: letterbox or stretch\ninterpolation = \"bilinear\"\npad_value = 114\n\n[output]\n"
+            "width = {side}\nheight = {side}\nchannels = \"rgb\"        # CHECK: rgb or bgr\nscale = 0.00392156862745098   # CHECK: 1/255, or 1.0 with mean and std\nresize = \"letterbox\"      # CHECK: letterbox or stretch\ninterpolation = \"bilinear\"\npad_value = 114\n"
         ));
+        // A float input of two values beside the image: a graph that maps its boxes back itself.
+        let scale_input = self
+            .inputs
+            .iter()
+            .find(|p| p.dtype == "float32" && Some(p.name.as_str()) != self.image_input().map(|i| i.name.as_str()));
+        if guess.layout == Some("rows") {
+            if let Some(p) = scale_input {
+                t.push_str(&format!("\n[[input.extra]]\nname = \"{}\"\nvalue = \"scale_yx\"     # CHECK: [input/frame height, input/frame width]\n", p.name));
+            }
+        }
+        t.push_str("\n[output]\n");
         match guess.layout {
             Some("detr") => {
                 let find = |dt: &str, last: Option<usize>| {
@@ -219,6 +229,19 @@ impl Inspection {
                 t.push_str("layout = \"darknet\"\n");
                 for p in &self.outputs {
                     t.push_str(&format!("[[output.heads]]\noutput = \"{}\"\nanchors = []      # CHECK: the cfg's anchors of this head, [[w, h], ...] in input pixels\n", p.name));
+                }
+            }
+            Some("rows") => {
+                let rows = self
+                    .outputs
+                    .iter()
+                    .find(|p| self.shape(p).is_some_and(|s| s.len() == 2 && s[1] == 6))
+                    .map(|p| p.name.clone())
+                    .unwrap_or_default();
+                let frame = if scale_input.is_some() { "image" } else { "input" };
+                t.push_str(&format!("layout = \"rows\"\noutput = \"{rows}\"\ncolumns = [\"class\", \"score\", \"x1\", \"y1\", \"x2\", \"y2\"]   # CHECK: the upstream post-processor's order\nframe = \"{frame}\"      # CHECK: image (boxes in frame pixels) or input\n"));
+                if frame == "image" {
+                    t = t.replace("resize = \"letterbox\"      # CHECK", "resize = \"stretch\"      # CHECK");
                 }
             }
             Some("gfl") => {

@@ -1,7 +1,7 @@
 //! ONNX Runtime backend: any ONNX detector described by a [`DetectorConfig`].
 
-use super::config::InputConfig;
 use super::config::{DetectorConfig, OutputLayout};
+use super::config::{ExtraValue, InputConfig};
 use super::decode::{decode, LayoutError, Proposals, RawOutput};
 use super::preprocess::InputMap;
 use super::{DetectError, Detector};
@@ -49,14 +49,11 @@ impl OnnxDetector {
             OutputLayout::Detr { size_input, .. } => size_input.clone(),
             _ => None,
         };
+        let fed_apart = |n: &String| Some(n) == size_input.as_ref() || cfg.input.extra.iter().any(|e| &e.name == n);
         let input_name = match &cfg.input.name {
             Some(n) if names.contains(n) => n.clone(),
             Some(n) => return Err(model_err(format!("has no input `{n}` (inputs: {})", names.join(", ")))),
-            None => names
-                .iter()
-                .find(|n| Some(*n) != size_input.as_ref())
-                .cloned()
-                .ok_or_else(|| model_err("has no inputs".into()))?,
+            None => names.iter().find(|n| !fed_apart(n)).cloned().ok_or_else(|| model_err("has no inputs".into()))?,
         };
         if let Some(s) = &size_input {
             if !names.contains(s) {
@@ -66,8 +63,10 @@ impl OnnxDetector {
                 )));
             }
         }
-        let extra: Vec<&String> =
-            names.iter().filter(|n| **n != input_name && Some(*n) != size_input.as_ref()).collect();
+        if let Some(e) = cfg.input.extra.iter().find(|e| !names.contains(&e.name)) {
+            return Err(model_err(format!("has no input `{}` (inputs: {})", e.name, names.join(", "))));
+        }
+        let extra: Vec<&String> = names.iter().filter(|n| **n != input_name && !fed_apart(n)).collect();
         if !extra.is_empty() {
             return Err(model_err(format!("has inputs the config does not feed: {extra:?}")));
         }
@@ -87,8 +86,9 @@ impl OnnxDetector {
         &self.cfg
     }
 
-    /// Runs the model on an already prepared NCHW input and returns its raw outputs.
-    pub fn infer(&mut self, input: Vec<f32>) -> Result<Vec<RawOutput>, DetectError> {
+    /// Runs the model on an already prepared NCHW input (of a frame `map` maps back to) and
+    /// returns its raw outputs.
+    pub fn infer(&mut self, input: Vec<f32>, map: &InputMap) -> Result<Vec<RawOutput>, DetectError> {
         let (w, h) = (self.cfg.input.width, self.cfg.input.height);
         let name = self.cfg.name.clone();
         let inf_err = |source| DetectError::Session { detector: name.clone(), what: "inference", source };
@@ -99,6 +99,17 @@ impl OnnxDetector {
             let size = Tensor::from_array(([1usize, 2], vec![w as i64, h as i64])).map_err(inf_err)?;
             feed.push((s.clone(), size.into()));
         }
+        for e in &self.cfg.input.extra {
+            let value: ort::session::SessionInputValue<'_> = match e.value {
+                ExtraValue::ScaleYx => {
+                    Tensor::from_array(([1usize, 2], vec![map.scale_y, map.scale_x])).map_err(inf_err)?.into()
+                }
+                ExtraValue::SizeWh => {
+                    Tensor::from_array(([1usize, 2], vec![w as i64, h as i64])).map_err(inf_err)?.into()
+                }
+            };
+            feed.push((e.name.clone(), value));
+        }
         let outputs = self.session.run(feed).map_err(inf_err)?;
         let mut raw = Vec::with_capacity(outputs.len());
         for (oname, value) in outputs.iter() {
@@ -107,6 +118,14 @@ impl OnnxDetector {
                 ValueType::Tensor { ty: TensorElementType::Float32, .. } => {
                     let (s, d) = value.try_extract_tensor::<f32>().map_err(inf_err)?;
                     RawOutput { name: oname.to_string(), shape: shape_of(s), data: d.to_vec() }
+                }
+                ValueType::Tensor { ty: TensorElementType::Int32, .. } => {
+                    let (s, d) = value.try_extract_tensor::<i32>().map_err(inf_err)?;
+                    RawOutput {
+                        name: oname.to_string(),
+                        shape: shape_of(s),
+                        data: d.iter().map(|&v| v as f32).collect(),
+                    }
                 }
                 ValueType::Tensor { ty: TensorElementType::Int64, .. } => {
                     let (s, d) = value.try_extract_tensor::<i64>().map_err(inf_err)?;
@@ -120,7 +139,7 @@ impl OnnxDetector {
                     return Err(DetectError::Output {
                         detector: name,
                         source: LayoutError(format!(
-                            "output `{oname}` has type {other:?}; only float32 and int64 tensors are read"
+                            "output `{oname}` has type {other:?}; only float32, int32 and int64 tensors are read"
                         )),
                     })
                 }
@@ -149,7 +168,7 @@ impl Detector for OnnxDetector {
     }
 
     fn propose_prepared(&mut self, input: Vec<f32>, map: InputMap) -> Result<Proposals, DetectError> {
-        let raw = self.infer(input)?;
+        let raw = self.infer(input, &map)?;
         let c = &self.cfg;
         decode(&c.output, &raw, c.input.width, c.input.height, c.class_names.len(), &map)
             .map_err(|source| DetectError::Output { detector: c.name.clone(), source })

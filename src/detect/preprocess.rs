@@ -23,6 +23,11 @@ pub struct InputMap {
 }
 
 impl InputMap {
+    /// The map of a `w × h` frame that is already the model's input (no resize, no padding).
+    pub fn identity(w: usize, h: usize) -> InputMap {
+        InputMap { scale_x: 1.0, scale_y: 1.0, pad_x: 0.0, pad_y: 0.0, frame_w: w as f32, frame_h: h as f32 }
+    }
+
     /// Converts an input-pixel box to a frame-pixel box, clipped to the frame.
     pub fn to_frame(&self, b: BBox) -> BBox {
         let fx = |x: f32| ((x - self.pad_x) / self.scale_x).clamp(0.0, self.frame_w);
@@ -177,6 +182,7 @@ mod tests {
             interpolation: Interpolation::Bilinear,
             pad_value: 114,
             align,
+            extra: Vec::new(),
         }
     }
 

@@ -190,13 +190,13 @@ pub fn bench_evaluate(opts: &BenchOptions, progress: &dyn Progress) -> Result<(V
             det.propose(f)?; // warm-up: first runs allocate and pick kernels
         }
         let (pre_s, inputs) =
-            best_of(opts.repeats, || Ok(frames.iter().map(|f| prepare(f, &cfg.input).0).collect::<Vec<_>>()))?;
+            best_of(opts.repeats, || Ok(frames.iter().map(|f| prepare(f, &cfg.input)).collect::<Vec<_>>()))?;
         let mut bare_s = f64::INFINITY;
         for _ in 0..opts.repeats.max(1) {
             let batch = inputs.clone();
             let t = Instant::now();
-            for x in batch {
-                det.infer(x)?;
+            for (x, map) in batch {
+                det.infer(x, &map)?;
             }
             bare_s = bare_s.min(t.elapsed().as_secs_f64());
         }
