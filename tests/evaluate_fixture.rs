@@ -1,5 +1,6 @@
 //! `evaluate` on the recorded CARLA fixture reproduces the per-frame truth exactly for two real
-//! detectors, with sidecar angles, stride, several videos, and partial results on bad input.
+//! detectors, with sidecar angles, stride, several videos, and partial results on bad input; the
+//! reports are the same whether detectors run one after another or side by side.
 
 mod common;
 
@@ -56,6 +57,7 @@ fn opts(out: &Path, frames: Frames) -> EvalOptions {
         angle_bins: 8,
         out_dir: out.to_path_buf(),
         plots: true,
+        parallel: 1,
     }
 }
 
@@ -221,4 +223,24 @@ fn even_sampling_picks_the_middle_of_equal_stretches_and_shared_labels_pool() {
         cell.status
     );
     assert!(out.failures.iter().any(|f| f.contains("60 frames asked")), "{:?}", out.failures);
+}
+
+#[test]
+fn detectors_side_by_side_write_the_same_reports() {
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let jobs = [VideoJob { path: fixture(), label: "orbit".into(), sidecar: None }];
+    let names = ["yolox_nano", "yolov8n_int8", "yolov3-tiny"];
+    let mut reports = Vec::new();
+    for parallel in [1, 2, 3] {
+        let out = tmp.path().join(format!("p{parallel}"));
+        let mut d = detectors(&names);
+        let o = EvalOptions { parallel, ..opts(&out, Frames::Stride(3)) };
+        let outcome = evaluate(&jobs, &mut d, &o, &pav::progress::Silent, &AtomicBool::new(false)).unwrap();
+        assert!(outcome.failures.is_empty(), "{:?}", outcome.failures);
+        assert_eq!(outcome.records.len(), 15 * names.len());
+        let read = |f: &str| std::fs::read(out.join(f)).unwrap();
+        reports.push((read("frames.csv"), read("summary.csv"), read("angles.csv")));
+    }
+    assert!(reports.windows(2).all(|w| w[0] == w[1]), "frames, summary or angles differ between parallel settings");
 }

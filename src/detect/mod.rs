@@ -48,8 +48,9 @@ pub struct TargetScore {
     pub class_id: usize,
 }
 
-/// A detector that maps a frame to scored proposals.
-pub trait Detector {
+/// A detector that maps a frame to scored proposals; `Send`, so that several can run side by side
+/// on one frame.
+pub trait Detector: Send {
     /// Short name used in reports.
     fn name(&self) -> &str;
     /// Runs the model and returns every proposal in frame coordinates.

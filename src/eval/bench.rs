@@ -160,6 +160,7 @@ fn run_evaluate(opts: &BenchOptions, cfg: &DetectorConfig, stride: usize) -> Res
         angle_bins: 12,
         out_dir: tmp.clone(),
         plots: false,
+        parallel: 1,
     };
     let job = VideoJob { path: opts.video.clone(), label: "bench".into(), sidecar: None };
     let mut dets: Vec<Box<dyn Detector>> = vec![Box::new(OnnxDetector::new(cfg.clone(), opts.threads)?)];

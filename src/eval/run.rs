@@ -10,8 +10,8 @@ use super::report::{
     SummaryRow,
 };
 use crate::detect::config::InputConfig;
-use crate::detect::preprocess::prepare;
-use crate::detect::Detector;
+use crate::detect::preprocess::{prepare, InputMap};
+use crate::detect::{DetectError, Detector, Proposals};
 use crate::image::Frame;
 use crate::progress::Progress;
 use crate::sidecar::{self, AngleSample};
@@ -90,6 +90,9 @@ pub struct EvalOptions {
     pub out_dir: PathBuf,
     /// Draw PNG plots.
     pub plots: bool,
+    /// Threads that run the detectors side by side on each frame (1: one after another).
+    /// Records and reports come out in the same order either way.
+    pub parallel: usize,
 }
 
 /// Wall-clock split of a run, for benchmarks.
@@ -177,6 +180,85 @@ fn failed_rows(label: &str, detectors: &[Box<dyn Detector>], why: &str) -> Vec<S
             status: format!("failed: {why}"),
         })
         .collect()
+}
+
+/// How `detectors` detectors share `cores` cores: (detector groups run side by side, ONNX Runtime
+/// intra-op threads per detector). `parallel` and `threads` as asked, 0 = choose: with several
+/// detectors and cores and no thread count asked, one group per core, one thread each.
+pub fn side_by_side(detectors: usize, cores: usize, parallel: usize, threads: usize) -> (usize, usize) {
+    let groups = match parallel {
+        0 if threads == 0 && detectors > 1 && cores > 1 => detectors.min(cores),
+        0 => 1,
+        p => p.min(detectors.max(1)),
+    };
+    let threads = match threads {
+        0 if groups > 1 => (cores / groups).max(1),
+        t => t,
+    };
+    (groups, threads)
+}
+
+/// One detector's proposals for a frame and the seconds they took; `None` for a detector that
+/// failed on an earlier frame.
+type Scored = Option<(Result<Proposals, DetectError>, f64)>;
+
+/// A frame's prepared input for one detector; `None` for a detector that failed earlier.
+type Prepared = Option<(Vec<f32>, InputMap)>;
+
+/// Every detector not yet failed on its prepared input, on `parallel` threads side by side;
+/// results in the detectors' order. Each thread takes the next detector not yet taken, in the
+/// order of `cost` (seconds so far, largest first), so that the slowest model starts first and
+/// the others fill the remaining threads around it.
+fn run_detectors(
+    detectors: &mut [Box<dyn Detector>],
+    prepared: &mut [Prepared],
+    failed: &[Option<String>],
+    cost: &[f64],
+    parallel: usize,
+) -> Vec<Scored> {
+    let one = |det: &mut Box<dyn Detector>, input: Prepared| -> Scored {
+        let (input, map) = input?;
+        let t = Instant::now();
+        let r = det.propose_prepared(input, map);
+        Some((r, t.elapsed().as_secs_f64()))
+    };
+    let inputs: Vec<Prepared> = prepared
+        .iter_mut()
+        .zip(failed)
+        .map(|(p, f)| if f.is_some() { None } else { Some(p.take().expect("one input per detector")) })
+        .collect();
+    let n = detectors.len();
+    let threads = parallel.clamp(1, n.max(1));
+    if threads == 1 {
+        return detectors.iter_mut().zip(inputs).map(|(d, x)| one(d, x)).collect();
+    }
+    let mut work: Vec<_> = detectors.iter_mut().zip(inputs).enumerate().map(|(k, (d, x))| (k, d, x)).collect();
+    // Popped from the end: the costliest first, ties in the detectors' order.
+    work.sort_by(|a, b| cost[a.0].total_cmp(&cost[b.0]).then(b.0.cmp(&a.0)));
+    let queue = std::sync::Mutex::new(work);
+    let mut results: Vec<Scored> = (0..n).map(|_| None).collect();
+    std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads)
+            .map(|_| {
+                s.spawn(|| {
+                    let mut done = Vec::new();
+                    loop {
+                        let next = queue.lock().unwrap_or_else(|e| e.into_inner()).pop();
+                        let Some((k, d, x)) = next else { break };
+                        done.push((k, one(d, x)));
+                    }
+                    done
+                })
+            })
+            .collect();
+        for h in handles {
+            // A detector that panicked is a bug, not a frame to skip: let it surface.
+            for (k, r) in h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)) {
+                results[k] = r;
+            }
+        }
+    });
+    results
 }
 
 /// Runs every detector over the chosen frames of every video and writes the reports into
@@ -297,14 +379,10 @@ pub fn evaluate(
             out.timing.frames_scored += 1;
             let (time_s, angle_deg) = angles.at(idx, info.fps);
             no_angle += usize::from(angle_deg.is_none());
-            for (k, det) in detectors.iter_mut().enumerate() {
-                if failed_det[k].is_some() {
-                    continue;
-                }
-                let t1 = Instant::now();
-                let (input, map) = prepared[k].take().expect("one input per detector");
-                let result = det.propose_prepared(input, map);
-                out.timing.detector_s[k] += t1.elapsed().as_secs_f64();
+            let results = run_detectors(detectors, &mut prepared, &failed_det, &out.timing.detector_s, opts.parallel);
+            for (k, (det, result)) in detectors.iter().zip(results).enumerate() {
+                let Some((result, seconds)) = result else { continue };
+                out.timing.detector_s[k] += seconds;
                 let props = match result {
                     Ok(p) => p,
                     Err(e) => {
@@ -477,4 +555,22 @@ fn file_safe(s: &str) -> String {
 /// The default label of a video: its file stem.
 pub fn default_label(p: &Path) -> String {
     p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| p.display().to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn detectors_share_cores_side_by_side_unless_told_otherwise() {
+        assert_eq!(side_by_side(4, 2, 0, 0), (2, 1));
+        assert_eq!(side_by_side(1, 2, 0, 0), (1, 0));
+        assert_eq!(side_by_side(4, 1, 0, 0), (1, 0));
+        assert_eq!(side_by_side(3, 8, 0, 0), (3, 2));
+        // An explicit thread count keeps detectors one after another unless --parallel says so.
+        assert_eq!(side_by_side(4, 2, 0, 2), (1, 2));
+        assert_eq!(side_by_side(4, 2, 3, 0), (3, 1));
+        assert_eq!(side_by_side(2, 2, 5, 1), (2, 1));
+        assert_eq!(side_by_side(4, 2, 1, 0), (1, 0));
+    }
 }

@@ -48,9 +48,14 @@ pub struct Args {
     /// Output directory for CSV, Markdown and PNG reports.
     #[arg(long, short = 'o', default_value = "out/evaluate")]
     out: PathBuf,
-    /// ONNX Runtime intra-op threads per detector (0 = runtime default).
+    /// ONNX Runtime intra-op threads per detector (0: one per core, or one each when detectors
+    /// run side by side).
     #[arg(long, default_value_t = 0)]
     threads: usize,
+    /// Detectors run side by side on each frame, each on a thread (0: one per core when there
+    /// are several detectors and --threads is not given; 1: one after another).
+    #[arg(long, default_value_t = 0)]
+    parallel: usize,
     /// Skip the PNG plots.
     #[arg(long)]
     no_plots: bool,
@@ -104,9 +109,13 @@ pub fn run(a: &Args) -> Result<()> {
         angle_bins: a.angle_bins as usize,
         out_dir: a.out.clone(),
         plots: !a.no_plots,
+        parallel: 1,
     };
+    let count = pav::detect::load::expand_configs(&a.detectors)?.len();
+    let (parallel, threads) = pav::eval::run::side_by_side(count, cores, a.parallel, a.threads);
+    let opts = EvalOptions { parallel, ..opts };
     opts.check()?;
-    let mut detectors = load_detectors(&a.detectors, &a.classes, a.threads)?;
+    let mut detectors = load_detectors(&a.detectors, &a.classes, threads)?;
     let sidecars: Vec<PathBuf> =
         jobs.iter().map(|j| j.sidecar.clone().unwrap_or_else(|| pav::sidecar::sidecar_path(&j.path))).collect();
     let record = pav::provenance::Run::start()
@@ -121,9 +130,14 @@ pub fn run(a: &Args) -> Result<()> {
     let record_path = a.out.join(pav::provenance::FILE);
     record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
     eprintln!(
-        "scoring {} video(s) with {} detector(s); threshold {}, classes {}, {}",
+        "scoring {} video(s) with {} detector(s){}; threshold {}, classes {}, {}",
         jobs.len(),
         detectors.len(),
+        match (parallel, threads) {
+            (1, 0) => String::new(),
+            (1, t) => format!(" ({t} thread(s) each)"),
+            (p, t) => format!(" ({p} side by side, {t} thread(s) each)"),
+        },
         a.threshold,
         detectors.iter().map(|d| format!("{}={}", d.name(), d.target_label())).collect::<Vec<_>>().join(", "),
         frames
