@@ -9,10 +9,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 RUNS=${2:-3}
 VIDEO=${1:-out/bench/loop810.mp4}
-if [ ! -f "$VIDEO" ]; then
-  mkdir -p "$(dirname "$VIDEO")"
-  ffmpeg -loglevel error -y -stream_loop 17 -i fixtures/carla_orbit.mp4 -c copy "$VIDEO"
-fi
+scripts/loop_video.sh "$VIDEO" 18
 cargo build --release --bin pav-rig -q
 CSV=bench/evaluate_parallel.csv
 echo "mode,run,wall_s" > "$CSV"

@@ -11,10 +11,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 RUNS=${2:-3}
 VIDEO=${1:-out/bench/loop810.mp4}
-if [ ! -f "$VIDEO" ]; then
-  mkdir -p "$(dirname "$VIDEO")"
-  ffmpeg -loglevel error -y -stream_loop 17 -i fixtures/carla_orbit.mp4 -c copy "$VIDEO"
-fi
+scripts/loop_video.sh "$VIDEO" 18
 PY=.venv-bench/bin/python
 if [ ! -x "$PY" ]; then
   python3 -m venv .venv-bench && $PY -m pip install -q onnxruntime==1.31.1 opencv-python-headless numpy \

@@ -12,6 +12,7 @@ import sys
 import cv2
 import numpy as np
 import onnxruntime as ort
+from reference_images import print_best
 
 SIDE, STRIDES, BINS, CAR = 416, (8, 16, 32), 8, 2
 MEAN = np.array([103.53, 116.28, 123.675], np.float32)
@@ -63,20 +64,4 @@ def best_car(img):
     return best
 
 
-print("image\tcar_score\tx1\ty1\tx2\ty2")
-for arg in sys.argv[2:]:
-    if arg.endswith(".npz"):
-        items = [(arg.rsplit("/", 1)[-1], np.load(arg)["img"])]
-    else:
-        path, every = (arg.split(":") + ["1"])[:2]
-        cap, items, k = cv2.VideoCapture(path), [], 0
-        while True:
-            ok, img = cap.read()
-            if not ok:
-                break
-            if k % int(every) == 0:
-                items.append((f"{path.rsplit('/', 1)[-1]}#{k}", img))
-            k += 1
-    for label, img in items:
-        score, box = best_car(img)
-        print(f"{label}\t{score:.5f}\t" + "\t".join(f"{v:.2f}" for v in box))
+print_best(sys.argv[2:], best_car)

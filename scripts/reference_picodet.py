@@ -12,6 +12,7 @@ import sys
 import cv2
 import numpy as np
 import onnxruntime as ort
+from reference_images import print_best
 
 SIDE, CAR = 320, 2
 MEAN = np.array([103.53, 116.28, 123.675], np.float32)
@@ -33,20 +34,4 @@ def best_car(img):
     return float(r[1]), [float(v) for v in r[2:6]]
 
 
-print("image\tcar_score\tx1\ty1\tx2\ty2")
-for arg in sys.argv[2:]:
-    if arg.endswith(".npz"):
-        items = [(arg.rsplit("/", 1)[-1], np.load(arg)["img"])]
-    else:
-        path, every = (arg.split(":") + ["1"])[:2]
-        cap, items, k = cv2.VideoCapture(path), [], 0
-        while True:
-            ok, img = cap.read()
-            if not ok:
-                break
-            if k % int(every) == 0:
-                items.append((f"{path.rsplit('/', 1)[-1]}#{k}", img))
-            k += 1
-    for label, img in items:
-        s, b = best_car(img)
-        print(f"{label}\t{s:.5f}\t{b[0]:.2f}\t{b[1]:.2f}\t{b[2]:.2f}\t{b[3]:.2f}")
+print_best(sys.argv[2:], best_car)
