@@ -8,7 +8,7 @@ use crate::proto::{Attr, InitData};
 /// A stride-1 ungrouped convolution: the flipped, transposed kernel; otherwise ConvTranspose.
 pub(super) fn conv(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     let w = cx.consts.get(n.inputs[1].as_str()).ok_or_else(|| cx.bad("the weight must be a constant"))?;
     let InitData::F32(wv) = &w.data else { return Err(cx.bad("the weight must be float")) };
     let (k, s, p) = window(n, Some([w.dims[2], w.dims[3]]))?;

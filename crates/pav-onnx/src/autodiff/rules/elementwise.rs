@@ -15,7 +15,7 @@ pub(super) fn identity(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), Autodif
 /// `g` where the input is positive, else `alpha·g` (Relu: alpha 0).
 pub(super) fn leaky_relu(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     let alpha = if n.op_type == "Relu" { 0.0 } else { float(n, "alpha").unwrap_or(0.01) };
     // For alpha ≥ 0 the output has the input's sign, and saving the output leaves the
     // convolution before it free to fuse with the activation.
@@ -42,7 +42,7 @@ pub(super) fn leaky_relu(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), Autod
 /// `g·y·(1 − y)`, from the saved output.
 pub(super) fn sigmoid(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     let y = n.outputs[0].clone();
     bw.save(&y);
     let one = bw.tape.scalar(1.0);
@@ -56,7 +56,7 @@ pub(super) fn sigmoid(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), Autodiff
 /// `g·c·x^(c−1)` for a constant scalar exponent `c`.
 pub(super) fn pow(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     let c = cx
         .consts
         .get(n.inputs[1].as_str())
@@ -82,7 +82,7 @@ pub(super) fn pow(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffErro
 /// `g / (2·y)`, from the saved output.
 pub(super) fn sqrt(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     let y = n.outputs[0].clone();
     bw.save(&y);
     let half = bw.tape.scalar(0.5);
@@ -112,7 +112,7 @@ pub(super) fn neg(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffErro
 /// `g` where the input lies strictly inside the bounds, else 0.
 pub(super) fn clip(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     // The gradient passes where the input lies strictly inside the bounds.
     bw.save(&x);
     let bound = |i: usize| n.inputs.get(i).filter(|v| !v.is_empty()).cloned();
@@ -141,7 +141,7 @@ pub(super) fn clip(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffErr
 /// A cast to float passes the gradient; to anything else it carries none.
 pub(super) fn cast(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     if int(n, "to") != Some(FLOAT as i64) {
         return Err(cx.bad("a cast to anything but float carries no gradient"));
     }

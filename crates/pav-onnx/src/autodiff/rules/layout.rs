@@ -8,7 +8,7 @@ use crate::proto::Attr;
 /// The gradient cut back to the unpadded extent.
 pub(super) fn pad(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     let xs = cx.shape[&x].clone();
     let p = const_ints(n, cx.consts, 1).or_else(|| ints(n, "pads")).unwrap_or_default();
     let r = xs.len();
@@ -24,7 +24,7 @@ pub(super) fn pad(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffErro
 /// `g` summed back over the expanded axes.
 pub(super) fn expand(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     let gx = bw.tape.unbroadcast(g, &cx.shape[&n.outputs[0]], &cx.shape[&x]);
     bw.add(&x, gx);
     Ok(())
@@ -69,7 +69,7 @@ pub(super) fn concat(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffE
 /// `g` spread back to the positions read (positive steps), zero elsewhere.
 pub(super) fn slice(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     // Axis by axis: spread each read position to its step's slot, then pad to the
     // input's extent (or cut where the last step runs past it).
     let xs = cx.shape[&x].clone();
@@ -112,7 +112,7 @@ pub(super) fn slice(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffEr
 /// `g` through the inverse permutation.
 pub(super) fn transpose(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     let perm = transpose_perm(n, cx.shape[&x].len());
     let mut inv = vec![0i64; perm.len()];
     for (i, &p) in perm.iter().enumerate() {
@@ -126,7 +126,7 @@ pub(super) fn transpose(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), Autodi
 /// Nearest upsampling by an integer factor: `g` summed over each block.
 pub(super) fn resize(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     let f = resize_factor(n, cx.consts, &cx.shape[&x])?;
     let pooled = bw.tape.node(
         "AveragePool",

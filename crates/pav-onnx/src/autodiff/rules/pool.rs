@@ -9,7 +9,7 @@ use crate::proto::{Attr, FLOAT};
 /// The gradient to the first position (row-major) of each window equal to its maximum, in standard operators.
 fn max_pool_onnx(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     let y = n.outputs[0].clone();
     bw.save(&x);
     bw.save(&y);

@@ -8,7 +8,7 @@ use crate::proto::Attr;
 /// `∂x = y ⊙ (g − Σ_axis g ⊙ y)`.
 pub(super) fn softmax(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     // ∂x = y ⊙ (g − Σ_axis g ⊙ y).
     let r = cx.shape[&x].len() as i64;
     let axis = int(n, "axis").unwrap_or(-1);
@@ -30,7 +30,7 @@ pub(super) fn softmax(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), Autodiff
 /// `g` expanded back over the reduced axes (divided by their size for the mean).
 pub(super) fn reduce_mean_sum(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     let xs = cx.shape[&x].clone();
     let axes = reduce_axes(n, cx.consts, xs.len());
     let kept = bw.tape.reshape(g, &reduced(&xs, &axes, true));
@@ -48,7 +48,7 @@ pub(super) fn reduce_mean_sum(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), 
 /// `g` to every position equal to the maximum.
 pub(super) fn reduce_max(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     // The gradient goes to the positions equal to the maximum (ties, of measure zero
     // for real inputs, each get it whole).
     let xs = cx.shape[&x].clone();
@@ -82,7 +82,7 @@ pub(super) fn global_average_pool(cx: &Ctx, bw: &mut Back, g: String) -> Result<
 /// A transposed uniform convolution (padding counted, as the forward counts it).
 pub(super) fn average_pool(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     let (k, st, p) = window(n, None)?;
     if int(n, "count_include_pad").unwrap_or(0) == 0 && p.iter().any(|&v| v != 0) {
         return Err(cx.bad("padded windows must count the padding (count_include_pad = 1)"));

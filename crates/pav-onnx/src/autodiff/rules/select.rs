@@ -9,7 +9,7 @@ use crate::proto::{Attr, FLOAT, INT64};
 /// The values' gradient scattered back to where they were taken from.
 pub(super) fn top_k(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     // The values' gradient goes back to where they were taken from.
     let xs = cx.shape[&x].clone();
     let a = int(n, "axis").unwrap_or(-1);
@@ -24,7 +24,7 @@ pub(super) fn top_k(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffEr
 /// `g` scattered (added) back to the positions read.
 pub(super) fn gather_elements(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     let xs = cx.shape[&x].clone();
     let a = int(n, "axis").unwrap_or(0);
     let a = if a < 0 { a + xs.len() as i64 } else { a };
@@ -39,7 +39,7 @@ pub(super) fn gather_elements(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), 
 /// `g` scattered (added) back to the constant indices read.
 pub(super) fn gather(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     let xs = cx.shape[&x].clone();
     let a = int(n, "axis").unwrap_or(0);
     let a = (if a < 0 { a + xs.len() as i64 } else { a }) as usize;
@@ -63,7 +63,7 @@ pub(super) fn gather(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffE
 /// Both gradients of bilinear, zero-padded sampling, from the four corners of every sample.
 pub(super) fn grid_sample(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
-    let x = cx.n.inputs[0].clone();
+    let x = n.inputs[0].clone();
     let mode = string(n, "mode").unwrap_or("bilinear".into());
     let padding = string(n, "padding_mode").unwrap_or("zeros".into());
     if mode != "bilinear" || padding != "zeros" || int(n, "align_corners").unwrap_or(0) != 0 {
