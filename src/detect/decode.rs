@@ -270,21 +270,12 @@ pub fn decode(
             let width = columns.len();
             let o = match output {
                 Some(_) => find(outs, output.as_deref())?,
-                None => outs
-                    .iter()
-                    .find(|o| {
-                        let mut s = o.shape.as_slice();
-                        while s.len() > 2 && s[0] == 1 {
-                            s = &s[1..];
-                        }
-                        s.len() == 2 && s[1] == width
-                    })
-                    .ok_or_else(|| {
-                        LayoutError(format!(
-                            "no output holds rows of {width} columns (outputs: {})",
-                            outs.iter().map(|o| format!("`{}` {:?}", o.name, o.shape)).collect::<Vec<_>>().join(", ")
-                        ))
-                    })?,
+                None => outs.iter().find(|o| squeeze(o, 2, "rows").is_ok_and(|s| s[1] == width)).ok_or_else(|| {
+                    LayoutError(format!(
+                        "no output holds rows of {width} columns (outputs: {})",
+                        outs.iter().map(|o| format!("`{}` {:?}", o.name, o.shape)).collect::<Vec<_>>().join(", ")
+                    ))
+                })?,
             };
             let s = squeeze(o, 2, "rows")?;
             if s[1] != width {
@@ -294,8 +285,13 @@ pub fn decode(
                 )));
             }
             let col = |c: Column| columns.iter().position(|k| *k == c).unwrap_or(0);
-            let (ci, si, b) =
-                (col(Column::Class), col(Column::Score), [Column::X1, Column::Y1, Column::X2, Column::Y2]);
+            let (ci, si) = (col(Column::Class), col(Column::Score));
+            let corners = [Column::X1, Column::Y1, Column::X2, Column::Y2].map(col);
+            // Boxes the graph mapped back itself are only clipped to the frame.
+            let to_frame = match frame {
+                BoxFrame::Input => *map,
+                BoxFrame::Image => InputMap { scale_x: 1.0, scale_y: 1.0, pad_x: 0.0, pad_y: 0.0, ..*map },
+            };
             p = Proposals::with_capacity(num_classes, s[0]);
             for r in o.data.chunks_exact(width) {
                 let class = r[ci];
@@ -303,14 +299,7 @@ pub fn decode(
                 if class < 0.0 || class as usize >= num_classes {
                     continue;
                 }
-                let bb = b.map(|c| r[col(c)]);
-                p.boxes.push(match frame {
-                    BoxFrame::Input => map.to_frame(bb),
-                    BoxFrame::Image => {
-                        let (w, h) = (map.frame_w, map.frame_h);
-                        [bb[0].clamp(0.0, w), bb[1].clamp(0.0, h), bb[2].clamp(0.0, w), bb[3].clamp(0.0, h)]
-                    }
-                });
+                p.boxes.push(to_frame.to_frame(corners.map(|c| r[c])));
                 let mut row = vec![0f32; num_classes];
                 row[class as usize] = r[si];
                 p.scores.extend(row);

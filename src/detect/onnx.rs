@@ -1,7 +1,7 @@
 //! ONNX Runtime backend: any ONNX detector described by a [`DetectorConfig`].
 
 use super::config::{DetectorConfig, OutputLayout};
-use super::config::{ExtraValue, InputConfig};
+use super::config::{ExtraInput, ExtraValue, InputConfig};
 use super::decode::{decode, LayoutError, Proposals, RawOutput};
 use super::preprocess::InputMap;
 use super::{DetectError, Detector};
@@ -22,7 +22,8 @@ pub struct OnnxDetector {
     cfg: DetectorConfig,
     session: Session,
     input_name: String,
-    size_input: Option<String>,
+    /// The inputs beside the image: the config's, and a DETR's target size.
+    extra: Vec<ExtraInput>,
 }
 
 impl OnnxDetector {
@@ -45,32 +46,28 @@ impl OnnxDetector {
             .commit_from_file(&cfg.model)
             .map_err(session_err(&cfg.name, "loading the ONNX model"))?;
         let names: Vec<String> = session.inputs().iter().map(|i| i.name().to_string()).collect();
-        let size_input = match &cfg.output {
-            OutputLayout::Detr { size_input, .. } => size_input.clone(),
-            _ => None,
-        };
-        let fed_apart = |n: &String| Some(n) == size_input.as_ref() || cfg.input.extra.iter().any(|e| &e.name == n);
+        let mut extra = cfg.input.extra.clone();
+        if let OutputLayout::Detr { size_input: Some(s), .. } = &cfg.output {
+            extra.push(ExtraInput { name: s.clone(), value: ExtraValue::SizeWh });
+        }
+        let fed_apart = |n: &String| extra.iter().any(|e| &e.name == n);
         let input_name = match &cfg.input.name {
             Some(n) if names.contains(n) => n.clone(),
             Some(n) => return Err(model_err(format!("has no input `{n}` (inputs: {})", names.join(", ")))),
             None => names.iter().find(|n| !fed_apart(n)).cloned().ok_or_else(|| model_err("has no inputs".into()))?,
         };
-        if let Some(s) = &size_input {
-            if !names.contains(s) {
-                return Err(model_err(format!(
-                    "has no input `{s}` for the target size (inputs: {})",
-                    names.join(", ")
-                )));
-            }
+        if let Some(e) = extra.iter().find(|e| !names.contains(&e.name)) {
+            let what = match e.value {
+                ExtraValue::ScaleYx => "the scale factor",
+                ExtraValue::SizeWh => "the target size",
+            };
+            return Err(model_err(format!("has no input `{}` for {what} (inputs: {})", e.name, names.join(", "))));
         }
-        if let Some(e) = cfg.input.extra.iter().find(|e| !names.contains(&e.name)) {
-            return Err(model_err(format!("has no input `{}` (inputs: {})", e.name, names.join(", "))));
+        let unfed: Vec<&String> = names.iter().filter(|n| **n != input_name && !fed_apart(n)).collect();
+        if !unfed.is_empty() {
+            return Err(model_err(format!("has inputs the config does not feed: {unfed:?}")));
         }
-        let extra: Vec<&String> = names.iter().filter(|n| **n != input_name && !fed_apart(n)).collect();
-        if !extra.is_empty() {
-            return Err(model_err(format!("has inputs the config does not feed: {extra:?}")));
-        }
-        Ok(OnnxDetector { cfg, session, input_name, size_input })
+        Ok(OnnxDetector { cfg, session, input_name, extra })
     }
 
     /// Whether the model accepts any input height and width (symbolic spatial dimensions).
@@ -95,11 +92,7 @@ impl OnnxDetector {
         let image = Tensor::from_array(([1usize, 3, h, w], input)).map_err(inf_err)?;
         let mut feed: Vec<(String, ort::session::SessionInputValue<'_>)> =
             vec![(self.input_name.clone(), image.into())];
-        if let Some(s) = &self.size_input {
-            let size = Tensor::from_array(([1usize, 2], vec![w as i64, h as i64])).map_err(inf_err)?;
-            feed.push((s.clone(), size.into()));
-        }
-        for e in &self.cfg.input.extra {
+        for e in &self.extra {
             let value: ort::session::SessionInputValue<'_> = match e.value {
                 ExtraValue::ScaleYx => {
                     Tensor::from_array(([1usize, 2], vec![map.scale_y, map.scale_x])).map_err(inf_err)?.into()
