@@ -5,7 +5,7 @@
 #![cfg(feature = "runtime")]
 
 use pav_onnx::autodiff::{differentiate, differentiate_with, operators, Kernels};
-use pav_onnx::proto::{Attr, Dim, InitData, Initializer, Model, Node, ValueInfo, FLOAT};
+use pav_onnx::proto::{Attr, Dim, Initializer, Model, Node, ValueInfo, FLOAT};
 use pav_onnx::GradSession;
 
 /// ONNX Runtime, or the fix when it is missing.
@@ -16,35 +16,16 @@ fn require_runtime() {
 }
 
 fn node(op: &str, inputs: &[&str], out: &str, attrs: Vec<(&str, Attr)>) -> Node {
-    Node {
-        op_type: op.into(),
-        name: out.into(),
-        inputs: inputs.iter().map(|s| s.to_string()).collect(),
-        outputs: vec![out.into()],
-        attrs: attrs.into_iter().map(|(k, a)| (k.into(), a)).collect(),
-        domain: String::new(),
-    }
+    attrs.into_iter().fold(Node::new(op, inputs, &[out]), |n, (k, a)| n.attr(k, a))
 }
 
-fn init(name: &str, dims: Vec<i64>, data: InitData) -> Initializer {
-    Initializer { name: name.into(), dims, data }
-}
-
+/// A float value of symbolic shape: the differentiation fixes the shapes.
 fn value(name: &str) -> ValueInfo {
     ValueInfo { name: name.into(), elem_type: FLOAT, dims: vec![Dim::Symbolic("?".into()); 4] }
 }
 
 fn model(nodes: Vec<Node>, inits: Vec<Initializer>, outputs: &[&str]) -> Model {
-    Model {
-        graph_name: "t".into(),
-        producer: "test".into(),
-        opset: 13,
-        domains: vec![],
-        nodes,
-        initializers: inits,
-        inputs: vec![value("x")],
-        outputs: outputs.iter().map(|o| value(o)).collect(),
-    }
+    Model::graph(13, nodes, inits, vec![value("x")], outputs.iter().map(|o| value(o)).collect())
 }
 
 /// Values in [−1, 1], spread so that no two are closer than 1e-3 apart (no kink within a step).
@@ -91,16 +72,16 @@ fn check_with(m: Model, shape: [i64; 4], tol: f32, kernels: Kernels) {
 }
 
 fn ints(n: &str, v: Vec<i64>) -> Initializer {
-    init(n, vec![v.len() as i64], InitData::I64(v))
+    Initializer::i64(n, &[v.len() as i64], v)
 }
 
 fn scalar(n: &str, v: f32) -> Initializer {
-    init(n, vec![], InitData::F32(vec![v]))
+    Initializer::f32(n, &[], vec![v])
 }
 
 fn weights(n: &str, dims: Vec<i64>, seed: usize) -> Initializer {
     let k = dims.iter().product::<i64>() as usize;
-    init(n, dims, InitData::F32(spread(k, seed)))
+    Initializer::f32(n, &dims, spread(k, seed))
 }
 
 /// One `op` node reading `x` (and `more`), writing `y`.
@@ -339,7 +320,7 @@ fn resize() {
         ("coordinate_transformation_mode", Attr::Str("asymmetric".into())),
         ("nearest_mode", Attr::Str("floor".into())),
     ];
-    let scales = init("sc", vec![4], InitData::F32(vec![1.0, 1.0, 2.0, 2.0]));
+    let scales = Initializer::f32("sc", &[4], vec![1.0, 1.0, 2.0, 2.0]);
     check(single("Resize", &["", "sc"], attrs, vec![scales]), [1, 2, 3, 4], 2e-3);
 }
 
@@ -438,13 +419,13 @@ fn top_k() {
 fn gather() {
     // Constant indices, one of them negative, along the last axis; and a matrix of indices.
     check(single("Gather", &["i"], vec![("axis", Attr::Int(3))], vec![ints("i", vec![2, -1, 0])]), [1, 2, 3, 4], 2e-3);
-    let idx = init("i", vec![2, 2], InitData::I64(vec![0, 2, 1, 1]));
+    let idx = Initializer::i64("i", &[2, 2], vec![0, 2, 1, 1]);
     check(single("Gather", &["i"], vec![("axis", Attr::Int(2))], vec![idx]), [1, 2, 3, 4], 2e-3);
 }
 
 #[test]
 fn gather_elements() {
-    let idx = init("i", vec![1, 2, 2, 4], InitData::I64(vec![0, 2, 1, 1, 2, 0, 0, 1, 1, 1, 2, 0, 0, 2, 2, 1]));
+    let idx = Initializer::i64("i", &[1, 2, 2, 4], vec![0, 2, 1, 1, 2, 0, 0, 1, 1, 1, 2, 0, 0, 2, 2, 1]);
     check(single("GatherElements", &["i"], vec![("axis", Attr::Int(2))], vec![idx]), [1, 2, 3, 4], 2e-3);
 }
 
@@ -494,7 +475,7 @@ fn split() {
         outputs: outs.iter().map(|o| o.to_string()).collect(),
         ..node("Split", inputs, outs[0], vec![("axis", Attr::Int(1))])
     };
-    let sizes = init("sizes", vec![2], InitData::I64(vec![1, 3]));
+    let sizes = Initializer::i64("sizes", &[2], vec![1, 3]);
     let graphs = vec![
         // Sizes as an input; both parts read, one of them twice.
         model(
@@ -514,7 +495,7 @@ fn split() {
         check(m, [1, 4, 3, 3], 2e-3);
     }
     // Sizes that do not add up are refused by name.
-    let bad = init("sizes", vec![2], InitData::I64(vec![1, 1]));
+    let bad = Initializer::i64("sizes", &[2], vec![1, 1]);
     let m = model(vec![split(&["x", "sizes"], &["a", "b"]), node("Sigmoid", &["a"], "y", vec![])], vec![bad], &["y"]);
     let e = differentiate(&m, &[1, 4, 3, 3]).unwrap_err().to_string();
     assert!(e.contains("Split") && e.contains("sizes [1, 1]"), "{e}");
@@ -601,10 +582,6 @@ fn layer_norm_attention_and_reductions_as_a_detr_writes_them() {
     // Pow, Sqrt, Div, a broadcast scale and shift), self-attention (MatMul with a weight, Q·Kᵀ of
     // two activations, Softmax, the product with the values), and the reshapes and reductions
     // around them.
-    let f = |n: &str, dims: Vec<i64>, seed: usize| {
-        let k = dims.iter().product::<i64>() as usize;
-        init(n, dims, InitData::F32(spread(k, seed)))
-    };
     let mean = |x: &str, y: &str| node("ReduceMean", &[x], y, vec![("axes", Attr::Ints(vec![-1]))]);
     let nodes = vec![
         node("Reshape", &["x", "seq"], "s", vec![]),
@@ -637,10 +614,10 @@ fn layer_norm_attention_and_reductions_as_a_detr_writes_them() {
         ints("seq", vec![1, 6, 4]),
         scalar("two", 2.0),
         scalar("eps", 1e-5),
-        f("gamma", vec![4], 3),
-        f("beta", vec![4], 4),
-        f("wq", vec![4, 4], 5),
-        f("wk", vec![4, 4], 6),
+        weights("gamma", vec![4], 3),
+        weights("beta", vec![4], 4),
+        weights("wq", vec![4, 4], 5),
+        weights("wk", vec![4, 4], 6),
         scalar("lo", -0.3),
         scalar("hi", 0.3),
         ints("ax1", vec![1]),

@@ -1,19 +1,20 @@
 //! Max pooling: the gradient to the first maximum of each window, as PyTorch routes it.
 
 use super::{Back, Ctx};
-use crate::autodiff::shapes::window;
+use crate::autodiff::shapes::{window, Window};
 use crate::autodiff::tape::Tape;
 use crate::autodiff::{AutodiffError, Kernels};
 use crate::proto::{Attr, FLOAT};
 
 /// The gradient to the first position (row-major) of each window equal to its maximum, in standard operators.
-fn max_pool_onnx(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
-    let n = cx.n;
-    let x = n.inputs[0].clone();
-    let y = n.outputs[0].clone();
-    bw.save(&x);
-    bw.save(&y);
-    let (k, s, p) = window(n, None)?;
+fn max_pool_onnx(
+    cx: &Ctx,
+    bw: &mut Back,
+    g: String,
+    x: String,
+    y: String,
+    (k, s, p): Window,
+) -> Result<(), AutodiffError> {
     let (xs, ys) = (cx.shape[&x].clone(), cx.shape[&y].clone());
     // Windows that tile the input exactly never read the end padding (darknet pads
     // every pool by k − 1 at the end, which stride-2 pools on even sizes never reach).
@@ -94,21 +95,21 @@ fn max_pool_onnx(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError
 /// The first maximum of each window gets its gradient: in one fused operator with
 /// [`Kernels::Fused`], else in standard operators.
 pub(super) fn max_pool(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
+    let n = cx.n;
+    let (x, y) = (n.inputs[0].clone(), n.outputs[0].clone());
+    bw.save(&x);
+    bw.save(&y);
+    let w = window(n, None)?;
     if cx.kernels == Kernels::Fused {
-        max_pool_fused(cx, bw, g)
+        max_pool_fused(bw, g, x, y, w);
+        Ok(())
     } else {
-        max_pool_onnx(cx, bw, g)
+        max_pool_onnx(cx, bw, g, x, y, w)
     }
 }
 
 /// The fused `MaxPoolGrad` operator.
-fn max_pool_fused(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
-    let n = cx.n;
-    let x = n.inputs[0].clone();
-    let y = n.outputs[0].clone();
-    bw.save(&x);
-    bw.save(&y);
-    let (k, s, p) = window(n, None)?;
+fn max_pool_fused(bw: &mut Back, g: String, x: String, y: String, (k, s, p): Window) {
     let attrs = vec![
         ("kernel_shape", Attr::Ints(k.to_vec())),
         ("strides", Attr::Ints(s.to_vec())),
@@ -116,7 +117,6 @@ fn max_pool_fused(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffErro
     ];
     let gx = bw.tape.fused("MaxPoolGrad", vec![x.clone(), y, g], attrs);
     bw.add(&x, gx);
-    Ok(())
 }
 
 /// The gradient of a max-pool whose windows tile the input (kernel = stride `b`):
