@@ -101,6 +101,8 @@ pub fn run(a: &Args) -> Result<()> {
         Some(n) => Frames::Even(n as usize),
         None => Frames::Stride(a.stride as usize),
     };
+    let count = pav::detect::load::expand_configs(&a.detectors)?.len();
+    let (parallel, threads) = pav::eval::run::side_by_side(count, cores, a.parallel, a.threads);
     let opts = EvalOptions {
         threshold: a.threshold,
         frames,
@@ -109,11 +111,8 @@ pub fn run(a: &Args) -> Result<()> {
         angle_bins: a.angle_bins as usize,
         out_dir: a.out.clone(),
         plots: !a.no_plots,
-        parallel: 1,
+        parallel,
     };
-    let count = pav::detect::load::expand_configs(&a.detectors)?.len();
-    let (parallel, threads) = pav::eval::run::side_by_side(count, cores, a.parallel, a.threads);
-    let opts = EvalOptions { parallel, ..opts };
     opts.check()?;
     let mut detectors = load_detectors(&a.detectors, &a.classes, threads)?;
     let sidecars: Vec<PathBuf> =
