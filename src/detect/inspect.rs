@@ -184,18 +184,19 @@ impl Inspection {
         if let Some(p) = self.image_input() {
             t.push_str(&format!("name = \"{}\"\n", p.name));
         }
-        t.push_str(&format!(
-            "width = {side}\nheight = {side}\nchannels = \"rgb\"        # CHECK: rgb or bgr\nscale = 0.00392156862745098   # CHECK: 1/255, or 1.0 with mean and std\nresize = \"letterbox\"      # CHECK: letterbox or stretch\ninterpolation = \"bilinear\"\npad_value = 114\n"
-        ));
-        // A float input of two values beside the image: a graph that maps its boxes back itself.
+        // A float input beside the image of a rows model: a graph that maps its boxes back itself
+        // by scale alone, which a stretched input keeps exact.
         let scale_input = self
             .inputs
             .iter()
-            .find(|p| p.dtype == "float32" && Some(p.name.as_str()) != self.image_input().map(|i| i.name.as_str()));
-        if guess.layout == Some("rows") {
-            if let Some(p) = scale_input {
-                t.push_str(&format!("\n[[input.extra]]\nname = \"{}\"\nvalue = \"scale_yx\"     # CHECK: [input/frame height, input/frame width]\n", p.name));
-            }
+            .find(|p| p.dtype == "float32" && Some(p.name.as_str()) != self.image_input().map(|i| i.name.as_str()))
+            .filter(|_| guess.layout == Some("rows"));
+        let resize = if scale_input.is_some() { "stretch" } else { "letterbox" };
+        t.push_str(&format!(
+            "width = {side}\nheight = {side}\nchannels = \"rgb\"        # CHECK: rgb or bgr\nscale = 0.00392156862745098   # CHECK: 1/255, or 1.0 with mean and std\nresize = \"{resize}\"      # CHECK: letterbox or stretch\ninterpolation = \"bilinear\"\npad_value = 114\n"
+        ));
+        if let Some(p) = scale_input {
+            t.push_str(&format!("\n[[input.extra]]\nname = \"{}\"\nvalue = \"scale_yx\"     # CHECK: [input/frame height, input/frame width]\n", p.name));
         }
         t.push_str("\n[output]\n");
         match guess.layout {
@@ -240,9 +241,6 @@ impl Inspection {
                     .unwrap_or_default();
                 let frame = if scale_input.is_some() { "image" } else { "input" };
                 t.push_str(&format!("layout = \"rows\"\noutput = \"{rows}\"\ncolumns = [\"class\", \"score\", \"x1\", \"y1\", \"x2\", \"y2\"]   # CHECK: the upstream post-processor's order\nframe = \"{frame}\"      # CHECK: image (boxes in frame pixels) or input\n"));
-                if frame == "image" {
-                    t = t.replace("resize = \"letterbox\"      # CHECK", "resize = \"stretch\"      # CHECK");
-                }
             }
             Some("gfl") => {
                 let bins = self.outputs.iter().filter_map(|p| self.shape(p)?.last().copied()).min().unwrap_or(32) / 4;
