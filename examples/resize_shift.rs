@@ -38,8 +38,10 @@ fn main() {
                 let props = det.propose_prepared(input.0, input.1).unwrap();
                 props.best(det.target_classes()).map_or(0.0, |b| b.score)
             };
-            let pairs: Vec<(f32, f32)> =
-                frames.iter().map(|f| (best(prepare(f, &cfg.input)), best(prepare_exact(f, &cfg.input)))).collect();
+            let pairs: Vec<(f32, f32)> = frames
+                .iter()
+                .map(|f| (best(prepare(f, &cfg.input).expect("no defences")), best(prepare_exact(f, &cfg.input))))
+                .collect();
             let mut d: Vec<f32> = pairs.iter().map(|(a, b)| (a - b).abs()).collect();
             d.sort_by(f32::total_cmp);
             let flips = pairs.iter().filter(|(a, b)| (*a >= 0.5) != (*b >= 0.5)).count();

@@ -32,6 +32,13 @@ impl Rng {
     pub fn uniform(&mut self, lo: f32, hi: f32) -> f32 {
         lo + (hi - lo) * self.unit()
     }
+
+    /// Standard normal (Box–Muller on two uniform draws).
+    pub fn normal(&mut self) -> f32 {
+        let u = 1.0 - self.unit() as f64; // in (0, 1], so the logarithm is finite
+        let v = self.unit() as f64;
+        ((-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()) as f32
+    }
 }
 
 #[cfg(test)]
@@ -48,5 +55,19 @@ mod tests {
         assert!((mean - 0.5).abs() < 0.01, "{mean}");
         let below = xs.iter().filter(|x| **x < 0.1).count();
         assert!((900..1100).contains(&below), "{below}");
+    }
+
+    #[test]
+    fn normal_draws_have_unit_variance_and_gaussian_tails() {
+        let mut r = Rng::new(11);
+        let n = 1_000_000;
+        let z: Vec<f64> = (0..n).map(|_| r.normal() as f64).collect();
+        let mean = z.iter().sum::<f64>() / n as f64;
+        let var = z.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n as f64;
+        let kurt = z.iter().map(|x| (x - mean).powi(4)).sum::<f64>() / n as f64 / (var * var);
+        let beyond2 = z.iter().filter(|x| x.abs() > 2.0).count() as f64 / n as f64;
+        assert!(mean.abs() < 0.005 && (var - 1.0).abs() < 0.005, "mean {mean}, variance {var}");
+        assert!((kurt - 3.0).abs() < 0.03, "kurtosis {kurt}");
+        assert!((beyond2 - 0.0455).abs() < 0.001, "P(|z| > 2) = {beyond2}");
     }
 }

@@ -70,7 +70,7 @@ fn turned_views_are_built_from_training_photos_and_stay_cars() {
     eprintln!("region texels read by 0 / 1 / 2+ training views: photos {without:.3?}, with turns {with:.3?}");
     assert!((with.iter().sum::<f64>() - 1.0).abs() < 1e-9);
     assert!(with[2] > without[2] && with[0] < without[0], "{with:?} vs {without:?}");
-    let mut dets = pav::detect::load::load_detectors(&[common::detector_config("yolov3-tiny")], &[], 1).unwrap();
+    let mut dets = pav::detect::load::load_detectors(&[common::detector_config("yolov3-tiny")], &[], &[], 1).unwrap();
     let mut scores = Vec::new();
     for v in &setup.synthetic {
         let s = detect_view(v, None, &setup, &mut dets).unwrap()[0].best_score();

@@ -50,7 +50,7 @@ fn forward_heads_equal_plain_inference() {
     let shared = common::real_data();
     let cfg = DetectorConfig::load(&common::detector_config("yolov3-tiny")).unwrap();
     let sample = CarlaSample::load(&shared.join("fca/carla_dataset/test/data12503.npz")).unwrap();
-    let (input, map) = prepare(&sample.image, &cfg.input);
+    let (input, map) = prepare(&sample.image, &cfg.input).unwrap();
     let raw = OnnxDetector::new(cfg, 1).unwrap().infer(input.clone(), &map).unwrap();
     let mut g = session(416);
     let (heads, _) = g.forward(input).unwrap();

@@ -41,7 +41,7 @@ fn the_class_branch_forward_equals_the_surrogate_on_real_frames() {
     let d = differentiate_with(&branch, &[1, 3, 640, 640], Kernels::Fused).unwrap_or_else(|e| panic!("{e}"));
     let mut g = GradSession::new("yolov8n class branch", d, 2).unwrap();
     for name in ["data12503.npz", "data12510.npz"] {
-        let (input, map) = prepare(&frame(name).image, &config().input);
+        let (input, map) = prepare(&frame(name).image, &config().input).unwrap();
         let raw = plain.infer(input.clone(), &map).unwrap();
         let (outs, _) = g.forward(input).unwrap();
         // [1, 84, 8400]: rows 4.. are the 80 class probabilities.
@@ -56,7 +56,7 @@ fn the_class_branch_forward_equals_the_surrogate_on_real_frames() {
 #[test]
 fn the_class_branch_gradient_matches_central_differences() {
     let branch = class_branch(surrogate(), false).unwrap();
-    let input = prepare(&frame("data12503.npz").image, &config().input).0;
+    let input = prepare(&frame("data12503.npz").image, &config().input).unwrap().0;
     let d = differentiate_with(&branch, &[1, 3, 640, 640], Kernels::Fused).unwrap();
     let mut g = GradSession::new("yolov8n class branch", d, 2).unwrap();
     let (outs, pass) = g.forward(input.clone()).unwrap();

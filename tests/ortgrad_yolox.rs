@@ -26,7 +26,7 @@ fn session(kernels: Kernels) -> GradSession {
 fn frame_input(name: &str) -> Vec<f32> {
     let shared = common::real_data();
     let sample = CarlaSample::load(&shared.join("fca/carla_dataset/test").join(name)).unwrap();
-    prepare(&sample.image, &config().input).0
+    prepare(&sample.image, &config().input).unwrap().0
 }
 
 #[test]

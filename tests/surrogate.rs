@@ -164,7 +164,7 @@ fn the_deimv2_surrogate_folds_to_its_data_path_with_the_same_outputs() {
     assert_eq!(folded.nodes.len() + report.nodes_removed, float.nodes.len());
     // The same numbers on a real photo: folding only replaced values by what they always are.
     let s = CarlaSample::load(&shared.join("fca/carla_dataset/test/data12509.npz")).unwrap();
-    let (x, _) = pav::detect::preprocess::prepare(&s.image, &cfg.input);
+    let (x, _) = pav::detect::preprocess::prepare(&s.image, &cfg.input).unwrap();
     let (a, b) = (run(&float, &x), run(&folded, &x));
     assert_eq!(a[0].len(), b[0].len());
     let worst = a.iter().flatten().zip(b.iter().flatten()).map(|(p, q)| (p - q).abs()).fold(0f32, f32::max);
@@ -221,7 +221,7 @@ fn the_deimv2_surrogate_differentiates_and_its_input_gradient_matches_difference
     let shared = common::real_data();
     let cfg = DetectorConfig::load(&common::detector_config("deimv2_atto_int8")).unwrap();
     let s = CarlaSample::load(&shared.join("fca/carla_dataset/test/data12509.npz")).unwrap();
-    let (x, _) = pav::detect::preprocess::prepare(&s.image, &cfg.input);
+    let (x, _) = pav::detect::preprocess::prepare(&s.image, &cfg.input).unwrap();
     // The last decoder layer's class logits of the 100 queries, as the DETR loss reads them.
     let m = deim_cut(&["/decoder/Gather_5_output_0"], &x);
     let d = differentiate_with(&m, &[1, 3, 320, 320], Kernels::Onnx).unwrap_or_else(|e| panic!("{e}"));

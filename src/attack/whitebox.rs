@@ -164,6 +164,13 @@ impl WhiteBox {
     pub fn with_options(cfg: &DetectorConfig, loss: DetectionLoss, o: WhiteBoxOptions) -> Result<Self, WhiteBoxError> {
         let unsupported = |why: String| WhiteBoxError::Unsupported { name: cfg.name.clone(), why };
         let i = &cfg.input;
+        if !i.defence.is_empty() {
+            // Training as if undefended would be a silent lie about what the texture was made for.
+            return Err(unsupported(format!(
+                "input defences ({}) are not differentiated yet; name the undefended config as the white box",
+                crate::detect::defence::chain_label(&i.defence)
+            )));
+        }
         // A square composite letterboxed into a square input is a plain resize.
         if i.width != i.height {
             return Err(unsupported(format!("a non-square input {}x{}", i.width, i.height)));

@@ -1,6 +1,7 @@
 //! Detector configs (TOML): everything needed to run an ONNX detector without code changes.
 
 use super::coco::COCO80;
+use super::defence::{chain_label, Defence};
 use super::DetectError;
 use crate::image::resize::Interpolation;
 use serde::Deserialize;
@@ -72,6 +73,10 @@ pub struct InputConfig {
     /// Further inputs the model reads, each fed a value pav computes per frame.
     #[serde(default)]
     pub extra: Vec<ExtraInput>,
+    /// Input transforms applied to the 8-bit input image before normalization, in order (the
+    /// config's `[[defence]]` list, then any `--defence` chain).
+    #[serde(skip)]
+    pub defence: Vec<Defence>,
 }
 
 /// A model input beside the image (PicoDet's `scale_factor`), fed per frame.
@@ -269,6 +274,8 @@ struct RawConfig {
     classes: ClassConfig,
     #[serde(default = "nms_default")]
     nms_iou: f32,
+    #[serde(default)]
+    defence: Vec<Defence>,
 }
 
 fn nms_default() -> f32 {
@@ -346,11 +353,13 @@ impl DetectorConfig {
                 .filter(|l| !l.is_empty())
                 .collect()
         };
+        let mut input = raw.input;
+        input.defence = raw.defence;
         let mut cfg = DetectorConfig {
             name: raw.name,
             description: raw.description,
             model: resolve(&raw.model)?,
-            input: raw.input,
+            input,
             output: raw.output,
             class_names,
             target_classes: Vec::new(),
@@ -379,6 +388,16 @@ impl DetectorConfig {
         Ok(())
     }
 
+    /// The same detector behind `chain` as well (after the config's own defences), named
+    /// `NAME+LABELS` (`yolox_nano+median3`); the chain is checked against the input size.
+    pub fn defended(&self, chain: &[Defence]) -> Result<DetectorConfig, DetectError> {
+        let mut d = self.clone();
+        d.name = format!("{}+{}", self.name, chain_label(chain));
+        d.input.defence.extend(chain.iter().cloned());
+        d.validate().map_err(|msg| DetectError::Config { path: self.source.display().to_string(), msg })?;
+        Ok(d)
+    }
+
     /// Names of the target classes, joined for reports.
     pub fn target_names(&self) -> String {
         self.target_classes.iter().map(|&i| self.class_names[i].as_str()).collect::<Vec<_>>().join("+")
@@ -394,6 +413,9 @@ impl DetectorConfig {
         }
         if i.std.iter().any(|s| !s.is_finite() || *s == 0.0) || i.mean.iter().any(|m| !m.is_finite()) {
             return Err(format!("input.mean {:?} / input.std {:?} must be finite, std non-zero", i.mean, i.std));
+        }
+        for (n, d) in i.defence.iter().enumerate() {
+            d.check(i.width, i.height).map_err(|e| format!("defence {} ({}): {e}", n + 1, d.label()))?;
         }
         if !(0.0..=1.0).contains(&self.nms_iou) {
             return Err(format!("nms_iou = {} must be in [0, 1]", self.nms_iou));

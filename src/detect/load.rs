@@ -1,5 +1,6 @@
 //! Loading ONNX detectors from config files and folders of them.
 
+use super::defence::Defence;
 use super::onnx::OnnxDetector;
 use super::{DetectError, Detector, DetectorConfig};
 use std::path::PathBuf;
@@ -42,11 +43,13 @@ pub fn detector_inputs(paths: &[PathBuf]) -> Vec<PathBuf> {
     configs.into_iter().chain(models).collect()
 }
 
-/// Loads every detector of `paths` (files or folders), with `classes` as targets when given.
+/// Loads every detector of `paths` (files or folders), with `classes` as targets when given,
+/// and after each one, the same detector behind each chain of `defences` (`--defence`).
 /// Every config is checked before any model loads, so all config mistakes show at once.
 pub fn load_detectors(
     paths: &[PathBuf],
     classes: &[String],
+    defences: &[Vec<Defence>],
     threads: usize,
 ) -> Result<Vec<Box<dyn Detector>>, DetectError> {
     let paths = &expand_configs(paths)?;
@@ -60,7 +63,12 @@ pub fn load_detectors(
                         errors.push(format!("{}: {e}", p.display()));
                     }
                 }
+                let derived: Vec<DetectorConfig> = defences
+                    .iter()
+                    .filter_map(|chain| c.defended(chain).map_err(|e| errors.push(e.to_string())).ok())
+                    .collect();
                 cfgs.push(c);
+                cfgs.extend(derived);
             }
             Err(e) => errors.push(e.to_string()),
         }

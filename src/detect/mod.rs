@@ -3,6 +3,7 @@
 pub mod coco;
 pub mod config;
 pub mod decode;
+pub mod defence;
 pub mod inspect;
 #[cfg(feature = "eval")]
 pub mod load;
@@ -55,7 +56,8 @@ pub trait Detector: Send {
     fn name(&self) -> &str;
     /// Runs the model and returns every proposal in frame coordinates.
     fn propose(&mut self, frame: &Frame) -> Result<Proposals, DetectError> {
-        let (input, map) = preprocess::prepare(frame, self.input());
+        let (input, map) = preprocess::prepare(frame, self.input())
+            .map_err(|source| DetectError::Defence { detector: self.name().to_string(), source })?;
         self.propose_prepared(input, map)
     }
     /// How a frame becomes the model's input; [`preprocess::prepare`] with it can run on any
@@ -133,6 +135,14 @@ pub enum DetectError {
         what: &'static str,
         /// ONNX Runtime's error.
         source: ort::Error,
+    },
+    /// An input defence failed on a frame.
+    #[error("detector `{detector}`: {source}")]
+    Defence {
+        /// Detector name.
+        detector: String,
+        /// What failed.
+        source: defence::DefenceError,
     },
     /// The model's outputs do not fit the configured layout.
     #[error("detector `{detector}`: {source}")]

@@ -1,6 +1,7 @@
 //! Frame → model input tensor (resize/letterbox, channel order, normalization) and the inverse box map.
 
 use super::config::{Align, ChannelOrder, InputConfig, Resize};
+use super::defence::{apply_chain, DefenceError};
 use super::BBox;
 use crate::image::resize::{resize, resize_pil_u8, Interpolation};
 use crate::image::Frame;
@@ -40,18 +41,60 @@ impl InputMap {
 ///
 /// One pass: the frame is resized to 8 bits (OpenCV's `INTER_LINEAR`, as the models' upstream
 /// code resizes, or PIL's antialiased bilinear), then each sample goes through a 256-entry table
-/// of its channel's normalization straight into its plane.
-pub fn prepare(frame: &Frame, cfg: &InputConfig) -> (Vec<f32>, InputMap) {
-    prepare_with(frame, cfg, true)
+/// of its channel's normalization straight into its plane. With defences, the 8-bit input
+/// (padding included) is built first and goes through them before the tables.
+pub fn prepare(frame: &Frame, cfg: &InputConfig) -> Result<(Vec<f32>, InputMap), DefenceError> {
+    if cfg.defence.is_empty() {
+        return Ok(prepare_with(frame, cfg, true));
+    }
+    let (mut canvas, map) = model_image(frame, cfg);
+    apply_chain(&cfg.defence, &mut canvas)?;
+    Ok((prepare_with(&canvas, cfg, true).0, map))
 }
 
-/// [`prepare`] with pav's own float bilinear (OpenCV's result to within one level) instead of
-/// OpenCV's: what `prepare` did before it called OpenCV, kept to measure what the switch moved.
-pub fn prepare_exact(frame: &Frame, cfg: &InputConfig) -> (Vec<f32>, InputMap) {
-    prepare_with(frame, cfg, false)
+/// The 8-bit BGR image the model's input is made from (`cfg`'s size, resized and padded, before
+/// channel order and normalization), and the map back to frame pixels.
+pub fn model_image(frame: &Frame, cfg: &InputConfig) -> (Frame, InputMap) {
+    let g = geometry(frame, cfg);
+    let (iw, ih) = (cfg.width, cfg.height);
+    let mut canvas = Frame { width: iw, height: ih, bgr: vec![cfg.pad_value; iw * ih * 3] };
+    let resized;
+    let pixels: &[u8] = if (g.nw, g.nh) == (frame.width, frame.height) {
+        &frame.bgr
+    } else {
+        resized = resize_u8(frame, g.nw, g.nh, cfg.interpolation, true);
+        &resized
+    };
+    for (y, row) in pixels.chunks_exact(g.nw * 3).take(g.nh).enumerate() {
+        let at = ((y + g.py) * iw + g.px) * 3;
+        canvas.bgr[at..at + g.nw * 3].copy_from_slice(row);
+    }
+    (canvas, g.map(frame))
 }
 
-fn prepare_with(frame: &Frame, cfg: &InputConfig, opencv: bool) -> (Vec<f32>, InputMap) {
+/// Where a frame lands in the input: resized to `nw × nh` at `(px, py)`.
+struct Geometry {
+    nw: usize,
+    nh: usize,
+    px: usize,
+    py: usize,
+}
+
+impl Geometry {
+    fn map(&self, frame: &Frame) -> InputMap {
+        let (w, h) = (frame.width as f32, frame.height as f32);
+        InputMap {
+            scale_x: self.nw as f32 / w,
+            scale_y: self.nh as f32 / h,
+            pad_x: self.px as f32,
+            pad_y: self.py as f32,
+            frame_w: w,
+            frame_h: h,
+        }
+    }
+}
+
+fn geometry(frame: &Frame, cfg: &InputConfig) -> Geometry {
     let (w, h) = (frame.width, frame.height);
     let (iw, ih) = (cfg.width, cfg.height);
     let (nw, nh, px, py) = match cfg.resize {
@@ -66,6 +109,20 @@ fn prepare_with(frame: &Frame, cfg: &InputConfig, opencv: bool) -> (Vec<f32>, In
             }
         }
     };
+    Geometry { nw, nh, px, py }
+}
+
+/// [`prepare`] with pav's own float bilinear (OpenCV's result to within one level) instead of
+/// OpenCV's: what `prepare` did before it called OpenCV, kept to measure what the switch moved.
+pub fn prepare_exact(frame: &Frame, cfg: &InputConfig) -> (Vec<f32>, InputMap) {
+    prepare_with(frame, cfg, false)
+}
+
+fn prepare_with(frame: &Frame, cfg: &InputConfig, opencv: bool) -> (Vec<f32>, InputMap) {
+    let (w, h) = (frame.width, frame.height);
+    let (iw, ih) = (cfg.width, cfg.height);
+    let g = geometry(frame, cfg);
+    let (nw, nh, px, py) = (g.nw, g.nh, g.px, g.py);
     // Model channel c reads BGR channel src_ch[c].
     let src_ch = match cfg.channels {
         ChannelOrder::Bgr => [0, 1, 2],
@@ -98,15 +155,7 @@ fn prepare_with(frame: &Frame, cfg: &InputConfig, opencv: bool) -> (Vec<f32>, In
             o2[x] = lut[2][p[src_ch[2]] as usize];
         }
     }
-    let map = InputMap {
-        scale_x: nw as f32 / w as f32,
-        scale_y: nh as f32 / h as f32,
-        pad_x: px as f32,
-        pad_y: py as f32,
-        frame_w: w as f32,
-        frame_h: h as f32,
-    };
-    (out, map)
+    (out, g.map(frame))
 }
 
 /// `frame` resized to `nw × nh`, 8-bit BGR; bilinear by OpenCV when `opencv` and the `video`
@@ -183,6 +232,7 @@ mod tests {
             pad_value: 114,
             align,
             extra: Vec::new(),
+            defence: Vec::new(),
         }
     }
 
@@ -193,7 +243,7 @@ mod tests {
     #[test]
     fn letterbox_centre_pads_and_maps_boxes_back() {
         let f = solid(16, 8, [10, 20, 30]);
-        let (t, m) = prepare(&f, &cfg(Resize::Letterbox, Align::Center, ChannelOrder::Rgb));
+        let (t, m) = prepare(&f, &cfg(Resize::Letterbox, Align::Center, ChannelOrder::Rgb)).unwrap();
         // 16x8 -> 8x4 centred vertically: rows 0,1 and 6,7 are padding.
         assert_eq!(t[0], 114.0);
         assert_eq!(t[2 * 8], 30.0); // R plane, row 2 = image
@@ -212,7 +262,7 @@ mod tests {
         for size in [40, 150] {
             let mut c = cfg(Resize::Letterbox, Align::Center, ChannelOrder::Rgb);
             (c.width, c.height) = (size, size);
-            let (a, ma) = prepare(&f, &c);
+            let (a, ma) = prepare(&f, &c).unwrap();
             let (b, mb) = prepare_exact(&f, &c);
             assert_eq!(ma, mb);
             let worst = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0f32, f32::max);
@@ -221,14 +271,37 @@ mod tests {
         }
     }
 
+    /// The defended path builds the padded 8-bit input first: with a defence that changes nothing
+    /// (8 bits kept) it gives the plain path's tensor exactly; with a real one, the padding is
+    /// defended too and the map is unchanged.
+    #[test]
+    fn defences_see_the_padded_input_and_an_identity_changes_nothing() {
+        let (w, h) = (37, 23);
+        let f =
+            Frame { width: w, height: h, bgr: (0..w * h * 3).map(|i| ((i * 53 + i / 9 * 7) % 256) as u8).collect() };
+        for (resize, align) in
+            [(Resize::Letterbox, Align::Center), (Resize::Letterbox, Align::TopLeft), (Resize::Stretch, Align::Center)]
+        {
+            let mut c = cfg(resize, align, ChannelOrder::Rgb);
+            (c.width, c.height) = (20, 16);
+            let plain = prepare(&f, &c).unwrap();
+            c.defence = vec![crate::detect::defence::Defence::Bits { b: 8 }];
+            assert_eq!(prepare(&f, &c).unwrap(), plain);
+            c.defence = vec![crate::detect::defence::Defence::Bits { b: 1 }];
+            let (t, m) = prepare(&f, &c).unwrap();
+            assert_eq!(m, plain.1);
+            assert!(t.iter().all(|&v| v == 0.0 || v == 255.0));
+        }
+    }
+
     #[test]
     fn top_left_letterbox_and_stretch() {
         let f = solid(8, 16, [1, 2, 3]);
-        let (t, m) = prepare(&f, &cfg(Resize::Letterbox, Align::TopLeft, ChannelOrder::Bgr));
+        let (t, m) = prepare(&f, &cfg(Resize::Letterbox, Align::TopLeft, ChannelOrder::Bgr)).unwrap();
         assert_eq!(t[0], 1.0);
         assert_eq!(t[7], 114.0); // column 4..8 padded
         assert_eq!((m.pad_x, m.scale_x), (0.0, 0.5));
-        let (_, m) = prepare(&f, &cfg(Resize::Stretch, Align::Center, ChannelOrder::Bgr));
+        let (_, m) = prepare(&f, &cfg(Resize::Stretch, Align::Center, ChannelOrder::Bgr)).unwrap();
         assert_eq!(m.to_frame([4.0, 4.0, 8.0, 8.0]), [4.0, 8.0, 8.0, 16.0]);
     }
 }

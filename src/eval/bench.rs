@@ -190,8 +190,13 @@ pub fn bench_evaluate(opts: &BenchOptions, progress: &dyn Progress) -> Result<(V
         for f in frames.iter().take(2) {
             det.propose(f)?; // warm-up: first runs allocate and pick kernels
         }
-        let (pre_s, inputs) =
-            best_of(opts.repeats, || Ok(frames.iter().map(|f| prepare(f, &cfg.input)).collect::<Vec<_>>()))?;
+        let (pre_s, inputs) = best_of(opts.repeats, || {
+            frames
+                .iter()
+                .map(|f| prepare(f, &cfg.input))
+                .collect::<std::result::Result<Vec<_>, _>>()
+                .map_err(|source| DetectError::Defence { detector: cfg.name.clone(), source }.into())
+        })?;
         let mut bare_s = f64::INFINITY;
         for _ in 0..opts.repeats.max(1) {
             let batch = inputs.clone();

@@ -10,6 +10,7 @@ use super::report::{
     SummaryRow,
 };
 use crate::detect::config::InputConfig;
+use crate::detect::defence::DefenceError;
 use crate::detect::preprocess::{prepare, InputMap};
 use crate::detect::{DetectError, Detector, Proposals};
 use crate::image::Frame;
@@ -202,8 +203,9 @@ pub fn side_by_side(detectors: usize, cores: usize, parallel: usize, threads: us
 /// failed on an earlier frame.
 type Scored = Option<(Result<Proposals, DetectError>, f64)>;
 
-/// A frame's prepared input for one detector; `None` for a detector that failed earlier.
-type Prepared = Option<(Vec<f32>, InputMap)>;
+/// A frame's prepared input for one detector (or why its defence failed on it); `None` for a
+/// detector that failed earlier.
+type Prepared = Option<Result<(Vec<f32>, InputMap), DefenceError>>;
 
 /// Every detector not yet failed on its prepared input, on `parallel` threads side by side;
 /// results in the detectors' order. Each thread takes the next detector not yet taken, in the
@@ -217,7 +219,10 @@ fn run_detectors(
     parallel: usize,
 ) -> Vec<Scored> {
     let one = |det: &mut Box<dyn Detector>, input: Prepared| -> Scored {
-        let (input, map) = input?;
+        let (input, map) = match input? {
+            Ok(x) => x,
+            Err(source) => return Some((Err(DetectError::Defence { detector: det.name().to_string(), source }), 0.0)),
+        };
         let t = Instant::now();
         let r = det.propose_prepared(input, map);
         Some((r, t.elapsed().as_secs_f64()))

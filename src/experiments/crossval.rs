@@ -328,7 +328,7 @@ pub fn crossval_report(
         progress.note(&format!("views.pbr: {k}"));
     }
     let rendered_views = setup.rendered_over_plates(&cfg, rendered)?;
-    let mut dets = load_detectors(&scoring.detectors, &[], 1)?;
+    let mut dets = load_detectors(&scoring.detectors, &[], &scoring.defences, 1)?;
     let n = setup.train.len() + setup.test.len();
     let k = folds.unwrap_or(n);
     create_dir(out)?;

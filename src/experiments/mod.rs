@@ -86,6 +86,8 @@ pub struct Scoring {
     /// Score textures as this printer prints them; `None`: as the config's `[print]` table
     /// says (unprinted without one).
     pub print: Option<PrintConfig>,
+    /// Each detector is also scored behind each of these defence chains (`--defence`).
+    pub defences: Vec<Vec<crate::detect::defence::Defence>>,
 }
 
 impl Scoring {

@@ -249,7 +249,7 @@ pub fn eval_digital(
         mine.push(name.clone());
         conditions.push(Condition { name, seed: 0, texture: Some(tex) });
     }
-    let mut dets = load_detectors(&scoring.detectors, &[], 1)?;
+    let mut dets = load_detectors(&scoring.detectors, &[], &scoring.defences, 1)?;
     let white_box = |name: &str| own_wb.get(name).cloned().unwrap_or_else(|| config_wb.clone());
     let (rows, records) = score_textures(&setup, &mut dets, &conditions, threshold, &white_box, progress)?;
     create_dir(out)?;

@@ -1,6 +1,7 @@
 //! Images: the 8-bit BGR [`Frame`] that cameras, videos and detectors exchange, the float RGB
 //! image that textures, masks and renders use, PNG I/O, and resampling ([`resize`]).
 
+pub mod filter;
 pub mod resize;
 
 use std::path::{Path, PathBuf};

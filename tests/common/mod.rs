@@ -171,5 +171,5 @@ pub fn two_folds(
         rendered,
         curve: Default::default(),
     };
-    (opts, pav::detect::load::load_detectors(&[detector_config("yolov3-tiny")], &[], 1).unwrap())
+    (opts, pav::detect::load::load_detectors(&[detector_config("yolov3-tiny")], &[], &[], 1).unwrap())
 }

@@ -115,3 +115,19 @@ pub fn ctrl_c_flag() -> Result<Arc<AtomicBool>> {
         .context("installing the Ctrl-C and SIGTERM handler")?;
     Ok(stop)
 }
+
+/// One `--defence` value: a chain of input defences applied left to right.
+#[derive(Clone, Debug)]
+pub struct DefenceArg(pub Vec<pav::detect::defence::Defence>);
+
+/// Parses `--defence median:k=3`, `jpeg:q=75+bits:b=5`, ...
+pub fn parse_defence(s: &str) -> Result<DefenceArg, String> {
+    pav::detect::defence::parse_chain(s).map(DefenceArg).map_err(|e| e.to_string())
+}
+
+/// The chains of `--defence` values, and their labels for `run.toml` (`median3;jpeg75`).
+pub fn defence_chains(args: &[DefenceArg]) -> (Vec<Vec<pav::detect::defence::Defence>>, String) {
+    let chains: Vec<_> = args.iter().map(|a| a.0.clone()).collect();
+    let labels = chains.iter().map(|c| pav::detect::defence::chain_label(c)).collect::<Vec<_>>().join(";");
+    (chains, labels)
+}

@@ -1,6 +1,6 @@
 //! `pav-rig evaluate`.
 
-use crate::common::{ctrl_c_flag, Bar};
+use crate::common::{ctrl_c_flag, defence_chains, parse_defence, Bar, DefenceArg};
 use crate::port::parse_seconds;
 use anyhow::{bail, Context, Result};
 use pav::detect::load::load_detectors;
@@ -56,6 +56,11 @@ pub struct Args {
     /// are several detectors and --threads is not given; 1: one after another).
     #[arg(long, default_value_t = 0)]
     parallel: usize,
+    /// Also score each detector behind this input defence, named `DETECTOR+LABEL`: `median:k=3`,
+    /// `bits:b=5`, `jpeg:q=75`, `cutout:n=2,s=40`, `noise:sigma=8`; `+` chains them. Repeat for
+    /// several; the undefended detectors stay, so each defence's clean cost shows beside it.
+    #[arg(long = "defence", value_name = "SPEC", value_parser = parse_defence)]
+    defences: Vec<DefenceArg>,
     /// Skip the PNG plots.
     #[arg(long)]
     no_plots: bool,
@@ -101,7 +106,8 @@ pub fn run(a: &Args) -> Result<()> {
         Some(n) => Frames::Even(n as usize),
         None => Frames::Stride(a.stride as usize),
     };
-    let count = pav::detect::load::expand_configs(&a.detectors)?.len();
+    let (chains, defence_labels) = defence_chains(&a.defences);
+    let count = pav::detect::load::expand_configs(&a.detectors)?.len() * (1 + chains.len());
     let (parallel, threads) = pav::eval::run::side_by_side(count, cores, a.parallel, a.threads);
     let opts = EvalOptions {
         threshold: a.threshold,
@@ -114,13 +120,14 @@ pub fn run(a: &Args) -> Result<()> {
         parallel,
     };
     opts.check()?;
-    let mut detectors = load_detectors(&a.detectors, &a.classes, threads)?;
+    let mut detectors = load_detectors(&a.detectors, &a.classes, &chains, threads)?;
     let sidecars: Vec<PathBuf> =
         jobs.iter().map(|j| j.sidecar.clone().unwrap_or_else(|| pav::sidecar::sidecar_path(&j.path))).collect();
     let record = pav::provenance::Run::start()
         .inputs(jobs.iter().map(|j| j.path.as_path()).chain(sidecars.iter().map(|p| p.as_path())))
         .inputs(pav::detect::load::detector_inputs(&a.detectors).iter().map(|p| p.as_path()))
         .setting("threshold", a.threshold)
+        .setting("defences", &defence_labels)
         .setting("sampling", frames.tag())
         .setting("rotation_period_s", a.rotation_period)
         .setting("start_angle_deg", a.start_angle)

@@ -43,10 +43,11 @@ pub struct Args {
 
 pub fn run(a: &Args) -> Result<()> {
     let cfg = pav::attack::config::OptimizeConfig::load(&a.config)?;
-    let record = pav::provenance::Run::start()
+    let record = a
+        .scoring
+        .record(pav::provenance::Run::start())
         .config(&a.config)
         .inputs(cfg.inputs().iter().chain(&a.references).map(|p| p.as_path()))
-        .inputs(pav::detect::load::detector_inputs(&a.scoring.detectors).iter().map(|p| p.as_path()))
         .setting("seed", cfg.optimizer.seed)
         .setting("folds", a.folds.map_or("one per view".to_string(), |k| k.to_string()))
         .setting("random_seeds", a.random_seeds)
@@ -56,9 +57,6 @@ pub fn run(a: &Args) -> Result<()> {
         )
         .setting("curve_every", a.curve_every)
         .setting("curve_mean_from", a.curve_mean_from.map_or("none".to_string(), |m| m.to_string()))
-        .setting("threshold", a.scoring.threshold)
-        .setting("print", a.scoring.print || a.scoring.print_profile.is_some())
-        .inputs(a.scoring.print_profile.iter().map(|p| p.as_path()))
         .tool("onnxruntime", pav_onnx::runtime::runtime_version());
     let record_path = a.out.join(pav::provenance::FILE);
     record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;

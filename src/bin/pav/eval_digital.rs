@@ -26,13 +26,11 @@ pub struct Args {
 
 pub fn run(a: &Args) -> Result<()> {
     let cfg = pav::attack::config::OptimizeConfig::load(&a.config)?;
-    let record = pav::provenance::Run::start()
+    let record = a
+        .scoring
+        .record(pav::provenance::Run::start())
         .config(&a.config)
         .inputs(cfg.inputs().iter().chain(&a.textures).map(|p| p.as_path()))
-        .inputs(pav::detect::load::detector_inputs(&a.scoring.detectors).iter().map(|p| p.as_path()))
-        .setting("threshold", a.scoring.threshold)
-        .setting("print", a.scoring.print || a.scoring.print_profile.is_some())
-        .inputs(a.scoring.print_profile.iter().map(|p| p.as_path()))
         .setting("random_seeds", a.random_seeds)
         .tool("onnxruntime", pav_onnx::runtime::runtime_version());
     let record_path = a.out.join(pav::provenance::FILE);

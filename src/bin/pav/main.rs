@@ -97,10 +97,24 @@ struct Scoring {
     /// Score as printed through this ICC output profile (implies --print).
     #[arg(long, value_parser = pav::data::arg_path)]
     print_profile: Option<std::path::PathBuf>,
+    /// Also score with each detector behind this input defence, named `DETECTOR+LABEL`
+    /// (`median:k=3`, `bits:b=5`, `jpeg:q=75`, `cutout:n=2,s=40`, `noise:sigma=8`; `+` chains
+    /// them); repeat for several.
+    #[arg(long = "defence", value_name = "SPEC", value_parser = common::parse_defence)]
+    defences: Vec<common::DefenceArg>,
 }
 
 #[cfg(feature = "optimize")]
 impl Scoring {
+    /// `run` with the scoring's inputs (detector configs, models, a print profile) and settings.
+    fn record(&self, run: pav::provenance::Run) -> pav::provenance::Run {
+        run.inputs(pav::detect::load::detector_inputs(&self.detectors).iter().map(|p| p.as_path()))
+            .setting("threshold", self.threshold)
+            .setting("print", self.print || self.print_profile.is_some())
+            .inputs(self.print_profile.iter().map(|p| p.as_path()))
+            .setting("defences", common::defence_chains(&self.defences).1)
+    }
+
     /// The library's scoring options; `config` is the optimize config whose [print] table --print reads.
     fn to_lib(&self, config: &std::path::Path) -> anyhow::Result<pav::experiments::Scoring> {
         let print = if self.print || self.print_profile.is_some() {
@@ -112,7 +126,8 @@ impl Scoring {
         } else {
             None
         };
-        Ok(pav::experiments::Scoring { detectors: self.detectors.clone(), threshold: self.threshold, print })
+        let defences = common::defence_chains(&self.defences).0;
+        Ok(pav::experiments::Scoring { detectors: self.detectors.clone(), threshold: self.threshold, print, defences })
     }
 }
 

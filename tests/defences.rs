@@ -1,0 +1,77 @@
+//! The input defences against an independent implementation on real images: FCA's 11 photos and
+//! every eighth frame of the turntable fixture through `scripts/reference_defences.py` (OpenCV 5.0
+//! and NumPy; `tests/reference/defences.tsv`). Median smoothing, bit-depth squeezing and JPEG must
+//! give the reference's bytes exactly; Gaussian noise, whose draws differ, must change each image
+//! as much, with the same bias and spread (clipping at 0 and 255 shapes both).
+#![cfg(feature = "eval")]
+
+mod common;
+
+use pav::dataset::fca::CarlaSample;
+use pav::detect::defence::{apply_chain, parse_chain};
+use pav::image::Frame;
+use sha2::{Digest, Sha256};
+
+fn fixture_frame(k: usize) -> Frame {
+    let mut rd = pav::video::VideoReader::open(&common::repo().join("fixtures/turntable.mp4")).unwrap();
+    while let Some((i, f)) = rd.read().unwrap() {
+        if i == k {
+            return f;
+        }
+    }
+    panic!("the fixture has no frame {k}");
+}
+
+/// Mean absolute change, mean change and its standard deviation, in levels.
+fn change(before: &Frame, after: &Frame) -> [f64; 3] {
+    let d: Vec<f64> = after.bgr.iter().zip(&before.bgr).map(|(&a, &b)| a as f64 - b as f64).collect();
+    let n = d.len() as f64;
+    let mean = d.iter().sum::<f64>() / n;
+    let sd = (d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt();
+    [d.iter().map(|x| x.abs()).sum::<f64>() / n, mean, sd]
+}
+
+#[test]
+fn defences_match_opencv_and_numpy_on_photos_and_turntable_frames() {
+    let data = common::real_data();
+    let text = std::fs::read_to_string(common::repo().join("tests/reference/defences.tsv")).unwrap();
+    let mut current: Option<(String, Frame)> = None;
+    let mut checked = 0;
+    for line in text.lines().skip(1) {
+        let f: Vec<&str> = line.split('\t').collect();
+        let (label, spec, digest) = (f[0], f[1], f[2]);
+        let want: Vec<f64> = f[3..].iter().map(|v| v.parse().unwrap()).collect();
+        if current.as_ref().is_none_or(|(l, _)| l != label) {
+            let image = match label.split_once('#') {
+                Some((_, k)) => fixture_frame(k.parse().unwrap()),
+                None => {
+                    let dir = if label == "data1.npz" { "train" } else { "test" };
+                    CarlaSample::load(&data.join("fca/carla_dataset").join(dir).join(label)).unwrap().image
+                }
+            };
+            current = Some((label.to_string(), image));
+        }
+        let image = &current.as_ref().unwrap().1;
+        let mut out = image.clone();
+        apply_chain(&parse_chain(spec).unwrap(), &mut out).unwrap();
+        let got = change(image, &out);
+        if digest == "-" {
+            // Two independent draws: allow 5 standard errors of the difference of two means over
+            // the image's samples (a wrong sigma or a biased generator misses by far more).
+            let tol = 5.0 * std::f64::consts::SQRT_2 * want[2] / (out.bgr.len() as f64).sqrt() + 0.0001;
+            for (k, what) in ["mean absolute change", "mean change", "spread"].iter().enumerate() {
+                let (g, w) = (got[k], want[k]);
+                assert!((g - w).abs() <= tol, "{label} {spec}: {what} {g:.4}, reference {w:.4} (tolerance {tol:.4})");
+            }
+        } else {
+            let hex: String = Sha256::digest(&out.bgr).iter().map(|b| format!("{b:02x}")).collect();
+            assert_eq!(
+                hex, digest,
+                "{label} {spec}: bytes differ (mean absolute change {:.4}, reference {:.4})",
+                got[0], want[0]
+            );
+        }
+        checked += 1;
+    }
+    assert_eq!(checked, 17 * 13);
+}
