@@ -247,3 +247,71 @@ fn paint_puts_a_texture_on_the_region_and_keeps_the_car_paint_elsewhere() {
         .unwrap();
     assert!(!o.status.success() && common::output_text(&o).contains("nope.png"), "{}", common::output_text(&o));
 }
+
+/// `--defence` on the experiments: `eval-digital` and `crossval` score each detector behind each
+/// defence beside the undefended one (never starred as a white box: the texture was not made
+/// through the defence), and record the defences in run.toml.
+#[cfg(feature = "optimize")]
+#[test]
+fn eval_digital_and_crossval_score_defended_detectors() {
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let rows = |csv: &str, detector: &str| -> Vec<String> {
+        csv.lines().filter(|l| l.split(',').next() == Some(detector)).map(str::to_string).collect()
+    };
+    let o = pav()
+        .args([
+            "eval-digital",
+            "--config",
+            "configs/studies/half-turns.toml",
+            "-d",
+            "configs/detectors/yolov3-tiny.toml",
+        ])
+        .args(["--defence", "bits:b=1", "--random-seeds", "1", "-o"])
+        .arg(tmp.path().join("digital"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", common::output_text(&o));
+    let csv = std::fs::read_to_string(tmp.path().join("digital/digital.csv")).unwrap();
+    let (plain, defended) = (rows(&csv, "yolov3-tiny"), rows(&csv, "yolov3-tiny+bits1"));
+    assert_eq!(plain.len(), defended.len(), "{csv}");
+    assert!(plain.iter().all(|l| l.contains(",true,")) && defended.iter().all(|l| l.contains(",false,")), "{csv}");
+    // One bit per channel: the original paint is found far less often (the defence's clean cost).
+    let p50 = |lines: &[String]| -> f64 {
+        let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+        let line = lines.iter().find(|l| l.contains(",original,all,")).unwrap();
+        line.split(',').nth(header.iter().position(|h| *h == "p50").unwrap()).unwrap().parse().unwrap()
+    };
+    assert!(p50(&defended) < p50(&plain) - 0.3, "{csv}");
+    let run = common::run_record(&tmp.path().join("digital/run.toml"));
+    assert_eq!(run["settings"]["defences"].as_str(), Some("bits1"), "{run}");
+
+    // Cross-validation of a two-photo, one-epoch config: each fold's texture and baselines are
+    // scored by the plain and the defended detector.
+    let cfg = tmp.path().join("tiny.toml");
+    let base = common::repo().join("configs/studies/half.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "extends = {:?}\n[views]\ntrain = [\"data:fca/carla_dataset/test/data12501.npz\"]\ntest = [\"data:fca/carla_dataset/test/data12502.npz\"]\n[optimizer]\nepochs = 1\n",
+            base.display().to_string()
+        ),
+    )
+    .unwrap();
+    let o = pav()
+        .args(["crossval", "--config"])
+        .arg(&cfg)
+        .args(["--random-seeds", "1", "-d", "configs/detectors/yolov3-tiny.toml", "--defence", "median:k=5", "-o"])
+        .arg(tmp.path().join("cv"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", common::output_text(&o));
+    let csv = std::fs::read_to_string(tmp.path().join("cv/crossval.csv")).unwrap();
+    let defended = rows(&csv, "yolov3-tiny+median5");
+    assert_eq!(defended.len(), rows(&csv, "yolov3-tiny").len(), "{csv}");
+    assert!(defended.iter().any(|l| l.contains(",optimized,held-out,2,")), "both photos held out once:\n{csv}");
+    let run = common::run_record(&tmp.path().join("cv/run.toml"));
+    assert_eq!(run["settings"]["defences"].as_str(), Some("median5"), "{run}");
+    let o = pav().args(["crossval", "--config"]).arg(&cfg).args(["--defence", "jpeg:q=0"]).output().unwrap();
+    assert!(!o.status.success() && common::output_text(&o).contains("q = 0 must be a quality from 1 to 100"));
+}

@@ -270,9 +270,16 @@ pub(crate) fn write_text(path: &Path, text: &str) -> Result<(), ReportError> {
 /// A plain-text summary table for the terminal.
 pub fn summary_table(rows: &[SummaryRow], threshold: f32) -> String {
     let mut s = format!("A_physical at score threshold {threshold}\n");
+    // Columns as wide as their longest entry (defended detectors have long names).
+    let width = |min: usize, f: &dyn Fn(&SummaryRow) -> usize| rows.iter().map(f).max().unwrap_or(0).max(min);
+    let (wv, wd, wc) = (
+        width(20, &|r| r.video.chars().count()),
+        width(16, &|r| r.detector.chars().count()),
+        width(10, &|r| r.classes.chars().count()),
+    );
     let _ = writeln!(
         s,
-        "{:<20} {:<16} {:<10} {:>6} {:>6} {:>8}  {:<13} status",
+        "{:<wv$} {:<wd$} {:<wc$} {:>6} {:>6} {:>8}  {:<13} status",
         "video", "detector", "classes", "f_d", "f_o", "A %", "95% CI"
     );
     for r in rows {
@@ -283,7 +290,7 @@ pub fn summary_table(rows: &[SummaryRow], threshold: f32) -> String {
             .unwrap_or_else(|| "n/a".into());
         let _ = writeln!(
             s,
-            "{:<20} {:<16} {:<10} {:>6} {:>6} {:>8}  {:<13} {}",
+            "{:<wv$} {:<wd$} {:<wc$} {:>6} {:>6} {:>8}  {:<13} {}",
             r.video,
             r.detector,
             r.classes,
