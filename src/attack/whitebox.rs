@@ -183,7 +183,7 @@ impl WhiteBox {
         })?;
         let mut model =
             Model::from_bytes(&bytes).map_err(|source| WhiteBoxError::Model { path: cfg.model.clone(), source })?;
-        let quantized = model.nodes.iter().any(|n| n.op_type == "ConvInteger" || n.op_type == "DynamicQuantizeLinear");
+        let quantized = crate::detect::onnx::is_quantized(&model);
         if quantized && !o.surrogate {
             return Err(unsupported(
                 "a dynamically quantized model has no gradient; set `surrogate = true` on its [[white_box]] to train against its float surrogate".into(),
@@ -192,6 +192,8 @@ impl WhiteBox {
         if quantized {
             model = dequantize(&model).map_err(|e| unsupported(e.to_string()))?.0;
         }
+        // A clipped detector is trained through its clipping: the rewrite is differentiable.
+        crate::detect::defence::clip_graph(&mut model, &cfg.model_defence)?;
         // The box outputs `loss.iou` reads come last and are computed forward only.
         let mut forward_only = 0;
         if matches!(cfg.output, OutputLayout::Ultralytics { .. }) {

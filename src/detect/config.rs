@@ -317,6 +317,9 @@ pub struct DetectorConfig {
     pub target_classes: Vec<usize>,
     /// IoU threshold for NMS.
     pub nms_iou: f32,
+    /// Defences rewritten into the model when it loads (feature norm clipping); the input
+    /// transforms are in [`InputConfig::defence`].
+    pub model_defence: Vec<Defence>,
     /// Where the config was read from.
     pub source: PathBuf,
 }
@@ -354,7 +357,8 @@ impl DetectorConfig {
                 .collect()
         };
         let mut input = raw.input;
-        input.defence = raw.defence;
+        let (on_input, in_model) = raw.defence.into_iter().partition(Defence::on_input);
+        input.defence = on_input;
         let mut cfg = DetectorConfig {
             name: raw.name,
             description: raw.description,
@@ -364,6 +368,7 @@ impl DetectorConfig {
             class_names,
             target_classes: Vec::new(),
             nms_iou: raw.nms_iou,
+            model_defence: in_model,
             source: path.to_path_buf(),
         };
         cfg.set_targets(&raw.classes.target).map_err(|e| cfg_err(e.to_string()))?;
@@ -393,7 +398,13 @@ impl DetectorConfig {
     pub fn defended(&self, chain: &[Defence]) -> Result<DetectorConfig, DetectError> {
         let mut d = self.clone();
         d.name = format!("{}+{}", self.name, chain_label(chain));
-        d.input.defence.extend(chain.iter().cloned());
+        for x in chain {
+            if x.on_input() {
+                d.input.defence.push(x.clone());
+            } else {
+                d.model_defence.push(x.clone());
+            }
+        }
         d.validate().map_err(|msg| DetectError::Config { path: self.source.display().to_string(), msg })?;
         Ok(d)
     }
@@ -414,7 +425,7 @@ impl DetectorConfig {
         if i.std.iter().any(|s| !s.is_finite() || *s == 0.0) || i.mean.iter().any(|m| !m.is_finite()) {
             return Err(format!("input.mean {:?} / input.std {:?} must be finite, std non-zero", i.mean, i.std));
         }
-        for (n, d) in i.defence.iter().enumerate() {
+        for (n, d) in i.defence.iter().chain(&self.model_defence).enumerate() {
             d.check(i.width, i.height).map_err(|e| format!("defence {} ({}): {e}", n + 1, d.label()))?;
         }
         if !(0.0..=1.0).contains(&self.nms_iou) {

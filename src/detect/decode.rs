@@ -17,7 +17,7 @@ pub struct RawOutput {
 }
 
 /// Every proposal of one frame: a box and a final score per class.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Proposals {
     /// Number of classes (row length of `scores`).
     pub num_classes: usize,

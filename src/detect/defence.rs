@@ -6,6 +6,7 @@
 use crate::image::filter;
 use crate::image::Frame;
 use crate::rng::Rng;
+use pav_onnx::proto::Model;
 use serde::Deserialize;
 
 /// One input transform, as a detector config's `[[defence]]` entry or a `--defence` spec names it.
@@ -48,6 +49,20 @@ pub enum Defence {
         #[serde(default)]
         seed: u64,
     },
+    /// Feature norm clipping, in the model: after each tensor of `layers`, feature vectors longer
+    /// than `level` times the map's mean norm are scaled down to it (Yu et al. 2021 use level 1).
+    /// Rewritten into the graph when it loads; an int8 model is clipped on its float surrogate.
+    Clip {
+        /// Tensor names (node outputs) to clip after.
+        layers: Vec<String>,
+        /// Bound as a multiple of the mean feature norm.
+        #[serde(default = "unit_level")]
+        level: f32,
+    },
+}
+
+fn unit_level() -> f32 {
+    1.0
 }
 
 fn mid_grey() -> u8 {
@@ -83,7 +98,7 @@ impl Defence {
         let (kind, params) = spec.split_once(':').unwrap_or((spec, ""));
         let mut table = toml::Table::new();
         table.insert("kind".into(), toml::Value::String(kind.trim().to_string()));
-        for kv in params.split(',').filter(|p| !p.trim().is_empty()) {
+        for kv in split_params(params).into_iter().filter(|p| !p.trim().is_empty()) {
             let (k, v) = kv.split_once('=').ok_or_else(|| invalid(format!("`{kv}` is not KEY=VALUE")))?;
             let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {}", v.trim()))
                 .ok()
@@ -115,6 +130,10 @@ impl Defence {
             Defence::Noise { sigma, .. } if !(sigma.is_finite() && sigma > 0.0 && sigma <= 255.0) => {
                 Err(format!("sigma = {sigma} must be a level in (0, 255]"))
             }
+            Defence::Clip { ref layers, .. } if layers.is_empty() => Err("layers names no tensor to clip after".into()),
+            Defence::Clip { level, .. } if level.is_nan() || level <= 0.0 => {
+                Err(format!("level = {level} must be positive (inf: no clipping)"))
+            }
             _ => Ok(()),
         }
     }
@@ -128,6 +147,7 @@ impl Defence {
             Defence::Jpeg { q } => format!("jpeg{q}"),
             Defence::Cutout { n, s, seed, .. } => format!("cutout{n}x{s}{}", seeded(*seed)),
             Defence::Noise { sigma, seed } => format!("noise{sigma}{}", seeded(*seed)),
+            Defence::Clip { level, .. } => format!("clip{level}"),
         }
     }
 
@@ -136,7 +156,13 @@ impl Defence {
         matches!(self, Defence::Cutout { .. } | Defence::Noise { .. })
     }
 
-    /// Applies the transform to `img`; `draw` seeds the random ones for this image.
+    /// Whether it transforms the input image (else it changes the model: [`clip_graph`]).
+    pub fn on_input(&self) -> bool {
+        !matches!(self, Defence::Clip { .. })
+    }
+
+    /// Applies the transform to `img`; `draw` seeds the random ones for this image. A model-side
+    /// defence leaves the image alone: the graph carries it.
     pub fn apply(&self, img: &mut Frame, draw: u64) -> Result<(), DefenceError> {
         match *self {
             Defence::Median { k } => filter::median(img, k),
@@ -150,6 +176,7 @@ impl Defence {
                 filter::erase(img, &holes, fill)
             }
             Defence::Noise { sigma, seed } => filter::gaussian_noise(img, sigma, &mut Rng::new(seed ^ draw)),
+            Defence::Clip { .. } => {}
         }
         Ok(())
     }
@@ -179,6 +206,37 @@ pub fn apply_chain(chain: &[Defence], img: &mut Frame) -> Result<(), DefenceErro
     Ok(())
 }
 
+/// Rewrites the model-side defences of `defences` (feature norm clipping) into `model`.
+pub fn clip_graph(model: &mut Model, defences: &[Defence]) -> Result<(), pav_onnx::OnnxError> {
+    for d in defences {
+        if let Defence::Clip { layers, level } = d {
+            for l in layers {
+                pav_onnx::rewrite::clip_feature_norms(model, l, *level)?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `params` split at the commas outside brackets and quotes (`layers=["a","b"],level=1`).
+fn split_params(params: &str) -> Vec<&str> {
+    let (mut out, mut start, mut depth, mut quoted) = (Vec::new(), 0, 0i32, false);
+    for (i, c) in params.char_indices() {
+        match c {
+            '"' | '\'' => quoted = !quoted,
+            '[' if !quoted => depth += 1,
+            ']' if !quoted => depth -= 1,
+            ',' if !quoted && depth == 0 => {
+                out.push(&params[start..i]);
+                start = i + 1;
+            }
+            _ => {}
+        }
+    }
+    out.push(&params[start..]);
+    out
+}
+
 /// FNV-1a, 64 bits: a fast, stable hash (the standard library's is not stable across releases).
 fn fnv1a(bytes: &[u8]) -> u64 {
     bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3))
@@ -202,6 +260,10 @@ mod tests {
             ]
         );
         assert_eq!(chain_label(&c), "bits5+jpeg75+cutout2x40+noise8.5s3");
+        let clip = parse_chain(r#"clip:layers=["781", "a,b"],level=0.5"#).unwrap();
+        assert_eq!(clip, vec![Defence::Clip { layers: vec!["781".into(), "a,b".into()], level: 0.5 }]);
+        assert_eq!(parse_chain("clip:layers=['x'],level=inf").unwrap()[0].label(), "clipinf");
+        assert!(!clip[0].on_input() && c.iter().all(Defence::on_input));
     }
 
     #[test]
@@ -222,6 +284,10 @@ mod tests {
             ("cutout:n=0,s=4", "must be positive"),
             ("cutout:n=1,s=4,fill=300", "u8"),
             ("noise:sigma=-1", "sigma = -1"),
+            ("clip:layers=[]", "layers names no tensor"),
+            ("clip:layers=['x'],level=0", "level = 0 must be positive"),
+            ("clip:layers=['x'],level=nan", "level = NaN must be positive"),
+            ("clip:layers=781", "expected a sequence"),
             ("", "names no defence"),
         ] {
             let e = err(spec);

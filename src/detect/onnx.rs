@@ -3,11 +3,14 @@
 use super::config::{DetectorConfig, OutputLayout};
 use super::config::{ExtraInput, ExtraValue, InputConfig};
 use super::decode::{decode, LayoutError, Proposals, RawOutput};
+use super::defence::clip_graph;
 use super::preprocess::InputMap;
 use super::{DetectError, Detector};
 use ort::session::Session;
 use ort::value::{Tensor, TensorElementType, ValueType};
+use pav_onnx::proto::Model;
 use pav_onnx::runtime::session_builder;
+use pav_onnx::surrogate::dequantize;
 
 /// Wraps an ONNX Runtime error of detector `name` while doing `what`.
 pub(crate) fn session_err<'a, E: Into<ort::Error>>(
@@ -38,13 +41,16 @@ impl OnnxDetector {
                 if cfg.model.to_string_lossy().contains(".deps") { "; run scripts/setup.sh" } else { "" }
             )));
         }
-        let session = session_builder(&cfg.name, threads)?
+        let mut builder = session_builder(&cfg.name, threads)?
             // evaluate decodes and prepares the next frame on another thread meanwhile: a pool
             // spinning between runs would take its core.
             .with_intra_op_spinning(false)
-            .map_err(session_err(&cfg.name, "turning spinning off"))?
-            .commit_from_file(&cfg.model)
-            .map_err(session_err(&cfg.name, "loading the ONNX model"))?;
+            .map_err(session_err(&cfg.name, "turning spinning off"))?;
+        let session = match defended_graph(&cfg)? {
+            Some(bytes) => builder.commit_from_memory(&bytes),
+            None => builder.commit_from_file(&cfg.model),
+        }
+        .map_err(session_err(&cfg.name, "loading the ONNX model"))?;
         let names: Vec<String> = session.inputs().iter().map(|i| i.name().to_string()).collect();
         let mut extra = cfg.input.extra.clone();
         if let OutputLayout::Detr { size_input: Some(s), .. } = &cfg.output {
@@ -141,6 +147,31 @@ impl OnnxDetector {
         }
         Ok(raw)
     }
+}
+
+/// The model of `cfg` with its model-side defences rewritten in (an int8 model first replaced by
+/// its float surrogate), as ONNX bytes; `None` when it has none.
+fn defended_graph(cfg: &DetectorConfig) -> Result<Option<Vec<u8>>, DetectError> {
+    if cfg.model_defence.is_empty() {
+        return Ok(None);
+    }
+    let refuse = |msg: String| DetectError::Config { path: cfg.source.display().to_string(), msg };
+    let bytes = std::fs::read(&cfg.model).map_err(|source| DetectError::ConfigRead {
+        path: cfg.source.display().to_string(),
+        what: format!("the model {}", cfg.model.display()),
+        source,
+    })?;
+    let mut model = Model::from_bytes(&bytes).map_err(|e| refuse(format!("feature norm clipping: {e}")))?;
+    if is_quantized(&model) {
+        model = dequantize(&model).map_err(|e| refuse(format!("the float surrogate to clip: {e}")))?.0;
+    }
+    clip_graph(&mut model, &cfg.model_defence).map_err(|e| refuse(format!("feature norm clipping: {e}")))?;
+    Ok(Some(model.to_bytes()))
+}
+
+/// Whether a graph is dynamically quantized (int8 convolutions without a gradient).
+pub fn is_quantized(model: &Model) -> bool {
+    model.nodes.iter().any(|n| n.op_type == "ConvInteger" || n.op_type == "DynamicQuantizeLinear")
 }
 
 impl Detector for OnnxDetector {

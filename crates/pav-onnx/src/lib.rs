@@ -8,6 +8,7 @@ pub mod fold;
 #[cfg(feature = "runtime")]
 pub mod gradops;
 pub mod proto;
+pub mod rewrite;
 #[cfg(feature = "runtime")]
 pub mod runtime;
 #[cfg(feature = "runtime")]

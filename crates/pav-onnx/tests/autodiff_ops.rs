@@ -682,3 +682,20 @@ fn selection_and_pooling_as_a_detr_writes_them() {
     ];
     check(model(pools, vec![ints("pads", vec![0, 0, 1, 0, 0, 0, 0, 1])], &["a", "gap"]), [1, 2, 6, 6], 3e-3);
 }
+
+/// Feature norm clipping (`rewrite::clip_feature_norms`) after a convolution, at a level that
+/// clips some positions and not others: differentiable through the bound (the mean norm) and
+/// the scale, with the axes as attribute (opset 11) and as input (opset 13).
+#[test]
+fn feature_norm_clipping_rewrite() {
+    for opset in [11, 13] {
+        let mut m = model(
+            vec![node("Conv", &["x", "w"], "f", vec![]), node("Sigmoid", &["f"], "y", vec![])],
+            vec![weights("w", vec![4, 2, 1, 1], 3)],
+            &["y"],
+        );
+        m.opset = opset;
+        pav_onnx::rewrite::clip_feature_norms(&mut m, "f", 0.9).unwrap();
+        check(m, [1, 2, 3, 3], 2e-2);
+    }
+}
