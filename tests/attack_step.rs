@@ -10,17 +10,25 @@ use pav::attack::config::OptimizeConfig;
 use pav::attack::loss::{DetectionLoss, Proposals, Reduce};
 use pav::attack::setup::Setup;
 use pav::attack::whitebox::{Ensemble, WhiteBox};
+use pav::detect::defence::Defence;
 use pav::detect::DetectorConfig;
 use pav::rng::Rng;
 use pav::scene::{self, Effect, Scene};
 
 fn setup(size: usize, detector: &str) -> (OptimizeConfig, Setup, WhiteBox) {
+    setup_defended(size, detector, &[])
+}
+
+fn setup_defended(size: usize, detector: &str, defence: &[Defence]) -> (OptimizeConfig, Setup, WhiteBox) {
     common::real_data();
     let mut cfg = OptimizeConfig::load(&common::repo().join("configs/optimize/paper.toml")).unwrap();
     cfg.views.train.truncate(2);
     cfg.views.test.clear();
     let s = Setup::load(&cfg, Some(size)).unwrap();
-    let d = DetectorConfig::load(&common::detector_config(detector)).unwrap();
+    let mut d = DetectorConfig::load(&common::detector_config(detector)).unwrap();
+    if !defence.is_empty() {
+        d = d.defended(defence).unwrap();
+    }
     let loss = DetectionLoss {
         box_threshold: 0.05,
         target: d.target_classes.clone(),
@@ -47,6 +55,15 @@ fn texture_gradient_matches_finite_differences_through_a_zoom_out_and_yolov3_tin
     check_chain("yolov3-tiny", Some(0.8));
 }
 
+/// An adaptive white box: YOLOX-Nano behind median smoothing (differentiated: each gradient to
+/// the sample it picked) and feature norm clipping after its three backbone stages (rewritten
+/// into the graph), the chain checked end to end as above.
+#[test]
+fn texture_gradient_matches_finite_differences_through_median_smoothing_and_clipping() {
+    let clip = Defence::Clip { layers: ["781", "841", "886"].map(String::from).to_vec(), level: 1.0 };
+    check_defended_chain("yolox_nano", None, &[Defence::Median { k: 3 }, clip]);
+}
+
 #[test]
 fn an_ensemble_sums_its_members_and_a_drawn_subset_keeps_the_loss_scale() {
     let (_, s, tiny) = setup(416, "yolov3-tiny");
@@ -71,7 +88,11 @@ fn an_ensemble_sums_its_members_and_a_drawn_subset_keeps_the_loss_scale() {
 
 /// The chain texture → composite → (zoom by `zoom` at a fixed place) → detector → loss.
 fn check_chain(detector: &str, zoom: Option<f32>) {
-    let (_, s, wb) = setup(416, detector);
+    check_defended_chain(detector, zoom, &[]);
+}
+
+fn check_defended_chain(detector: &str, zoom: Option<f32>, defence: &[Defence]) {
+    let (_, s, wb) = setup_defended(416, detector, defence);
     let v = &s.train[1];
     eprintln!(
         "{}: car {:.1} % of the image, textured {:.1} %, c_mid {}",

@@ -117,6 +117,22 @@ pub struct WhiteBoxEntry {
     /// instead of refusing it; scoring still runs the quantized model the config names.
     #[serde(default)]
     pub surrogate: bool,
+    /// Defences to train through (as a detector config's `[[defence]]` list): the white box is
+    /// the defended detector, named `NAME+LABELS` as `--defence` names it in the tables.
+    #[serde(default)]
+    pub defence: Vec<crate::detect::defence::Defence>,
+}
+
+impl WhiteBoxEntry {
+    /// The detector config it names, behind its defences.
+    pub fn detector_config(&self) -> Result<crate::detect::DetectorConfig, crate::detect::DetectError> {
+        let d = crate::detect::DetectorConfig::load(&self.detector)?;
+        if self.defence.is_empty() {
+            Ok(d)
+        } else {
+            d.defended(&self.defence)
+        }
+    }
 }
 
 fn one() -> f32 {
@@ -452,7 +468,7 @@ impl OptimizeConfig {
 
     /// Names of the `[[white_box]]` detectors (read from their configs).
     pub fn white_box_names(&self) -> Result<Vec<String>, crate::detect::DetectError> {
-        self.white_box.iter().map(|w| crate::detect::DetectorConfig::load(&w.detector).map(|d| d.name)).collect()
+        self.white_box.iter().map(|w| w.detector_config().map(|d| d.name)).collect()
     }
 
     /// The parsed `mesh.parts`.

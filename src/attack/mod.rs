@@ -6,6 +6,7 @@ pub mod adam;
 pub mod bench;
 pub mod checkpoint;
 pub mod config;
+pub mod defended;
 pub mod export;
 pub mod loss;
 #[cfg(feature = "optimize")]

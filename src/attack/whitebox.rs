@@ -11,9 +11,11 @@
 //! branch the gradient graph leaves out), to weight its score by its overlap with the car.
 
 use super::config::OptimizeConfig;
+use super::defended::{self, Tape};
 use super::loss::{DetectionLoss, HeadShapeError, Predictions};
 use crate::detect::config::{ChannelOrder, DetectorConfig, OutputLayout};
 use crate::detect::decode::{decode, LayoutError, RawOutput};
+use crate::detect::defence::Defence;
 use crate::detect::preprocess::InputMap;
 use crate::detect::DetectError;
 use crate::image::resize::Resampler;
@@ -71,6 +73,8 @@ pub struct WhiteBox {
     gain: [f32; 3],
     offset: [f32; 3],
     composite: usize,
+    /// Input defences trained through (`attack::defended`).
+    defence: Vec<Defence>,
 }
 
 /// Errors of the white-box detector.
@@ -164,13 +168,6 @@ impl WhiteBox {
     pub fn with_options(cfg: &DetectorConfig, loss: DetectionLoss, o: WhiteBoxOptions) -> Result<Self, WhiteBoxError> {
         let unsupported = |why: String| WhiteBoxError::Unsupported { name: cfg.name.clone(), why };
         let i = &cfg.input;
-        if !i.defence.is_empty() {
-            // Training as if undefended would be a silent lie about what the texture was made for.
-            return Err(unsupported(format!(
-                "input defences ({}) are not differentiated yet; name the undefended config as the white box",
-                crate::detect::defence::chain_label(&i.defence)
-            )));
-        }
         // A square composite letterboxed into a square input is a plain resize.
         if i.width != i.height {
             return Err(unsupported(format!("a non-square input {}x{}", i.width, i.height)));
@@ -278,6 +275,7 @@ impl WhiteBox {
             gain,
             offset,
             composite: o.composite,
+            defence: i.defence.clone(),
         })
     }
 
@@ -296,12 +294,14 @@ impl WhiteBox {
     }
 
     /// The model input of the `size × size` composite `img`: resized, channels ordered and
-    /// normalized as the config says.
-    fn model_input(&self, img: &[f32], size: usize) -> Result<Vec<f32>, WhiteBoxError> {
+    /// normalized as the config says, behind its input defences (what their backward needs).
+    fn model_input(&self, img: &[f32], size: usize) -> Result<(Vec<f32>, Tape), WhiteBoxError> {
         if size != self.composite || img.len() != size * size * 3 {
             return Err(WhiteBoxError::Size { got: img.len(), expected: self.composite });
         }
-        let rgb = self.resample.apply(img, 3);
+        let mut rgb = self.resample.apply(img, 3);
+        let tape = defended::forward(&self.defence, &mut rgb, self.input)
+            .map_err(|source| DetectError::Defence { detector: self.name.clone(), source })?;
         let plane = self.input * self.input;
         let mut x = vec![0f32; 3 * plane];
         for c in 0..3 {
@@ -309,17 +309,18 @@ impl WhiteBox {
             let (g, o) = (self.gain[c], self.offset[c]);
             x[c * plane..(c + 1) * plane].iter_mut().zip(src).for_each(|(d, &v)| *d = v * g + o);
         }
-        Ok(x)
+        Ok((x, tape))
     }
 
-    /// The adjoint of [`WhiteBox::model_input`].
-    fn input_adjoint(&self, g: &[f32]) -> Vec<f32> {
+    /// The adjoint of [`WhiteBox::model_input`] (of its forward that left `tape`).
+    fn input_adjoint(&self, g: &[f32], tape: &Tape) -> Vec<f32> {
         let plane = self.input * self.input;
         let mut rgb = vec![0f32; 3 * plane];
         for c in 0..3 {
             let dst = &mut rgb[self.channel[c] * plane..(self.channel[c] + 1) * plane];
             dst.iter_mut().zip(&g[c * plane..(c + 1) * plane]).for_each(|(d, &v)| *d += v * self.gain[c]);
         }
+        defended::backward(tape, &mut rgb);
         self.resample.adjoint(&rgb, 3)
     }
 
@@ -395,13 +396,20 @@ impl WhiteBox {
     /// target classes, for checks and plots (the box output is there under `loss.iou` only for
     /// Ultralytics and DETR).
     pub fn predictions(&self, img: &[f32], size: usize) -> Result<Vec<([f32; 4], f32)>, WhiteBoxError> {
-        let (outs, _) = self.outputs(&mut self.session(), img, size)?;
+        let (outs, ..) = self.outputs(&mut self.session(), img, size)?;
         let scores = self.read(&outs[..self.out_shapes.len()])?.target_scores(&self.loss.target);
         Ok(self.boxes(&outs)?.into_iter().zip(scores).collect())
     }
 
-    fn outputs(&self, s: &mut GradSession, img: &[f32], size: usize) -> Result<(Vec<Vec<f32>>, Pass), WhiteBoxError> {
-        Ok(s.forward(self.model_input(img, size)?)?)
+    fn outputs(
+        &self,
+        s: &mut GradSession,
+        img: &[f32],
+        size: usize,
+    ) -> Result<(Vec<Vec<f32>>, Pass, Tape), WhiteBoxError> {
+        let (x, tape) = self.model_input(img, size)?;
+        let (outs, pass) = s.forward(x)?;
+        Ok((outs, pass, tape))
     }
 
     /// Loss of the `size × size` RGB composite `img` and its gradient for weight `beta` on L2;
@@ -415,18 +423,18 @@ impl WhiteBox {
     ) -> Result<DetectorGrad, WhiteBoxError> {
         let t0 = Instant::now();
         let mut s = self.session();
-        let (outs, pass) = self.outputs(&mut s, img, size)?;
+        let (outs, pass, tape) = self.outputs(&mut s, img, size)?;
         let (loss, out_grads) = self.score(&outs, beta, car)?;
         let forward_ms = t0.elapsed().as_secs_f64() * 1e3;
         let t1 = Instant::now();
         let g = s.backward(&pass, out_grads)?;
-        let grad = self.input_adjoint(&g);
+        let grad = self.input_adjoint(&g, &tape);
         Ok(DetectorGrad { loss, grad, forward_ms, backward_ms: t1.elapsed().as_secs_f64() * 1e3 })
     }
 
     /// The loss terms of a composite, without gradients (for scoring).
     pub fn loss(&self, img: &[f32], size: usize) -> Result<DetectorLoss, WhiteBoxError> {
-        let (outs, _) = self.outputs(&mut self.session(), img, size)?;
+        let (outs, ..) = self.outputs(&mut self.session(), img, size)?;
         Ok(self.score(&outs, 1.0, None)?.0)
     }
 }
@@ -453,7 +461,7 @@ impl Ensemble {
             .white_box
             .iter()
             .map(|e| {
-                let d = DetectorConfig::load(&e.detector)?;
+                let d = e.detector_config()?;
                 let loss = DetectionLoss {
                     box_threshold: cfg.loss.box_threshold,
                     target: d.target_classes.clone(),
