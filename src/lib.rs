@@ -16,6 +16,7 @@
 
 pub mod colour;
 pub mod data;
+pub mod extends;
 pub mod geometry;
 pub mod image;
 #[cfg(feature = "plot")]

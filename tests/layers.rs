@@ -7,7 +7,20 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
 const LAYERS: [&[&str]; 4] = [
-    &["colour", "data", "provenance", "image", "video", "geometry", "rng", "sidecar", "table", "plot", "progress"],
+    &[
+        "colour",
+        "data",
+        "extends",
+        "provenance",
+        "image",
+        "video",
+        "geometry",
+        "rng",
+        "sidecar",
+        "table",
+        "plot",
+        "progress",
+    ],
     &["print", "render", "scene", "dataset", "detect"],
     &["attack", "eval", "rig"],
     &["experiments"],

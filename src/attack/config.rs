@@ -495,93 +495,19 @@ const PATH_KEYS: &[&[&str]] = &[
     &["print", "calibration"],
 ];
 
-/// The longest `extends` chain followed; a longer one is almost surely a mistake.
-const MAX_EXTENDS: usize = 16;
-
-/// The TOML of `path` merged over the configs it `extends` (the key removed), and the files read,
-/// `path` first. A base's relative paths are rewritten relative to `path`'s folder, so each path
-/// means what it meant in the file that set it.
+/// The TOML of `path` merged over the configs it `extends` (see [`crate::extends`]).
 pub fn read_merged(path: &Path) -> Result<(toml::Table, Vec<PathBuf>), ConfigError> {
-    let mut chain: Vec<(PathBuf, toml::Table)> = Vec::new();
-    let mut next = Some(path.to_path_buf());
-    // Where the current file lies, relative to the first file's folder.
-    let mut rel = PathBuf::new();
-    while let Some(file) = next.take() {
-        if chain.iter().any(|(f, _)| crate::provenance::tidy(f) == crate::provenance::tidy(&file)) {
-            let names: Vec<String> = chain.iter().map(|(f, _)| f.display().to_string()).collect();
-            return Err(ConfigError::Invalid {
-                path: path.into(),
-                source: InvalidConfig(format!("extends: {} comes back to {}", names.join(" → "), file.display())),
-            });
-        }
-        if chain.len() == MAX_EXTENDS {
-            return Err(ConfigError::Invalid {
-                path: path.into(),
-                source: InvalidConfig(format!("extends: more than {MAX_EXTENDS} configs in the chain")),
-            });
-        }
-        let text = std::fs::read_to_string(&file).map_err(|source| ConfigError::Read { path: file.clone(), source })?;
-        let mut table: toml::Table =
-            toml::from_str(&text).map_err(|source| ConfigError::Parse { path: file.clone(), source })?;
-        if !chain.is_empty() {
-            for key in PATH_KEYS {
-                anchor(&mut table, key, &rel);
-            }
-        }
-        match table.remove("extends") {
-            None => {}
-            Some(toml::Value::String(base)) => {
-                let dir = file.parent().unwrap_or(Path::new(""));
-                rel = crate::provenance::tidy(&rel.join(Path::new(&base).parent().unwrap_or(Path::new(""))));
-                next = Some(crate::provenance::tidy(&dir.join(&base)));
-            }
-            Some(other) => {
-                return Err(ConfigError::Invalid {
-                    path: file.clone(),
-                    source: InvalidConfig(format!("extends must be a config's path, got {other}")),
-                })
-            }
-        }
-        chain.push((file, table));
-    }
-    let files = chain.iter().map(|(f, _)| f.clone()).collect();
-    let mut merged = toml::Table::new();
-    for (_, t) in chain.into_iter().rev() {
-        merge(&mut merged, t);
-    }
-    Ok((merged, files))
+    Ok(crate::extends::read_merged(path, PATH_KEYS, &["random"])?)
 }
 
-/// `over`'s keys win; tables merge key by key.
-fn merge(base: &mut toml::Table, over: toml::Table) {
-    for (k, v) in over {
-        match (base.get_mut(&k), v) {
-            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge(b, o),
-            (_, v) => {
-                base.insert(k, v);
-            }
+impl From<crate::extends::ExtendsError> for ConfigError {
+    fn from(e: crate::extends::ExtendsError) -> Self {
+        use crate::extends::ExtendsError as E;
+        match e {
+            E::Read { path, source } => ConfigError::Read { path, source },
+            E::Parse { path, source } => ConfigError::Parse { path, source },
+            E::Invalid { path, msg } => ConfigError::Invalid { path, source: InvalidConfig(msg) },
         }
-    }
-}
-
-/// Prefixes `rel` to the relative paths at `key` (through arrays of tables and arrays of paths).
-fn anchor(table: &mut toml::Table, key: &[&str], rel: &Path) {
-    let Some(v) = table.get_mut(key[0]) else { return };
-    anchor_value(v, &key[1..], rel);
-}
-
-fn anchor_value(v: &mut toml::Value, key: &[&str], rel: &Path) {
-    match v {
-        toml::Value::Array(items) => items.iter_mut().for_each(|i| anchor_value(i, key, rel)),
-        toml::Value::Table(t) if !key.is_empty() => anchor(t, key, rel),
-        toml::Value::String(s) if key.is_empty() => {
-            let p = Path::new(s.as_str());
-            // `data:` entries, absolute paths and named starts ("random") are not relative paths.
-            if !(s.starts_with(crate::data::SCHEME) || p.is_absolute() || s == "random") {
-                *s = crate::provenance::tidy(&rel.join(p)).display().to_string();
-            }
-        }
-        _ => {}
     }
 }
 

@@ -3,6 +3,7 @@
 use super::coco::COCO80;
 use super::defence::{chain_label, Defence};
 use super::DetectError;
+use crate::extends::{read_merged, ExtendsError};
 use crate::image::resize::Interpolation;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -322,6 +323,8 @@ pub struct DetectorConfig {
     pub model_defence: Vec<Defence>,
     /// Where the config was read from.
     pub source: PathBuf,
+    /// The configs it `extends`, nearest first.
+    pub bases: Vec<PathBuf>,
 }
 
 impl DetectorConfig {
@@ -329,13 +332,28 @@ impl DetectorConfig {
     pub fn load(path: &Path) -> Result<Self, DetectError> {
         let cfg_err = |msg: String| DetectError::Config { path: path.display().to_string(), msg };
         let shown = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| DetectError::ConfigRead {
-            path: shown.clone(),
-            what: "the file".into(),
-            source,
-        })?;
-        let raw: RawConfig =
-            toml::from_str(&text).map_err(|source| DetectError::ConfigParse { path: shown.clone(), source })?;
+        let (table, files) =
+            read_merged(path, &[&["model"], &["classes", "names"]], &["coco80"]).map_err(|e| match e {
+                ExtendsError::Read { path, source } => {
+                    DetectError::ConfigRead { path: path.display().to_string(), what: "the file".into(), source }
+                }
+                ExtendsError::Parse { path, source } => {
+                    DetectError::ConfigParse { path: path.display().to_string(), source }
+                }
+                ExtendsError::Invalid { path, msg } => DetectError::Config { path: path.display().to_string(), msg },
+            })?;
+        let parse = |source| DetectError::ConfigParse { path: shown.clone(), source };
+        let raw: RawConfig = if files.len() == 1 {
+            // Parsed from the text again so that an error points at its line.
+            let text = std::fs::read_to_string(path).map_err(|source| DetectError::ConfigRead {
+                path: shown.clone(),
+                what: "the file".into(),
+                source,
+            })?;
+            toml::from_str(&text).map_err(parse)?
+        } else {
+            toml::Value::Table(table).try_into().map_err(parse)?
+        };
         let dir = path.parent().unwrap_or(Path::new("."));
         let resolve = |p: &Path| {
             crate::data::resolve(dir, p)
@@ -370,6 +388,7 @@ impl DetectorConfig {
             nms_iou: raw.nms_iou,
             model_defence: in_model,
             source: path.to_path_buf(),
+            bases: files[1..].to_vec(),
         };
         cfg.set_targets(&raw.classes.target).map_err(|e| cfg_err(e.to_string()))?;
         cfg.validate().map_err(cfg_err)?;
@@ -525,5 +544,31 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("scale_yx"), "{e}");
+    }
+
+    #[test]
+    fn a_config_extends_another_and_adds_defences() {
+        let d = tempfile::tempdir().unwrap();
+        let sub = d.path().join("variants");
+        std::fs::create_dir(&sub).unwrap();
+        let names = d.path().join("names.txt");
+        std::fs::write(&names, "car\ntruck\n").unwrap();
+        let base = write(d.path(), &format!("{BASE}[output]\nlayout='ultralytics'\n[classes]\nnames='names.txt'\n"));
+        std::fs::write(
+            sub.join("v.toml"),
+            "extends = '../d.toml'\nname = 'x+median3'\n[[defence]]\nkind = 'median'\nk = 3\n[[defence]]\nkind = 'clip'\nlayers = ['f']\n",
+        )
+        .unwrap();
+        let c = DetectorConfig::load(&sub.join("v.toml")).unwrap();
+        assert_eq!(c.name, "x+median3");
+        // The base's relative paths keep meaning the base's folder.
+        assert_eq!(crate::provenance::tidy(&c.model), crate::provenance::tidy(&d.path().join("m.onnx")));
+        assert_eq!(c.class_names, ["car", "truck"]);
+        assert_eq!(c.input.defence, [Defence::Median { k: 3 }]);
+        assert_eq!(c.model_defence, [Defence::Clip { layers: vec!["f".into()], level: 1.0 }]);
+        assert_eq!(c.bases, [crate::provenance::tidy(&base)]);
+        std::fs::write(sub.join("w.toml"), "extends = 'v.toml'\n[[defence]]\nkind = 'median'\nk = 2\n").unwrap();
+        let e = DetectorConfig::load(&sub.join("w.toml")).unwrap_err().to_string();
+        assert!(e.contains("w.toml") && e.contains("k = 2 must be odd"), "{e}");
     }
 }

@@ -35,11 +35,16 @@ pub fn expand_configs(paths: &[PathBuf]) -> Result<Vec<PathBuf>, DetectError> {
     Ok(out)
 }
 
-/// The detector configs `paths` name (folders expanded) and their model files, for `run.toml`;
+/// The detector configs `paths` name (folders expanded), the configs they extend and their model
+/// files, for `run.toml`;
 /// what cannot be read is left out (loading the detectors reports it).
 pub fn detector_inputs(paths: &[PathBuf]) -> Vec<PathBuf> {
     let configs = expand_configs(paths).unwrap_or_default();
-    let models: Vec<PathBuf> = configs.iter().filter_map(|c| DetectorConfig::load(c).ok()).map(|d| d.model).collect();
+    let models: Vec<PathBuf> = configs
+        .iter()
+        .filter_map(|c| DetectorConfig::load(c).ok())
+        .flat_map(|d| d.bases.into_iter().chain([d.model]))
+        .collect();
     configs.into_iter().chain(models).collect()
 }
 
