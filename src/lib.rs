@@ -5,7 +5,7 @@
 //!
 //! | layer | modules |
 //! |---|---|
-//! | 0 base | [`colour`], [`data`], [`provenance`], [`image`], [`video`], [`geometry`], [`rng`], [`sidecar`], [`table`], [`plot`], [`progress`] |
+//! | 0 base | [`colour`], [`data`], [`extends`], [`provenance`], [`image`], [`video`], [`geometry`], [`rng`], [`sidecar`], [`table`], [`plot`], [`progress`] |
 //! | 1 method blocks | [`print`], [`render`], [`scene`], [`dataset`], [`detect`] |
 //! | 2 jobs | [`attack`] (the optimizer), [`eval`] (scoring), [`rig`] (turntable and capture); no job uses another |
 //! | 3 experiments | [`experiments`]: what combines the optimizer and scoring |

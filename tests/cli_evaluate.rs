@@ -314,6 +314,16 @@ fn bad_defences_are_refused_naming_the_config() {
         .output()
         .unwrap();
     assert_clean_failure(&o, "yolox_nano.toml: defence 1 (median417): k = 417 is wider than the 416x416 input");
+    // A clipping layer the graph does not have: named with the config, before any frame.
+    let out = tmp.path().join("clip");
+    let o = pav_rig()
+        .args(["evaluate", &fixture(), "-d", &cfg("yolox_nano"), "--defence", "clip:layers=['781','dark9']", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_clean_failure(&o, "yolox_nano.toml: feature norm clipping");
+    assert_clean_failure(&o, "the graph has no tensor `dark9` to clip");
+    assert!(!out.exists(), "nothing runs half-configured");
     let base = std::fs::read_to_string(common::detector_config("yolox_nano")).unwrap();
     for (entry, needle) in [
         ("kind = 'jpeg'\nq = 0\n", "defence 1 (jpeg0): q = 0 must be a quality from 1 to 100"),
