@@ -70,6 +70,14 @@ fn bad_meshes_are_clear_errors() {
     assert!(common::output_text(&o).contains("nan.obj:1: non-finite value NaN"), "{}", common::output_text(&o));
 }
 
+/// `pav eval-digital` of `half-turns.toml`'s photos scored by YOLOv3-tiny; the caller adds the rest.
+#[cfg(feature = "optimize")]
+fn eval_digital_yolov3_tiny() -> Command {
+    let mut c = pav();
+    c.args(["eval-digital", "--config", "configs/studies/half-turns.toml", "-d", "configs/detectors/yolov3-tiny.toml"]);
+    c
+}
+
 /// `pav eval-digital` with a peer's texture at its own size (RAUCA-E2E's 2048² atlas on a 256²
 /// config): resampled, scored, and both random baselines beside it.
 #[cfg(feature = "optimize")]
@@ -87,14 +95,7 @@ fn eval_digital_resamples_a_texture_of_another_size() {
     );
     std::fs::write(yolox_run.join("run.toml"), record).unwrap();
     let out_dir = tmp.path().join("out");
-    let o = pav()
-        .args([
-            "eval-digital",
-            "--config",
-            "configs/studies/half-turns.toml",
-            "-d",
-            "configs/detectors/yolov3-tiny.toml",
-        ])
+    let o = eval_digital_yolov3_tiny()
         .args(["-t", "data:rauca-e2e/RAUCA_E2E.png", "-t"])
         .arg(yolox_run.join("texture.png"))
         .args(["--random-seeds", "2", "-o"])
@@ -259,14 +260,7 @@ fn eval_digital_and_crossval_score_defended_detectors() {
     let rows = |csv: &str, detector: &str| -> Vec<String> {
         csv.lines().filter(|l| l.split(',').next() == Some(detector)).map(str::to_string).collect()
     };
-    let o = pav()
-        .args([
-            "eval-digital",
-            "--config",
-            "configs/studies/half-turns.toml",
-            "-d",
-            "configs/detectors/yolov3-tiny.toml",
-        ])
+    let o = eval_digital_yolov3_tiny()
         .args(["--defence", "bits:b=1", "--random-seeds", "1", "-o"])
         .arg(tmp.path().join("digital"))
         .output()

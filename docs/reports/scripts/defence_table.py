@@ -92,3 +92,22 @@ for d in DET:
         f = squeeze(t)
         cells.append(f"{100 * sum(x > thr for x in f) / len(f):.0f} % of {len(f)}" if f else "–")
     print(f"| {d} | {thr:.3f} | " + " | ".join(cells) + " |")
+
+# The simulated turntable (defence_turntable.sh): A_physical per detector and defence, one column per paint.
+rows = {}
+for name in ("eval", "eval-clipped"):
+    path = os.path.join(out, "turntable", name, "summary.csv")
+    if os.path.exists(path):
+        for r in csv.DictReader(open(path)):
+            rows[(r["video"], r["detector"])] = (int(r["detected"]), int(r["frames"]))
+if rows:
+    PAINTS = [("original", "original"), ("rauca", "RAUCA-E2E"), ("plain", "pav"), ("median", "pav through median"),
+              ("clip", "pav through clipping")]
+    print("\n#### Simulated turntable: A_physical % (frames with the car found / frames scored)\n")
+    print("| detector | defence | " + " | ".join(p for _, p in PAINTS) + " |")
+    print("|---|---|" + "---:|" * len(PAINTS))
+    for d in DET:
+        for label, suffix in DEFENCES:
+            cells = [f"{100 * rows[(v, d + suffix)][0] / rows[(v, d + suffix)][1]:.1f}" if (v, d + suffix) in rows else "–"
+                     for v, _ in PAINTS]
+            print(f"| {d} | {label} | " + " | ".join(cells) + " |")
