@@ -52,7 +52,7 @@ data = {name: collect(cond, tex) for name, cond, tex in TEXTURES}
 seeds = sorted({k[1] for k in data["pav"]})
 print(f"seeds {seeds}; held-out photos per seed: {len({k[2] for k in data['pav']})}\n")
 for d in DET:
-    print(f"\n#### {d}: mean best car score / photos with the car found\n")
+    print(f"\n### {d}: mean best car score / photos with the car found\n")
     print("| defence | " + " | ".join(t for t, _, _ in TEXTURES) + " |")
     print("|---|" + "---:|" * len(TEXTURES))
     for label, suffix in DEFENCES:
@@ -62,7 +62,7 @@ for d in DET:
             cells.append(f"{statistics.mean(v):.3f} / {100 * sum(x >= 0.5 for x in v) / len(v):.0f} %" if v else "–")
         print(f"| {label} | " + " | ".join(cells) + " |")
 
-print("\n#### Paired differences of the mean best car score, pairs = (seed, held-out photo)\n")
+print("\n### Paired differences of the mean best car score, pairs = (seed, held-out photo)\n")
 print("Clean cost: the original paint behind the defence − without it (negative: the defence loses the car). "
       "Effect: pav's texture behind the defence − without it (positive: the defence finds the car again). "
       "Adapted: the texture trained through the defence − pav's, both scored behind it (negative: adapting wins it back).\n")
@@ -76,7 +76,7 @@ for label, suffix in DEFENCES[1:]:
               f"{paired(data['pav through median'], dd, data['pav'], dd) if suffix == '+median3' else '–'} | "
               f"{paired(data['pav through clipping'], dd, data['pav'], dd) if suffix == '+clip2' else '–'} |")
 
-print("\n#### Feature squeezing as an attack detector (Xu et al.)\n")
+print("\n### Feature squeezing as an attack detector (Xu et al.)\n")
 print("A photo is flagged when bit depth 4 or a 3×3 median moves its best car score by more than the threshold "
       "that flags 5 % of legitimate photos (original paint and random blocks).\n")
 print("| detector | threshold | " + " | ".join(f"{t} flagged" for t, _, _ in TEXTURES) + " |")
@@ -103,7 +103,7 @@ for name in ("eval", "eval-clipped"):
 if rows:
     PAINTS = [("original", "original"), ("rauca", "RAUCA-E2E"), ("plain", "pav"), ("median", "pav through median"),
               ("clip", "pav through clipping")]
-    print("\n#### Simulated turntable: A_physical % (frames with the car found / frames scored)\n")
+    print("\n### Simulated turntable: A_physical % (frames with the car found / frames scored)\n")
     print("| detector | defence | " + " | ".join(p for _, p in PAINTS) + " |")
     print("|---|---|" + "---:|" * len(PAINTS))
     for d in DET:
