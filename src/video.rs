@@ -22,6 +22,9 @@ pub enum VideoError {
         /// OpenCV's error.
         source: opencv::Error,
     },
+    /// An image file is missing or not one OpenCV reads.
+    #[error("image {0} cannot be read (missing, or not a format OpenCV reads)")]
+    Image(PathBuf),
     /// OpenCV opened nothing (corrupt, truncated before the index, or unsupported).
     #[error("video {path} cannot be opened: not a readable video (corrupt, truncated or unsupported format)")]
     Unreadable {
@@ -151,6 +154,16 @@ pub fn opencv_version() -> Option<String> {
 /// The first line of `ffmpeg -version`, which encodes recordings (for `run.toml`).
 pub fn ffmpeg_version() -> Option<String> {
     crate::provenance::tool_version("ffmpeg", &["-version"])
+}
+
+/// Reads an image file (any format OpenCV reads: PNG, JPEG, TIFF, ...) as a [`Frame`].
+pub fn read_image(path: &Path) -> Result<Frame, VideoError> {
+    let m =
+        opencv::imgcodecs::imread(path, opencv::imgcodecs::IMREAD_COLOR).map_err(|_| VideoError::Image(path.into()))?;
+    if m.empty() {
+        return Err(VideoError::Image(path.into()));
+    }
+    mat_to_frame(&m).map_err(|source| VideoError::Decode { path: path.into(), frame: 0, source })
 }
 
 /// Copies an 8-bit BGR (or grey) OpenCV matrix into a [`Frame`].

@@ -1,7 +1,7 @@
 //! `pav-rig model inspect` on every detector in the data set: the four pav decodes are guessed as
 //! their shipped configs' layouts and their skeletons load as detector configs, NanoDet's GFL head
 //! too; PicoDet's in-graph NMS is guessed as `rows` with its scale-factor input; a non-model is a
-//! clear error.
+//! clear error. `pav-rig model check` tells a finished config from a wrong one on real images.
 #![cfg(feature = "eval")]
 
 mod common;
@@ -83,4 +83,56 @@ fn gfl_and_in_graph_nms_are_guessed_and_bad_files_refused() {
     std::fs::write(&junk, b"not a model").unwrap();
     let (ok, text) = inspect(junk.to_str().unwrap(), &tmp.path().join("j.toml"));
     assert!(!ok && text.contains("junk.onnx"), "{text}");
+}
+
+fn check(config: &std::path::Path, images: &[&str], out: &std::path::Path) -> (bool, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+        .current_dir(common::repo())
+        .env("RUST_BACKTRACE", "0")
+        .args(["model", "check"])
+        .arg(config)
+        .args(images)
+        .arg("-o")
+        .arg(out)
+        .output()
+        .unwrap();
+    (o.status.success(), common::output_text(&o))
+}
+
+/// `model check` on a photo and a turntable frame: the right config finds the car and draws it; a
+/// config with a wrong scale (inputs in [0, 1] for a model that reads 0–255) finds none and says
+/// what to check; an unreadable image is named.
+#[test]
+fn check_shows_a_wrong_config_at_once() {
+    let data = common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let photo = data.join("fca/carla_dataset/test/data12501.npz").display().to_string();
+    let frame = "fixtures/turntable.mp4#0";
+    let good = common::detector_config("yolox_nano");
+    let (ok, text) = check(&good, &[&photo, frame], &tmp.path().join("good"));
+    assert!(ok, "{text}");
+    let best: Vec<f32> = text
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("best car: "))
+        .map(|l| l.split_whitespace().next().unwrap().parse().unwrap())
+        .collect();
+    assert!(best.len() == 2 && best.iter().all(|s| *s > 0.5), "{text}");
+    assert!(text.contains(" car ") && text.contains(" *"), "target detections are starred:\n{text}");
+    for png in ["data12501.png", "turntable_0.png"] {
+        let img = pav::image::Rgb::load(&tmp.path().join("good").join(png)).unwrap();
+        // The car's box is drawn in green.
+        let green = img.rgb.chunks_exact(3).filter(|p| p[0] < 0.3 && p[1] > 0.7 && p[2] < 0.3).count();
+        assert!(green > 100, "{png}: {green} green pixels");
+    }
+    let wrong = tmp.path().join("wrong.toml");
+    std::fs::write(
+        &wrong,
+        format!("extends = {:?}\nname = \"wrong\"\n[input]\nscale = 0.00392156862745098\n", good.display().to_string()),
+    )
+    .unwrap();
+    let (ok, text) = check(&wrong, &[&photo, frame], &tmp.path().join("wrong"));
+    assert!(ok, "{text}");
+    assert!(text.contains("no car on 2 of 2 images") && text.contains("check the config's channels, scale"), "{text}");
+    let (ok, text) = check(&good, &["no/such.jpg"], &tmp.path().join("x"));
+    assert!(!ok && text.contains("no/such.jpg") && text.contains("cannot be read"), "{text}");
 }

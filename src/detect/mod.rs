@@ -1,5 +1,7 @@
 //! Object detectors: configs, preprocessing, output decoding, NMS and backends.
 
+#[cfg(feature = "eval")]
+pub mod check;
 pub mod coco;
 pub mod config;
 pub mod decode;

@@ -128,6 +128,25 @@ pub fn save_rgb8(path: &Path, w: usize, h: usize, rgb: Vec<u8>) -> Result<(), Im
 }
 
 /// Draws a 10 mm × 1 mm black bar with 1 mm ticks (5 mm ticks twice as tall) into an 8-bit
+/// Draws the outline of box `b` (xyxy, frame pixels, clipped to the frame) in colour `bgr`,
+/// `thickness` pixels wide, inside the box.
+pub fn draw_box(frame: &mut Frame, b: [f32; 4], bgr: [u8; 3], thickness: usize) {
+    let (w, h) = (frame.width, frame.height);
+    if w == 0 || h == 0 {
+        return;
+    }
+    let clip = |v: f32, hi: usize| (v.round().max(0.0) as usize).min(hi - 1);
+    let (x0, y0, x1, y1) = (clip(b[0], w), clip(b[1], h), clip(b[2], w), clip(b[3], h));
+    for y in y0..=y1 {
+        for x in x0..=x1 {
+            let edge = x < x0 + thickness || x + thickness > x1 || y < y0 + thickness || y + thickness > y1;
+            if edge {
+                frame.bgr[(y * w + x) * 3..(y * w + x) * 3 + 3].copy_from_slice(&bgr);
+            }
+        }
+    }
+}
+
 /// RGB image `w × h`, its left end at `(x, y)`: printed at 100 %, it measures 10 mm.
 pub fn draw_scale_bar(rgb: &mut [u8], w: usize, h: usize, x: usize, y: usize, px_per_mm: f64) {
     let len = (10.0 * px_per_mm).round() as usize;

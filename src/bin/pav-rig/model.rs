@@ -27,6 +27,22 @@ pub enum Cmd {
         #[arg(long, short = 'o')]
         out: Option<PathBuf>,
     },
+    /// Try a finished detector config on images with a car: every detection above a score, the
+    /// target's best, and each image with its boxes drawn (targets green, others orange), so that a
+    /// wrong channel order, scale or layout shows at once.
+    Check {
+        /// The detector config.
+        config: PathBuf,
+        /// Image files (any format OpenCV reads), FCA `.npz` samples, or `VIDEO#K` for frame K.
+        #[arg(required = true)]
+        images: Vec<String>,
+        /// List detections from this score.
+        #[arg(long, default_value_t = 0.25)]
+        min_score: f32,
+        /// Folder for the images with their boxes drawn (`<name>.png`).
+        #[arg(long, short = 'o')]
+        out: Option<PathBuf>,
+    },
     /// Convert a darknet cfg + weights (YOLOv3/YOLOv3-tiny) to an ONNX graph with raw head outputs.
     Darknet2onnx {
         /// Darknet .cfg file.
@@ -53,6 +69,7 @@ pub enum Cmd {
 pub fn run(c: &Cmd) -> Result<()> {
     match c {
         Cmd::Inspect { model, size, no_run, out } => inspect(model, *size, *no_run, out.as_deref())?,
+        Cmd::Check { config, images, min_score, out } => check(config, images, *min_score, out.as_deref())?,
         Cmd::Darknet2onnx { cfg, weights, out } => {
             let r = convert(cfg, weights, out)?;
             eprintln!(
@@ -78,6 +95,66 @@ pub fn run(c: &Cmd) -> Result<()> {
                 b.len() as f64 / 1e6
             );
         }
+    }
+    Ok(())
+}
+
+fn check(config: &std::path::Path, images: &[String], min_score: f32, out: Option<&std::path::Path>) -> Result<()> {
+    use pav::detect::check::{annotate, check, read_input};
+    use pav::detect::Detector;
+    if !(0.0..=1.0).contains(&min_score) {
+        anyhow::bail!("--min-score {min_score} must be within [0, 1]");
+    }
+    let cfg = pav::detect::DetectorConfig::load(config)?;
+    let names = cfg.class_names.clone();
+    let mut det = pav::detect::onnx::OnnxDetector::new(cfg, 0)?;
+    let target = det.target_label();
+    if let Some(o) = out {
+        std::fs::create_dir_all(o).with_context(|| format!("creating {}", o.display()))?;
+    }
+    let mut missed = 0;
+    for spec in images {
+        let frame = read_input(spec)?;
+        let c = check(&mut det, &frame, min_score)?;
+        println!("{spec} ({}x{}):", frame.width, frame.height);
+        for d in &c.detections {
+            let b = d.bbox;
+            let star = if det.target_classes().contains(&d.class_id) { " *" } else { "" };
+            println!(
+                "  {:<14} {:.3}  [{:.0}, {:.0}, {:.0}, {:.0}]{star}",
+                names[d.class_id], d.score, b[0], b[1], b[2], b[3]
+            );
+        }
+        match c.best {
+            Some(b) if b.score >= min_score => println!(
+                "  best {target}: {:.3} at [{:.0}, {:.0}, {:.0}, {:.0}]",
+                b.score, b.bbox[0], b.bbox[1], b.bbox[2], b.bbox[3]
+            ),
+            best => {
+                missed += 1;
+                println!("  no {target} from {min_score} (best {:.3})", best.map_or(0.0, |b| b.score));
+            }
+        }
+        if let Some(o) = out {
+            let name = std::path::Path::new(spec.split('#').next().unwrap_or(spec))
+                .file_stem()
+                .map_or_else(|| "image".into(), |s| s.to_string_lossy().into_owned());
+            let name = match spec.rsplit_once('#') {
+                Some((_, k)) => format!("{name}_{k}"),
+                None => name,
+            };
+            let drawn = annotate(&frame, &c.detections, det.target_classes());
+            let rgb: Vec<u8> = drawn.bgr.chunks_exact(3).flat_map(|p| [p[2], p[1], p[0]]).collect();
+            let path = o.join(format!("{name}.png"));
+            pav::image::save_rgb8(&path, drawn.width, drawn.height, rgb)?;
+            println!("  wrote {}", path.display());
+        }
+    }
+    if missed > 0 {
+        println!(
+            "\nno {target} on {missed} of {} images: if they show one, check the config's channels, scale, mean/std, resize and align, and its output layout",
+            images.len()
+        );
     }
     Ok(())
 }
