@@ -32,6 +32,24 @@ pub enum ExtendsError {
     },
 }
 
+/// `path` read as a `T` over the chain of configs it `extends`, and the files read, `path` first
+/// (see [`read_merged`]). A file that extends nothing is parsed from its own text, so that an
+/// error points at its line.
+pub fn load<T: serde::de::DeserializeOwned>(
+    path: &Path,
+    path_keys: &[&[&str]],
+    names: &[&str],
+) -> Result<(T, Vec<PathBuf>), ExtendsError> {
+    let parse = |source| ExtendsError::Parse { path: path.into(), source };
+    let text = std::fs::read_to_string(path).map_err(|source| ExtendsError::Read { path: path.into(), source })?;
+    let table: toml::Table = toml::from_str(&text).map_err(parse)?;
+    if !table.contains_key("extends") {
+        return Ok((toml::from_str(&text).map_err(parse)?, vec![path.to_path_buf()]));
+    }
+    let (merged, files) = read_merged(path, path_keys, names)?;
+    Ok((toml::Value::Table(merged).try_into().map_err(parse)?, files))
+}
+
 /// The longest `extends` chain followed; a longer one is almost surely a mistake.
 const MAX_EXTENDS: usize = 16;
 

@@ -305,16 +305,7 @@ impl OptimizeConfig {
     /// Reads the file and the chain of configs it `extends`, resolves relative paths against the
     /// folder of the file that names them, and checks the values.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let (table, files) = read_merged(path)?;
-        let parse = |source| ConfigError::Parse { path: path.into(), source };
-        let mut c: OptimizeConfig = if files.len() == 1 {
-            // Parsed from the text again so that an error points at its line.
-            let text =
-                std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: path.into(), source })?;
-            toml::from_str(&text).map_err(parse)?
-        } else {
-            toml::Value::Table(table).try_into().map_err(parse)?
-        };
+        let (mut c, files): (OptimizeConfig, _) = crate::extends::load(path, PATH_KEYS, &["random"])?;
         c.files = files;
         let dir = path.parent().unwrap_or(Path::new("."));
         let mut first_err = None;
@@ -494,11 +485,6 @@ const PATH_KEYS: &[&[&str]] = &[
     &["print", "profile"],
     &["print", "calibration"],
 ];
-
-/// The TOML of `path` merged over the configs it `extends` (see [`crate::extends`]).
-pub fn read_merged(path: &Path) -> Result<(toml::Table, Vec<PathBuf>), ConfigError> {
-    Ok(crate::extends::read_merged(path, PATH_KEYS, &["random"])?)
-}
 
 impl From<crate::extends::ExtendsError> for ConfigError {
     fn from(e: crate::extends::ExtendsError) -> Self {

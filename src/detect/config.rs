@@ -3,7 +3,7 @@
 use super::coco::COCO80;
 use super::defence::{chain_label, Defence};
 use super::DetectError;
-use crate::extends::{read_merged, ExtendsError};
+use crate::extends::{load, ExtendsError};
 use crate::image::resize::Interpolation;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -332,8 +332,8 @@ impl DetectorConfig {
     pub fn load(path: &Path) -> Result<Self, DetectError> {
         let cfg_err = |msg: String| DetectError::Config { path: path.display().to_string(), msg };
         let shown = path.display().to_string();
-        let (table, files) =
-            read_merged(path, &[&["model"], &["classes", "names"]], &["coco80"]).map_err(|e| match e {
+        let (raw, files): (RawConfig, _) =
+            load(path, &[&["model"], &["classes", "names"]], &["coco80"]).map_err(|e| match e {
                 ExtendsError::Read { path, source } => {
                     DetectError::ConfigRead { path: path.display().to_string(), what: "the file".into(), source }
                 }
@@ -342,18 +342,6 @@ impl DetectorConfig {
                 }
                 ExtendsError::Invalid { path, msg } => DetectError::Config { path: path.display().to_string(), msg },
             })?;
-        let parse = |source| DetectError::ConfigParse { path: shown.clone(), source };
-        let raw: RawConfig = if files.len() == 1 {
-            // Parsed from the text again so that an error points at its line.
-            let text = std::fs::read_to_string(path).map_err(|source| DetectError::ConfigRead {
-                path: shown.clone(),
-                what: "the file".into(),
-                source,
-            })?;
-            toml::from_str(&text).map_err(parse)?
-        } else {
-            toml::Value::Table(table).try_into().map_err(parse)?
-        };
         let dir = path.parent().unwrap_or(Path::new("."));
         let resolve = |p: &Path| {
             crate::data::resolve(dir, p)
@@ -374,22 +362,20 @@ impl DetectorConfig {
                 .filter(|l| !l.is_empty())
                 .collect()
         };
-        let mut input = raw.input;
-        let (on_input, in_model) = raw.defence.into_iter().partition(Defence::on_input);
-        input.defence = on_input;
         let mut cfg = DetectorConfig {
             name: raw.name,
             description: raw.description,
             model: resolve(&raw.model)?,
-            input,
+            input: raw.input,
             output: raw.output,
             class_names,
             target_classes: Vec::new(),
             nms_iou: raw.nms_iou,
-            model_defence: in_model,
+            model_defence: Vec::new(),
             source: path.to_path_buf(),
             bases: files[1..].to_vec(),
         };
+        cfg.add_defences(raw.defence);
         cfg.set_targets(&raw.classes.target).map_err(|e| cfg_err(e.to_string()))?;
         cfg.validate().map_err(cfg_err)?;
         Ok(cfg)
@@ -417,15 +403,20 @@ impl DetectorConfig {
     pub fn defended(&self, chain: &[Defence]) -> Result<DetectorConfig, DetectError> {
         let mut d = self.clone();
         d.name = format!("{}+{}", self.name, chain_label(chain));
-        for x in chain {
-            if x.on_input() {
-                d.input.defence.push(x.clone());
-            } else {
-                d.model_defence.push(x.clone());
-            }
-        }
+        d.add_defences(chain.iter().cloned());
         d.validate().map_err(|msg| DetectError::Config { path: self.source.display().to_string(), msg })?;
         Ok(d)
+    }
+
+    /// Appends `defences`: input transforms to the input's chain, the others to the model's.
+    fn add_defences(&mut self, defences: impl IntoIterator<Item = Defence>) {
+        for d in defences {
+            if d.on_input() {
+                self.input.defence.push(d);
+            } else {
+                self.model_defence.push(d);
+            }
+        }
     }
 
     /// Names of the target classes, joined for reports.
