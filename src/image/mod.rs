@@ -22,6 +22,11 @@ impl Frame {
     pub fn from_levels(width: usize, height: usize, bgr: &[f32]) -> Frame {
         Frame { width, height, bgr: bgr.iter().map(|v| v.round().clamp(0.0, 255.0) as u8).collect() }
     }
+
+    /// Writes the frame as an 8-bit RGB PNG.
+    pub fn save_png(&self, path: &Path) -> Result<(), ImageError> {
+        save_rgb8(path, self.width, self.height, self.bgr.chunks_exact(3).flat_map(|p| [p[2], p[1], p[0]]).collect())
+    }
 }
 
 /// An RGB image with values in [0, 1], row-major from the top-left, 3 floats per pixel.

@@ -308,9 +308,7 @@ pub fn report_image(path: &Path, rows: &[PatchRow], title: &str) -> Result<(), C
 }
 
 fn save_frame(path: &Path, f: &Frame) -> Result<(), CalibrateError> {
-    let rgb: Vec<u8> = f.bgr.chunks_exact(3).flat_map(|p| [p[2], p[1], p[0]]).collect();
-    crate::image::save_rgb8(path, f.width, f.height, rgb)
-        .map_err(|e| CalibrateError::Write { path: path.into(), why: e.to_string() })
+    f.save_png(path).map_err(|e| CalibrateError::Write { path: path.into(), why: e.to_string() })
 }
 
 #[cfg(test)]

@@ -787,8 +787,7 @@ pub fn render_views(
                         let (rgb, alpha) = crate::image::load_rgba(&car)?;
                         let out = crate::image::over(&rgb, &alpha, plate);
                         let path = views_dir.join(format!("{name}.png"));
-                        let px: Vec<u8> = out.bgr.chunks(3).flat_map(|p| [p[2], p[1], p[0]]).collect();
-                        crate::image::save_rgb8(&path, n, n, px)?;
+                        out.save_png(&path)?;
                     }
                     let g = GBuffer::render(&mesh, &v.camera, n);
                     let mask: Vec<f32> = g.face.iter().flat_map(|f| [if *f == EMPTY { 0.0 } else { 1.0 }; 3]).collect();

@@ -136,17 +136,16 @@ fn check(config: &std::path::Path, images: &[String], min_score: f32, out: Optio
             }
         }
         if let Some(o) = out {
-            let name = std::path::Path::new(spec.split('#').next().unwrap_or(spec))
+            // `VIDEO#K` is named `VIDEO_K`.
+            let (file, frame_no) = spec.rsplit_once('#').map_or((spec.as_str(), None), |(f, k)| (f, Some(k)));
+            let stem = std::path::Path::new(file)
                 .file_stem()
                 .map_or_else(|| "image".into(), |s| s.to_string_lossy().into_owned());
-            let name = match spec.rsplit_once('#') {
-                Some((_, k)) => format!("{name}_{k}"),
-                None => name,
-            };
-            let drawn = annotate(&frame, &c.detections, det.target_classes());
-            let rgb: Vec<u8> = drawn.bgr.chunks_exact(3).flat_map(|p| [p[2], p[1], p[0]]).collect();
-            let path = o.join(format!("{name}.png"));
-            pav::image::save_rgb8(&path, drawn.width, drawn.height, rgb)?;
+            let path = o.join(match frame_no {
+                Some(k) => format!("{stem}_{k}.png"),
+                None => format!("{stem}.png"),
+            });
+            annotate(&frame, &c.detections, det.target_classes()).save_png(&path)?;
             println!("  wrote {}", path.display());
         }
     }
