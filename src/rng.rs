@@ -41,6 +41,12 @@ impl Rng {
     }
 }
 
+/// FNV-1a over 64-bit items (bytes, or values' bits): a fast hash that is the same on every
+/// build and release (the standard library's is not), to seed a draw from what it draws for.
+pub fn fnv1a(items: impl IntoIterator<Item = u64>) -> u64 {
+    items.into_iter().fold(0xcbf2_9ce4_8422_2325, |h, v| (h ^ v).wrapping_mul(0x0000_0100_0000_01b3))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

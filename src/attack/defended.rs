@@ -7,7 +7,7 @@
 
 use crate::detect::defence::{Defence, DefenceError};
 use crate::image::{filter, Frame};
-use crate::rng::Rng;
+use crate::rng::{fnv1a, Rng};
 
 /// What a chain's backward needs from its forward, one entry per defence.
 #[derive(Clone, Debug, Default)]
@@ -33,7 +33,7 @@ pub fn forward(chain: &[Defence], x: &mut [f32], side: usize) -> Result<Tape, De
 fn forward_drawn(chain: &[Defence], x: &mut [f32], side: usize, draw: Option<u64>) -> Result<Tape, DefenceError> {
     let mut tape = Tape::default();
     for d in chain.iter().filter(|d| d.on_input()) {
-        let draw = if d.random() { draw.unwrap_or_else(|| hash_floats(x)) } else { 0 };
+        let draw = if d.random() { draw.unwrap_or_else(|| fnv1a(x.iter().map(|v| v.to_bits() as u64))) } else { 0 };
         tape.0.push(match *d {
             Defence::Median { k } => Step::Gather(median(x, side, k)),
             Defence::Bits { b } => {
@@ -138,11 +138,6 @@ fn from_frame(f: &Frame, x: &mut [f32]) {
             x[c * plane + i] = v as f32 / 255.0;
         }
     }
-}
-
-/// FNV-1a over the values' bits: a fresh, reproducible draw per image.
-fn hash_floats(x: &[f32]) -> u64 {
-    x.iter().fold(0xcbf2_9ce4_8422_2325, |h, v| (h ^ v.to_bits() as u64).wrapping_mul(0x0000_0100_0000_01b3))
 }
 
 #[cfg(test)]

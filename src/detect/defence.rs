@@ -5,7 +5,7 @@
 
 use crate::image::filter;
 use crate::image::Frame;
-use crate::rng::Rng;
+use crate::rng::{fnv1a, Rng};
 use pav_onnx::proto::Model;
 use serde::Deserialize;
 
@@ -200,7 +200,7 @@ pub fn chain_label(chain: &[Defence]) -> String {
 /// the image as it reaches them, so a frame gets the same draw whatever order or thread scores it.
 pub fn apply_chain(chain: &[Defence], img: &mut Frame) -> Result<(), DefenceError> {
     for d in chain {
-        let draw = if d.random() { fnv1a(&img.bgr) } else { 0 };
+        let draw = if d.random() { fnv1a(img.bgr.iter().map(|&b| b as u64)) } else { 0 };
         d.apply(img, draw)?;
     }
     Ok(())
@@ -235,11 +235,6 @@ fn split_params(params: &str) -> Vec<&str> {
     }
     out.push(&params[start..]);
     out
-}
-
-/// FNV-1a, 64 bits: a fast, stable hash (the standard library's is not stable across releases).
-fn fnv1a(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3))
 }
 
 #[cfg(test)]
