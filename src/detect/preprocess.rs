@@ -58,13 +58,7 @@ pub fn model_image(frame: &Frame, cfg: &InputConfig) -> (Frame, InputMap) {
     let g = geometry(frame, cfg);
     let (iw, ih) = (cfg.width, cfg.height);
     let mut canvas = Frame { width: iw, height: ih, bgr: vec![cfg.pad_value; iw * ih * 3] };
-    let resized;
-    let pixels: &[u8] = if (g.nw, g.nh) == (frame.width, frame.height) {
-        &frame.bgr
-    } else {
-        resized = resize_u8(frame, g.nw, g.nh, cfg.interpolation, true);
-        &resized
-    };
+    let pixels = g.pixels(frame, cfg, true);
     for (y, row) in pixels.chunks_exact(g.nw * 3).take(g.nh).enumerate() {
         let at = ((y + g.py) * iw + g.px) * 3;
         canvas.bgr[at..at + g.nw * 3].copy_from_slice(row);
@@ -81,6 +75,15 @@ struct Geometry {
 }
 
 impl Geometry {
+    /// The frame's pixels at `nw × nh` (the frame itself when it already has that size).
+    fn pixels<'a>(&self, frame: &'a Frame, cfg: &InputConfig, opencv: bool) -> std::borrow::Cow<'a, [u8]> {
+        if (self.nw, self.nh) == (frame.width, frame.height) {
+            std::borrow::Cow::Borrowed(&frame.bgr)
+        } else {
+            std::borrow::Cow::Owned(resize_u8(frame, self.nw, self.nh, cfg.interpolation, opencv))
+        }
+    }
+
     fn map(&self, frame: &Frame) -> InputMap {
         let (w, h) = (frame.width as f32, frame.height as f32);
         InputMap {
@@ -119,7 +122,6 @@ pub fn prepare_exact(frame: &Frame, cfg: &InputConfig) -> (Vec<f32>, InputMap) {
 }
 
 fn prepare_with(frame: &Frame, cfg: &InputConfig, opencv: bool) -> (Vec<f32>, InputMap) {
-    let (w, h) = (frame.width, frame.height);
     let (iw, ih) = (cfg.width, cfg.height);
     let g = geometry(frame, cfg);
     let (nw, nh, px, py) = (g.nw, g.nh, g.px, g.py);
@@ -137,13 +139,7 @@ fn prepare_with(frame: &Frame, cfg: &InputConfig, opencv: bool) -> (Vec<f32>, In
             out[c * plane..(c + 1) * plane].fill(norm(c, cfg.pad_value as f32));
         }
     }
-    let resized;
-    let pixels: &[u8] = if (nw, nh) == (w, h) {
-        &frame.bgr
-    } else {
-        resized = resize_u8(frame, nw, nh, cfg.interpolation, opencv);
-        &resized
-    };
+    let pixels = g.pixels(frame, cfg, opencv);
     let (p0, rest) = out.split_at_mut(plane);
     let (p1, p2) = rest.split_at_mut(plane);
     for (y, row) in pixels.chunks_exact(nw * 3).take(nh).enumerate() {
