@@ -7,20 +7,9 @@
 
 mod common;
 
-use pav::dataset::fca::CarlaSample;
 use pav::detect::defence::{apply_chain, parse_chain};
 use pav::image::Frame;
 use sha2::{Digest, Sha256};
-
-fn fixture_frame(k: usize) -> Frame {
-    let mut rd = pav::video::VideoReader::open(&common::repo().join("fixtures/turntable.mp4")).unwrap();
-    while let Some((i, f)) = rd.read().unwrap() {
-        if i == k {
-            return f;
-        }
-    }
-    panic!("the fixture has no frame {k}");
-}
 
 /// Mean absolute change, mean change and its standard deviation, in levels.
 fn change(before: &Frame, after: &Frame) -> [f64; 3] {
@@ -33,7 +22,7 @@ fn change(before: &Frame, after: &Frame) -> [f64; 3] {
 
 #[test]
 fn defences_match_opencv_and_numpy_on_photos_and_turntable_frames() {
-    let data = common::real_data();
+    common::real_data();
     let text = std::fs::read_to_string(common::repo().join("tests/reference/defences.tsv")).unwrap();
     let mut current: Option<(String, Frame)> = None;
     let mut checked = 0;
@@ -42,14 +31,7 @@ fn defences_match_opencv_and_numpy_on_photos_and_turntable_frames() {
         let (label, spec, digest) = (f[0], f[1], f[2]);
         let want: Vec<f64> = f[3..].iter().map(|v| v.parse().unwrap()).collect();
         if current.as_ref().is_none_or(|(l, _)| l != label) {
-            let image = match label.split_once('#') {
-                Some((_, k)) => fixture_frame(k.parse().unwrap()),
-                None => {
-                    let dir = if label == "data1.npz" { "train" } else { "test" };
-                    CarlaSample::load(&data.join("fca/carla_dataset").join(dir).join(label)).unwrap().image
-                }
-            };
-            current = Some((label.to_string(), image));
+            current = Some((label.to_string(), common::reference_image(label)));
         }
         let image = &current.as_ref().unwrap().1;
         let mut out = image.clone();
@@ -85,7 +67,7 @@ fn feature_norm_clipping_matches_an_independent_rewrite() {
     use pav::detect::defence::Defence;
     use pav::detect::onnx::OnnxDetector;
     use pav::detect::{Detector, DetectorConfig};
-    let data = common::real_data();
+    common::real_data();
     let text = std::fs::read_to_string(common::repo().join("tests/reference/clip_yolox_nano.tsv")).unwrap();
     let plain_cfg = DetectorConfig::load(&common::detector_config("yolox_nano")).unwrap();
     let layers: Vec<String> = ["781", "841", "886"].map(String::from).to_vec();
@@ -99,13 +81,7 @@ fn feature_norm_clipping_matches_an_independent_rewrite() {
             let cfg = plain_cfg.defended(&[Defence::Clip { layers: layers.clone(), level }]).unwrap();
             OnnxDetector::new(cfg, 1).unwrap()
         });
-        let image = match label.split_once('#') {
-            Some((_, k)) => fixture_frame(k.parse().unwrap()),
-            None => {
-                let dir = if label == "data1.npz" { "train" } else { "test" };
-                CarlaSample::load(&data.join("fca/carla_dataset").join(dir).join(label)).unwrap().image
-            }
-        };
+        let image = common::reference_image(label);
         let props = det.propose(&image).unwrap();
         let got = props.best(det.target_classes()).map_or(0.0, |b| b.score);
         worst = worst.max((got - want).abs());

@@ -9,41 +9,21 @@
 
 mod common;
 
-use pav::dataset::fca::CarlaSample;
 use pav::detect::onnx::OnnxDetector;
 use pav::detect::{Detector, DetectorConfig};
-use pav::image::Frame;
-
-fn fixture_frames(every: usize) -> Vec<(usize, Frame)> {
-    let mut rd = pav::video::VideoReader::open(&common::repo().join("fixtures/turntable.mp4")).unwrap();
-    let mut out = Vec::new();
-    while let Some((i, f)) = rd.read().unwrap() {
-        if i % every == 0 {
-            out.push((i, f));
-        }
-    }
-    out
-}
 
 /// The best car of `config` on every image of `reference` against the reference's.
 fn matches_reference(config: &str, reference: &str) {
-    let data = common::real_data();
+    common::real_data();
     let cfg = DetectorConfig::load(&common::repo().join("configs/detectors-wide").join(config)).unwrap();
     let mut det = OnnxDetector::new(cfg, 1).unwrap();
     let text = std::fs::read_to_string(common::repo().join("tests/reference").join(reference)).unwrap();
-    let frames = fixture_frames(4);
     let mut checked = 0;
     let (mut worst_score, mut worst_box) = (0f32, 0f32);
     for line in text.lines().skip(1) {
         let f: Vec<&str> = line.split('\t').collect();
         let want: Vec<f32> = f[1..].iter().map(|v| v.parse().unwrap()).collect();
-        let image = match f[0].split_once('#') {
-            Some((_, k)) => frames.iter().find(|(i, _)| *i == k.parse::<usize>().unwrap()).unwrap().1.clone(),
-            None => {
-                let dir = if f[0] == "data1.npz" { "train" } else { "test" };
-                CarlaSample::load(&data.join("fca/carla_dataset").join(dir).join(f[0])).unwrap().image
-            }
-        };
+        let image = common::reference_image(f[0]);
         let best = det.propose(&image).unwrap().best(det.target_classes()).unwrap();
         let db = (0..4).map(|k| (best.bbox[k] - want[1 + k]).abs()).fold(0f32, f32::max);
         worst_score = worst_score.max((best.score - want[0]).abs());

@@ -60,6 +60,20 @@ pub fn real_data() -> PathBuf {
     s
 }
 
+/// An image of the reference tables by its label: one of FCA's photos (`data1.npz`, the training
+/// photo, or `data12501.npz` … `data12510.npz`) or frame K of a fixture video (`turntable.mp4#K`).
+#[cfg(feature = "eval")]
+pub fn reference_image(label: &str) -> pav::image::Frame {
+    let spec = match label.split_once('#') {
+        Some(_) => repo().join("fixtures").join(label),
+        None => {
+            let dir = if label == "data1.npz" { "train" } else { "test" };
+            real_data().join("fca/carla_dataset").join(dir).join(label)
+        }
+    };
+    pav::detect::check::read_input(&spec.display().to_string()).unwrap_or_else(|e| panic!("{e}"))
+}
+
 /// A finished command's stdout and stderr, one after the other, for assertions and messages.
 pub fn output_text(o: &std::process::Output) -> String {
     format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
