@@ -227,18 +227,46 @@ fn encoder_args(fourcc: &str) -> Option<&'static [&'static str]> {
 impl VideoWriter {
     /// Creates `path` for `width × height` frames at `fps` with codec `fourcc` (`avc1` = H.264,
     /// `mp4v` = MPEG-4 part 2, `MJPG`).
-    pub fn create(
+    pub fn create(path: &Path, fourcc: [char; 4], fps: f64, size: (usize, usize)) -> Result<Self, VideoError> {
+        let codec: String = fourcc.iter().collect();
+        let enc = encoder_args(&codec).ok_or_else(|| VideoError::Encoder {
+            path: path.into(),
+            codec: codec.clone(),
+            reason: "unknown codec: use avc1 (H.264), mp4v (MPEG-4 part 2) or MJPG".into(),
+        })?;
+        Self::spawn(path, &codec, &enc.iter().map(|s| s.to_string()).collect::<Vec<_>>(), fps, size)
+    }
+
+    /// Creates `path` as H.264 at a constant `kbps` (a phone's or webcam's recording: the
+    /// codec's losses at the capture's bitrate), not the near-lossless quality of [`Self::create`].
+    pub fn create_at_bitrate(path: &Path, fps: f64, size: (usize, usize), kbps: f64) -> Result<Self, VideoError> {
+        if !(kbps.is_finite() && kbps > 0.0) {
+            return Err(VideoError::Encoder {
+                path: path.into(),
+                codec: "avc1".into(),
+                reason: format!("a bitrate of {kbps} kbit/s is no bitrate"),
+            });
+        }
+        let k = format!("{}k", kbps.round().max(1.0));
+        let buf = format!("{}k", (2.0 * kbps).round().max(1.0));
+        let enc: Vec<String> = ["-c:v", "libx264", "-preset", "veryfast", "-b:v", &k, "-maxrate", &k, "-bufsize", &buf]
+            .into_iter()
+            .chain(["-pix_fmt", "yuv420p"])
+            .map(String::from)
+            .collect();
+        Self::spawn(path, "avc1", &enc, fps, size)
+    }
+
+    fn spawn(
         path: &Path,
-        fourcc: [char; 4],
+        codec: &str,
+        enc: &[String],
         fps: f64,
         (width, height): (usize, usize),
     ) -> Result<Self, VideoError> {
         use std::os::unix::process::CommandExt;
         use std::process::{Command, Stdio};
-        let codec: String = fourcc.iter().collect();
-        let refuse = |reason: String| VideoError::Encoder { path: path.into(), codec: codec.clone(), reason };
-        let enc = encoder_args(&codec)
-            .ok_or_else(|| refuse("unknown codec: use avc1 (H.264), mp4v (MPEG-4 part 2) or MJPG".into()))?;
+        let refuse = |reason: String| VideoError::Encoder { path: path.into(), codec: codec.into(), reason };
         if !(fps.is_finite() && fps > 0.0) || width == 0 || height == 0 {
             return Err(refuse(format!("{width}x{height} at {fps} fps is no video")));
         }

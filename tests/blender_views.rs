@@ -425,7 +425,86 @@ fn on_a_turntable_the_room_stays_put_and_the_videos_carry_the_angles() {
     let o =
         pav().args(["views", "turntable"]).arg(tmp.path().join("tfalse.toml")).arg("-o").arg(&cli).output().unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success() && err.contains("another texture or turntable setting"), "{err}");
+    assert!(!o.status.success() && err.contains("another texture, turntable setting or rig"), "{err}");
+}
+
+#[test]
+fn a_rig_films_the_model_on_its_table_before_its_backdrop_at_its_frame_size() {
+    let tmp = tempfile::tempdir().unwrap();
+    common::shared_data();
+    let text = std::fs::read_to_string(common::repo().join("configs/rig/webcam.toml")).unwrap();
+    let small = text
+        .replace("width = 640", "width = 160")
+        .replace("samples = 16", "samples = 2")
+        .replace("frames = 22", "frames = 2")
+        .replace(r#"effects = ["motion-blur", "noise", "codec"]"#, "effects = []");
+    assert_ne!(small, text);
+    let rig = tmp.path().join("rig.toml");
+    std::fs::write(&rig, small).unwrap();
+    let dir = tmp.path().join("tt");
+    let out = run_ok(pav().args(["views", "turntable", "--rig"]).arg(&rig).arg("-o").arg(&dir));
+    assert!(out.contains("2 frames"), "{out}");
+    // The rows of a 16:9 frame alone are rendered; the mask is cut alike.
+    let rows = pav::scene::views::read_manifest(&dir.join("manifest.csv")).unwrap();
+    assert_eq!(rows.len(), 2);
+    let img = pav::image::Rgb::load(&dir.join(&rows[1].image)).unwrap();
+    let mask = pav::image::Rgb::load(&dir.join(&rows[1].mask)).unwrap();
+    assert_eq!((img.width, img.height, mask.width, mask.height), (160, 90, 160, 90));
+    // Above the model the camera sees the backdrop's colour, not the light map; on it, the model.
+    let backdrop = [0.7f32, 0.68, 0.62];
+    let covered: Vec<bool> = mask.rgb.chunks(3).map(|p| p[0] > 0.5).collect();
+    let near_model = |x: usize, y: usize| {
+        (y.saturating_sub(3)..(y + 4).min(90))
+            .any(|yy| (x.saturating_sub(3)..(x + 4).min(160)).any(|xx| covered[yy * 160 + xx]))
+    };
+    let inside = |x: usize, y: usize| {
+        (x >= 3 && y >= 3 && x + 3 < 160 && y + 3 < 90)
+            && (y - 3..=y + 3).all(|yy| (x - 3..=x + 3).all(|xx| covered[yy * 160 + xx]))
+    };
+    let first_model_row = covered.iter().position(|c| *c).unwrap() / 160;
+    let mut sky = Vec::new();
+    let mut model = Vec::new();
+    for y in 0..90 {
+        for x in 0..160 {
+            let p = &img.rgb[3 * (y * 160 + x)..3 * (y * 160 + x) + 3];
+            let d: f32 = (0..3).map(|c| (p[c] - backdrop[c]).abs()).sum::<f32>() / 3.0;
+            if y + 3 < first_model_row && !near_model(x, y) {
+                sky.push(d);
+            } else if inside(x, y) {
+                model.push(d);
+            }
+        }
+    }
+    let (sky_max, model_mean) =
+        (sky.iter().cloned().fold(0.0, f32::max), model.iter().sum::<f32>() / model.len().max(1) as f32);
+    eprintln!(
+        "backdrop: {} pixels, max difference {sky_max}; model: {} pixels, mean {model_mean}",
+        sky.len(),
+        model.len()
+    );
+    assert!(sky.len() > 1000 && sky_max < 2.5 / 255.0, "{} pixels, {sky_max}", sky.len());
+    assert!(model.len() > 200 && model_mean > 0.05, "{} pixels, {model_mean}", model.len());
+    // One video for the one camera height, at the rig's frame size, with the table's angles.
+    let video = dir
+        .join("videos")
+        .read_dir()
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "mp4"))
+        .unwrap();
+    let mut r = pav::video::VideoReader::open(&video).unwrap();
+    let mut n = 0;
+    while let Some((_, f)) = r.read().unwrap() {
+        assert_eq!((f.width, f.height), (160, 90));
+        n += 1;
+    }
+    assert_eq!(n, 2);
+    let angles: Vec<f64> =
+        pav::sidecar::read(&pav::sidecar::sidecar_path(&video)).unwrap().iter().map(|s| s.angle_deg).collect();
+    assert_eq!(angles, [0.0, 180.0]);
+    // The run records the rig it filmed.
+    let run = std::fs::read_to_string(dir.join("run.toml")).unwrap();
+    assert!(run.contains("rig.toml") && run.contains("rig = \"true\""), "{run}");
 }
 
 #[test]

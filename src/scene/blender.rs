@@ -83,6 +83,15 @@ impl JobView {
     }
 }
 
+/// A turntable top.
+#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
+pub struct TableTop {
+    /// Radius, in the mesh's units.
+    pub radius: f32,
+    /// Colour, sRGB in [0, 1].
+    pub colour: [f32; 3],
+}
+
 /// One Blender process's work.
 #[derive(Clone, Debug, Serialize)]
 pub struct Job {
@@ -114,6 +123,17 @@ pub struct Job {
     pub roughness: f32,
     /// Paint clear coat.
     pub clearcoat: f32,
+    /// Specular level of the paint.
+    pub specular: f32,
+    /// What camera rays see where they hit no geometry (sRGB in [0, 1]); the environment then
+    /// only lights the scene. None: the environment is seen.
+    pub backdrop: Option<[f32; 3]>,
+    /// Render only the centre this many rows of the square image (a landscape frame cut from
+    /// it), so rows the frame drops cost nothing.
+    pub rows: Option<usize>,
+    /// A turntable top under the car (a matte disc at the ground height that catches the
+    /// car's shadow and turns with it).
+    pub table: Option<TableTop>,
     /// "Linear" or "Closest" texture lookups.
     pub interpolation: String,
     /// Raw 16-bit RGBA out, no view transform, every sample at its pixel's centre (for codes
@@ -144,6 +164,10 @@ impl Job {
             metallic: 0.0,
             roughness: 1.0,
             clearcoat: 0.0,
+            specular: 0.5,
+            backdrop: None,
+            table: None,
+            rows: None,
             interpolation: "Linear".into(),
             raw: false,
             transparent: false,

@@ -27,6 +27,16 @@ scene.cycles.seed = job.get("seed", 0)
 scene.render.resolution_x = job["size"]
 scene.render.resolution_y = job["size"]
 scene.render.resolution_percentage = 100
+if job.get("rows") is not None:
+    # A landscape frame: only its rows, the centre of the square, are rendered and written.
+    side, rows = job["size"], job["rows"]
+    y0 = (side - rows) // 2
+    scene.render.use_border = True
+    scene.render.use_crop_to_border = True
+    scene.render.border_min_x, scene.render.border_max_x = 0.0, 1.0
+    # Half a pixel inside each edge, so Blender's rounding lands on whole rows.
+    scene.render.border_min_y = (y0 + 0.5) / side - 0.5 / side
+    scene.render.border_max_y = (y0 + rows) / side
 scene.render.dither_intensity = 0.0
 scene.render.image_settings.file_format = "PNG"
 RAW = job["mode"] == "uv" or job.get("raw", False)
@@ -60,6 +70,11 @@ if not car:
     raise SystemExit("pav: the OBJ importer made no mesh object from " + job["mesh"])
 for o in car:
     o.matrix_world = PAV_TO_BLENDER @ o.matrix_world
+
+
+def srgb_to_linear(rgb):
+    # Blender's colour sockets are scene-linear; configs give colours as they look (sRGB).
+    return tuple(c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4 for c in rgb)
 
 
 def uv_node(nt):
@@ -104,6 +119,7 @@ def material():
         bsdf.inputs["Metallic"].default_value = job.get("metallic", 0.3)
         bsdf.inputs["Roughness"].default_value = job.get("roughness", 0.35)
         bsdf.inputs["Clearcoat"].default_value = job.get("clearcoat", 0.5)
+        bsdf.inputs["Specular"].default_value = job.get("specular", 0.5)
         nt.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
     return m
 
@@ -130,12 +146,40 @@ else:
     world.node_tree.links.new(coords.outputs["Generated"], env_turn.inputs["Vector"])
     world.node_tree.links.new(env_turn.outputs["Vector"], env.inputs["Vector"])
     bg.inputs["Strength"].default_value = job.get("env_strength", 1.0)
+    if job.get("backdrop") is not None:
+        # A rig's room: the map lights the scene, but camera rays see a plain backdrop (as a
+        # studio sweep behind a turntable), so nothing in the map can be filmed or detected.
+        seen = world.node_tree.nodes.new("ShaderNodeBackground")
+        seen.inputs["Color"].default_value = srgb_to_linear(job["backdrop"]) + (1.0,)
+        seen.inputs["Strength"].default_value = 1.0
+        path = world.node_tree.nodes.new("ShaderNodeLightPath")
+        mix = world.node_tree.nodes.new("ShaderNodeMixShader")
+        world.node_tree.links.new(path.outputs["Is Camera Ray"], mix.inputs["Fac"])
+        world.node_tree.links.new(bg.outputs["Background"], mix.inputs[1])
+        world.node_tree.links.new(seen.outputs["Background"], mix.inputs[2])
+        world.node_tree.links.new(mix.outputs["Shader"], world.node_tree.nodes["World Output"].inputs["Surface"])
 
 if job.get("shadows") and job["mode"] == "pbr":
     # A shadow-catcher ground under the wheels (pav's lowest y, i.e. Blender's lowest z).
     bpy.ops.mesh.primitive_plane_add(size=job["ground_size"], location=(0, 0, job["ground_y"]))
     ground = bpy.context.active_object
     ground.is_shadow_catcher = True
+
+if job.get("table") is not None and job["mode"] == "pbr":
+    # The turntable's top: a matte disc whose surface is at the ground height. It is round and
+    # plain, so turning the camera round it is the same picture as turning it.
+    t = job["table"]
+    bpy.ops.mesh.primitive_cylinder_add(
+        vertices=128, radius=t["radius"], depth=t["radius"] * 0.1, location=(0, 0, job["ground_y"] - t["radius"] * 0.05)
+    )
+    top = bpy.context.active_object
+    tm = bpy.data.materials.new("pav-table")
+    tm.use_nodes = True
+    tb = tm.node_tree.nodes["Principled BSDF"]
+    tb.inputs["Base Color"].default_value = srgb_to_linear(t["colour"]) + (1.0,)
+    tb.inputs["Roughness"].default_value = 0.8
+    tb.inputs["Specular"].default_value = 0.3
+    top.data.materials.append(tm)
 
 cam_data = bpy.data.cameras.new("pav")
 cam_data.sensor_fit = "HORIZONTAL"

@@ -22,7 +22,9 @@
 
 pub mod align;
 pub mod blender;
+pub mod camera_effects;
 pub mod eot;
+pub mod rig;
 pub mod turntable;
 pub mod views;
 pub mod zoom;

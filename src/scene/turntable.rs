@@ -6,11 +6,15 @@
 //! predicted: nothing here is calibrated against a capture.
 
 #[cfg(feature = "video")]
+use super::camera_effects::codec_kbps;
+use super::camera_effects::{apply_noise, apply_optics, behind, cut, Behind};
+use super::rig::{RigConfig, Shot};
+#[cfg(feature = "video")]
 use super::views::{read_manifest, ViewRecord, ViewSetInfo};
 use super::views::{ViewsConfig, ViewsError};
 use crate::geometry::camera::{spherical, Camera};
 use crate::geometry::mesh::Mesh;
-use crate::image::{to_u8, Frame, Rgb};
+use crate::image::{Frame, Rgb};
 use crate::render::raster::{GBuffer, EMPTY};
 use crate::render::shade::{vertex_normals, Lights, Shading};
 use crate::render::texture::Gather;
@@ -82,6 +86,18 @@ pub fn write_videos(dir: &Path, period_s: f64) -> Result<Vec<TurntableVideo>, Vi
     }
     let out_dir = dir.join("videos");
     std::fs::create_dir_all(&out_dir).map_err(io(&out_dir))?;
+    // A rig's views are cut to its frame and get its camera effects, from the same cameras
+    // (found by view name) and the same mesh the views were rendered from.
+    let rig = match &info.rig {
+        Some(rig) => {
+            let (cfg, mesh) = rig.views_config()?;
+            let shot = rig.shot(&mesh);
+            let cams: std::collections::HashMap<String, crate::geometry::camera::Camera> =
+                cfg.views().into_iter().map(|v| (v.name, v.camera)).collect();
+            Some((rig, mesh, shot, cams))
+        }
+        None => None,
+    };
     let mut out = Vec::new();
     for mut g in groups {
         g.sort_by(|a, b| a.azimuth_deg.total_cmp(&b.azimuth_deg));
@@ -96,15 +112,37 @@ pub fn write_videos(dir: &Path, period_s: f64) -> Result<Vec<TurntableVideo>, Vi
         let side = sidecar::sidecar_path(&path);
         let mut angles = sidecar::Writer::create(&side)?;
         for (i, r) in g.iter().enumerate() {
-            let img = Rgb::load(&dir.join(&r.image))?;
-            let frame = Frame {
-                width: img.width,
-                height: img.height,
-                bgr: img.rgb.chunks_exact(3).flat_map(|p| [to_u8(p[2]), to_u8(p[1]), to_u8(p[0])]).collect(),
+            let mut img = Rgb::load(&dir.join(&r.image))?;
+            let frame = match &rig {
+                Some((rig, mesh, shot, cams)) => {
+                    let cam = cams.get(&r.name).ok_or_else(|| {
+                        refuse(&manifest, format!("view {} is not one of the rig's: render into a new folder", r.name))
+                    })?;
+                    let side = shot.size.0.max(shot.size.1);
+                    if img.width != side || !(img.height == side || img.height == shot.size.1) {
+                        return Err(refuse(
+                            &manifest,
+                            format!("view {} is {}x{}, not the rig's render", r.name, img.width, img.height),
+                        ));
+                    }
+                    // Rendered as the frame's rows alone: back into the square the optics see.
+                    let mut square = vec![0.0f32; side * side * 3];
+                    let y0 = (side - img.height) / 2;
+                    square[3 * side * y0..3 * side * (y0 + img.height)].copy_from_slice(&img.rgb);
+                    img.rgb = square;
+                    apply_optics(rig, shot, mesh, cam, &mut img.rgb, side);
+                    let mut f = cut(&img.rgb, side, shot.size);
+                    apply_noise(rig, &mut f, crate::rng::fnv1a([i as u64, u64::from(r.elevation_deg.to_bits())]));
+                    f
+                }
+                None => cut(&img.rgb, img.width, (img.width, img.height)),
             };
             let v = match &mut video {
                 Some(v) => v,
-                None => video.insert(VideoWriter::create(&path, ['a', 'v', 'c', '1'], fps, (img.width, img.height))?),
+                None => video.insert(match rig.as_ref().and_then(|(rig, ..)| codec_kbps(rig)) {
+                    Some(kbps) => VideoWriter::create_at_bitrate(&path, fps, (frame.width, frame.height), kbps)?,
+                    None => VideoWriter::create(&path, ['a', 'v', 'c', '1'], fps, (frame.width, frame.height))?,
+                }),
             };
             v.write(&frame)?;
             let s = AngleSample {
@@ -142,6 +180,8 @@ pub struct CarScene {
     target: [f32; 3],
     lights: Lights,
     background: [f32; 3],
+    /// The rig the scene films, with its shot in the mesh's units and the camera height's index.
+    rig: Option<(Box<RigConfig>, Shot, usize)>,
 }
 
 /// Room light: a key light from above the camera's left shoulder and some ambient. Of the few
@@ -172,16 +212,52 @@ impl CarScene {
             target: g.target,
             lights: ROOM,
             background: [0.45, 0.45, 0.45],
+            rig: None,
         })
+    }
+
+    /// The model of a rig config at model size, painted with `texture` (else the config's), on
+    /// the rig's table before its backdrop, filmed by its camera from camera height `k` (an
+    /// index into `placement`'s heights or elevations).
+    pub fn from_rig(rig: &RigConfig, texture: Option<&Path>, k: usize) -> Result<CarScene, ViewsError> {
+        let (cfg, mesh) = rig.views_config()?;
+        let texture = match texture {
+            Some(t) => t.to_path_buf(),
+            None => cfg.texture(&mesh)?,
+        };
+        let shot = rig.shot(&mesh);
+        let Some(&(distance, elevation_deg)) = shot.poses.get(k) else {
+            return Err(refuse(
+                &rig.mesh.obj,
+                format!("the rig has {} camera heights, not {}", shot.poses.len(), k + 1),
+            ));
+        };
+        Ok(CarScene {
+            normals: vertex_normals(&mesh),
+            texture: Rgb::load(&texture)?,
+            mesh,
+            distance,
+            elevation_deg,
+            fov_deg: shot.fov_deg,
+            target: shot.target,
+            lights: ROOM,
+            background: rig.room.backdrop,
+            rig: Some((Box::new(rig.clone()), shot, k)),
+        })
+    }
+
+    /// The camera at table angle `angle_deg`.
+    fn camera(&self, angle_deg: f32) -> Camera {
+        let eye = spherical(self.distance, self.elevation_deg, angle_deg);
+        let eye = [eye[0] + self.target[0], eye[1] + self.target[1], eye[2] + self.target[2]];
+        Camera::look_at(eye, self.target, [0.0, 1.0, 0.0], self.fov_deg)
     }
 
     /// The car turned by the table's `angle_deg` as the same camera sees it in the room
     /// (`size × size` RGB in [0, 1]). As in Blender's turntable views, the camera goes round by
     /// the angle and the room's light with it.
     pub fn render(&self, angle_deg: f32, size: usize) -> Vec<f32> {
-        let eye = spherical(self.distance, self.elevation_deg, angle_deg);
-        let eye = [eye[0] + self.target[0], eye[1] + self.target[1], eye[2] + self.target[2]];
-        let cam = Camera::look_at(eye, self.target, [0.0, 1.0, 0.0], self.fov_deg);
+        let cam = self.camera(angle_deg);
         let g = GBuffer::render(&self.mesh, &cam, size);
         let mut rgb = vec![0.0f32; size * size * 3];
         Gather::new(g.uv_samples(&self.mesh), self.texture.width, self.texture.height).apply(
@@ -193,10 +269,20 @@ impl CarScene {
         let [x, y, z] = self.lights.direction;
         let lights = Lights { direction: [x * c + z * s, y, -x * s + z * c], ..self.lights };
         Shading::new(&g, &self.mesh, &self.normals, &cam, &lights).apply(&mut rgb, 3);
+        // The table top, lit as a matte surface facing up by the same light.
+        let l = lights.direction;
+        let up = l[1] / (l[0] * l[0] + l[1] * l[1] + l[2] * l[2]).sqrt();
+        let table_light = (lights.ambient + lights.diffuse * up.max(0.0)).min(1.0);
         for (i, f) in g.face.iter().enumerate() {
             let px = &mut rgb[3 * i..3 * i + 3];
             if *f == EMPTY {
-                px.copy_from_slice(&self.background);
+                match &self.rig {
+                    Some((rig, shot, _)) => match behind(rig, shot, &cam, size, i % size, i / size) {
+                        Behind::Table(_) => px.copy_from_slice(&rig.table.surface.map(|c| c * table_light)),
+                        Behind::Backdrop(_) => px.copy_from_slice(&self.background),
+                    },
+                    None => px.copy_from_slice(&self.background),
+                }
             } else {
                 px.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
             }
@@ -205,18 +291,21 @@ impl CarScene {
     }
 
     /// The same as a `width × height` BGR frame: the centre of a square render of the larger
-    /// side, drawn at twice the resolution and averaged down, so edges are smooth as a lens makes them.
+    /// side, drawn at twice the resolution and averaged down, so edges are smooth as a lens
+    /// makes them; a rig's scene then gets the camera effects the rig lists (but the codec,
+    /// which is the video writer's).
     pub fn frame(&self, angle_deg: f32, width: usize, height: usize) -> Frame {
         let side = width.max(height);
-        let rgb = crate::image::halve(&self.render(angle_deg, 2 * side), 2 * side, 2 * side);
-        let (x0, y0) = ((side - width) / 2, (side - height) / 2);
-        let mut bgr = Vec::with_capacity(width * height * 3);
-        for y in y0..y0 + height {
-            for x in x0..x0 + width {
-                let p = &rgb[3 * (y * side + x)..3 * (y * side + x) + 3];
-                bgr.extend([to_u8(p[2]), to_u8(p[1]), to_u8(p[0])]);
-            }
-        }
-        Frame { width, height, bgr }
+        let mut rgb = crate::image::halve(&self.render(angle_deg, 2 * side), 2 * side, 2 * side);
+        let Some((rig, shot, _)) = &self.rig else { return cut(&rgb, side, (width, height)) };
+        apply_optics(rig, shot, &self.mesh, &self.camera(angle_deg), &mut rgb, side);
+        let mut frame = cut(&rgb, side, (width, height));
+        apply_noise(rig, &mut frame, u64::from(angle_deg.to_bits()));
+        frame
+    }
+
+    /// The rig this scene films, if it was made from one.
+    pub fn rig(&self) -> Option<&RigConfig> {
+        self.rig.as_ref().map(|(r, _, _)| r.as_ref())
     }
 }

@@ -37,7 +37,7 @@
 //! turned, so background, camera and ground are real and only the car is rendered. The
 //! environment then only lights the car; the photo's own car shadow stays on the plate.
 
-use super::blender::{Blender, BlenderError, Job, JobView, Mode};
+use super::blender::{Blender, BlenderError, Job, JobView, Mode, TableTop};
 use crate::geometry::camera::{moved_away, spherical, Camera, CameraConvention};
 use crate::geometry::mesh::{Mesh, MeshError};
 use crate::image::resize::{resize, Interpolation};
@@ -94,7 +94,7 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ViewsError + '_ {
 }
 
 /// How the mesh is normalized (which fixes the units of the pose grid).
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, serde::Serialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub enum Normalize {
     /// PAV-Camou: vertex-mean centring, max-abs scaling.
@@ -105,7 +105,7 @@ pub enum Normalize {
 }
 
 /// The car.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct ViewMesh {
     /// OBJ with UVs.
@@ -241,6 +241,10 @@ pub struct ViewsConfig {
     /// Background plates.
     #[serde(default)]
     pub plates: Option<Plates>,
+    /// The rig whose turntable these views film ([`super::rig::RigConfig::views_config`]): its
+    /// table, backdrop and sticker replace the ground and the car paint.
+    #[serde(skip)]
+    pub rig: Option<Box<super::rig::RigConfig>>,
 }
 
 /// One view to render.
@@ -585,6 +589,9 @@ pub struct ViewSetInfo {
     /// Whether the environment turned with the camera.
     #[serde(default)]
     pub turntable: bool,
+    /// The rig whose turntable the views film, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rig: Option<super::rig::RigConfig>,
 }
 
 impl ViewSetInfo {
@@ -700,6 +707,7 @@ pub fn render_views(
         up: cfg.mesh.up.clone(),
         texture_sha256: Some(crate::data::store::file_digest(&texture).map_err(io(&texture))?.1),
         turntable: cfg.render.turntable,
+        rig: cfg.rig.as_deref().cloned(),
     };
     let info_path = dir.join("views.toml");
     let info_text = toml::to_string(&info).expect("view set info serializes");
@@ -716,10 +724,11 @@ pub fn render_views(
             // Resuming would mix two paints, or cars turned and not turned, in one set.
             if old.texture_sha256.as_ref().is_some_and(|t| Some(t) != info.texture_sha256.as_ref())
                 || old.turntable != info.turntable
+                || old.rig != info.rig
             {
                 return Err(ViewsError::Config {
                     path: info_path.clone(),
-                    msg: "this folder holds views with another texture or turntable setting: use another output folder"
+                    msg: "this folder holds views with another texture, turntable setting or rig: use another output folder"
                         .into(),
                 });
             }
@@ -766,6 +775,17 @@ pub fn render_views(
             if effects.contains(&PbrEffect::Reflections) {
                 (job.metallic, job.roughness, job.clearcoat) = (0.3, 0.35, 0.5);
             }
+            if let Some(rig) = &cfg.rig {
+                let s = rig.sticker.material.surface();
+                (job.metallic, job.roughness, job.clearcoat, job.specular) =
+                    (0.0, s.roughness, s.clearcoat, s.specular);
+                job.backdrop = Some(rig.room.backdrop);
+                let units = rig.shot(&mesh).units_per_m;
+                job.table = Some(TableTop { radius: rig.table.radius_m as f32 * units, colour: rig.table.surface });
+                job.shadows = false;
+                let (w, h) = rig.frame_size();
+                job.rows = (h < w).then_some(h);
+            }
             let out_name = |v: &View| if on_plates { format!("{}_car.png", v.name) } else { format!("{}.png", v.name) };
             job.views = todo
                 .iter()
@@ -791,7 +811,11 @@ pub fn render_views(
                     }
                     let g = GBuffer::render(&mesh, &v.camera, n);
                     let mask: Vec<f32> = g.face.iter().flat_map(|f| [if *f == EMPTY { 0.0 } else { 1.0 }; 3]).collect();
-                    crate::image::save_rgb(&views_dir.join(format!("{name}_mask.png")), n, n, &mask)?;
+                    // A rig's mask is cut as its view is: the centre rows of the square.
+                    let rows = cfg.rig.as_ref().map_or(n, |r| r.frame_size().1.min(n));
+                    let y0 = (n - rows) / 2;
+                    let mask = &mask[3 * n * y0..3 * n * (y0 + rows)];
+                    crate::image::save_rgb(&views_dir.join(format!("{name}_mask.png")), n, rows, mask)?;
                     let [d, e, a] = v.pose;
                     let up = if v.plate.is_some() { v.camera.axes[1] } else { [0.0, 1.0, 0.0] };
                     let (eye, target, up) =
@@ -904,19 +928,19 @@ pub fn contact_sheet(dir: &Path, max: usize) -> Result<PathBuf, ViewsError> {
     let pick: Vec<&(PathBuf, PathBuf)> =
         if rows.len() <= max { rows.iter().collect() } else { (0..max).map(|k| &rows[k * rows.len() / max]).collect() };
     let mut tiles = Vec::new();
-    let mut side = 0;
+    let mut size = (0, 0);
     for (img, mask) in pick {
         for p in [img, mask] {
             let t = crate::image::Rgb::load(&dir.join(p))?;
-            side = t.width;
+            size = (t.width, t.height);
             tiles.push(t.rgb);
         }
     }
     let path = dir.join("contact.png");
-    if tiles.is_empty() || tiles.iter().any(|t| t.len() != side * side * 3) {
+    if tiles.is_empty() || tiles.iter().any(|t| t.len() != size.0 * size.1 * 3) {
         return Err(ViewsError::Config { path: manifest, msg: "no views of one size to show".into() });
     }
-    let (w, h, px) = crate::image::tile(&tiles, side, side, 8, 1.0);
+    let (w, h, px) = crate::image::tile(&tiles, size.0, size.1, 8, 1.0);
     crate::image::save_rgb(&path, w, h, &px)?;
     Ok(path)
 }

@@ -5,6 +5,7 @@ use crate::port::{connect, parse_signed_seconds, PortArgs};
 use anyhow::{bail, Context, Result};
 use pav::rig::capture::{capture, CaptureOptions};
 use pav::rig::source::open_source;
+use pav::scene::rig::RigConfig;
 use pav::scene::turntable::CarScene;
 use pav::scene::views::ViewsConfig;
 use std::path::PathBuf;
@@ -19,24 +20,33 @@ pub struct Args {
     /// Output video; the sidecar goes beside it as NAME.angles.csv.
     #[arg(long, short = 'o')]
     out: PathBuf,
-    /// Seconds per revolution.
-    #[arg(long, default_value = "28s", value_parser = parse_signed_seconds, allow_hyphen_values = true)]
-    period: f64,
+    /// Seconds per revolution [default: the rig's table, else 28 s].
+    #[arg(long, value_parser = parse_signed_seconds, allow_hyphen_values = true)]
+    period: Option<f64>,
     /// Revolutions to record.
     #[arg(long, default_value_t = 1)]
     turns: u32,
     /// Do not home before recording.
     #[arg(long)]
     no_home: bool,
-    /// Requested camera width.
-    #[arg(long, default_value_t = 1280)]
-    width: usize,
-    /// Requested camera height.
-    #[arg(long, default_value_t = 720)]
-    height: usize,
-    /// Requested camera frame rate.
-    #[arg(long, default_value_t = 30.0)]
-    fps: f64,
+    /// Requested camera width [default: the rig's, else 1280].
+    #[arg(long)]
+    width: Option<usize>,
+    /// Requested camera height [default: the rig's, else 720].
+    #[arg(long)]
+    height: Option<usize>,
+    /// Requested camera frame rate [default: the rig's, else 30].
+    #[arg(long)]
+    fps: Option<f64>,
+    /// The rig this capture films (configs/rig/*.toml): recorded in run.toml, so the capture and
+    /// its simulation (`pav views turntable --rig`) name the same shot; it sets the frame size,
+    /// frame rate and period not given. With `--camera sim`, the simulated camera films the
+    /// rig's model.
+    #[arg(long, conflicts_with = "car", value_parser = pav::data::arg_path)]
+    rig: Option<PathBuf>,
+    /// With --rig: the camera position, 1-based, of the rig's heights or elevations.
+    #[arg(long, requires = "rig", default_value_t = 1)]
+    placement: usize,
     /// Video codec FourCC (avc1 = H.264, mp4v = MPEG-4 part 2).
     #[arg(long, default_value = "avc1")]
     codec: String,
@@ -47,8 +57,9 @@ pub struct Args {
     /// on the simulated table, drawn live by pav's rasterizer, instead of a marked disc.
     #[arg(long, value_parser = pav::data::arg_path)]
     car: Option<PathBuf>,
-    /// With --car: its paint (e.g. an optimized texture.png) instead of the config's.
-    #[arg(long, requires = "car", value_parser = pav::data::arg_path)]
+    /// With --car or --rig and --camera sim: the model's paint (e.g. an optimized texture.png)
+    /// instead of the config's.
+    #[arg(long, value_parser = pav::data::arg_path)]
     texture: Option<PathBuf>,
     /// With --car: the camera's elevation (the paper's polar angle, 0 or 20) instead of the config's first.
     #[arg(long, requires = "car", allow_hyphen_values = true)]
@@ -66,19 +77,35 @@ pub fn run(a: &Args) -> Result<()> {
     if a.camera == "sim" && a.port.port != "sim" {
         bail!("--camera sim films the simulated turntable: use it with --port sim");
     }
-    let car = match &a.car {
-        Some(cfg) => {
+    let rig = a.rig.as_deref().map(RigConfig::load).transpose()?;
+    if a.texture.is_some() && a.car.is_none() && !(rig.is_some() && a.camera == "sim") {
+        bail!("--texture paints the simulated model: use it with --car, or with --rig and --camera sim");
+    }
+    let car = match (&a.car, &rig) {
+        (Some(cfg), _) => {
             let views = ViewsConfig::load(cfg)?;
             Some(CarScene::new(&views, a.texture.as_deref(), a.elevation)?)
         }
-        None => None,
+        (None, Some(rig)) if a.camera == "sim" => {
+            if a.placement == 0 {
+                bail!("--placement counts from 1");
+            }
+            Some(CarScene::from_rig(rig, a.texture.as_deref(), a.placement - 1)?)
+        }
+        _ => None,
     };
+    let size = (
+        a.width.or(rig.as_ref().map(|r| r.camera.width)).unwrap_or(1280),
+        a.height.or(rig.as_ref().map(|r| r.camera.height)).unwrap_or(720),
+    );
+    let fps = a.fps.or(rig.as_ref().map(|r| r.camera.fps)).unwrap_or(30.0);
+    let period = a.period.or(rig.as_ref().map(|r| r.table.period_s)).unwrap_or(28.0);
     let (sim, mut table) = connect(&a.port)?;
-    let mut cam = open_source(&a.camera, sim.as_ref().map(|s| s.truth()), car, (a.width, a.height), a.fps)?;
+    let mut cam = open_source(&a.camera, sim.as_ref().map(|s| s.truth()), car, size, fps)?;
     let (w, h) = cam.size();
     eprintln!("camera: {} {w}x{h} at {:.1} fps", cam.describe(), cam.fps());
     let opts = CaptureOptions {
-        period_s: a.period,
+        period_s: period,
         turns: a.turns,
         home: !a.no_home,
         fourcc: [c0, c1, c2, c3],
@@ -90,10 +117,16 @@ pub fn run(a: &Args) -> Result<()> {
         .setting("camera", cam.describe())
         .setting("size", format!("{w}x{h}"))
         .setting("fps", cam.fps())
-        .setting("period_s", a.period)
+        .setting("period_s", period)
         .setting("turns", a.turns)
         .setting("max_angle_error_deg", a.max_angle_error)
         .tool("ffmpeg", pav::video::ffmpeg_version());
+    if let (Some(path), Some(rig)) = (&a.rig, &rig) {
+        record = record.config(path).inputs(rig.inputs().iter().map(|p| p.as_path()));
+        if a.camera == "sim" {
+            record = record.setting("placement", a.placement);
+        }
+    }
     let record_path = a.out.with_extension("run.toml");
     let write =
         |r: &pav::provenance::Run| r.write(&record_path).with_context(|| format!("writing {}", record_path.display()));

@@ -4,6 +4,8 @@ use crate::common::Bar;
 use anyhow::{bail, Context, Result};
 use pav::scene::blender::Blender;
 #[cfg(feature = "video")]
+use pav::scene::rig::RigConfig;
+#[cfg(feature = "video")]
 use pav::scene::turntable::write_videos;
 use pav::scene::views::{contact_sheet, merge_shards, render_views, ViewsConfig};
 use std::path::PathBuf;
@@ -45,16 +47,23 @@ pub struct RenderArgs {
 pub struct TurntableArgs {
     /// Views config (TOML): the camera's distances and elevations (the paper's polar angles), the
     /// table's angles as azimuths, the room as environments; e.g. configs/views/turntable.toml.
-    config: PathBuf,
+    #[arg(required_unless_present = "rig", conflicts_with = "rig")]
+    config: Option<PathBuf>,
+    /// Or a rig config (configs/rig/*.toml): the model at model size on the rig's table, filmed
+    /// by its camera, with the camera effects it lists; one video per camera position at the
+    /// rig's frame size, `render.frames` a turn.
+    #[arg(long, value_parser = pav::data::arg_path)]
+    rig: Option<PathBuf>,
     /// Output folder: views/, manifest.csv and videos/.
     #[arg(long, short = 'o', default_value = "out/turntable")]
     out: PathBuf,
     /// Body texture instead of the config's (e.g. an optimized texture.png).
     #[arg(long, value_parser = pav::data::arg_path)]
     texture: Option<PathBuf>,
-    /// Seconds per turn in the videos' time stamps (the paper's table: 28 s).
-    #[arg(long, default_value = "28")]
-    period: f64,
+    /// Seconds per turn in the videos' time stamps [default: the rig's table, else 28 s, the
+    /// paper's].
+    #[arg(long)]
+    period: Option<f64>,
 }
 
 /// Renders the views config at `config` into `out` (resuming), as `pav views render` does.
@@ -78,6 +87,7 @@ fn render(
         .inputs(inputs.iter().map(|p| p.as_path()))
         .setting("shard", shard.map_or("all".to_string(), |(k, n)| format!("{k}/{n}")))
         .setting("turntable", cfg.render.turntable)
+        .setting("rig", cfg.rig.is_some())
         .tool("blender", blender.version());
     let name = match shard {
         Some((k, n)) => format!("run.{k}-of-{n}.toml"),
@@ -116,11 +126,19 @@ pub fn run(c: &Cmd) -> Result<()> {
         }
         #[cfg(feature = "video")]
         Cmd::Turntable(a) => {
-            let mut cfg = ViewsConfig::load(&a.config)?;
+            let (mut cfg, config, period) = match (&a.config, &a.rig) {
+                (_, Some(rig_path)) => {
+                    let rig = RigConfig::load(rig_path)?;
+                    let period = rig.table.period_s;
+                    (rig.views_config()?.0, rig_path, period)
+                }
+                (Some(c), None) => (ViewsConfig::load(c)?, c, 28.0),
+                (None, None) => unreachable!("clap requires a config or --rig"),
+            };
             cfg.mesh.texture = a.texture.clone().or(cfg.mesh.texture);
             cfg.render.turntable = true;
-            render(&cfg, &a.config, &a.out, None)?;
-            let videos = write_videos(&a.out, a.period)?;
+            render(&cfg, config, &a.out, None)?;
+            let videos = write_videos(&a.out, a.period.unwrap_or(period))?;
             for v in &videos {
                 println!(
                     "{}: {} frames, {} at distance {} and elevation {}°",

@@ -1,0 +1,216 @@
+//! Rig configs: the shipped rigs put the model where a pinhole camera of their lens and sensor
+//! would see it, shots no camera could take are refused, and each camera effect is off unless
+//! the rig lists it.
+
+mod common;
+
+use pav::render::raster::{GBuffer, EMPTY};
+use pav::scene::camera_effects::{apply_noise, circle_of_confusion_px, codec_kbps, cut};
+use pav::scene::rig::{CameraEffect, RigConfig};
+use pav::scene::turntable::CarScene;
+
+fn rig(name: &str) -> RigConfig {
+    common::shared_data();
+    RigConfig::load(&common::repo().join("configs/rig").join(name)).unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
+/// Columns of a `side`-wide G-buffer the model covers: (first, last).
+fn covered_columns(g: &GBuffer) -> (usize, usize) {
+    let cols: Vec<usize> = (0..g.size).filter(|&x| (0..g.size).any(|y| g.face[y * g.size + x] != EMPTY)).collect();
+    (cols[0], *cols.last().unwrap())
+}
+
+/// The model's extent across a `width`-pixel frame by the pinhole formula alone: its vertices
+/// in metres about its centre, a camera `d_m` away level with the centre on the +Z side
+/// (table angle 0), x·f/(d − z) with f from the lens and the sensor.
+fn pinhole_extent_px(mesh: &pav::geometry::mesh::Mesh, r: &RigConfig, d_m: f64, width: usize) -> f64 {
+    let (lo, hi) = mesh.bounds();
+    let length_units = f64::from((hi[0] - lo[0]).max(hi[2] - lo[2]));
+    let per_m = length_units / (r.model.car_length_m / r.model.scale);
+    let cy = f64::from(lo[1] + hi[1]) / 2.0;
+    let f_px = r.camera.focal_mm.unwrap() / r.camera.sensor_mm.unwrap()[0] * width as f64;
+    let cols: Vec<f64> = mesh
+        .positions
+        .iter()
+        .map(|p| {
+            let (x, _y, z) = (f64::from(p[0]) / per_m, (f64::from(p[1]) - cy) / per_m, f64::from(p[2]) / per_m);
+            f_px * x / (d_m - z)
+        })
+        .collect();
+    cols.iter().cloned().fold(f64::MIN, f64::max) - cols.iter().cloned().fold(f64::MAX, f64::min)
+}
+
+#[test]
+fn the_model_spans_the_pixels_a_pinhole_camera_predicts() {
+    let r = rig("phone-paper.toml");
+    let (_, mesh) = r.views_config().unwrap();
+    let shot = r.shot(&mesh);
+    assert_eq!(shot.size, (640, 360));
+    // Level with the model's centre (elevation 0), at the rig's distance and at twice it.
+    for d in [0.5, 1.0] {
+        let mut at = r.clone();
+        at.placement.distance_m = d;
+        let shot = at.shot(&mesh);
+        let g = GBuffer::render(&mesh, &RigConfig::camera(&shot, 0, 0.0), 640);
+        let (a, b) = covered_columns(&g);
+        let measured = (b - a + 1) as f64;
+        let predicted = pinhole_extent_px(&mesh, &r, d, 640);
+        eprintln!("at {d} m: {measured} px, predicted {predicted:.1}");
+        assert!((measured / predicted - 1.0).abs() < 0.02, "at {d} m: {measured} px against {predicted:.1}");
+        // The camera looks at the model's centre.
+        assert!((((a + b) as f64 / 2.0) - 319.5).abs() < 3.0, "centred at {}", (a + b) / 2);
+    }
+    // A 1:20 model filmed from 0.5 m fills about f·L/D of the frame: 235 px of 640 for the
+    // paper's phone, with the perspective of its near corners on top.
+    let plain = 4.8 / 6.4 * 640.0 * (4.9 / 20.0) / 0.5;
+    let near = pinhole_extent_px(&mesh, &r, 0.5, 640);
+    assert!(near > plain && near < 1.1 * plain, "{near} against {plain}");
+    let _ = shot;
+}
+
+#[test]
+fn a_camera_height_is_metres_above_the_table_top() {
+    let r = rig("webcam.toml");
+    let (cfg, mesh) = r.views_config().unwrap();
+    let shot = r.shot(&mesh);
+    let cam = RigConfig::camera(&shot, 0, 30.0);
+    let u = shot.units_per_m;
+    let height = (cam.eye[1] - shot.ground_y) / u;
+    let horizontal = (cam.eye[0] * cam.eye[0] + cam.eye[2] * cam.eye[2]).sqrt() / u;
+    assert!((height - 0.1).abs() < 1e-4 && (horizontal - 0.4).abs() < 1e-4, "{height} m up, {horizontal} m away");
+    // The views the turntable renders are these cameras, a turn of render.frames angles.
+    let views = cfg.views();
+    assert_eq!(views.len(), r.render.frames);
+    let v = &views[3];
+    let c = RigConfig::camera(&shot, 0, v.pose[2]);
+    assert!(v.camera.eye.iter().zip(c.eye).all(|(a, b)| (a - b).abs() < 1e-5));
+    assert_eq!(cfg.render.size, 640);
+    // 1:20 of a 4.9 m car is 24.5 cm long.
+    let (lo, hi) = mesh.bounds();
+    let length = (hi[0] - lo[0]).max(hi[2] - lo[2]) / u;
+    assert!((length - 0.245).abs() < 1e-5, "{length}");
+}
+
+/// One change to a rig config.
+type Change = Box<dyn Fn(&mut RigConfig)>;
+
+#[test]
+fn shots_no_camera_could_take_are_refused() {
+    let good = rig("phone-paper.toml");
+    assert!(good.check().is_ok());
+    let cases: Vec<(&str, Change, &str)> = vec![
+        ("zero distance", Box::new(|r| r.placement.distance_m = 0.0), "distance_m"),
+        ("negative distance", Box::new(|r| r.placement.distance_m = -0.5), "distance_m"),
+        ("focus behind the camera", Box::new(|r| r.camera.focus_m = Some(-0.2)), "in front of the camera"),
+        ("focus inside the lens", Box::new(|r| r.camera.focus_m = Some(0.004)), "focal length"),
+        ("exposure over a frame", Box::new(|r| r.camera.exposure_s = 0.05), "does not fit"),
+        ("zero fps", Box::new(|r| r.camera.fps = 0.0), "camera.fps"),
+        ("table reaching the camera", Box::new(|r| r.table.radius_m = 0.6), "reaches the camera"),
+        ("no lens", Box::new(|r| r.camera.focal_mm = None), "focal_mm with sensor_mm"),
+        ("lens and field of view", Box::new(|r| r.camera.fov_deg = Some(60.0)), "focal_mm with sensor_mm"),
+        ("heights and elevations", Box::new(|r| r.placement.heights_m = vec![0.1]), "heights_m or elevations_deg"),
+        (
+            "camera under the table",
+            Box::new(|r| {
+                r.placement.elevations_deg.clear();
+                r.placement.heights_m = vec![-0.1];
+            }),
+            "below the table top",
+        ),
+        ("zero scale", Box::new(|r| r.model.scale = 0.0), "model.scale"),
+        ("colour out of range", Box::new(|r| r.room.backdrop = [1.5, 0.0, 0.0]), "sRGB"),
+        ("effect twice", Box::new(|r| r.effects = vec![CameraEffect::Noise, CameraEffect::Noise]), "twice"),
+        (
+            "defocus without a lens",
+            Box::new(|r| {
+                (r.camera.focal_mm, r.camera.sensor_mm, r.camera.fov_deg) = (None, None, Some(60.0));
+                r.effects = vec![CameraEffect::Defocus];
+            }),
+            "defocus needs the lens",
+        ),
+    ];
+    for (what, change, says) in cases {
+        let mut r = good.clone();
+        change(&mut r);
+        let e = r.check().expect_err(what);
+        assert!(e.contains(says), "{what}: {e}");
+    }
+    // Unknown keys are refused when read, naming the file.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("rig.toml");
+    let text = std::fs::read_to_string(common::repo().join("configs/rig/phone-paper.toml")).unwrap();
+    std::fs::write(&path, text.replace("f_number", "aperture")).unwrap();
+    let e = RigConfig::load(&path).unwrap_err().to_string();
+    assert!(e.contains("rig.toml") && e.contains("aperture"), "{e}");
+}
+
+#[test]
+fn the_circle_of_confusion_is_the_thin_lens_one() {
+    let r = rig("phone-paper.toml");
+    // In focus: a point. At 1 m with the lens at 0.5 m: f²/(N(s−f))·|z−s|/z on the sensor.
+    assert_eq!(circle_of_confusion_px(&r, 0.5, 0.5, 640), 0.0);
+    let mm = 4.8 * 4.8 / (1.8 * (500.0 - 4.8)) * 0.5;
+    let px = circle_of_confusion_px(&r, 0.5, 1.0, 640);
+    assert!((px - mm / 6.4 * 640.0).abs() < 1e-9, "{px}");
+    // Nearer than the focus blurs more than as far behind it.
+    assert!(circle_of_confusion_px(&r, 0.5, 0.4, 640) > circle_of_confusion_px(&r, 0.5, 0.6, 640));
+}
+
+#[test]
+fn each_camera_effect_is_off_unless_listed() {
+    let mut r = rig("webcam.toml");
+    r.effects.clear();
+    r.render.width = Some(320);
+    let plain = CarScene::from_rig(&r, None, 0).unwrap();
+    let (w, h) = (320, 180);
+    let angle = 60.0;
+    let bare = {
+        let rgb = pav::image::halve(&plain.render(angle, 640), 640, 640);
+        cut(&rgb, 320, (w, h))
+    };
+    let none = plain.frame(angle, w, h);
+    assert_eq!(none.bgr, bare.bgr, "no effect listed, yet the frame changed");
+    let mut untouched = none.clone();
+    apply_noise(&r, &mut untouched, 7);
+    assert_eq!(untouched.bgr, none.bgr);
+    assert_eq!(codec_kbps(&r), None);
+    // The model's pixels, and the backdrop's well away from them.
+    let shot = {
+        let (_, mesh) = r.views_config().unwrap();
+        (r.shot(&mesh), mesh)
+    };
+    let g = GBuffer::render(&shot.1, &RigConfig::camera(&shot.0, 0, angle), 320);
+    let y0 = (320 - h) / 2;
+    let on_model = |x: usize, y: usize| {
+        let (lo_x, hi_x, lo_y, hi_y) =
+            (x.saturating_sub(4), (x + 4).min(319), (y + y0).saturating_sub(4), (y + y0 + 4).min(319));
+        (lo_y..=hi_y).any(|yy| (lo_x..=hi_x).any(|xx| g.face[yy * 320 + xx] != EMPTY))
+    };
+    for effect in [CameraEffect::Defocus, CameraEffect::MotionBlur, CameraEffect::Noise, CameraEffect::Codec] {
+        let mut one = r.clone();
+        one.effects = vec![effect];
+        if effect == CameraEffect::Codec {
+            // The codec is the video writer's: the capture's bits per pixel at the simulated size.
+            let kbps = codec_kbps(&one).unwrap();
+            assert!((kbps - 4000.0 * (320.0 * 180.0) / (1280.0 * 720.0)).abs() < 1e-9, "{kbps}");
+            assert_eq!(CarScene::from_rig(&one, None, 0).unwrap().frame(angle, w, h).bgr, none.bgr);
+            continue;
+        }
+        let f = CarScene::from_rig(&one, None, 0).unwrap().frame(angle, w, h);
+        let changed: Vec<(usize, usize)> = (0..w * h)
+            .filter(|&i| f.bgr[3 * i..3 * i + 3] != none.bgr[3 * i..3 * i + 3])
+            .map(|i| (i % w, i / w))
+            .collect();
+        eprintln!("{effect:?}: {} pixels changed", changed.len());
+        assert!(changed.len() > 100, "{effect:?} changed only {} pixels", changed.len());
+        if effect == CameraEffect::MotionBlur {
+            // Only the turning model blurs; the room stands still.
+            assert!(changed.iter().all(|&(x, y)| on_model(x, y)), "motion blur moved the room");
+        }
+        if effect == CameraEffect::Noise {
+            let d: Vec<f64> = (0..w * h * 3).map(|i| f64::from(f.bgr[i]) - f64::from(none.bgr[i])).collect();
+            let mean = d.iter().sum::<f64>() / d.len() as f64;
+            assert!(mean.abs() < 0.5, "noise shifted the levels by {mean}");
+        }
+    }
+}
