@@ -42,7 +42,7 @@ fn pinhole_extent_px(mesh: &pav::geometry::mesh::Mesh, r: &RigConfig, d_m: f64, 
 
 #[test]
 fn the_model_spans_the_pixels_a_pinhole_camera_predicts() {
-    let r = rig("phone-paper.toml");
+    let r = rig("phone-etron.toml");
     let (_, mesh) = r.views_config().unwrap();
     let shot = r.shot(&mesh);
     assert_eq!(shot.size, (640, 360));
@@ -96,7 +96,7 @@ type Change = Box<dyn Fn(&mut RigConfig)>;
 
 #[test]
 fn shots_no_camera_could_take_are_refused() {
-    let good = rig("phone-paper.toml");
+    let good = rig("phone-etron.toml");
     assert!(good.check().is_ok());
     let cases: Vec<(&str, Change, &str)> = vec![
         ("zero distance", Box::new(|r| r.placement.distance_m = 0.0), "distance_m"),
@@ -146,7 +146,7 @@ fn shots_no_camera_could_take_are_refused() {
 
 #[test]
 fn the_circle_of_confusion_is_the_thin_lens_one() {
-    let r = rig("phone-paper.toml");
+    let r = rig("phone-etron.toml");
     // In focus: a point. At 1 m with the lens at 0.5 m: f²/(N(s−f))·|z−s|/z on the sensor.
     assert_eq!(circle_of_confusion_px(&r, 0.5, 0.5, 640), 0.0);
     let mm = 4.8 * 4.8 / (1.8 * (500.0 - 4.8)) * 0.5;
@@ -213,4 +213,114 @@ fn each_camera_effect_is_off_unless_listed() {
             assert!(mean.abs() < 0.5, "noise shifted the levels by {mean}");
         }
     }
+}
+
+/// A copy of a shipped rig, small: `width` pixels wide, `frames` a turn.
+fn small_rig(dir: &std::path::Path, name: &str, width: usize, frames: usize) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(common::repo().join("configs/rig").join(name)).unwrap();
+    let small =
+        text.replace("width = 640", &format!("width = {width}")).replace("frames = 22", &format!("frames = {frames}"));
+    assert_ne!(small, text);
+    let path = dir.join(name);
+    std::fs::write(&path, small).unwrap();
+    path
+}
+
+#[test]
+fn the_rasterizer_films_the_rigs_frames_at_the_views_angles() {
+    common::shared_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let path = small_rig(tmp.path(), "webcam.toml", 256, 4);
+    let out = tmp.path().join("tt");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav"))
+        .args(["views", "turntable", "--rasterizer", "--rig"])
+        .arg(&path)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let said = common::output_text(&o);
+    assert!(o.status.success(), "{said}");
+    let r = RigConfig::load(&path).unwrap();
+    let (cfg, _) = r.views_config().unwrap();
+    let videos: Vec<_> = std::fs::read_dir(out.join("videos"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "mp4"))
+        .collect();
+    assert_eq!(videos.len(), 1, "{said}");
+    // The file is named as Blender's would be, and holds the views' angles, a turn in 28 s.
+    let v = &cfg.views()[0];
+    let stem = format!("interior_d{:.2}_e{:.0}", v.pose[0], v.pose[1]);
+    assert_eq!(videos[0].file_stem().unwrap().to_string_lossy(), stem);
+    let rows = pav::sidecar::read(&pav::sidecar::sidecar_path(&videos[0])).unwrap();
+    let want: Vec<f64> = cfg.views().iter().map(|v| f64::from(v.pose[2])).collect();
+    assert_eq!(rows.iter().map(|s| s.angle_deg).collect::<Vec<_>>(), want);
+    assert_eq!(rows[3].timestamp_s, 21.0);
+    // Each frame is the scene's frame at its angle, through the rig's codec (4:2:0 at a low
+    // bitrate smooths the sensor noise away: about 5 levels per byte), and not the frame a
+    // quarter turn on (about 14).
+    let scene = CarScene::from_rig(&r, None, 0).unwrap();
+    let mut reader = pav::video::VideoReader::open(&videos[0]).unwrap();
+    let diff = |a: &[u8], b: &[u8]| {
+        a.iter().zip(b).map(|(x, y)| (f64::from(*x) - f64::from(*y)).abs()).sum::<f64>() / a.len() as f64
+    };
+    while let Some((i, f)) = reader.read().unwrap() {
+        assert_eq!((f.width, f.height), (256, 144));
+        let a = rows[i].angle_deg as f32;
+        let (at, off) =
+            (diff(&f.bgr, &scene.frame(a, 256, 144).bgr), diff(&f.bgr, &scene.frame(a + 90.0, 256, 144).bgr));
+        eprintln!("frame {i}: mean |Δ| {at:.2} at its angle, {off:.2} a quarter turn on");
+        assert!(at < 0.5 * off, "frame {i}: {at} against {off}");
+    }
+    let run = std::fs::read_to_string(out.join("run.toml")).unwrap();
+    assert!(run.contains("webcam.toml") && run.contains("rasterizer"), "{run}");
+}
+
+#[test]
+fn a_capture_names_its_rig_and_its_simulated_camera_films_the_rigs_model() {
+    common::shared_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let path = small_rig(tmp.path(), "webcam.toml", 256, 22);
+    let video = tmp.path().join("cap.mp4");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+        .args(["capture", "--port", "sim", "--time-scale", "8", "--camera", "sim", "--rig"])
+        .arg(&path)
+        .args(["--width", "256", "--height", "144", "--fps", "10", "-o"])
+        .arg(&video)
+        .output()
+        .unwrap();
+    let said = common::output_text(&o);
+    assert!(o.status.success(), "{said}");
+    let run = std::fs::read_to_string(video.with_extension("run.toml")).unwrap();
+    assert!(run.contains("webcam.toml") && run.contains("placement"), "{run}");
+    // The frames are the rig's model at the sidecar's angles.
+    let r = RigConfig::load(&path).unwrap();
+    let scene = CarScene::from_rig(&r, None, 0).unwrap();
+    let rows = pav::sidecar::read(&pav::sidecar::sidecar_path(&video)).unwrap();
+    let mut reader = pav::video::VideoReader::open(&video).unwrap();
+    let diff = |a: &[u8], b: &[u8]| {
+        a.iter().zip(b).map(|(x, y)| (f64::from(*x) - f64::from(*y)).abs()).sum::<f64>() / a.len() as f64
+    };
+    let (mut at, mut off) = (Vec::new(), Vec::new());
+    while let Some((i, f)) = reader.read().unwrap() {
+        let a = rows[i].angle_deg as f32;
+        at.push(diff(&f.bgr, &scene.frame(a, 256, 144).bgr));
+        off.push(diff(&f.bgr, &scene.frame(a + 45.0, 256, 144).bgr));
+    }
+    let worst = at.iter().cloned().fold(0.0, f64::max);
+    let closest_off = off.iter().cloned().fold(f64::INFINITY, f64::min);
+    eprintln!("mean |Δ| per byte: at the sidecar angle ≤ {worst:.2}, 45° off ≥ {closest_off:.2}");
+    assert!(at.len() >= 10 && worst < closest_off, "at {at:?}\noff {off:?}");
+    // --texture without a model to paint is refused.
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+        .args(["capture", "--port", "sim", "--camera", "gst-test", "--rig"])
+        .arg(&path)
+        .arg("--texture")
+        .arg(&path)
+        .arg("-o")
+        .arg(tmp.path().join("x.mp4"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success() && common::output_text(&o).contains("--texture paints"), "{}", common::output_text(&o));
 }

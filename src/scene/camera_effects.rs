@@ -223,6 +223,12 @@ pub fn apply_noise(rig: &RigConfig, frame: &mut Frame, seed: u64) {
     }
 }
 
+/// The noise draw of the frame at table angle `angle_deg` (in [0, 360)) from camera elevation
+/// `elevation_deg`: the same frame gets the same noise from either back-end.
+pub fn noise_seed(angle_deg: f32, elevation_deg: f32) -> u64 {
+    crate::rng::fnv1a([u64::from(angle_deg.to_bits()), u64::from(elevation_deg.to_bits())])
+}
+
 /// The H.264 bitrate for the simulated frames when the rig lists the codec: the capture's
 /// bits per pixel at the simulation's size, kbit/s.
 pub fn codec_kbps(rig: &RigConfig) -> Option<f64> {

@@ -3,6 +3,8 @@
 //! model size, and which a real capture records so that a capture and its simulation name the
 //! same shot.
 //!
+//! A rig config may `extends = "other.toml"` and set only what differs.
+//!
 //! ```toml
 //! effects = ["defocus", "motion-blur", "noise", "codec"]   # only these are simulated
 //!
@@ -275,7 +277,13 @@ pub struct RigConfig {
     /// Camera effects to simulate; everything not listed is off.
     #[serde(default)]
     pub effects: Vec<CameraEffect>,
+    /// The configs this one `extends`, nearest first (read by [`RigConfig::load`]).
+    #[serde(skip)]
+    pub bases: Vec<PathBuf>,
 }
+
+/// The keys of a rig config that hold paths (rewritten when another config extends it).
+const PATH_KEYS: &[&[&str]] = &[&["mesh", "obj"], &["mesh", "texture"], &["room", "environment"]];
 
 /// The rig's geometry in the normalized mesh's units, derived once the mesh is known.
 #[derive(Clone, Debug, PartialEq)]
@@ -299,8 +307,9 @@ impl RigConfig {
     /// Reads a rig config; relative paths are taken from the config's folder.
     pub fn load(path: &Path) -> Result<RigConfig, ViewsError> {
         let err = |msg: String| ViewsError::Config { path: path.into(), msg };
-        let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
-        let mut c: RigConfig = toml::from_str(&text).map_err(|e| err(e.to_string()))?;
+        let (mut c, files): (RigConfig, _) =
+            crate::extends::load(path, PATH_KEYS, super::views::STUDIO_LIGHT_NAMES).map_err(|e| err(e.to_string()))?;
+        c.bases = files.into_iter().skip(1).collect();
         let dir = path.parent().unwrap_or(Path::new("."));
         let resolve = |p: &Path| crate::data::resolve(dir, p).map_err(|e| err(e.to_string()));
         c.mesh.obj = resolve(&c.mesh.obj)?;
@@ -527,9 +536,11 @@ impl RigConfig {
         Ok((cfg, mesh))
     }
 
-    /// The files the shot is made of (for `run.toml`).
+    /// The files the shot is made of (for `run.toml`): the configs it extends, the mesh and
+    /// its texture.
     pub fn inputs(&self) -> Vec<PathBuf> {
-        let mut v = vec![self.mesh.obj.clone()];
+        let mut v = self.bases.clone();
+        v.push(self.mesh.obj.clone());
         v.extend(self.mesh.texture.clone());
         v
     }

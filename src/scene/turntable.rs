@@ -7,7 +7,7 @@
 
 #[cfg(feature = "video")]
 use super::camera_effects::codec_kbps;
-use super::camera_effects::{apply_noise, apply_optics, behind, cut, Behind};
+use super::camera_effects::{apply_noise, apply_optics, behind, cut, noise_seed, Behind};
 use super::rig::{RigConfig, Shot};
 #[cfg(feature = "video")]
 use super::views::{read_manifest, ViewRecord, ViewSetInfo};
@@ -132,7 +132,7 @@ pub fn write_videos(dir: &Path, period_s: f64) -> Result<Vec<TurntableVideo>, Vi
                     img.rgb = square;
                     apply_optics(rig, shot, mesh, cam, &mut img.rgb, side);
                     let mut f = cut(&img.rgb, side, shot.size);
-                    apply_noise(rig, &mut f, crate::rng::fnv1a([i as u64, u64::from(r.elevation_deg.to_bits())]));
+                    apply_noise(rig, &mut f, noise_seed(r.azimuth_deg, r.elevation_deg));
                     f
                 }
                 None => cut(&img.rgb, img.width, (img.width, img.height)),
@@ -161,6 +161,59 @@ pub fn write_videos(dir: &Path, period_s: f64) -> Result<Vec<TurntableVideo>, Vi
             distance: f.distance,
             elevation_deg: f.elevation_deg,
             frames: g.len(),
+        });
+    }
+    Ok(out)
+}
+
+/// The rasterizer's turntable of a rig: for each camera position the same frames, angles,
+/// camera effects, codec, file names and sidecars as Blender's (`pav views turntable --rig`),
+/// drawn by [`CarScene`] in `dir/videos`, the model painted with `texture` (else its own).
+#[cfg(feature = "video")]
+pub fn write_raster_videos(
+    rig: &RigConfig,
+    texture: Option<&Path>,
+    dir: &Path,
+    period_s: f64,
+) -> Result<Vec<TurntableVideo>, ViewsError> {
+    if !(period_s.is_finite() && period_s > 0.0) {
+        return Err(refuse(dir, format!("a turn of {period_s} s is no turn")));
+    }
+    let out_dir = dir.join("videos");
+    std::fs::create_dir_all(&out_dir).map_err(io(&out_dir))?;
+    let n = rig.render.frames;
+    let fps = n as f64 / period_s;
+    let env = Path::new(&rig.room.environment)
+        .file_stem()
+        .map_or(rig.room.environment.clone(), |s| s.to_string_lossy().into());
+    let mut out = Vec::new();
+    for k in 0.. {
+        let scene = match CarScene::from_rig(rig, texture, k) {
+            Ok(s) => s,
+            Err(_) if k > 0 => break,
+            Err(e) => return Err(e),
+        };
+        let size = rig.frame_size();
+        let name = format!("{env}_d{:.2}_e{:.0}", scene.distance, scene.elevation_deg);
+        let path = out_dir.join(format!("{name}.mp4"));
+        let mut video = match codec_kbps(rig) {
+            Some(kbps) => VideoWriter::create_at_bitrate(&path, fps, size, kbps)?,
+            None => VideoWriter::create(&path, ['a', 'v', 'c', '1'], fps, size)?,
+        };
+        let mut angles = sidecar::Writer::create(&sidecar::sidecar_path(&path))?;
+        for i in 0..n {
+            // The same angles as the views of RigConfig::views_config.
+            let a = i as f32 * (360.0 / n as f32);
+            video.write(&scene.frame(a, size.0, size.1))?;
+            angles.push(AngleSample { frame: i, timestamp_s: i as f64 / fps, angle_deg: f64::from(a) })?;
+        }
+        video.finish()?;
+        out.push(TurntableVideo {
+            path,
+            environment: env.clone(),
+            distance: scene.distance,
+            elevation_deg: scene.elevation_deg,
+            frames: n,
         });
     }
     Ok(out)
@@ -300,7 +353,7 @@ impl CarScene {
         let Some((rig, shot, _)) = &self.rig else { return cut(&rgb, side, (width, height)) };
         apply_optics(rig, shot, &self.mesh, &self.camera(angle_deg), &mut rgb, side);
         let mut frame = cut(&rgb, side, (width, height));
-        apply_noise(rig, &mut frame, u64::from(angle_deg.to_bits()));
+        apply_noise(rig, &mut frame, noise_seed(angle_deg.rem_euclid(360.0), self.elevation_deg));
         frame
     }
 

@@ -52,6 +52,10 @@ use std::path::{Path, PathBuf};
 /// Where Debian's `blender` package puts its HDR environments.
 pub const STUDIO_LIGHTS: &str = "/usr/share/blender/datafiles/studiolights/world";
 
+/// The studio lights Blender ships, by name.
+pub const STUDIO_LIGHT_NAMES: &[&str] =
+    &["city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset"];
+
 /// Errors making views.
 #[derive(Debug, thiserror::Error)]
 pub enum ViewsError {
@@ -707,7 +711,8 @@ pub fn render_views(
         up: cfg.mesh.up.clone(),
         texture_sha256: Some(crate::data::store::file_digest(&texture).map_err(io(&texture))?.1),
         turntable: cfg.render.turntable,
-        rig: cfg.rig.as_deref().cloned(),
+        // The shot itself: which files its config extended is the run record's business.
+        rig: cfg.rig.as_deref().map(|r| super::rig::RigConfig { bases: Vec::new(), ..r.clone() }),
     };
     let info_path = dir.join("views.toml");
     let info_text = toml::to_string(&info).expect("view set info serializes");

@@ -6,7 +6,7 @@ use pav::scene::blender::Blender;
 #[cfg(feature = "video")]
 use pav::scene::rig::RigConfig;
 #[cfg(feature = "video")]
-use pav::scene::turntable::write_videos;
+use pav::scene::turntable::{write_raster_videos, write_videos};
 use pav::scene::views::{contact_sheet, merge_shards, render_views, ViewsConfig};
 use std::path::PathBuf;
 
@@ -60,6 +60,10 @@ pub struct TurntableArgs {
     /// Body texture instead of the config's (e.g. an optimized texture.png).
     #[arg(long, value_parser = pav::data::arg_path)]
     texture: Option<PathBuf>,
+    /// With --rig: draw the frames with pav's rasterizer (Phong under one light, no Cycles) instead
+    /// of Blender: the same angles, effects and file names, in seconds instead of minutes.
+    #[arg(long, requires = "rig")]
+    rasterizer: bool,
     /// Seconds per turn in the videos' time stamps [default: the rig's table, else 28 s, the
     /// paper's].
     #[arg(long)]
@@ -137,8 +141,19 @@ pub fn run(c: &Cmd) -> Result<()> {
             };
             cfg.mesh.texture = a.texture.clone().or(cfg.mesh.texture);
             cfg.render.turntable = true;
-            render(&cfg, config, &a.out, None)?;
-            let videos = write_videos(&a.out, a.period.unwrap_or(period))?;
+            let videos = if a.rasterizer {
+                let rig = cfg.rig.as_deref().expect("--rasterizer requires --rig");
+                let record = pav::provenance::Run::start()
+                    .config(config)
+                    .inputs(rig.inputs().iter().chain(&a.texture).map(|p| p.as_path()))
+                    .setting("backend", "rasterizer")
+                    .setting("rig", true);
+                record.write(&a.out.join(pav::provenance::FILE)).context("writing run.toml")?;
+                write_raster_videos(rig, a.texture.as_deref(), &a.out, a.period.unwrap_or(period))?
+            } else {
+                render(&cfg, config, &a.out, None)?;
+                write_videos(&a.out, a.period.unwrap_or(period))?
+            };
             for v in &videos {
                 println!(
                     "{}: {} frames, {} at distance {} and elevation {}°",
