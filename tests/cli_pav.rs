@@ -247,6 +247,24 @@ fn paint_puts_a_texture_on_the_region_and_keeps_the_car_paint_elsewhere() {
         .output()
         .unwrap();
     assert!(!o.status.success() && common::output_text(&o).contains("nope.png"), "{}", common::output_text(&o));
+    // The random baseline as a paint: blocks of one colour, 1/64 of the atlas side, the same
+    // for the same seed and not for another.
+    let random = |seed: &str, name: &str| {
+        let path = tmp.path().join(name);
+        let o = pav()
+            .args(["paint", "--config", "configs/studies/half-turns-ensemble-pbr.toml", "--random", seed, "-o"])
+            .arg(&path)
+            .output()
+            .unwrap();
+        assert!(o.status.success() && common::output_text(&o).contains("random blocks"), "{}", common::output_text(&o));
+        image::open(&path).unwrap().to_rgb8()
+    };
+    let (r0, again, r1) = (random("0", "r0.png"), random("0", "r0b.png"), random("1", "r1.png"));
+    assert_eq!(r0, again);
+    let differ = r0.pixels().zip(r1.pixels()).filter(|(a, b)| a != b).count();
+    assert!(differ > n / 8, "seeds 0 and 1 differ in {differ} of {n} pixels");
+    let kept = r0.enumerate_pixels().filter(|(x, y, px)| *px == base.get_pixel(*x, *y)).count();
+    assert!(kept > n / 2, "the car's paint outside the region: {kept} of {n}");
 }
 
 /// `--defence` on the experiments: `eval-digital` and `crossval` score each detector behind each

@@ -565,7 +565,7 @@ impl Setup {
 
     /// Edge of the random baseline's blocks in texels at this atlas size.
     pub fn random_block(&self) -> usize {
-        (self.tex_size / RANDOM_BLOCKS_PER_SIDE).max(1)
+        random_block_side(self.tex_size)
     }
 
     /// Block edge of the paper's random baseline ("random32", see [`PAPER_RANDOM_SIDE`]).
@@ -576,12 +576,7 @@ impl Setup {
     /// The "random" baseline: uniform random colours in `block × block` texel squares (a
     /// printable pattern, not sub-pixel noise that aliases in the render).
     pub fn random_texture(&self, block: usize, seed: u64) -> Vec<f32> {
-        let n = self.tex_size;
-        let b = block.max(1);
-        let cells = n.div_ceil(b);
-        let mut rng = crate::rng::Rng::new(seed);
-        let colours: Vec<f32> = (0..cells * cells * 3).map(|_| rng.unit()).collect();
-        (0..n * n * 3).map(|i| colours[(((i / 3) / n / b) * cells + ((i / 3) % n) / b) * 3 + i % 3]).collect()
+        random_blocks(self.tex_size, block, seed)
     }
 
     /// The starting texture; a random start draws its blocks from `seed`.
@@ -605,6 +600,21 @@ impl Setup {
         let frame = Frame { width: t.width, height: t.height, bgr: t.rgb.iter().map(|v| to_u8(*v)).collect() };
         Ok(resize(&frame, n, n, Interpolation::Antialias).into_iter().map(|v| v / 255.0).collect())
     }
+}
+
+/// An `n × n` RGB texture of uniform random colours in `block × block` squares drawn from
+/// `seed` (the "random" baseline; [`random_block_side`] is its block edge at atlas size `n`).
+pub fn random_blocks(n: usize, block: usize, seed: u64) -> Vec<f32> {
+    let b = block.max(1);
+    let cells = n.div_ceil(b);
+    let mut rng = crate::rng::Rng::new(seed);
+    let colours: Vec<f32> = (0..cells * cells * 3).map(|_| rng.unit()).collect();
+    (0..n * n * 3).map(|i| colours[(((i / 3) / n / b) * cells + ((i / 3) % n) / b) * 3 + i % 3]).collect()
+}
+
+/// Edge of the random baseline's blocks in texels at atlas size `n`.
+pub fn random_block_side(n: usize) -> usize {
+    (n / RANDOM_BLOCKS_PER_SIDE).max(1)
 }
 
 #[cfg(test)]

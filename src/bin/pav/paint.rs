@@ -13,8 +13,12 @@ pub struct Args {
     #[arg(long)]
     config: PathBuf,
     /// The texture (an optimize or crossval texture.png, or a peer's, e.g. data:rauca-e2e/RAUCA_E2E.png).
-    #[arg(long, value_parser = pav::data::arg_path)]
-    texture: PathBuf,
+    #[arg(long, value_parser = pav::data::arg_path, required_unless_present = "random", conflicts_with = "random")]
+    texture: Option<PathBuf>,
+    /// Or the "random" baseline of `pav crossval`: uniform random colours in blocks 1/64 of the
+    /// atlas side, drawn from this seed.
+    #[arg(long, value_name = "SEED")]
+    random: Option<u64>,
     /// The car's paint outside the region (default: the mesh's own map_Kd).
     #[arg(long, value_parser = pav::data::arg_path)]
     base: Option<PathBuf>,
@@ -38,7 +42,16 @@ pub fn run(a: &Args) -> Result<()> {
                 format!("{} names no map_Kd: give the car's paint with --base", cfg.mesh.obj.display())
             })?,
         };
-    let (base_img, mut texture) = (Rgb::load(&base)?, Rgb::load(&a.texture)?);
+    let base_img = Rgb::load(&base)?;
+    let (mut texture, named) = match (&a.texture, a.random) {
+        (Some(t), _) => (Rgb::load(t)?, t.display().to_string()),
+        (None, Some(seed)) => {
+            let n = cfg.mesh.texture_size;
+            let rgb = pav::attack::setup::random_blocks(n, pav::attack::setup::random_block_side(n), seed);
+            (Rgb { width: n, height: n, rgb }, format!("random blocks (seed {seed})"))
+        }
+        (None, None) => unreachable!("clap requires --texture or --random"),
+    };
     if a.print {
         let p = a.printer.resolve(&cfg);
         let channel = pav::print::channel::PrintChannel::open(&p)?;
@@ -58,7 +71,7 @@ pub fn run(a: &Args) -> Result<()> {
         a.out.display(),
         painted.width,
         painted.height,
-        a.texture.display(),
+        named,
         region.len(),
         base.display()
     );
