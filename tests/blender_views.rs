@@ -505,6 +505,24 @@ fn a_rig_films_the_model_on_its_table_before_its_backdrop_at_its_frame_size() {
     // The run records the rig it filmed.
     let run = std::fs::read_to_string(dir.join("run.toml")).unwrap();
     assert!(run.contains("rig.toml") && run.contains("rig = \"true\""), "{run}");
+    // Other camera effects reuse the renders and cut new videos; another shot is refused.
+    let first = {
+        let mut r = pav::video::VideoReader::open(&video).unwrap();
+        r.read().unwrap().unwrap().1
+    };
+    let text = std::fs::read_to_string(&rig).unwrap();
+    std::fs::write(&rig, text.replace("effects = []", r#"effects = ["noise"]"#)).unwrap();
+    let out = run_ok(pav().args(["views", "turntable", "--rig"]).arg(&rig).arg("-o").arg(&dir));
+    assert!(out.contains("0 rendered now, 2 from an earlier run"), "{out}");
+    let noisy = {
+        let mut r = pav::video::VideoReader::open(&video).unwrap();
+        r.read().unwrap().unwrap().1
+    };
+    assert_ne!(first.bgr, noisy.bgr, "the noise effect left the video as it was");
+    std::fs::write(&rig, text.replace("distance_m = 0.4", "distance_m = 0.6")).unwrap();
+    let o = pav().args(["views", "turntable", "--rig"]).arg(&rig).arg("-o").arg(&dir).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("or rig"), "{err}");
 }
 
 #[test]

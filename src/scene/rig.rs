@@ -423,6 +423,22 @@ impl RigConfig {
         Ok(())
     }
 
+    /// Whether `other` renders the same views (it may differ in the camera effects and in what
+    /// only they read: exposure, aperture, focus, noise and bitrate), so a view folder of one
+    /// can be cut into videos with the other's effects without rendering again.
+    pub fn same_renders(&self, other: &RigConfig) -> bool {
+        let bare = |r: &RigConfig| {
+            let mut r = r.clone();
+            r.effects.clear();
+            r.bases.clear();
+            let c = &mut r.camera;
+            (c.exposure_s, c.f_number, c.focus_m, c.read_noise, c.shot_gain, c.bitrate_kbps) =
+                (0.0, 0.0, None, 0.0, 0.0, 0.0);
+            r
+        };
+        bare(self) == bare(other)
+    }
+
     /// The model's length, metres.
     pub fn model_length_m(&self) -> f64 {
         self.model.car_length_m / self.model.scale

@@ -727,9 +727,13 @@ pub fn render_views(
                 return Err(other());
             }
             // Resuming would mix two paints, or cars turned and not turned, in one set.
+            let same_rig = match (&old.rig, &info.rig) {
+                (Some(a), Some(b)) => a.same_renders(b),
+                (a, b) => a.is_none() && b.is_none(),
+            };
             if old.texture_sha256.as_ref().is_some_and(|t| Some(t) != info.texture_sha256.as_ref())
                 || old.turntable != info.turntable
-                || old.rig != info.rig
+                || !same_rig
             {
                 return Err(ViewsError::Config {
                     path: info_path.clone(),
@@ -739,6 +743,10 @@ pub fn render_views(
             }
         }
         Err(_) => std::fs::write(&info_path, &info_text).map_err(io(&info_path))?,
+    }
+    // A rig's camera effects may differ from the folder's: the videos are cut with these.
+    if info.rig.is_some() {
+        std::fs::write(&info_path, &info_text).map_err(io(&info_path))?;
     }
     let rot = up_rotation(&cfg.mesh.up).expect("checked by load");
     let all = cfg.views();
