@@ -215,14 +215,12 @@ fn each_camera_effect_is_off_unless_listed() {
     }
 }
 
-/// A copy of a shipped rig, small: `width` pixels wide, `frames` a turn.
+/// A shipped rig made small: `width` pixels wide, `frames` a turn (a config that extends it).
 fn small_rig(dir: &std::path::Path, name: &str, width: usize, frames: usize) -> std::path::PathBuf {
-    let text = std::fs::read_to_string(common::repo().join("configs/rig").join(name)).unwrap();
-    let small =
-        text.replace("width = 640", &format!("width = {width}")).replace("frames = 22", &format!("frames = {frames}"));
-    assert_ne!(small, text);
+    let shipped = common::repo().join("configs/rig").join(name);
     let path = dir.join(name);
-    std::fs::write(&path, small).unwrap();
+    let text = format!("extends = {:?}\n[render]\nwidth = {width}\nframes = {frames}\n", shipped.display().to_string());
+    std::fs::write(&path, text).unwrap();
     path
 }
 
@@ -323,4 +321,92 @@ fn a_capture_names_its_rig_and_its_simulated_camera_films_the_rigs_model() {
         .output()
         .unwrap();
     assert!(!o.status.success() && common::output_text(&o).contains("--texture paints"), "{}", common::output_text(&o));
+}
+
+#[test]
+fn compare_finds_how_far_a_capture_s_zero_is_from_the_simulation_s() {
+    common::shared_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let path = small_rig(tmp.path(), "phone-etron.toml", 320, 36);
+    let sim = tmp.path().join("sim");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav"))
+        .args(["views", "turntable", "--rasterizer", "--rig"])
+        .arg(&path)
+        .arg("-o")
+        .arg(&sim)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", common::output_text(&o));
+    // The "real" capture: the live simulated camera at the table's own angles (other frames
+    // than the simulation's), from the rig's first camera position, its sidecar then written as
+    // a table that homed 40° before the simulation's zero.
+    let real = tmp.path().join("real.mp4");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+        .args(["capture", "--port", "sim", "--time-scale", "4", "--camera", "sim", "--rig"])
+        .arg(&path)
+        .args(["--width", "320", "--height", "180", "--fps", "10", "-o"])
+        .arg(&real)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", common::output_text(&o));
+    let side = pav::sidecar::sidecar_path(&real);
+    let mut rows = pav::sidecar::read(&side).unwrap();
+    for r in &mut rows {
+        r.angle_deg = (r.angle_deg - 40.0).rem_euclid(360.0);
+    }
+    let mut w = pav::sidecar::Writer::create(&side).unwrap();
+    for r in &rows {
+        w.push(*r).unwrap();
+    }
+    drop(w);
+    let level = std::fs::read_dir(sim.join("videos"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.to_string_lossy().ends_with("_e0.mp4"))
+        .unwrap();
+    let eval = tmp.path().join("eval");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+        .arg("evaluate")
+        .args([&real, &level])
+        .args(["--label", "real", "--label", "sim", "--no-plots", "-d"])
+        .arg(common::repo().join("configs/detectors"))
+        .arg("-o")
+        .arg(&eval)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", common::output_text(&o));
+    let out = tmp.path().join("cmp");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+        .arg("compare")
+        .arg(&eval)
+        .args(["--real", "real", "--sim", "sim", "--sectors", "36", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let said = common::output_text(&o);
+    assert!(o.status.success(), "{said}");
+    let run = std::fs::read_to_string(out.join("run.toml")).unwrap();
+    let offset: f64 = run
+        .lines()
+        .find_map(|l| l.strip_prefix("offset_deg = "))
+        .map(|v| v.trim_matches('"').parse().unwrap())
+        .unwrap_or_else(|| panic!("{run}"));
+    eprintln!("{said}");
+    let err = (offset - 40.0 + 180.0).rem_euclid(360.0) - 180.0;
+    // Within a sector (10°) of the truth.
+    assert!(err.abs() <= 10.0, "found {offset}°, put in 40°");
+    assert!(std::fs::read_to_string(out.join("compare.csv")).unwrap().lines().count() == 1 + 4 * 36);
+    // A label that was not scored is named with the ones that were.
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+        .arg("compare")
+        .arg(&eval)
+        .args(["--real", "nope", "--sim", "sim", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        !o.status.success() && common::output_text(&o).contains("labels here: real, sim"),
+        "{}",
+        common::output_text(&o)
+    );
 }

@@ -5,6 +5,7 @@
 pub mod bench;
 #[cfg(feature = "eval")]
 mod charts;
+pub mod compare;
 pub mod digital;
 pub mod physical;
 #[cfg(feature = "eval")]

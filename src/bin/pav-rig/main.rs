@@ -7,6 +7,7 @@ mod common;
 mod bench;
 mod bench_rig;
 mod capture;
+mod compare;
 mod evaluate;
 mod model;
 mod port;
@@ -44,6 +45,9 @@ enum Cmd {
     Simulate(simulate::Args),
     /// Record one or more turntable revolutions: video plus a per-frame angle sidecar.
     Capture(capture::Args),
+    /// A real capture beside its simulation: A_physical of both and per-angle car scores, the
+    /// angle offset between the two tables found from the scores.
+    Compare(compare::Args),
 }
 
 fn main() -> Result<()> {
@@ -55,5 +59,6 @@ fn main() -> Result<()> {
         Cmd::Turntable(a) => turntable::run(a),
         Cmd::Simulate(a) => simulate::run(a),
         Cmd::Capture(a) => capture::run(a),
+        Cmd::Compare(a) => compare::run(a),
     }
 }
