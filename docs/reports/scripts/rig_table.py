@@ -81,3 +81,17 @@ for p in PAINTS:
         cells.append(f"{100 * (k1 / n1 - k0 / n0):+.1f} [{100 * lo:+.0f}, {100 * hi:+.0f}]{mark}")
     print(f"| {p} | " + " | ".join(cells) + " |")
 print("\n* the interval excludes 0: the back-ends disagree")
+
+print("\nThe unpainted model by camera position: A_physical in % per polar angle (22 frames each)\n")
+print("| back-end | polar angle | " + " | ".join(detectors) + " |")
+print("|---|---:|" + "---:|" * len(detectors))
+for b in BACKENDS:
+    with open(out / "eval" / f"{b}-original-none" / "frames.csv") as f:
+        rows = list(csv.DictReader(f))
+    for e in ["0", "20"]:
+        cells = []
+        for d in detectors:
+            sel = [r for r in rows if r["detector"] == d and r["file"].endswith(f"_e{e}.mp4")]
+            k = sum(r["detected"] == "true" for r in sel)
+            cells.append(f"{100 * k / len(sel):.1f}")
+        print(f"| {NAMES[b]} | {e}° | " + " | ".join(cells) + " |")
