@@ -50,7 +50,8 @@
 //! frames = 44                  # per turn and camera position
 //! ```
 
-use super::views::{Environment, PbrEffect, PoseGrid, RenderSettings, ViewMesh, ViewsConfig, ViewsError};
+use super::blender::TableTop;
+use super::views::{Environment, PbrEffect, PoseGrid, RenderSettings, RigScene, ViewMesh, ViewsConfig, ViewsError};
 use crate::geometry::camera::Camera;
 use crate::geometry::mesh::Mesh;
 use serde::{Deserialize, Serialize};
@@ -427,16 +428,34 @@ impl RigConfig {
     /// only they read: exposure, aperture, focus, noise and bitrate), so a view folder of one
     /// can be cut into videos with the other's effects without rendering again.
     pub fn same_renders(&self, other: &RigConfig) -> bool {
-        let bare = |r: &RigConfig| {
-            let mut r = r.clone();
-            r.effects.clear();
-            r.bases.clear();
-            let c = &mut r.camera;
-            (c.exposure_s, c.f_number, c.focus_m, c.read_noise, c.shot_gain, c.bitrate_kbps) =
-                (0.0, 0.0, None, 0.0, 0.0, 0.0);
-            r
-        };
-        bare(self) == bare(other)
+        self.render_key() == other.render_key()
+    }
+
+    /// The rig without its camera effects and what only they read, as TOML: equal for rigs
+    /// whose views are the same renders.
+    fn render_key(&self) -> String {
+        let mut r = self.clone();
+        r.effects.clear();
+        r.bases.clear();
+        let c = &mut r.camera;
+        (c.exposure_s, c.f_number, c.focus_m, c.read_noise, c.shot_gain, c.bitrate_kbps) =
+            (0.0, 0.0, None, 0.0, 0.0, 0.0);
+        toml::to_string(&r).expect("a rig serializes")
+    }
+
+    /// The rig as `views.toml` records it (which configs it extended is the run record's business).
+    pub fn record(&self) -> toml::Table {
+        toml::Table::try_from(RigConfig { bases: Vec::new(), ..self.clone() }).expect("a rig serializes")
+    }
+
+    /// The rig a view folder recorded ([`Self::record`]).
+    pub fn from_record(t: &toml::Table) -> Result<RigConfig, String> {
+        toml::Value::Table(t.clone()).try_into().map_err(|e: toml::de::Error| e.to_string())
+    }
+
+    /// How many camera positions the rig lists (heights or elevations).
+    pub fn positions(&self) -> usize {
+        self.placement.heights_m.len().max(self.placement.elevations_deg.len())
     }
 
     /// The model's length, metres.
@@ -547,7 +566,16 @@ impl RigConfig {
                 target: shot.target,
             })
             .collect();
-        cfg.rig = Some(Box::new(self.clone()));
+        let s = self.sticker.material.surface();
+        let (w, h) = shot.size;
+        cfg.rig = Some(Box::new(RigScene {
+            surface: [s.roughness, s.specular, s.clearcoat],
+            backdrop: self.room.backdrop,
+            table: TableTop { radius: self.table.radius_m as f32 * shot.units_per_m, colour: self.table.surface },
+            rows: if h < w { h } else { cfg.render.size },
+            record: self.record(),
+            key: self.render_key(),
+        }));
         cfg.check().map_err(|msg| ViewsError::Config { path: self.mesh.obj.clone(), msg })?;
         Ok((cfg, mesh))
     }

@@ -89,12 +89,13 @@ pub fn write_videos(dir: &Path, period_s: f64) -> Result<Vec<TurntableVideo>, Vi
     // A rig's views are cut to its frame and get its camera effects, from the same cameras
     // (found by view name) and the same mesh the views were rendered from.
     let rig = match &info.rig {
-        Some(rig) => {
+        Some(record) => {
+            let rig = RigConfig::from_record(record).map_err(|e| refuse(&info_path, format!("its rig: {e}")))?;
             let (cfg, mesh) = rig.views_config()?;
             let shot = rig.shot(&mesh);
             let cams: std::collections::HashMap<String, crate::geometry::camera::Camera> =
                 cfg.views().into_iter().map(|v| (v.name, v.camera)).collect();
-            Some((rig, mesh, shot, cams))
+            Some((Box::new(rig), mesh, shot, cams))
         }
         None => None,
     };
@@ -187,12 +188,8 @@ pub fn write_raster_videos(
         .file_stem()
         .map_or(rig.room.environment.clone(), |s| s.to_string_lossy().into());
     let mut out = Vec::new();
-    for k in 0.. {
-        let scene = match CarScene::from_rig(rig, texture, k) {
-            Ok(s) => s,
-            Err(_) if k > 0 => break,
-            Err(e) => return Err(e),
-        };
+    for k in 0..rig.positions() {
+        let scene = CarScene::from_rig(rig, texture, k)?;
         let size = rig.frame_size();
         let name = format!("{env}_d{:.2}_e{:.0}", scene.distance, scene.elevation_deg);
         let path = out_dir.join(format!("{name}.mp4"));
@@ -233,8 +230,8 @@ pub struct CarScene {
     target: [f32; 3],
     lights: Lights,
     background: [f32; 3],
-    /// The rig the scene films, with its shot in the mesh's units and the camera height's index.
-    rig: Option<(Box<RigConfig>, Shot, usize)>,
+    /// The rig the scene films, with its shot in the mesh's units.
+    rig: Option<(Box<RigConfig>, Shot)>,
 }
 
 /// Room light: a key light from above the camera's left shoulder and some ambient. Of the few
@@ -295,7 +292,7 @@ impl CarScene {
             target: shot.target,
             lights: ROOM,
             background: rig.room.backdrop,
-            rig: Some((Box::new(rig.clone()), shot, k)),
+            rig: Some((Box::new(rig.clone()), shot)),
         })
     }
 
@@ -330,7 +327,7 @@ impl CarScene {
             let px = &mut rgb[3 * i..3 * i + 3];
             if *f == EMPTY {
                 match &self.rig {
-                    Some((rig, shot, _)) => match behind(rig, shot, &cam, size, i % size, i / size) {
+                    Some((rig, shot)) => match behind(rig, shot, &cam, size, i % size, i / size) {
                         Behind::Table(_) => px.copy_from_slice(&rig.table.surface.map(|c| c * table_light)),
                         Behind::Backdrop(_) => px.copy_from_slice(&self.background),
                     },
@@ -350,7 +347,7 @@ impl CarScene {
     pub fn frame(&self, angle_deg: f32, width: usize, height: usize) -> Frame {
         let side = width.max(height);
         let mut rgb = crate::image::halve(&self.render(angle_deg, 2 * side), 2 * side, 2 * side);
-        let Some((rig, shot, _)) = &self.rig else { return cut(&rgb, side, (width, height)) };
+        let Some((rig, shot)) = &self.rig else { return cut(&rgb, side, (width, height)) };
         apply_optics(rig, shot, &self.mesh, &self.camera(angle_deg), &mut rgb, side);
         let mut frame = cut(&rgb, side, (width, height));
         apply_noise(rig, &mut frame, noise_seed(angle_deg.rem_euclid(360.0), self.elevation_deg));
@@ -359,6 +356,6 @@ impl CarScene {
 
     /// The rig this scene films, if it was made from one.
     pub fn rig(&self) -> Option<&RigConfig> {
-        self.rig.as_ref().map(|(r, _, _)| r.as_ref())
+        self.rig.as_ref().map(|(r, _)| r.as_ref())
     }
 }

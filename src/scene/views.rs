@@ -245,10 +245,27 @@ pub struct ViewsConfig {
     /// Background plates.
     #[serde(default)]
     pub plates: Option<Plates>,
-    /// The rig whose turntable these views film ([`super::rig::RigConfig::views_config`]): its
-    /// table, backdrop and sticker replace the ground and the car paint.
+    /// The rig whose turntable these views film (set by `RigConfig::views_config`): its table,
+    /// backdrop and sticker replace the ground and the car paint.
     #[serde(skip)]
-    pub rig: Option<Box<super::rig::RigConfig>>,
+    pub rig: Option<Box<RigScene>>,
+}
+
+/// What a rig changes in a render, and what a view folder records of it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RigScene {
+    /// The sticker's roughness, specular level and clear coat (metallic 0).
+    pub surface: [f32; 3],
+    /// What camera rays see behind the table, sRGB.
+    pub backdrop: [f32; 3],
+    /// The table top.
+    pub table: TableTop,
+    /// Rows of the square render the frame keeps (its centre rows).
+    pub rows: usize,
+    /// The rig config as TOML, for `views.toml` (the videos are cut with its effects).
+    pub record: toml::Table,
+    /// What two rigs must share to share rendered views (not their camera effects).
+    pub key: String,
 }
 
 /// One view to render.
@@ -593,9 +610,12 @@ pub struct ViewSetInfo {
     /// Whether the environment turned with the camera.
     #[serde(default)]
     pub turntable: bool,
-    /// The rig whose turntable the views film, if any.
+    /// The rig whose turntable the views film, if any (its config).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub rig: Option<super::rig::RigConfig>,
+    pub rig: Option<toml::Table>,
+    /// What views of another rig must share to be resumed here.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rig_key: Option<String>,
 }
 
 impl ViewSetInfo {
@@ -711,8 +731,8 @@ pub fn render_views(
         up: cfg.mesh.up.clone(),
         texture_sha256: Some(crate::data::store::file_digest(&texture).map_err(io(&texture))?.1),
         turntable: cfg.render.turntable,
-        // The shot itself: which files its config extended is the run record's business.
-        rig: cfg.rig.as_deref().map(|r| super::rig::RigConfig { bases: Vec::new(), ..r.clone() }),
+        rig: cfg.rig.as_ref().map(|r| r.record.clone()),
+        rig_key: cfg.rig.as_ref().map(|r| r.key.clone()),
     };
     let info_path = dir.join("views.toml");
     let info_text = toml::to_string(&info).expect("view set info serializes");
@@ -727,10 +747,7 @@ pub fn render_views(
                 return Err(other());
             }
             // Resuming would mix two paints, or cars turned and not turned, in one set.
-            let same_rig = match (&old.rig, &info.rig) {
-                (Some(a), Some(b)) => a.same_renders(b),
-                (a, b) => a.is_none() && b.is_none(),
-            };
+            let same_rig = old.rig_key == info.rig_key;
             if old.texture_sha256.as_ref().is_some_and(|t| Some(t) != info.texture_sha256.as_ref())
                 || old.turntable != info.turntable
                 || !same_rig
@@ -789,15 +806,12 @@ pub fn render_views(
                 (job.metallic, job.roughness, job.clearcoat) = (0.3, 0.35, 0.5);
             }
             if let Some(rig) = &cfg.rig {
-                let s = rig.sticker.material.surface();
-                (job.metallic, job.roughness, job.clearcoat, job.specular) =
-                    (0.0, s.roughness, s.clearcoat, s.specular);
-                job.backdrop = Some(rig.room.backdrop);
-                let units = rig.shot(&mesh).units_per_m;
-                job.table = Some(TableTop { radius: rig.table.radius_m as f32 * units, colour: rig.table.surface });
+                let [roughness, specular, clearcoat] = rig.surface;
+                (job.metallic, job.roughness, job.clearcoat, job.specular) = (0.0, roughness, clearcoat, specular);
+                job.backdrop = Some(rig.backdrop);
+                job.table = Some(rig.table);
                 job.shadows = false;
-                let (w, h) = rig.frame_size();
-                job.rows = (h < w).then_some(h);
+                job.rows = (rig.rows < n).then_some(rig.rows);
             }
             let out_name = |v: &View| if on_plates { format!("{}_car.png", v.name) } else { format!("{}.png", v.name) };
             job.views = todo
@@ -825,7 +839,7 @@ pub fn render_views(
                     let g = GBuffer::render(&mesh, &v.camera, n);
                     let mask: Vec<f32> = g.face.iter().flat_map(|f| [if *f == EMPTY { 0.0 } else { 1.0 }; 3]).collect();
                     // A rig's mask is cut as its view is: the centre rows of the square.
-                    let rows = cfg.rig.as_ref().map_or(n, |r| r.frame_size().1.min(n));
+                    let rows = cfg.rig.as_ref().map_or(n, |r| r.rows.min(n));
                     let y0 = (n - rows) / 2;
                     let mask = &mask[3 * n * y0..3 * n * (y0 + rows)];
                     crate::image::save_rgb(&views_dir.join(format!("{name}_mask.png")), n, rows, mask)?;

@@ -130,29 +130,28 @@ pub fn run(c: &Cmd) -> Result<()> {
         }
         #[cfg(feature = "video")]
         Cmd::Turntable(a) => {
-            let (mut cfg, config, period) = match (&a.config, &a.rig) {
-                (_, Some(rig_path)) => {
-                    let rig = RigConfig::load(rig_path)?;
-                    let period = rig.table.period_s;
-                    (rig.views_config()?.0, rig_path, period)
-                }
-                (Some(c), None) => (ViewsConfig::load(c)?, c, 28.0),
-                (None, None) => unreachable!("clap requires a config or --rig"),
+            let rig = a.rig.as_deref().map(RigConfig::load).transpose()?;
+            let (mut cfg, config, period) = match (&a.config, &a.rig, &rig) {
+                (_, Some(path), Some(rig)) => (rig.views_config()?.0, path, rig.table.period_s),
+                (Some(c), None, None) => (ViewsConfig::load(c)?, c, 28.0),
+                _ => unreachable!("clap requires a config or --rig"),
             };
             cfg.mesh.texture = a.texture.clone().or(cfg.mesh.texture);
             cfg.render.turntable = true;
-            let videos = if a.rasterizer {
-                let rig = cfg.rig.as_deref().expect("--rasterizer requires --rig");
-                let record = pav::provenance::Run::start()
-                    .config(config)
-                    .inputs(rig.inputs().iter().chain(&a.texture).map(|p| p.as_path()))
-                    .setting("backend", "rasterizer")
-                    .setting("rig", true);
-                record.write(&a.out.join(pav::provenance::FILE)).context("writing run.toml")?;
-                write_raster_videos(rig, a.texture.as_deref(), &a.out, a.period.unwrap_or(period))?
-            } else {
-                render(&cfg, config, &a.out, None)?;
-                write_videos(&a.out, a.period.unwrap_or(period))?
+            let videos = match (&rig, a.rasterizer) {
+                (Some(rig), true) => {
+                    let record = pav::provenance::Run::start()
+                        .config(config)
+                        .inputs(rig.inputs().iter().chain(&a.texture).map(|p| p.as_path()))
+                        .setting("backend", "rasterizer")
+                        .setting("rig", true);
+                    record.write(&a.out.join(pav::provenance::FILE)).context("writing run.toml")?;
+                    write_raster_videos(rig, a.texture.as_deref(), &a.out, a.period.unwrap_or(period))?
+                }
+                _ => {
+                    render(&cfg, config, &a.out, None)?;
+                    write_videos(&a.out, a.period.unwrap_or(period))?
+                }
             };
             for v in &videos {
                 println!(
