@@ -135,18 +135,15 @@ fn defocus(rgb: &mut [f32], side: usize, coc_px: &[f32]) {
 fn motion_blur(rgb: &mut [f32], g: &GBuffer, cam: &Camera, turn_rad: f32) {
     let side = g.size;
     let src = rgb.to_vec();
-    let t = (cam.fov_deg.to_radians() / 2.0).tan();
-    let s = side as f32 / 2.0;
     let (sn, cs) = turn_rad.sin_cos();
     for i in 0..side * side {
         if g.face[i] == EMPTY {
             continue;
         }
         let (x, y) = (i % side, i / side);
-        let z = g.depth[i];
-        let v = [(1.0 - (x as f32 + 0.5) / s) * t * z, (1.0 - (y as f32 + 0.5) / s) * t * z, z];
-        let a = cam.axes;
-        let p = [0, 1, 2].map(|k| cam.eye[k] + a[0][k] * v[0] + a[1][k] * v[1] + a[2][k] * v[2]);
+        // The pixel's ray reaches the surface at its view depth.
+        let (d, z) = (ray(cam, side, x, y), g.depth[i]);
+        let p = [0, 1, 2].map(|k| cam.eye[k] + z * d[k]);
         // The table's axis is pav's +Y through the origin.
         let q = [p[0] * cs + p[2] * sn, p[1], -p[0] * sn + p[2] * cs];
         let [qx, qy] = cam.to_pixel(cam.to_view(q), side);

@@ -424,15 +424,9 @@ impl RigConfig {
         Ok(())
     }
 
-    /// Whether `other` renders the same views (it may differ in the camera effects and in what
-    /// only they read: exposure, aperture, focus, noise and bitrate), so a view folder of one
-    /// can be cut into videos with the other's effects without rendering again.
-    pub fn same_renders(&self, other: &RigConfig) -> bool {
-        self.render_key() == other.render_key()
-    }
-
-    /// The rig without its camera effects and what only they read, as TOML: equal for rigs
-    /// whose views are the same renders.
+    /// The rig without its camera effects and what only they read (exposure, aperture, focus,
+    /// noise, bitrate), as TOML: equal for rigs whose views are the same renders, so a view
+    /// folder of one can be cut into videos with the other's effects.
     fn render_key(&self) -> String {
         let mut r = self.clone();
         r.effects.clear();

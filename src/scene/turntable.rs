@@ -106,7 +106,7 @@ pub fn write_videos(dir: &Path, period_s: f64) -> Result<Vec<TurntableVideo>, Vi
             return Err(refuse(&manifest, format!("views {} and {} share an azimuth", w[0].name, w[1].name)));
         }
         let f = &g[0];
-        let name = format!("{}_d{:.2}_e{:.0}", f.environment, f.distance, f.elevation_deg);
+        let name = video_stem(&f.environment, f.distance, f.elevation_deg);
         let path = out_dir.join(format!("{name}.mp4"));
         let fps = g.len() as f64 / period_s;
         let mut video: Option<VideoWriter> = None;
@@ -167,6 +167,13 @@ pub fn write_videos(dir: &Path, period_s: f64) -> Result<Vec<TurntableVideo>, Vi
     Ok(out)
 }
 
+/// A turntable video's file stem: its environment, camera distance and elevation, the same for
+/// both back-ends so their videos of one shot are named alike.
+#[cfg(feature = "video")]
+fn video_stem(environment: &str, distance: f32, elevation_deg: f32) -> String {
+    format!("{environment}_d{distance:.2}_e{elevation_deg:.0}")
+}
+
 /// The rasterizer's turntable of a rig: for each camera position the same frames, angles,
 /// camera effects, codec, file names and sidecars as Blender's (`pav views turntable --rig`),
 /// drawn by [`CarScene`] in `dir/videos`, the model painted with `texture` (else its own).
@@ -184,14 +191,12 @@ pub fn write_raster_videos(
     std::fs::create_dir_all(&out_dir).map_err(io(&out_dir))?;
     let n = rig.render.frames;
     let fps = n as f64 / period_s;
-    let env = Path::new(&rig.room.environment)
-        .file_stem()
-        .map_or(rig.room.environment.clone(), |s| s.to_string_lossy().into());
+    let env = super::views::environment_stem(&rig.room.environment);
     let mut out = Vec::new();
     for k in 0..rig.positions() {
         let scene = CarScene::from_rig(rig, texture, k)?;
         let size = rig.frame_size();
-        let name = format!("{env}_d{:.2}_e{:.0}", scene.distance, scene.elevation_deg);
+        let name = video_stem(&env, scene.distance, scene.elevation_deg);
         let path = out_dir.join(format!("{name}.mp4"));
         let mut video = match codec_kbps(rig) {
             Some(kbps) => VideoWriter::create_at_bitrate(&path, fps, size, kbps)?,

@@ -399,8 +399,7 @@ impl ViewsConfig {
     /// The name views and the manifest give environment `i`: a studio light's name, or a map
     /// file's stem.
     pub fn environment_name(&self, i: usize) -> String {
-        let name = &self.environments[i].name;
-        Path::new(name).file_stem().map_or(name.clone(), |s| s.to_string_lossy().into())
+        environment_stem(&self.environments[i].name)
     }
 
     /// Every view of the config, in a fixed order: environments, then grids, distances,
@@ -508,6 +507,12 @@ impl ViewsConfig {
             }
         })
     }
+}
+
+/// The name views, manifests and videos give an environment: a studio light's name, or a map
+/// file's stem.
+pub fn environment_stem(name: &str) -> String {
+    Path::new(name).file_stem().map_or(name.to_string(), |s| s.to_string_lossy().into())
 }
 
 /// The rotation taking a file whose up axis is `up` to pav's +Y up (a proper rotation, so the
