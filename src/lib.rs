@@ -5,7 +5,7 @@
 //!
 //! | layer | modules |
 //! |---|---|
-//! | 0 base | [`colour`], [`data`], [`extends`], [`provenance`], [`image`], [`video`], [`geometry`], [`rng`], [`sidecar`], [`table`], [`plot`], [`progress`] |
+//! | 0 base | [`cluster`], [`colour`], [`data`], [`extends`], [`provenance`], [`image`], [`video`], [`geometry`], [`rng`], [`shard`], [`sidecar`], [`table`], [`plot`], [`progress`] |
 //! | 1 method blocks | [`print`], [`render`], [`scene`], [`dataset`], [`detect`] |
 //! | 2 jobs | [`attack`] (the optimizer), [`eval`] (scoring), [`rig`] (turntable and capture); no job uses another |
 //! | 3 experiments | [`experiments`]: what combines the optimizer and scoring |
@@ -14,6 +14,7 @@
 //! → loss → texture; and video → frames → detections → metrics → reports.
 #![warn(missing_docs)]
 
+pub mod cluster;
 pub mod colour;
 pub mod data;
 pub mod extends;
@@ -24,6 +25,7 @@ pub mod plot;
 pub mod progress;
 pub mod provenance;
 pub mod rng;
+pub mod shard;
 pub mod sidecar;
 pub mod table;
 #[cfg(feature = "video")]

@@ -5,7 +5,7 @@
 
 use crate::data::manifest::Manifest;
 use crate::data::store::{file_digest, Store};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 pub const FILE: &str = "run.toml";
 
 /// One file (or folder) a run read.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Input {
     /// As given or resolved.
     pub path: String,
@@ -27,7 +27,7 @@ pub struct Input {
 }
 
 /// What made an output.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Run {
     /// pav's version.
     pub pav_version: String,
@@ -82,6 +82,12 @@ impl Run {
             inputs: Vec::new(),
             result: BTreeMap::new(),
         }
+    }
+
+    /// Reads a record written by [`Run::write`].
+    pub fn read(path: &Path) -> Result<Run, String> {
+        let text = std::fs::read_to_string(path).map_err(|e| e.to_string())?;
+        toml::from_str(&text).map_err(|e| format!("not a pav run record: {e}"))
     }
 
     /// Records the config file.

@@ -8,6 +8,7 @@ use std::path::Path;
 
 const LAYERS: [&[&str]; 4] = [
     &[
+        "cluster",
         "colour",
         "data",
         "extends",
@@ -16,6 +17,7 @@ const LAYERS: [&[&str]; 4] = [
         "video",
         "geometry",
         "rng",
+        "shard",
         "sidecar",
         "table",
         "plot",

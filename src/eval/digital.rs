@@ -8,7 +8,7 @@ use crate::detect::nms::iou;
 use crate::detect::BBox;
 
 /// Car detections on one image and its ground-truth box.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ImageDetections {
     /// Ground-truth car box (None: no box known; the image counts only for ASR).
     pub gt: Option<BBox>,

@@ -7,6 +7,7 @@ pub mod bench;
 mod charts;
 pub mod compare;
 pub mod digital;
+pub mod merge;
 pub mod physical;
 #[cfg(feature = "eval")]
 pub mod report;

@@ -1,7 +1,7 @@
 //! Physical-world metrics: A_physical = f_d / f_o with a Wilson interval, overall and per angle bin.
 
 /// One scored frame for one detector.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FrameRecord {
     /// Video label.
     pub video: String,
@@ -30,7 +30,7 @@ pub struct FrameRecord {
 }
 
 /// Detected / total frame counts.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Accuracy {
     /// f_d: frames where the car was detected.
     pub detected: usize,

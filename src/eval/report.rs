@@ -32,6 +32,17 @@ pub enum ReportError {
     /// A whole table could not be written.
     #[error(transparent)]
     Table(#[from] crate::table::TableError),
+    /// Shards of a run that cannot be joined.
+    #[error(transparent)]
+    Shard(#[from] crate::shard::ShardError),
+    /// A shard's file that cannot be read back.
+    #[error("cannot read {path}: {why}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        why: String,
+    },
     /// A chart could not be drawn.
     #[cfg(feature = "plot")]
     #[error(transparent)]
@@ -67,7 +78,7 @@ impl FrameCsv {
 }
 
 /// What was scored for one (video, detector) pair.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SummaryRow {
     /// Video label.
     pub video: String,

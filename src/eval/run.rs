@@ -126,6 +126,24 @@ pub struct EvalOutcome {
     pub timing: Timing,
     /// Files written.
     pub files: Vec<PathBuf>,
+    /// What each video added, in the order of the jobs given.
+    pub videos: Vec<VideoPart>,
+}
+
+/// What one video added to a run, so the shards of a run can be joined in the order one process
+/// would have scored them.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct VideoPart {
+    /// The video's place among the run's videos (0-based).
+    pub index: usize,
+    /// Its summary rows, before videos that share a label are pooled.
+    pub rows: Vec<SummaryRow>,
+    /// How many frame records it added (its lines of `frames.csv`, in order).
+    pub records: usize,
+    /// The failures it added.
+    pub failures: Vec<String>,
+    /// Where its angles came from: (label, source).
+    pub angle_source: Option<(String, String)>,
 }
 
 enum Angles {
@@ -289,7 +307,10 @@ pub fn evaluate(
     out.files.push(frames_path);
     let mut angle_sources = Vec::new();
 
+    // Where each video's rows, records, failures and angle source begin.
+    let mut starts: Vec<[usize; 4]> = Vec::new();
     'videos: for job in jobs {
+        starts.push([out.rows.len(), out.records.len(), out.failures.len(), angle_sources.len()]);
         let angles = match job.sidecar.clone().or_else(|| Some(sidecar::sidecar_path(&job.path)).filter(|p| p.exists()))
         {
             Some(p) => match sidecar::read(&p) {
@@ -468,24 +489,41 @@ pub fn evaluate(
             break 'videos;
         }
     }
+    let ends = [out.rows.len(), out.records.len(), out.failures.len(), angle_sources.len()];
+    for (index, s) in starts.iter().enumerate() {
+        let e = starts.get(index + 1).unwrap_or(&ends);
+        out.videos.push(VideoPart {
+            index,
+            rows: out.rows[s[0]..e[0]].to_vec(),
+            records: e[1] - s[1],
+            failures: out.failures[s[2]..e[2]].to_vec(),
+            angle_source: angle_sources[s[3]..e[3]].first().cloned(),
+        });
+    }
     out.rows = pool(std::mem::take(&mut out.rows));
-    let settings = ReportSettings {
+    let names: Vec<String> = detectors.iter().map(|d| d.name().to_string()).collect();
+    write_reports(&mut out, &settings(opts, angle_sources), opts, &names)?;
+    out.timing.total_s = t_run.elapsed().as_secs_f64();
+    Ok(out)
+}
+
+/// The report settings of a run with `opts`.
+pub(crate) fn settings(opts: &EvalOptions, angle_sources: Vec<(String, String)>) -> ReportSettings {
+    ReportSettings {
         threshold: opts.threshold,
         sampling: opts.frames.tag(),
         sampling_text: opts.frames.to_string(),
         angle_bins: opts.angle_bins,
         angle_sources,
-    };
-    write_reports(&mut out, &settings, opts, detectors)?;
-    out.timing.total_s = t_run.elapsed().as_secs_f64();
-    Ok(out)
+    }
 }
 
-fn write_reports(
+/// Writes `summary.csv`, `angles.csv`, `summary.md` and (unless turned off) the plots.
+pub(crate) fn write_reports(
     out: &mut EvalOutcome,
     s: &ReportSettings,
     opts: &EvalOptions,
-    detectors: &[Box<dyn Detector>],
+    detectors: &[String],
 ) -> Result<(), ReportError> {
     let dir = &opts.out_dir;
     let p = dir.join("summary.csv");
@@ -500,7 +538,7 @@ fn write_reports(
     if !opts.plots {
         return Ok(());
     }
-    let names: Vec<&str> = detectors.iter().map(|d| d.name()).collect();
+    let names: Vec<&str> = detectors.iter().map(String::as_str).collect();
     for v in unique(out.records.iter().map(|r| r.video.clone())) {
         let p = dir.join(format!("polar_{}.png", file_safe(&v)));
         polar_video(&p, &v, &names, &out.records, opts.threshold)?;
@@ -516,7 +554,7 @@ fn write_reports(
 
 /// One row per (label, detector), in first-seen order: the counts of videos sharing a label add
 /// up, and a cell is `complete` only when each of its videos is (otherwise each video's status).
-fn pool(rows: Vec<SummaryRow>) -> Vec<SummaryRow> {
+pub(crate) fn pool(rows: Vec<SummaryRow>) -> Vec<SummaryRow> {
     let mut cells: Vec<(SummaryRow, Vec<String>)> = Vec::new();
     for r in rows {
         match cells.iter_mut().find(|(c, _)| c.video == r.video && c.detector == r.detector) {

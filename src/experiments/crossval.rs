@@ -22,6 +22,7 @@ use crate::detect::Detector;
 use crate::eval::digital::ImageDetections;
 use crate::image::save_rgb;
 use crate::progress::{Progress, Silent};
+use crate::shard::{Shard, ShardError};
 use crate::table::{unique, write_csv};
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
@@ -51,6 +52,8 @@ pub struct CrossvalOptions {
     /// Snapshot every fold's texture and score the snapshots on its photos
     /// (`experiments::curve`).
     pub curve: CurveOptions,
+    /// Which folds this call runs.
+    pub run: Folds,
 }
 
 /// Views of fold `f`: index `i` of `all` is held out when `i % k == f`.
@@ -73,6 +76,8 @@ pub struct Crossval {
     pub rendered: Option<Rendered>,
     /// The snapshots' scores, when options asked for a curve.
     pub curve: Vec<CurveRecord>,
+    /// Seconds the folds took, added up.
+    pub seconds: f64,
 }
 
 /// What a cross-validation scored on rendered views over the held-out photos' plates.
@@ -87,7 +92,7 @@ pub struct Rendered {
 }
 
 /// One rendered view over a held-out photo's plate, scored.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct RenderedRecord {
     /// Fold index.
     pub fold: usize,
@@ -132,6 +137,207 @@ pub fn per_photo(records: &[RenderedRecord], own_box: bool) -> Vec<ViewRecord> {
         .collect()
 }
 
+/// Which folds a [`crossval`] call runs.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Folds {
+    /// Every fold, optimized (a finished optimization resumes) and scored here.
+    All,
+    /// Only these folds (one shard of a job array); the tables cover only them.
+    Only(Vec<usize>),
+    /// Every fold was scored already (by the shards of a job array): each is read from its
+    /// folder, never optimized or scored again.
+    Scored,
+}
+
+/// A fold's folder inside a crossval's output folder.
+pub fn fold_dir(f: usize, k: usize) -> String {
+    format!("fold{f}of{k}")
+}
+
+/// What a fold scored, kept in its folder (`scores.json`), so the tables can be pooled from the
+/// folds' files whichever process ran them.
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+pub struct FoldScores {
+    /// Seconds the fold took (optimizing and scoring).
+    pub seconds: f64,
+    /// Every view's best car score under every texture and detector.
+    pub records: Vec<ViewRecord>,
+    /// Every car box on a held-out view.
+    pub boxes: Vec<BoxRecord>,
+    /// Every rendered view over a held-out photo's plate.
+    pub rendered: Vec<RenderedRecord>,
+    /// The snapshots' scores.
+    pub curve: Vec<CurveRecord>,
+    /// Detections per role, texture and detector, in view order.
+    pub pooled: Vec<Pooled>,
+    /// Detections on the rendered views per texture and detector (role held-out).
+    pub rendered_pooled: Vec<Pooled>,
+}
+
+/// The detections of one detector on one set of a fold's views under one texture.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct Pooled {
+    /// "train" or "held-out".
+    pub role: String,
+    /// Texture name.
+    pub texture: String,
+    /// Detector name.
+    pub detector: String,
+    /// One entry per view (random textures: per view and seed), in scoring order.
+    pub images: Vec<ImageDetections>,
+}
+
+/// The file a fold's scores are kept in.
+pub const FOLD_SCORES: &str = "scores.json";
+
+fn write_fold_scores(dir: &Path, s: &FoldScores) -> Result<(), ExperimentError> {
+    let path = dir.join(FOLD_SCORES);
+    let io = |source| ExperimentError::Io { path: path.clone(), source };
+    let text = serde_json::to_vec(s).map_err(|e| io(std::io::Error::other(e)))?;
+    let part = path.with_extension("json.part");
+    std::fs::write(&part, text).map_err(io)?;
+    std::fs::rename(&part, &path).map_err(io)
+}
+
+/// Reads a fold's scores ([`FoldScores`]) from its folder.
+pub fn read_fold_scores(dir: &Path) -> Result<FoldScores, ExperimentError> {
+    let path = dir.join(FOLD_SCORES);
+    let text = std::fs::read(&path).map_err(|source| ExperimentError::Io { path: path.clone(), source })?;
+    serde_json::from_slice(&text).map_err(|e| ExperimentError::Invalid(format!("{}: {e}", path.display())))
+}
+
+/// Pushes `im` onto the entry of (role, texture, detector), in first-seen order.
+fn pool_into(list: &mut Vec<Pooled>, role: &str, texture: &str, detector: &str, im: ImageDetections) {
+    match list.iter_mut().find(|p| p.role == role && p.texture == texture && p.detector == detector) {
+        Some(p) => p.images.push(im),
+        None => list.push(Pooled {
+            role: role.into(),
+            texture: texture.into(),
+            detector: detector.into(),
+            images: vec![im],
+        }),
+    }
+}
+
+/// Optimizes fold `f` (resuming a finished or interrupted optimization from its folder) and
+/// scores its views under every texture.
+#[allow(clippy::too_many_arguments)]
+fn score_fold(
+    cfg_path: &Path,
+    cfg: &OptimizeConfig,
+    setup: &Setup,
+    wb: &Ensemble,
+    detectors: &mut [Box<dyn Detector>],
+    opts: &CrossvalOptions,
+    f: usize,
+    stage: &dyn Fn(usize, &str),
+    progress: &dyn Progress,
+    stop: &AtomicBool,
+) -> Result<FoldScores, ExperimentError> {
+    let all: Vec<&View> = setup.train.iter().chain(&setup.test).collect();
+    let k = opts.folds;
+    let (tr, te) = fold_split(all.len(), k, f);
+    // Synthetic views come from this fold's training photos only.
+    let names: Vec<&str> = tr.iter().map(|&i| all[i].name.as_str()).collect();
+    let synthetic = setup.turned_views(&names)?;
+    let fs = setup.with_views(
+        tr.iter().map(|&i| all[i].clone()).collect(),
+        synthetic,
+        te.iter().map(|&i| all[i].clone()).collect(),
+    );
+    stage(f, "optimizing");
+    let ro = RunOptions {
+        out: opts.out.join(fold_dir(f, k)),
+        resume: true,
+        checkpoint_every: 20,
+        max_skips: 5,
+        epochs: None,
+        snapshot_every: opts.curve.every,
+    };
+    let o = optimize_texture(cfg_path, cfg, &fs, wb, &ro, &Silent, stop)?;
+    if matches!(o.finish, Finish::Stopped) {
+        progress.end(Some("stopped"));
+        return Err(ExperimentError::Stopped(ro.out));
+    }
+    save_rgb(&ro.out.join("texture.png"), fs.tex_size, fs.tex_size, &o.texture)?;
+    if cfg.optimizer.average.is_some() {
+        save_rgb(&ro.out.join(LAST_ITERATE), fs.tex_size, fs.tex_size, &o.last)?;
+    }
+    let mut out = FoldScores::default();
+    if opts.curve.every > 0 {
+        stage(f, "scoring the snapshots");
+        out.curve = score_snapshots(f, &ro.out, &fs, detectors)?;
+    }
+    stage(f, "scoring");
+    progress.advance(1);
+    let mean_name = opts.curve.mean_from.map(snapshot_mean_name);
+    let mean = opts.curve.mean_from.map(|m| snapshot_mean(&ro.out, m, &fs)).transpose()?;
+    let mut textures: Vec<(String, u64, Option<&[f32]>)> =
+        vec![("original".into(), 0, None), ("optimized".into(), 0, Some(&o.texture))];
+    if let (Some(name), Some(t)) = (&mean_name, &mean) {
+        save_rgb(&ro.out.join(format!("{name}.png")), fs.tex_size, fs.tex_size, t)?;
+        textures.push((name.clone(), 0, Some(t)));
+    }
+    // Both random baselines, the same seeds for each: blocks, and the paper's 32×32 image.
+    let mut randoms = Vec::new();
+    for (name, block) in [("random", opts.random_block), ("random32", fs.paper_random_block())] {
+        for s in 0..opts.random_seeds {
+            let seed = 1 + s + 1000 * f as u64;
+            randoms.push((name, seed, fs.random_texture(block, seed)));
+        }
+    }
+    textures.extend(randoms.iter().map(|(name, seed, r)| (name.to_string(), *seed, Some(r.as_slice()))));
+    for (name, r) in &opts.references {
+        textures.push((name.clone(), 0, Some(r)));
+    }
+    // Each texture as scores see it, once per fold rather than once per view.
+    let seen: Vec<Option<std::borrow::Cow<[f32]>>> = textures.iter().map(|(_, _, t)| t.map(|t| fs.scored(t))).collect();
+    for (role, views) in [("train", &fs.train), ("held-out", &fs.test)] {
+        for v in views.iter() {
+            for ((tname, seed, _), tex) in textures.iter().zip(&seen) {
+                let dets = detect_view(v, tex.as_deref(), &fs, detectors)?;
+                for (d, im) in dets.into_iter().enumerate() {
+                    let detector = detectors[d].name();
+                    if role == "held-out" {
+                        out.boxes.extend(box_records(f, &v.name, tname, *seed, detector, &im));
+                    }
+                    out.records.push(ViewRecord {
+                        fold: f,
+                        role,
+                        view: v.name.clone(),
+                        texture: tname.to_string(),
+                        seed: *seed,
+                        detector: detector.to_string(),
+                        score: im.best_score(),
+                    });
+                    pool_into(&mut out.pooled, role, tname, detector, im);
+                }
+            }
+        }
+    }
+    let held: Vec<&str> = te.iter().map(|&i| all[i].name.as_str()).collect();
+    for v in &opts.rendered {
+        let Some(photo) = setup.plate_of(&v.name).filter(|p| held.contains(p)) else { continue };
+        for ((tname, seed, _), tex) in textures.iter().zip(&seen) {
+            for (d, im) in detect_view(v, tex.as_deref(), &fs, detectors)?.into_iter().enumerate() {
+                let detector = detectors[d].name();
+                out.rendered.push(RenderedRecord {
+                    fold: f,
+                    photo: photo.to_string(),
+                    view: v.name.clone(),
+                    texture: tname.clone(),
+                    seed: *seed,
+                    detector: detector.to_string(),
+                    score: im.best_score(),
+                    own_box: own_box_score(&im),
+                });
+                pool_into(&mut out.rendered_pooled, "held-out", tname, detector, im);
+            }
+        }
+    }
+    Ok(out)
+}
+
 /// Runs every fold; returns the pooled table rows (splits "held-out" and "train") and the
 /// per-view records. `progress` counts two units per fold (scored, done) and shows the stage.
 #[allow(clippy::too_many_arguments)]
@@ -155,112 +361,55 @@ pub fn crossval(
     }
     opts.curve.check()?;
     let mean_name = opts.curve.mean_from.map(snapshot_mean_name);
-    progress.begin("folds", 2 * k as u64);
+    let picked: Vec<usize> = match &opts.run {
+        Folds::Only(f) => f.clone(),
+        Folds::All | Folds::Scored => (0..k).collect(),
+    };
+    progress.begin("folds", 2 * picked.len() as u64);
     let stage = |f: usize, s: &str| progress.status(&format!("fold {}/{k}: {s}", f + 1));
     // (role, texture, detector index) → detections, pooled over folds and seeds.
-    let mut pooled: HashMap<(&'static str, String, usize), Vec<ImageDetections>> = HashMap::new();
+    let mut pooled: HashMap<(String, String, usize), Vec<ImageDetections>> = HashMap::new();
     let mut records = Vec::new();
     let mut boxes = Vec::new();
     let mut rendered_pooled: HashMap<(String, usize), Vec<ImageDetections>> = HashMap::new();
     let mut rendered = Vec::new();
     let mut curve = Vec::new();
-    for f in 0..k {
-        let (tr, te) = fold_split(all.len(), k, f);
-        // Synthetic views come from this fold's training photos only.
-        let names: Vec<&str> = tr.iter().map(|&i| all[i].name.as_str()).collect();
-        let synthetic = setup.turned_views(&names)?;
-        let fs = setup.with_views(
-            tr.iter().map(|&i| all[i].clone()).collect(),
-            synthetic,
-            te.iter().map(|&i| all[i].clone()).collect(),
-        );
-        stage(f, "optimizing");
-        let ro = RunOptions {
-            out: opts.out.join(format!("fold{f}of{k}")),
-            resume: true,
-            checkpoint_every: 20,
-            max_skips: 5,
-            epochs: None,
-            snapshot_every: opts.curve.every,
-        };
-        let o = optimize_texture(cfg_path, cfg, &fs, wb, &ro, &Silent, stop)?;
-        if matches!(o.finish, Finish::Stopped) {
-            progress.end(Some("stopped"));
-            return Err(ExperimentError::Stopped(ro.out));
+    let mut seconds = 0.0;
+    let names: Vec<String> = detectors.iter().map(|d| d.name().to_string()).collect();
+    let index = |name: &str, dir: &Path| {
+        names.iter().position(|d| d == name).ok_or_else(|| {
+            ExperimentError::Invalid(format!(
+                "{}: scored by detector {name}, which this run does not load",
+                dir.display()
+            ))
+        })
+    };
+    for &f in &picked {
+        let dir = opts.out.join(fold_dir(f, k));
+        if opts.run != Folds::Scored {
+            let t = Instant::now();
+            let scored = score_fold(cfg_path, cfg, setup, wb, detectors, opts, f, &stage, progress, stop)?;
+            write_fold_scores(&dir, &FoldScores { seconds: t.elapsed().as_secs_f64(), ..scored })?;
+        } else {
+            stage(f, "read");
+            progress.advance(1);
         }
-        save_rgb(&ro.out.join("texture.png"), fs.tex_size, fs.tex_size, &o.texture)?;
-        if cfg.optimizer.average.is_some() {
-            save_rgb(&ro.out.join(LAST_ITERATE), fs.tex_size, fs.tex_size, &o.last)?;
+        // Every fold is pooled from its file, so a job run in one process and one merged from
+        // shards pool the very same numbers.
+        let s = read_fold_scores(&dir)?;
+        seconds += s.seconds;
+        for p in s.pooled {
+            let d = index(&p.detector, &dir)?;
+            pooled.entry((p.role, p.texture, d)).or_default().extend(p.images);
         }
-        if opts.curve.every > 0 {
-            stage(f, "scoring the snapshots");
-            curve.extend(score_snapshots(f, &ro.out, &fs, detectors)?);
+        for p in s.rendered_pooled {
+            let d = index(&p.detector, &dir)?;
+            rendered_pooled.entry((p.texture, d)).or_default().extend(p.images);
         }
-        stage(f, "scoring");
-        progress.advance(1);
-        let mean = opts.curve.mean_from.map(|m| snapshot_mean(&ro.out, m, &fs)).transpose()?;
-        let mut textures: Vec<(String, u64, Option<&[f32]>)> =
-            vec![("original".into(), 0, None), ("optimized".into(), 0, Some(&o.texture))];
-        if let (Some(name), Some(t)) = (&mean_name, &mean) {
-            save_rgb(&ro.out.join(format!("{name}.png")), fs.tex_size, fs.tex_size, t)?;
-            textures.push((name.clone(), 0, Some(t)));
-        }
-        // Both random baselines, the same seeds for each: blocks, and the paper's 32×32 image.
-        let mut randoms = Vec::new();
-        for (name, block) in [("random", opts.random_block), ("random32", fs.paper_random_block())] {
-            for s in 0..opts.random_seeds {
-                let seed = 1 + s + 1000 * f as u64;
-                randoms.push((name, seed, fs.random_texture(block, seed)));
-            }
-        }
-        textures.extend(randoms.iter().map(|(name, seed, r)| (name.to_string(), *seed, Some(r.as_slice()))));
-        for (name, r) in &opts.references {
-            textures.push((name.clone(), 0, Some(r)));
-        }
-        // Each texture as scores see it, once per fold rather than once per view.
-        let seen: Vec<Option<std::borrow::Cow<[f32]>>> =
-            textures.iter().map(|(_, _, t)| t.map(|t| fs.scored(t))).collect();
-        for (role, views) in [("train", &fs.train), ("held-out", &fs.test)] {
-            for v in views.iter() {
-                for ((tname, seed, _), tex) in textures.iter().zip(&seen) {
-                    let dets = detect_view(v, tex.as_deref(), &fs, detectors)?;
-                    for (d, im) in dets.into_iter().enumerate() {
-                        if role == "held-out" {
-                            boxes.extend(box_records(f, &v.name, tname, *seed, detectors[d].name(), &im));
-                        }
-                        records.push(ViewRecord {
-                            fold: f,
-                            role,
-                            view: v.name.clone(),
-                            texture: tname.to_string(),
-                            seed: *seed,
-                            detector: detectors[d].name().to_string(),
-                            score: im.best_score(),
-                        });
-                        pooled.entry((role, tname.clone(), d)).or_default().push(im);
-                    }
-                }
-            }
-        }
-        let held: Vec<&str> = te.iter().map(|&i| all[i].name.as_str()).collect();
-        for v in &opts.rendered {
-            let Some(photo) = setup.plate_of(&v.name).filter(|p| held.contains(p)) else { continue };
-            for ((tname, seed, _), tex) in textures.iter().zip(&seen) {
-                for (d, im) in detect_view(v, tex.as_deref(), &fs, detectors)?.into_iter().enumerate() {
-                    rendered.push(RenderedRecord {
-                        fold: f,
-                        photo: photo.to_string(),
-                        view: v.name.clone(),
-                        texture: tname.clone(),
-                        seed: *seed,
-                        detector: detectors[d].name().to_string(),
-                        score: im.best_score(),
-                        own_box: own_box_score(&im),
-                    });
-                    rendered_pooled.entry((tname.clone(), d)).or_default().push(im);
-                }
-            }
-        }
+        records.extend(s.records);
+        boxes.extend(s.boxes);
+        rendered.extend(s.rendered);
+        curve.extend(s.curve);
         stage(f, "done");
         progress.advance(1);
     }
@@ -272,7 +421,7 @@ pub fn crossval(
     for tname in names.chain(mean_name).chain(opts.references.iter().map(|r| r.0.clone())) {
         for (d, det) in detectors.iter().enumerate() {
             let white_box = opts.white_box.iter().any(|w| w == det.name());
-            if let Some(ims) = pooled.get(&("held-out", tname.clone(), d)) {
+            if let Some(ims) = pooled.get(&("held-out".to_string(), tname.clone(), d)) {
                 anatomies.extend(anatomy(det.name(), &tname, ims));
             }
             if let Some(ims) = rendered_pooled.get(&(tname.clone(), d)) {
@@ -280,7 +429,7 @@ pub fn crossval(
                 rendered_rows.extend(aggregate(det.name(), white_box, &tname, "held-out", ims, opts.threshold));
             }
             for role in ["held-out", "train"] {
-                let ims = pooled.get(&(role, tname.clone(), d)).map(Vec::as_slice).unwrap_or_default();
+                let ims = pooled.get(&(role.to_string(), tname.clone(), d)).map(Vec::as_slice).unwrap_or_default();
                 rows.extend(aggregate(det.name(), white_box, &tname, role, ims, opts.threshold));
             }
         }
@@ -290,21 +439,85 @@ pub fn crossval(
         records: rendered,
         anatomies: rendered_anatomies,
     });
-    Ok(Crossval { rows, records, boxes, anatomies, rendered, curve })
+    Ok(Crossval { rows, records, boxes, anatomies, rendered, curve, seconds })
 }
 
-/// `pav crossval`: cross-validates `config` with `folds` folds (default: leave-one-out) and
-/// `random_seeds` random textures per fold; writes `crossval.csv`, `crossval_views.csv`,
+/// How a crossval job is cut for a job array (`crate::shard`).
+#[derive(Clone, Debug)]
+pub enum Cut {
+    /// The whole job in this process.
+    Whole,
+    /// One shard: its folds are optimized and scored into its folder; no tables.
+    Shard(Shard),
+    /// The shards' folds (found and checked by `shard::find_checked`) joined into the tables.
+    Merge(Vec<(Shard, PathBuf)>),
+}
+
+/// What a crossval job runs besides its config: folds, baselines, scoring, seeds and its cut.
+#[derive(Clone, Debug)]
+pub struct CrossvalJob {
+    /// Number of folds (None: one per view, leave-one-out).
+    pub folds: Option<usize>,
+    /// Random textures per fold (pooled as "random").
+    pub random_seeds: u64,
+    /// Fixed textures scored beside the optimized one, by file.
+    pub references: Vec<PathBuf>,
+    /// `pav views render` folders over FCA's photos' plates.
+    pub rendered: Vec<PathBuf>,
+    /// Snapshot scoring.
+    pub curve: CurveOptions,
+    /// Optimizer seeds, each cross-validated into `seed<S>/` (empty: the config's seed, into the
+    /// output folder itself).
+    pub seeds: Vec<u64>,
+    /// Whole, one shard, or the merge of the shards.
+    pub cut: Cut,
+}
+
+/// The folder of seed `seed` of a job (the output folder itself without `--seeds`).
+fn seed_dir(root: &Path, seed: Option<u64>) -> PathBuf {
+    seed.map_or_else(|| root.to_path_buf(), |s| root.join(format!("seed{s}")))
+}
+
+/// Checks that the shard owning each (seed, fold) unit has scored it and no other shard holds it,
+/// then links each fold's folder into the job's output folder.
+fn gather_shards(
+    shards: &[(Shard, PathBuf)],
+    seeds: &[Option<u64>],
+    k: usize,
+    out: &Path,
+) -> Result<(), ExperimentError> {
+    let n = shards.first().map_or(1, |s| s.0.n);
+    let mut links = Vec::new();
+    for (si, &seed) in seeds.iter().enumerate() {
+        for f in 0..k {
+            let unit = si * k + f;
+            let owner = Shard::owner(unit, n);
+            let what = format!("fold {}/{k}{}", f + 1, seed.map_or(String::new(), |s| format!(" of seed {s}")));
+            let at = |dir: &Path| seed_dir(dir, seed).join(fold_dir(f, k));
+            let (_, own) = shards.iter().find(|(s, _)| *s == owner).expect("find() returns every shard of the cut");
+            if !at(own).join(FOLD_SCORES).is_file() {
+                return Err(ShardError::Unfinished { shard: own.clone(), what }.into());
+            }
+            if let Some((_, other)) = shards.iter().find(|(s, d)| *s != owner && at(d).join(FOLD_SCORES).is_file()) {
+                return Err(ShardError::Duplicate { what, a: own.clone(), b: other.clone() }.into());
+            }
+            links.push((at(own), seed_dir(out, seed).join(fold_dir(f, k))));
+        }
+    }
+    for (from, to) in links {
+        crate::shard::link_tree(&from, &to)?;
+    }
+    Ok(())
+}
+
+/// `pav crossval`: cross-validates `config` with `job.folds` folds (default: leave-one-out) and
+/// `job.random_seeds` random textures per fold; writes `crossval.csv`, `crossval_views.csv`,
 /// `crossval_boxes.csv`, `crossval_anatomy.csv`, `crossval_paired_own_box.csv`, `crossval.md`
-/// and a folder per fold into `out` (finished folds resume), and returns the Markdown.
-#[allow(clippy::too_many_arguments)]
+/// and a folder per fold into `out` (or `out/seed<S>` per seed; finished optimizations resume),
+/// and returns the Markdown. A shard only optimizes and scores its folds; the merge pools them.
 pub fn crossval_report(
     config: &Path,
-    folds: Option<usize>,
-    random_seeds: u64,
-    references: &[PathBuf],
-    rendered: &[PathBuf],
-    curve: CurveOptions,
+    job: &CrossvalJob,
     scoring: &Scoring,
     out: &Path,
     progress: &dyn Progress,
@@ -312,7 +525,7 @@ pub fn crossval_report(
 ) -> Result<String, ExperimentError> {
     let threshold = scoring.threshold;
     // Before loading anything: a refused option should not wait for the photos.
-    curve.check()?;
+    job.curve.check()?;
     let cfg = OptimizeConfig::load(config)?;
     if !cfg.views.pbr_test.is_empty() {
         return Err(ExperimentError::Invalid(format!(
@@ -321,38 +534,92 @@ pub fn crossval_report(
         )));
     }
     let mut setup = Setup::load_photos(&cfg, None)?;
+    let n = setup.train.len() + setup.test.len();
+    let k = job.folds.unwrap_or(n);
+    if k < 2 || k > n {
+        return Err(ExperimentError::Invalid(format!("folds must be in 2..={n} (the number of views), got {k}")));
+    }
+    let seeds: Vec<Option<u64>> =
+        if job.seeds.is_empty() { vec![None] } else { job.seeds.iter().copied().map(Some).collect() };
+    if let Cut::Merge(shards) = &job.cut {
+        gather_shards(shards, &seeds, k, out)?;
+    }
     scoring.apply_print(&mut setup)?;
     let wb = Ensemble::load(&cfg, cfg.views.size)?;
     let pbr_kept = cfg.views.pbr_min_score.map(|t| setup.keep_detected_pbr(&wb, t)).transpose()?;
     if let Some(k) = &pbr_kept {
         progress.note(&format!("views.pbr: {k}"));
     }
-    let rendered_views = setup.rendered_over_plates(&cfg, rendered)?;
+    let rendered_views = setup.rendered_over_plates(&cfg, &job.rendered)?;
     let mut dets = load_detectors(&scoring.detectors, &[], &scoring.defences, 1)?;
-    let n = setup.train.len() + setup.test.len();
-    let k = folds.unwrap_or(n);
     create_dir(out)?;
-    let opts = CrossvalOptions {
-        folds: k,
-        random_seeds,
-        random_block: setup.random_block(),
-        out: out.to_path_buf(),
-        threshold,
-        white_box: cfg.white_box_names()?,
-        references: references
-            .iter()
-            .map(|p| {
-                let name =
-                    p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| p.display().to_string());
-                setup.load_texture(p).map(|t| (name, t))
-            })
-            .collect::<Result<_, _>>()?,
-        rendered: rendered_views,
-        curve,
-    };
-    let t = Instant::now();
-    let Crossval { rows, records, boxes, anatomies, rendered: scored, curve: scored_curve } =
-        crossval(config, &cfg, &setup, &wb, &mut dets, &opts, progress, stop)?;
+    let references: Vec<(String, Vec<f32>)> = job
+        .references
+        .iter()
+        .map(|p| {
+            let name =
+                p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| p.display().to_string());
+            setup.load_texture(p).map(|t| (name, t))
+        })
+        .collect::<Result<_, _>>()?;
+    let mut mds = Vec::new();
+    for (si, &seed) in seeds.iter().enumerate() {
+        let mut cfg = cfg.clone();
+        if let Some(s) = seed {
+            cfg.optimizer.seed = s;
+        }
+        let (root, run) = match &job.cut {
+            Cut::Whole => (seed_dir(out, seed), Folds::All),
+            Cut::Merge(_) => (seed_dir(out, seed), Folds::Scored),
+            Cut::Shard(s) => {
+                let mine: Vec<usize> = (0..k).filter(|f| s.picks(si * k + f)).collect();
+                if mine.is_empty() {
+                    continue;
+                }
+                (seed_dir(&s.dir(out), seed), Folds::Only(mine))
+            }
+        };
+        let opts = CrossvalOptions {
+            folds: k,
+            random_seeds: job.random_seeds,
+            random_block: setup.random_block(),
+            out: root.clone(),
+            threshold,
+            white_box: cfg.white_box_names()?,
+            references: references.clone(),
+            rendered: rendered_views.clone(),
+            curve: job.curve,
+            run: run.clone(),
+        };
+        create_dir(&root)?;
+        let cv = crossval(config, &cfg, &setup, &wb, &mut dets, &opts, progress, stop)?;
+        match run {
+            Folds::Only(f) => mds.push(format!(
+                "{}: folds {} scored",
+                root.display(),
+                f.iter().map(|f| (f + 1).to_string()).collect::<Vec<_>>().join(", ")
+            )),
+            _ => mds.push(write_report(config, &cfg, &setup, &opts, cv, &job.rendered, pbr_kept.as_ref(), n, &root)?),
+        }
+    }
+    Ok(mds.join("\n"))
+}
+
+/// Writes crossval's tables and Markdown for one seed into `out` and returns the Markdown.
+#[allow(clippy::too_many_arguments)]
+fn write_report(
+    config: &Path,
+    cfg: &OptimizeConfig,
+    setup: &Setup,
+    opts: &CrossvalOptions,
+    cv: Crossval,
+    rendered: &[PathBuf],
+    pbr_kept: Option<&crate::attack::setup::PbrKept>,
+    n: usize,
+    out: &Path,
+) -> Result<String, ExperimentError> {
+    let (k, threshold, random_seeds, curve) = (opts.folds, opts.threshold, opts.random_seeds, opts.curve);
+    let Crossval { rows, records, boxes, anatomies, rendered: scored, curve: scored_curve, .. } = cv;
     write_csv(&out.join("crossval.csv"), &rows)?;
     write_csv(&out.join("crossval_views.csv"), &records)?;
     write_csv(&out.join("crossval_boxes.csv"), &boxes)?;
@@ -360,8 +627,8 @@ pub fn crossval_report(
     let pairs = paired(&records, &opts.white_box, "optimized");
     write_csv(&out.join("crossval_paired.csv"), &pairs)?;
     let mut md = format!(
-        "# Cross-validation, {k} folds over {n} views ({:.0} s)\n\nEach texture is optimized on the other folds' views{} ({}, {} epochs) and scored on its held-out views; \"random\" pools {random_seeds} random textures of {}-texel blocks per fold, \"random32\" as many of the paper's kind (a 32×32 random image scaled up){}. Car detected at score ≥ {threshold}; P@0.5 over boxes from score {AP_MIN_SCORE}; * = white-box.\n",
-        t.elapsed().as_secs_f64(),
+        "# Cross-validation, {k} folds over {n} views ({:.0} s of folds)\n\nEach texture is optimized on the other folds' views{} ({}, {} epochs) and scored on its held-out views; \"random\" pools {random_seeds} random textures of {}-texel blocks per fold, \"random32\" as many of the paper's kind (a 32×32 random image scaled up){}. Car detected at score ≥ {threshold}; P@0.5 over boxes from score {AP_MIN_SCORE}; * = white-box.\n",
+        cv.seconds,
         if cfg.views.turns.is_empty() {
             String::new()
         } else {

@@ -59,7 +59,7 @@ pub fn snapshot_mean(fold_dir: &Path, from: u64, fs: &Setup) -> Result<Vec<f32>,
 }
 
 /// One snapshot's best car score on one photo by one detector.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CurveRecord {
     /// Fold index.
     pub fold: usize,
@@ -68,7 +68,8 @@ pub struct CurveRecord {
     /// Whether the fold's last snapshot (its final texture).
     pub last: bool,
     /// "train" or "held-out".
-    pub role: &'static str,
+    #[serde(deserialize_with = "super::per_view::role")]
+    pub role: super::per_view::Role,
     /// Photo name.
     pub view: String,
     /// Detector name.

@@ -46,6 +46,9 @@ pub enum ExperimentError {
     /// The print channel's profile.
     #[error("print profile: {0}")]
     Print(#[from] crate::print::proof::ProofError),
+    /// Shards of a job array.
+    #[error(transparent)]
+    Shard(#[from] crate::shard::ShardError),
     /// A file or folder.
     #[error("{path}: {source}")]
     Io {

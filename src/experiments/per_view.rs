@@ -6,12 +6,13 @@ use crate::eval::digital::paired_bootstrap;
 use crate::table::unique;
 
 /// The best car score of one detector on one view under one texture.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct ViewRecord {
     /// Fold index.
     pub fold: usize,
     /// "train" or "held-out" in that fold.
-    pub role: &'static str,
+    #[serde(deserialize_with = "role")]
+    pub role: Role,
     /// View name.
     pub view: String,
     /// "original", "random" or "optimized".
@@ -22,6 +23,19 @@ pub struct ViewRecord {
     pub detector: String,
     /// Best car score (0 without a car box).
     pub score: f32,
+}
+
+/// A view's role in a fold, "train" or "held-out". A named type, since serde would otherwise
+/// borrow a `&str` field from its input, which a `'static` one cannot be.
+pub type Role = &'static str;
+
+/// A fold's role read back ("train" or "held-out"), as the static name records carry.
+pub(crate) fn role<'de, D: serde::Deserializer<'de>>(d: D) -> Result<&'static str, D::Error> {
+    let s = <String as serde::Deserialize>::deserialize(d)?;
+    ["train", "held-out"]
+        .into_iter()
+        .find(|r| *r == s)
+        .ok_or_else(|| serde::de::Error::custom(format!("role `{s}` is neither train nor held-out")))
 }
 
 /// Optimized against another texture on the held-out views of one detector: the per-view

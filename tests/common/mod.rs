@@ -184,6 +184,7 @@ pub fn two_folds(
         references,
         rendered,
         curve: Default::default(),
+        run: pav::experiments::crossval::Folds::All,
     };
     (opts, pav::detect::load::load_detectors(&[detector_config("yolov3-tiny")], &[], &[], 1).unwrap())
 }

@@ -131,3 +131,41 @@ pub fn defence_chains(args: &[DefenceArg]) -> (Vec<Vec<pav::detect::defence::Def
     let labels = chains.iter().map(|c| pav::detect::defence::chain_label(c)).collect::<Vec<_>>().join(";");
     (chains, labels)
 }
+
+/// `--shard K/N` and `--merge`, the same on every job that a cluster's job array can split.
+#[derive(clap::Args, Clone, Debug)]
+pub struct ShardArgs {
+    /// Run only shard K of N (1-based, e.g. `$SLURM_ARRAY_TASK_ID` of an array 1-N) into
+    /// <out>/shard-K-of-N with its own run.toml; `--merge` joins the shards afterwards.
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<pav::shard::Shard>,
+    /// Join the shard folders in <out> into the job's result; give the same arguments the shards
+    /// had. Refuses shards of another config, commit or data, and names missing ones.
+    #[arg(long, conflicts_with = "shard")]
+    pub merge: bool,
+}
+
+impl ShardArgs {
+    /// Where this run writes its `run.toml`: the shard's folder, or the output folder itself.
+    pub fn record_dir(&self, out: &std::path::Path) -> std::path::PathBuf {
+        self.shard.map_or_else(|| out.to_path_buf(), |s| s.dir(out))
+    }
+
+    /// Records the cut in `run` and writes it: a shard's into its folder; a merge's only after
+    /// every shard in `out` is found and matches it, returning them.
+    pub fn write_record(
+        &self,
+        run: pav::provenance::Run,
+        out: &std::path::Path,
+    ) -> Result<Option<Vec<(pav::shard::Shard, std::path::PathBuf)>>> {
+        let (run, shards) = if self.merge {
+            let shards = pav::shard::find_checked(out, &run)?;
+            (run.setting("shards", shards.len()), Some(shards))
+        } else {
+            (run.setting("shard", self.shard.map_or("whole".into(), |s| s.to_string())), None)
+        };
+        let path = self.record_dir(out).join(pav::provenance::FILE);
+        run.write(&path).with_context(|| format!("writing {}", path.display()))?;
+        Ok(shards)
+    }
+}

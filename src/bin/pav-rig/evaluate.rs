@@ -1,8 +1,8 @@
 //! `pav-rig evaluate`.
 
-use crate::common::{ctrl_c_flag, defence_chains, parse_defence, Bar, DefenceArg};
+use crate::common::{ctrl_c_flag, defence_chains, parse_defence, Bar, DefenceArg, ShardArgs};
 use crate::port::parse_seconds;
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use pav::detect::load::load_detectors;
 use pav::eval::report::summary_table;
 use pav::eval::run::{default_label, evaluate, EvalOptions, Frames, VideoJob};
@@ -64,6 +64,8 @@ pub struct Args {
     /// Skip the PNG plots.
     #[arg(long)]
     no_plots: bool,
+    #[command(flatten)]
+    shard: ShardArgs,
 }
 
 fn jobs(a: &Args) -> Result<Vec<VideoJob>> {
@@ -120,7 +122,9 @@ pub fn run(a: &Args) -> Result<()> {
         parallel,
     };
     opts.check()?;
-    let mut detectors = load_detectors(&a.detectors, &a.classes, &chains, threads)?;
+    // A merge scores nothing; the others load their detectors before anything is written.
+    let mut detectors =
+        if a.shard.merge { Vec::new() } else { load_detectors(&a.detectors, &a.classes, &chains, threads)? };
     let sidecars: Vec<PathBuf> =
         jobs.iter().map(|j| j.sidecar.clone().unwrap_or_else(|| pav::sidecar::sidecar_path(&j.path))).collect();
     let record = pav::provenance::Run::start()
@@ -133,8 +137,16 @@ pub fn run(a: &Args) -> Result<()> {
         .setting("start_angle_deg", a.start_angle)
         .tool("onnxruntime", pav_onnx::runtime::runtime_version())
         .tool("opencv", pav::video::opencv_version());
-    let record_path = a.out.join(pav::provenance::FILE);
-    record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
+    let shards = a.shard.write_record(record, &a.out)?;
+    if let Some(shards) = shards {
+        let out = pav::eval::merge::merge(&shards, jobs.len(), &opts)?;
+        eprintln!("joined {} shards of {} video(s)", shards.len(), jobs.len());
+        return report(&out, a.threshold);
+    }
+    // A shard scores its own videos into its folder; the merge puts them back in order.
+    let picked: Vec<usize> = a.shard.shard.map_or_else(|| (0..jobs.len()).collect(), |s| s.units(jobs.len()));
+    let jobs: Vec<VideoJob> = picked.iter().map(|&i| jobs[i].clone()).collect();
+    let opts = EvalOptions { out_dir: a.shard.record_dir(&a.out), ..opts };
     eprintln!(
         "scoring {} video(s) with {} detector(s){}; threshold {}, classes {}, {}",
         jobs.len(),
@@ -149,7 +161,16 @@ pub fn run(a: &Args) -> Result<()> {
         frames
     );
     let out = evaluate(&jobs, &mut detectors, &opts, &Bar::default(), &stop)?;
-    println!("{}", summary_table(&out.rows, a.threshold));
+    if a.shard.shard.is_some() && !out.interrupted {
+        let names: Vec<String> = detectors.iter().map(|d| d.name().to_string()).collect();
+        pav::eval::merge::write_index(&opts.out_dir, &names, &out, &picked)?;
+    }
+    report(&out, a.threshold)
+}
+
+/// Prints the summary and the files written; fails when the run was cut short or had problems.
+fn report(out: &pav::eval::run::EvalOutcome, threshold: f32) -> Result<()> {
+    println!("{}", summary_table(&out.rows, threshold));
     for f in &out.files {
         eprintln!("wrote {}", f.display());
     }

@@ -1,9 +1,9 @@
 //! `pav crossval`.
 
-use crate::common::{ctrl_c_flag, Bar};
+use crate::common::{ctrl_c_flag, Bar, ShardArgs};
 use crate::Scoring;
-use anyhow::{Context, Result};
-use pav::experiments::crossval::crossval_report;
+use anyhow::Result;
+use pav::experiments::crossval::{crossval_report, CrossvalJob, Cut};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -34,6 +34,13 @@ pub struct Args {
     /// its end (averaged iterates against the final texture).
     #[arg(long)]
     curve_mean_from: Option<u64>,
+    /// Optimizer seeds, comma-separated: each seed's cross-validation goes into <out>/seed<S>
+    /// (a folder `pav table1` reads; give the folders one --label to average the seeds). Default:
+    /// the config's seed, into <out> itself.
+    #[arg(long, value_delimiter = ',')]
+    seeds: Vec<u64>,
+    #[command(flatten)]
+    shard: ShardArgs,
     #[command(flatten)]
     scoring: Scoring,
     /// Output folder; an interrupted run resumes from it.
@@ -43,12 +50,17 @@ pub struct Args {
 
 pub fn run(a: &Args) -> Result<()> {
     let cfg = pav::attack::config::OptimizeConfig::load(&a.config)?;
+    let seeds = if a.seeds.is_empty() {
+        cfg.optimizer.seed.to_string()
+    } else {
+        a.seeds.iter().map(u64::to_string).collect::<Vec<_>>().join(", ")
+    };
     let record = a
         .scoring
         .record(pav::provenance::Run::start())
         .config(&a.config)
         .inputs(cfg.inputs().iter().chain(&a.references).map(|p| p.as_path()))
-        .setting("seed", cfg.optimizer.seed)
+        .setting("seed", seeds)
         .setting("folds", a.folds.map_or("one per view".to_string(), |k| k.to_string()))
         .setting("random_seeds", a.random_seeds)
         .setting(
@@ -58,22 +70,29 @@ pub fn run(a: &Args) -> Result<()> {
         .setting("curve_every", a.curve_every)
         .setting("curve_mean_from", a.curve_mean_from.map_or("none".to_string(), |m| m.to_string()))
         .tool("onnxruntime", pav_onnx::runtime::runtime_version());
-    let record_path = a.out.join(pav::provenance::FILE);
-    record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
+    let shards = a.shard.write_record(record, &a.out)?;
     let stop = ctrl_c_flag()?;
-    let md = crossval_report(
-        &a.config,
-        a.folds,
-        a.random_seeds,
-        &a.references,
-        &a.held_out_views,
-        pav::experiments::curve::CurveOptions { every: a.curve_every, mean_from: a.curve_mean_from },
-        &a.scoring.to_lib(&a.config)?,
-        &a.out,
-        &Bar::default(),
-        &stop,
-    )?;
+    let job = CrossvalJob {
+        folds: a.folds,
+        random_seeds: a.random_seeds,
+        references: a.references.clone(),
+        rendered: a.held_out_views.clone(),
+        curve: pav::experiments::curve::CurveOptions { every: a.curve_every, mean_from: a.curve_mean_from },
+        seeds: a.seeds.clone(),
+        cut: match (a.shard.shard, shards) {
+            (Some(s), _) => Cut::Shard(s),
+            (None, Some(shards)) => Cut::Merge(shards),
+            (None, None) => Cut::Whole,
+        },
+    };
+    let md = crossval_report(&a.config, &job, &a.scoring.to_lib(&a.config)?, &a.out, &Bar::default(), &stop)?;
     println!("{md}");
-    eprintln!("wrote crossval.md, its CSVs (scores, views, boxes, pairs) and a folder per fold in {}", a.out.display());
+    match a.shard.shard {
+        Some(s) => eprintln!("wrote shard {s}'s folds into {}; `--merge` joins the shards", s.dir(&a.out).display()),
+        None => eprintln!(
+            "wrote crossval.md, its CSVs (scores, views, boxes, pairs) and a folder per fold in {}",
+            a.out.display()
+        ),
+    }
     Ok(())
 }

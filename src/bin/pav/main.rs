@@ -9,6 +9,7 @@ mod common;
 mod bench_render;
 #[cfg(feature = "optimize")]
 mod bench_step;
+mod cluster;
 #[cfg(feature = "optimize")]
 mod crossval;
 mod data;
@@ -78,6 +79,10 @@ enum Cmd {
     /// with checksums, find.
     #[command(subcommand)]
     Data(data::Cmd),
+    /// Scripts that run a long job on a cluster: a Slurm job array (or a Kubernetes Indexed
+    /// Job) of its shards and the merge that joins them.
+    #[command(subcommand)]
+    Cluster(cluster::Cmd),
 }
 
 /// How `eval-digital` and `crossval` score composites.
@@ -150,5 +155,6 @@ fn main() -> Result<()> {
         Cmd::Views(c) => views::run(&c),
         Cmd::Print(c) => print::run(&c),
         Cmd::Data(c) => data::run(&c),
+        Cmd::Cluster(c) => cluster::run(&c),
     }
 }
