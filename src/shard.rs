@@ -69,7 +69,7 @@ pub enum ShardError {
         b: PathBuf,
     },
     /// A shard made by another run than the merge describes.
-    #[error("{shard}: made with {what} {theirs}, this merge has {ours}; shards of different runs cannot be merged")]
+    #[error("{shard}: its {what} is {theirs}, this merge's is {ours}; shards of different runs cannot be merged")]
     Differs {
         /// The shard's folder.
         shard: PathBuf,
@@ -201,8 +201,8 @@ pub fn check_record(dir: &Path, merge: &Run) -> Result<(), ShardError> {
     };
     differs("pav", shard.pav_version.clone(), merge.pav_version.clone())?;
     differs("commit", shard.git_commit.clone(), merge.git_commit.clone())?;
-    let dirty = |r: &Run| if r.git_dirty { "uncommitted changes" } else { "a clean checkout" }.to_string();
-    differs("a checkout with", dirty(&shard), dirty(merge))?;
+    let dirty = |r: &Run| if r.git_dirty { "modified (uncommitted changes)" } else { "clean" }.to_string();
+    differs("checkout", dirty(&shard), dirty(merge))?;
     let config =
         |r: &Run| r.config.as_ref().map_or("no config".into(), |c| format!("{} (sha256 {})", c.path, c.sha256));
     differs("config", config(&shard), config(merge))?;
@@ -231,6 +231,43 @@ pub fn find_checked(out: &Path, merge: &Run) -> Result<Vec<(Shard, PathBuf)>, Sh
         check_record(dir, merge)?;
     }
     Ok(shards)
+}
+
+/// One unit of a job: what to call it in errors, and its folder relative to a shard's folder
+/// (and to the job's output folder once gathered).
+pub struct Unit {
+    /// Its name in messages ("fold 2/3 of seed 1").
+    pub what: String,
+    /// Its folder, relative.
+    pub dir: PathBuf,
+}
+
+/// Gathers the units of a job from its shards into `out`: unit `u` must be finished (`done`) in
+/// the folder of the shard that owns it ([`Shard::owner`]) and in no other; then each unit's
+/// folder is linked into `out` ([`link_tree`]). Nothing is linked unless every unit passes.
+pub fn gather(
+    shards: &[(Shard, PathBuf)],
+    units: &[Unit],
+    done: &dyn Fn(&Path) -> bool,
+    out: &Path,
+) -> Result<(), ShardError> {
+    let n = shards.first().map_or(1, |s| s.0.n);
+    let mut links = Vec::new();
+    for (u, unit) in units.iter().enumerate() {
+        let owner = Shard::owner(u, n);
+        let own = shards.iter().find(|(s, _)| *s == owner).map_or_else(|| owner.dir(out), |s| s.1.clone());
+        if !done(&own.join(&unit.dir)) {
+            return Err(ShardError::Unfinished { shard: own, what: unit.what.clone() });
+        }
+        if let Some((_, other)) = shards.iter().find(|(s, d)| *s != owner && done(&d.join(&unit.dir))) {
+            return Err(ShardError::Duplicate { what: unit.what.clone(), a: own, b: other.clone() });
+        }
+        links.push((own.join(&unit.dir), out.join(&unit.dir)));
+    }
+    for (from, to) in links {
+        link_tree(&from, &to)?;
+    }
+    Ok(())
 }
 
 /// Makes `to` hold the files of `from` (folders recreated, files hard-linked, or copied where
@@ -312,10 +349,10 @@ mod tests {
         other.git_commit = "0123".into();
         other.write(&shard.join(FILE)).unwrap();
         let e = check_record(&shard, &merge).unwrap_err().to_string();
-        assert!(e.contains("commit 0123"), "{e}");
+        assert!(e.contains("its commit is 0123"), "{e}");
         merge.clone().setting("seed", 1).write(&shard.join(FILE)).unwrap();
         let e = check_record(&shard, &merge).unwrap_err().to_string();
-        assert!(e.contains("setting seed `1`, this merge has `0`"), "{e}");
+        assert!(e.contains("its setting seed is `1`, this merge's is `0`"), "{e}");
         std::fs::write(&cfg, "x = 2\n").unwrap();
         Run::start().config(&cfg).setting("seed", 0).write(&shard.join(FILE)).unwrap();
         let e = check_record(&shard, &merge).unwrap_err().to_string();

@@ -298,7 +298,7 @@ fn merge_refuses_missing_foreign_and_unfinished_shards() {
     let o = ev(&["--shard", "2/2", "--threshold", "0.4"]);
     assert!(o.status.success(), "{}", common::output_text(&o));
     let text = common::output_text(&ev(&["--merge"]));
-    assert!(text.contains("shard-2-of-2: made with setting threshold `0.4`, this merge has `0.5`"), "{text}");
+    assert!(text.contains("shard-2-of-2: its setting threshold is `0.4`, this merge's is `0.5`"), "{text}");
     // Shard 2 of this run, but cut short before it listed its videos.
     let o = ev(&["--shard", "2/2"]);
     assert!(o.status.success(), "{}", common::output_text(&o));
@@ -317,4 +317,48 @@ fn merge_refuses_missing_foreign_and_unfinished_shards() {
         files[..first_orbit].iter().all(|f| *f == "turntable.mp4")
             && files[first_orbit..].iter().all(|f| *f == "carla_orbit.mp4")
     );
+}
+
+/// `pav optimize --seeds`: each shard optimizes its seeds into its folder, the merge gathers
+/// every seed's folder, and each texture is the one a single process makes; a run without
+/// --seeds cannot be sharded.
+#[test]
+fn optimize_seeds_run_as_shards_and_gather() {
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let cfg = tmp.path().join("tiny.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "extends = {:?}\n[views]\ntrain = [\"data:fca/carla_dataset/test/data12501.npz\"]\ntest = [\"data:fca/carla_dataset/test/data12502.npz\"]\n[optimizer]\nepochs = 2\n",
+            common::repo().join("configs/studies/half.toml").display().to_string()
+        ),
+    )
+    .unwrap();
+    let opt = |out: &str, extra: &[&str]| {
+        let mut c = pav();
+        c.args(["optimize", "--config"]).arg(&cfg).args(["--seeds", "3,4", "-o"]).arg(tmp.path().join(out)).args(extra);
+        c.output().unwrap()
+    };
+    for o in [opt("one", &[]), opt("sh", &["--shard", "1/2"])] {
+        assert!(o.status.success(), "{}", common::output_text(&o));
+    }
+    let text = common::output_text(&opt("sh", &["--merge"]));
+    assert!(
+        text.contains("shard-1-of-2: has not finished seed 4") || text.contains("missing 1 of 2 shards: shard-2-of-2"),
+        "{text}"
+    );
+    assert!(opt("sh", &["--shard", "2/2"]).status.success());
+    let o = opt("sh", &["--merge"]);
+    assert!(o.status.success(), "{}", common::output_text(&o));
+    for s in ["seed3", "seed4"] {
+        let read = |d: &str| std::fs::read(tmp.path().join(d).join(s).join("texture.png")).unwrap();
+        assert_eq!(read("one"), read("sh"), "{s}'s texture");
+    }
+    assert_ne!(
+        std::fs::read(tmp.path().join("one/seed3/texture.png")).unwrap(),
+        std::fs::read(tmp.path().join("one/seed4/texture.png")).unwrap()
+    );
+    let o = pav().args(["optimize", "--config"]).arg(&cfg).args(["--shard", "1/2"]).output().unwrap();
+    assert!(!o.status.success() && common::output_text(&o).contains("give them with --seeds"));
 }

@@ -22,7 +22,7 @@ use crate::detect::Detector;
 use crate::eval::digital::ImageDetections;
 use crate::image::save_rgb;
 use crate::progress::{Progress, Silent};
-use crate::shard::{Shard, ShardError};
+use crate::shard::Shard;
 use crate::table::{unique, write_csv};
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
@@ -478,36 +478,24 @@ fn seed_dir(root: &Path, seed: Option<u64>) -> PathBuf {
     seed.map_or_else(|| root.to_path_buf(), |s| root.join(format!("seed{s}")))
 }
 
-/// Checks that the shard owning each (seed, fold) unit has scored it and no other shard holds it,
-/// then links each fold's folder into the job's output folder.
+/// Links each (seed, fold) unit's folder from the shard that scored it into the job's output
+/// folder, once every unit is found scored in its own shard and in no other.
 fn gather_shards(
     shards: &[(Shard, PathBuf)],
     seeds: &[Option<u64>],
     k: usize,
     out: &Path,
 ) -> Result<(), ExperimentError> {
-    let n = shards.first().map_or(1, |s| s.0.n);
-    let mut links = Vec::new();
-    for (si, &seed) in seeds.iter().enumerate() {
+    let mut units = Vec::new();
+    for &seed in seeds {
         for f in 0..k {
-            let unit = si * k + f;
-            let owner = Shard::owner(unit, n);
-            let what = format!("fold {}/{k}{}", f + 1, seed.map_or(String::new(), |s| format!(" of seed {s}")));
-            let at = |dir: &Path| seed_dir(dir, seed).join(fold_dir(f, k));
-            let (_, own) = shards.iter().find(|(s, _)| *s == owner).expect("find() returns every shard of the cut");
-            if !at(own).join(FOLD_SCORES).is_file() {
-                return Err(ShardError::Unfinished { shard: own.clone(), what }.into());
-            }
-            if let Some((_, other)) = shards.iter().find(|(s, d)| *s != owner && at(d).join(FOLD_SCORES).is_file()) {
-                return Err(ShardError::Duplicate { what, a: own.clone(), b: other.clone() }.into());
-            }
-            links.push((at(own), seed_dir(out, seed).join(fold_dir(f, k))));
+            units.push(crate::shard::Unit {
+                what: format!("fold {}/{k}{}", f + 1, seed.map_or(String::new(), |s| format!(" of seed {s}"))),
+                dir: seed_dir(Path::new(""), seed).join(fold_dir(f, k)),
+            });
         }
     }
-    for (from, to) in links {
-        crate::shard::link_tree(&from, &to)?;
-    }
-    Ok(())
+    Ok(crate::shard::gather(shards, &units, &|d: &Path| d.join(FOLD_SCORES).is_file(), out)?)
 }
 
 /// `pav crossval`: cross-validates `config` with `job.folds` folds (default: leave-one-out) and

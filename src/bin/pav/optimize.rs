@@ -1,6 +1,6 @@
 //! `pav optimize`.
 
-use crate::common::{ctrl_c_flag, Bar};
+use crate::common::{ctrl_c_flag, Bar, ShardArgs};
 use anyhow::{bail, Context, Result};
 use pav::attack::config::OptimizeConfig;
 use pav::attack::export::PrintSpec;
@@ -37,9 +37,26 @@ pub struct Args {
     /// Render the config's missing `views.pbr` folders first (Blender; minutes per hundred views).
     #[arg(long)]
     render_views: bool,
+    /// Optimizer seeds, comma-separated: one run per seed into <out>/seed<S> (the seeds a
+    /// result is averaged over); with --shard K/N each array task runs its seeds.
+    #[arg(long, value_delimiter = ',')]
+    seeds: Vec<u64>,
+    #[command(flatten)]
+    shard: ShardArgs,
 }
 
+/// A seed's folder of a `--seeds` run.
+fn seed_dir(out: &std::path::Path, seed: u64) -> PathBuf {
+    out.join(format!("seed{seed}"))
+}
+
+/// The result key a seed's run.toml gets once its run finished.
+const FINISHED: &str = "finished";
+
 pub fn run(a: &Args) -> Result<()> {
+    if a.seeds.is_empty() && (a.shard.shard.is_some() || a.shard.merge) {
+        bail!("--shard and --merge cut a run into its seeds: give them with --seeds");
+    }
     let missing = OptimizeConfig::load(&a.config)?.missing_views();
     if !missing.is_empty() && !a.render_views {
         let lines: Vec<String> = missing.iter().map(|m| format!("  {m}")).collect();
@@ -86,24 +103,64 @@ pub fn run(a: &Args) -> Result<()> {
     let record = pav::provenance::Run::start()
         .config(&a.config)
         .inputs(p.cfg.inputs().iter().map(|p| p.as_path()))
-        .setting("seed", p.cfg.optimizer.seed)
         .setting("resume", a.resume)
         .tool("onnxruntime", pav_onnx::runtime::runtime_version());
-    let record_path = a.out.join(pav::provenance::FILE);
-    record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
     let stop = ctrl_c_flag()?;
-    let run = OptimizeRun {
-        out: a.out.clone(),
-        resume: a.resume,
-        epochs: a.epochs,
-        snapshot_every: a.snapshot_every,
-        print: PrintSpec { scale: a.scale, dpi: a.dpi },
+    let once = |p: &Prepared, out: &std::path::Path, record: pav::provenance::Run| -> Result<()> {
+        let record_path = out.join(pav::provenance::FILE);
+        record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
+        let run = OptimizeRun {
+            out: out.to_path_buf(),
+            resume: a.resume,
+            epochs: a.epochs,
+            snapshot_every: a.snapshot_every,
+            print: PrintSpec { scale: a.scale, dpi: a.dpi },
+        };
+        let r = optimize_and_report(p, &run, &Bar::default(), &stop)?;
+        if matches!(r.finish, Finish::Stopped) {
+            // Not a success: `pav optimize && pav eval-digital` must not go on with a partial texture.
+            bail!("stopped: state saved in {}; run again with --resume", out.join("checkpoint.bin").display());
+        }
+        let mut record = record;
+        record.result(FINISHED, "yes");
+        record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
+        print_report(&r, p, a, out);
+        Ok(())
     };
-    let r = optimize_and_report(&p, &run, &Bar::default(), &stop)?;
-    if matches!(r.finish, Finish::Stopped) {
-        // Not a success: `pav optimize && pav eval-digital` must not go on with a partial texture.
-        bail!("stopped: state saved in {}; run again with --resume", a.out.join("checkpoint.bin").display());
+    if a.seeds.is_empty() {
+        return once(&p, &a.out, record.setting("seed", p.cfg.optimizer.seed));
     }
+    let seeds = a.seeds.iter().map(u64::to_string).collect::<Vec<_>>().join(", ");
+    let shards = a.shard.write_record(record.clone().setting("seed", &seeds), &a.out)?;
+    if let Some(shards) = shards {
+        let units: Vec<pav::shard::Unit> = a
+            .seeds
+            .iter()
+            .map(|&s| pav::shard::Unit { what: format!("seed {s}"), dir: format!("seed{s}").into() })
+            .collect();
+        let finished = |d: &std::path::Path| {
+            pav::provenance::Run::read(&d.join(pav::provenance::FILE))
+                .is_ok_and(|r| r.result.get(FINISHED).is_some_and(|v| v == "yes"))
+        };
+        pav::shard::gather(&shards, &units, &finished, &a.out)?;
+        eprintln!("gathered {} seeds from {} shards into {}/seed<S>", a.seeds.len(), shards.len(), a.out.display());
+        return Ok(());
+    }
+    let root = a.shard.record_dir(&a.out);
+    let mut p = p;
+    for (i, &seed) in a.seeds.iter().enumerate() {
+        if a.shard.shard.is_some_and(|s| !s.picks(i)) {
+            continue;
+        }
+        p.cfg.optimizer.seed = seed;
+        eprintln!("seed {seed}");
+        once(&p, &seed_dir(&root, seed), record.clone().setting("seed", seed))?;
+    }
+    Ok(())
+}
+
+/// Prints a finished run's per-view scores, its sheet and print shift, and its files.
+fn print_report(r: &pav::experiments::outputs::OptimizeReport, p: &Prepared, a: &Args, out: &std::path::Path) {
     println!(
         "white-box {} car score per view (no EoT): original photo / initial texture / optimized",
         p.wb.first().name()
@@ -111,10 +168,10 @@ pub fn run(a: &Args) -> Result<()> {
     for s in &r.scores {
         println!("  {:5} {:10} {:.3} / {:.3} / {:.3}", s.split, s.view, s.original, s.initial, s.optimized);
     }
-    if let Some(sheet) = r.sheet {
+    if let Some(sheet) = &r.sheet {
         println!(
             "printable sheet: {} ({}x{} px at {} dpi): print at 100 % so the atlas is {:.1} mm wide for a 1:{} model (the bar is 10 mm; texel density varies {:.2}x between faces, 10th-90th percentile)",
-            a.out.join("texture_print.png").display(),
+            out.join("texture_print.png").display(),
             sheet.width_px,
             sheet.height_px,
             a.dpi,
@@ -123,9 +180,8 @@ pub fn run(a: &Args) -> Result<()> {
             sheet.density_spread
         );
     }
-    if let Some(shift) = r.shift {
+    if let Some(shift) = &r.shift {
         println!("as printed (print.profile), the region's {shift}");
     }
-    eprintln!("wrote {} in {}", r.files.join(", "), a.out.display());
-    Ok(())
+    eprintln!("wrote {} in {}", r.files.join(", "), out.display());
 }
