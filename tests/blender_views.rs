@@ -162,8 +162,8 @@ fn the_ci_config_renders_resumes_and_shards() {
         let out = run_ok(pav().args(["views", "render"]).arg(&cfg).arg("-o").arg(&sharded).args(["--shard", k]));
         assert!(out.contains("3 views: 3 rendered now"), "{out}");
     }
-    let out = run_ok(pav().args(["views", "merge"]).arg(&sharded));
-    assert!(out.contains("6 views"), "{out}");
+    let out = run_ok(pav().args(["views", "render"]).arg(&cfg).arg("-o").arg(&sharded).arg("--merge"));
+    assert!(out.contains("6 views from 2 shards"), "{out}");
     let mut a = manifest_names(&sharded.join("manifest.csv"));
     let mut b = names.clone();
     a.sort();
@@ -422,6 +422,42 @@ fn on_a_turntable_the_room_stays_put_and_the_videos_carry_the_angles() {
     );
     assert!(out.contains("city_d2.20_e10.mp4: 3 frames"), "{out}");
     assert!(out.contains("pav-rig evaluate ") && out.contains("uncalibrated"), "{out}");
+    // Two shards render their frames; the merge joins them in the order one process renders
+    // them and cuts the same video.
+    let sharded = tmp.path().join("sharded");
+    let tt = |extra: &[&str]| {
+        run_ok(
+            pav()
+                .args(["views", "turntable"])
+                .arg(tmp.path().join("tfalse.toml"))
+                .arg("-o")
+                .arg(&sharded)
+                .arg("--texture")
+                .arg(&tex)
+                .args(extra),
+        )
+    };
+    assert!(tt(&["--shard", "1/2"]).contains("2 views: 2 rendered now"));
+    assert!(tt(&["--shard", "2/2"]).contains("1 views: 1 rendered now"));
+    let out = tt(&["--merge"]);
+    assert!(out.contains("3 views from 2 shards") && out.contains("city_d2.20_e10.mp4: 3 frames"), "{out}");
+    // Timing aside: the render seconds of each view.
+    let manifest = |d: &std::path::Path| {
+        let text = std::fs::read_to_string(d.join("manifest.csv")).unwrap();
+        let at = text.lines().next().unwrap().split(',').position(|c| c == "seconds").unwrap();
+        let row =
+            |l: &str| l.split(',').enumerate().filter(|(i, _)| *i != at).map(|(_, c)| c).collect::<Vec<_>>().join(",");
+        text.lines().map(row).collect::<Vec<_>>()
+    };
+    assert_eq!(manifest(&cli), manifest(&sharded), "the merged manifest is the one-process one");
+    let frames = |d: &std::path::Path| {
+        let mut r = pav::video::VideoReader::open(&d.join("videos/city_d2.20_e10.mp4")).unwrap();
+        std::iter::from_fn(|| r.read().unwrap().map(|(_, f)| f)).collect::<Vec<_>>()
+    };
+    for (a, b) in frames(&cli).iter().zip(frames(&sharded)) {
+        let d = a.bgr.iter().zip(&b.bgr).map(|(x, y)| (*x as f64 - *y as f64).abs()).sum::<f64>() / a.bgr.len() as f64;
+        assert!(d < 1.0, "a merged frame differs from the one-process frame by {d} levels on average");
+    }
     let o =
         pav().args(["views", "turntable"]).arg(tmp.path().join("tfalse.toml")).arg("-o").arg(&cli).output().unwrap();
     let err = String::from_utf8_lossy(&o.stderr);

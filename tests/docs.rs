@@ -113,6 +113,12 @@ fn words(line: &str) -> Vec<String> {
     out
 }
 
+/// Whether a word names the pav or pav-rig binary (bare, or a build's path).
+fn is_pav(x: &str) -> bool {
+    let name = x.rsplit('/').next().unwrap_or(x);
+    (name == "pav" || name == "pav-rig") && (x == name || x.contains("release/"))
+}
+
 /// The pav and pav-rig commands of every shell block of `md` (`file` names it in messages).
 fn invocations(file: &str, md: &str) -> Vec<Invocation> {
     let mut out = Vec::new();
@@ -137,7 +143,7 @@ fn invocations(file: &str, md: &str) -> Vec<Invocation> {
                     let placed =
                         w[..i].iter().all(|p| p.contains('=') || matches!(p.as_str(), "time" | "nohup" | "exec"))
                             || (i > 0 && w[i - 1] == "--bin");
-                    placed && (name == "pav" || name == "pav-rig") && (x == name || x.contains("release/"))
+                    placed && is_pav(x)
                 }) else {
                     continue;
                 };
@@ -151,7 +157,16 @@ fn invocations(file: &str, md: &str) -> Vec<Invocation> {
                 } else {
                     w[pos + 1..].to_vec()
                 };
-                out.push(Invocation { bin, words: args, at: format!("{file}:{}", b.line + k) });
+                let at = format!("{file}:{}", b.line + k);
+                // `pav cluster slurm … -- target/release/pav crossval …` wraps a second command.
+                match args.iter().position(|x| x == "--").filter(|&dd| args.get(dd + 1).is_some_and(|x| is_pav(x))) {
+                    Some(dd) => {
+                        let inner = if args[dd + 1].ends_with("pav-rig") { "pav-rig" } else { "pav" };
+                        out.push(Invocation { bin, words: args[..dd].to_vec(), at: at.clone() });
+                        out.push(Invocation { bin: inner, words: args[dd + 2..].to_vec(), at });
+                    }
+                    None => out.push(Invocation { bin, words: args, at }),
+                }
             }
         }
     }

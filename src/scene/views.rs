@@ -45,6 +45,7 @@ use crate::image::Frame;
 use crate::progress::Progress;
 use crate::render::bake::Plate;
 use crate::render::raster::{GBuffer, EMPTY};
+use crate::shard::{Shard, ShardError};
 use serde::Deserialize;
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -91,6 +92,9 @@ pub enum ViewsError {
     /// Its angle sidecar could not be written.
     #[error(transparent)]
     Sidecar(#[from] crate::sidecar::SidecarError),
+    /// Shards of a view set that cannot be joined.
+    #[error(transparent)]
+    Shard(#[from] ShardError),
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ViewsError + '_ {
@@ -643,7 +647,7 @@ pub fn read_view_set(dir: &Path) -> Result<(ViewSetInfo, Vec<ViewRecord>), Views
     let text = std::fs::read_to_string(&info_path).map_err(io(&info_path))?;
     let info: ViewSetInfo =
         toml::from_str(&text).map_err(|e| ViewsError::Config { path: info_path.clone(), msg: e.to_string() })?;
-    let manifest = manifest_path(dir, None);
+    let manifest = manifest_path(dir);
     let rows = read_manifest(&manifest)?;
     if rows.is_empty() {
         return Err(ViewsError::Config { path: manifest, msg: "no views listed".into() });
@@ -651,12 +655,9 @@ pub fn read_view_set(dir: &Path) -> Result<(ViewSetInfo, Vec<ViewRecord>), Views
     Ok((info, rows))
 }
 
-/// The manifest of a view folder, or of one shard of it.
-pub fn manifest_path(dir: &Path, shard: Option<(usize, usize)>) -> PathBuf {
-    match shard {
-        Some((k, n)) => dir.join(format!("manifest.{k}-of-{n}.csv")),
-        None => dir.join("manifest.csv"),
-    }
+/// The manifest of a view folder (a shard's folder has its own).
+pub fn manifest_path(dir: &Path) -> PathBuf {
+    dir.join("manifest.csv")
 }
 
 /// The rows of a manifest (a shard's or a merged one).
@@ -707,14 +708,14 @@ pub struct RenderSummary {
     pub manifest: PathBuf,
 }
 
-/// Renders the config's views (shard `k` of `n`, 1-based, when given) into `dir`: per view
+/// Renders the config's views (only a shard's, when given) into `dir`: per view
 /// `views/<name>.png` (Cycles) and `views/<name>_mask.png` (the car's silhouette from pav's
 /// rasterizer, which the alignment test ties to Blender's), and a manifest row written as
 /// each view finishes, so a crash loses at most the view in progress and a rerun resumes.
 pub fn render_views(
     cfg: &ViewsConfig,
     dir: &Path,
-    shard: Option<(usize, usize)>,
+    shard: Option<Shard>,
     blender: &Blender,
     progress: &dyn Progress,
 ) -> Result<RenderSummary, ViewsError> {
@@ -773,10 +774,10 @@ pub fn render_views(
     let rot = up_rotation(&cfg.mesh.up).expect("checked by load");
     let all = cfg.views();
     let mine: Vec<&View> = match shard {
-        Some((k, n)) => all.iter().enumerate().filter(|(i, _)| i % n == k - 1).map(|(_, v)| v).collect(),
+        Some(s) => all.iter().enumerate().filter(|(i, _)| s.picks(*i)).map(|(_, v)| v).collect(),
         None => all.iter().collect(),
     };
-    let manifest = manifest_path(dir, shard);
+    let manifest = manifest_path(dir);
     let done = rendered(&manifest, dir)?;
     if std::fs::metadata(&manifest).map_or(true, |m| m.len() == 0) {
         std::fs::write(&manifest, format!("{MANIFEST_HEADER}\n")).map_err(io(&manifest))?;
@@ -920,42 +921,69 @@ fn plate_frame(cfg: &ViewsConfig, mesh: &Mesh, pi: usize) -> Result<Frame, Views
     Ok(plate.frame())
 }
 
-/// Joins the shard manifests `manifest.K-of-N.csv` in `dir` into `manifest.csv`, refusing a
-/// view listed twice; returns the number of views.
-pub fn merge_shards(dir: &Path) -> Result<usize, ViewsError> {
-    let mut shards: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(io(dir))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            let n = p.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
-            n.starts_with("manifest.") && n.ends_with(".csv") && n.contains("-of-")
-        })
-        .collect();
-    shards.sort();
-    if shards.is_empty() {
-        return Err(ViewsError::Config {
-            path: dir.into(),
-            msg: "no shard manifests (manifest.K-of-N.csv) here".into(),
-        });
-    }
-    let mut seen = HashSet::new();
-    let path = manifest_path(dir, None);
-    std::fs::write(&path, format!("{MANIFEST_HEADER}\n")).map_err(io(&path))?;
-    for s in &shards {
-        for row in read_manifest(s)? {
-            if !seen.insert(row.name.clone()) {
-                return Err(ViewsError::Config { path: s.clone(), msg: format!("view {} is in two shards", row.name) });
+/// Joins the shards of a view set (found and checked by `shard::find_checked`) into `out`:
+/// every shard's images linked into `out/views`, and one `manifest.csv` in the order one process
+/// renders them (environment by environment, grid views before plate views). Refused before
+/// anything is linked: a view of the config that no shard rendered (named with its shard), or one
+/// that two shards list. Returns the number of views.
+pub fn merge_shards(cfg: &ViewsConfig, shards: &[(Shard, PathBuf)], out: &Path) -> Result<usize, ViewsError> {
+    let all = cfg.views();
+    let order: HashMap<&str, (usize, bool, usize)> =
+        all.iter().enumerate().map(|(i, v)| (v.name.as_str(), (v.environment, v.plate.is_some(), i))).collect();
+    let mut rows: HashMap<String, (ViewRecord, PathBuf)> = HashMap::new();
+    for (_, dir) in shards {
+        let manifest = manifest_path(dir);
+        let listed = if manifest.exists() { read_manifest(&manifest)? } else { Vec::new() };
+        for row in listed.into_iter().filter(|r| dir.join(&r.image).exists()) {
+            if !order.contains_key(row.name.as_str()) {
+                return Err(ViewsError::Config {
+                    path: manifest.clone(),
+                    msg: format!("view {} is not one of the config's", row.name),
+                });
             }
-            append_row(&path, &row)?;
+            if let Some((_, other)) = rows.get(&row.name) {
+                return Err(ShardError::Duplicate {
+                    what: format!("view {}", row.name),
+                    a: other.clone(),
+                    b: dir.clone(),
+                }
+                .into());
+            }
+            rows.insert(row.name.clone(), (row, dir.clone()));
         }
     }
-    Ok(seen.len())
+    let n = shards.first().map_or(1, |s| s.0.n);
+    if let Some((i, v)) = all.iter().enumerate().find(|(_, v)| !rows.contains_key(&v.name)) {
+        let owner = Shard::owner(i, n);
+        let dir = shards.iter().find(|s| s.0 == owner).map_or_else(|| owner.dir(out), |s| s.1.clone());
+        let missing = all.iter().filter(|v| !rows.contains_key(&v.name)).count();
+        let what = format!("view {} ({missing} of {} views missing)", v.name, all.len());
+        return Err(ShardError::Unfinished { shard: dir, what }.into());
+    }
+    for (_, dir) in shards {
+        crate::shard::link_tree(&dir.join("views"), &out.join("views"))?;
+    }
+    if let Some((_, first)) = shards.first() {
+        for f in ["views.toml", "mesh.obj"] {
+            let to = out.join(f);
+            let _ = std::fs::remove_file(&to);
+            std::fs::copy(first.join(f), &to).map_err(io(&to))?;
+        }
+    }
+    let mut rows: Vec<ViewRecord> = rows.into_values().map(|r| r.0).collect();
+    rows.sort_by_key(|r| order[r.name.as_str()]);
+    let path = manifest_path(out);
+    std::fs::write(&path, format!("{MANIFEST_HEADER}\n")).map_err(io(&path))?;
+    for row in &rows {
+        append_row(&path, row)?;
+    }
+    Ok(rows.len())
 }
 
 /// Writes `contact.png` in `dir`: up to `max` views of its manifest side by side, each beside
 /// its mask, evenly picked, so a glance shows poses, lighting and alignment.
 pub fn contact_sheet(dir: &Path, max: usize) -> Result<PathBuf, ViewsError> {
-    let manifest = manifest_path(dir, None);
+    let manifest = manifest_path(dir);
     let rows: Vec<(PathBuf, PathBuf)> = read_manifest(&manifest)?.into_iter().map(|r| (r.image, r.mask)).collect();
     let pick: Vec<&(PathBuf, PathBuf)> =
         if rows.len() <= max { rows.iter().collect() } else { (0..max).map(|k| &rows[k * rows.len() / max]).collect() };

@@ -1,6 +1,6 @@
 //! `pav views`.
 
-use crate::common::Bar;
+use crate::common::{Bar, ShardArgs};
 use anyhow::{bail, Context, Result};
 use pav::scene::blender::Blender;
 #[cfg(feature = "video")]
@@ -19,11 +19,6 @@ pub enum Cmd {
     /// and elevation, for `pav-rig evaluate` (resumes like render).
     #[cfg(feature = "video")]
     Turntable(TurntableArgs),
-    /// Join the shard manifests of a view folder into its manifest.csv.
-    Merge {
-        /// The view folder the shards wrote into.
-        dir: PathBuf,
-    },
 }
 
 #[derive(clap::Args)]
@@ -33,10 +28,8 @@ pub struct RenderArgs {
     /// Output folder.
     #[arg(long, short = 'o', default_value = "out/views")]
     out: PathBuf,
-    /// Render only shard K of N (1-based, views K, K+N, …), e.g. from a job array; `pav views
-    /// merge` joins the shards' manifests afterwards.
-    #[arg(long, value_name = "K/N")]
-    shard: Option<String>,
+    #[command(flatten)]
+    shard: ShardArgs,
     /// Body texture instead of the config's (e.g. an optimized texture.png).
     #[arg(long, value_parser = pav::data::arg_path)]
     texture: Option<PathBuf>,
@@ -68,57 +61,48 @@ pub struct TurntableArgs {
     /// paper's].
     #[arg(long)]
     period: Option<f64>,
+    /// (Blender only) a shard renders its frames; the merge joins them and cuts the videos.
+    #[command(flatten)]
+    shard: ShardArgs,
 }
 
 /// Renders the views config at `config` into `out` (resuming), as `pav views render` does.
 #[cfg(feature = "optimize")]
 pub fn render_config(config: &std::path::Path, out: &std::path::Path) -> Result<()> {
-    render(&ViewsConfig::load(config)?, config, out, None)
+    let whole = ShardArgs { shard: None, merge: false };
+    render(&ViewsConfig::load(config)?, config, out, &whole).map(|_| ())
 }
 
-/// Renders `cfg` into `out` with provenance, printing the summary.
-fn render(
-    cfg: &ViewsConfig,
-    config: &std::path::Path,
-    out: &std::path::Path,
-    shard: Option<(usize, usize)>,
-) -> Result<()> {
+/// Renders `cfg` into `out` with provenance, printing the summary: the whole set, one shard of
+/// it into its folder, or the merge of the shards. Returns whether `out` now holds every view.
+fn render(cfg: &ViewsConfig, config: &std::path::Path, out: &std::path::Path, shard: &ShardArgs) -> Result<bool> {
     let blender = Blender::find()?;
     let mut inputs = vec![cfg.mesh.obj.clone()];
     inputs.extend(cfg.mesh.texture.clone());
     let record = pav::provenance::Run::start()
         .config(config)
         .inputs(inputs.iter().map(|p| p.as_path()))
-        .setting("shard", shard.map_or("all".to_string(), |(k, n)| format!("{k}/{n}")))
         .setting("turntable", cfg.render.turntable)
         .setting("rig", cfg.rig.is_some())
         .tool("blender", blender.version());
-    let name = match shard {
-        Some((k, n)) => format!("run.{k}-of-{n}.toml"),
-        None => pav::provenance::FILE.to_string(),
-    };
-    record.write(&out.join(&name)).with_context(|| format!("writing {}", out.join(&name).display()))?;
-    let s = render_views(cfg, out, shard, &blender, &Bar::default())?;
-    println!(
-        "{} views: {} rendered now, {} from an earlier run; manifest {}",
-        s.total,
-        s.rendered,
-        s.resumed,
-        s.manifest.display()
-    );
-    if shard.is_none() {
-        println!("contact sheet {}", contact_sheet(out, 12)?.display());
+    if let Some(shards) = shard.write_record(record, out)? {
+        let n = merge_shards(cfg, &shards, out)?;
+        println!("{n} views from {} shards; manifest {}", shards.len(), out.join("manifest.csv").display());
+    } else {
+        let s = render_views(cfg, &shard.record_dir(out), shard.shard, &blender, &Bar::default())?;
+        println!(
+            "{} views: {} rendered now, {} from an earlier run; manifest {}",
+            s.total,
+            s.rendered,
+            s.resumed,
+            s.manifest.display()
+        );
+        if shard.shard.is_some() {
+            return Ok(false);
+        }
     }
-    Ok(())
-}
-
-fn shard(s: &str) -> Result<(usize, usize)> {
-    let (k, n) = s.split_once('/').with_context(|| format!("--shard `{s}`: expected K/N, e.g. 2/8"))?;
-    let (k, n): (usize, usize) = (k.parse()?, n.parse()?);
-    if n == 0 || k == 0 || k > n {
-        bail!("--shard {k}/{n}: need 1 ≤ K ≤ N");
-    }
-    Ok((k, n))
+    println!("contact sheet {}", contact_sheet(out, 12)?.display());
+    Ok(true)
 }
 
 pub fn run(c: &Cmd) -> Result<()> {
@@ -126,7 +110,7 @@ pub fn run(c: &Cmd) -> Result<()> {
         Cmd::Render(a) => {
             let mut cfg = ViewsConfig::load(&a.config)?;
             cfg.mesh.texture = a.texture.clone().or(cfg.mesh.texture);
-            render(&cfg, &a.config, &a.out, a.shard.as_deref().map(shard).transpose()?)?;
+            render(&cfg, &a.config, &a.out, &a.shard)?;
         }
         #[cfg(feature = "video")]
         Cmd::Turntable(a) => {
@@ -139,6 +123,9 @@ pub fn run(c: &Cmd) -> Result<()> {
             cfg.mesh.texture = a.texture.clone().or(cfg.mesh.texture);
             cfg.render.turntable = true;
             let videos = match (&rig, a.rasterizer) {
+                (_, true) if a.shard.shard.is_some() || a.shard.merge => {
+                    bail!("--rasterizer draws a turntable in seconds: it has no shards")
+                }
                 (Some(rig), true) => {
                     let record = pav::provenance::Run::start()
                         .config(config)
@@ -149,7 +136,10 @@ pub fn run(c: &Cmd) -> Result<()> {
                     write_raster_videos(rig, a.texture.as_deref(), &a.out, a.period.unwrap_or(period))?
                 }
                 _ => {
-                    render(&cfg, config, &a.out, None)?;
+                    if !render(&cfg, config, &a.out, &a.shard)? {
+                        println!("`--merge` with the same arguments joins the shards and cuts the videos");
+                        return Ok(());
+                    }
                     write_videos(&a.out, a.period.unwrap_or(period))?
                 }
             };
@@ -168,10 +158,6 @@ pub fn run(c: &Cmd) -> Result<()> {
                 videos.iter().map(|v| v.path.display().to_string()).collect::<Vec<_>>().join(" "),
                 " --label NAME".repeat(videos.len().saturating_sub(1))
             );
-        }
-        Cmd::Merge { dir } => {
-            let n = merge_shards(dir)?;
-            println!("{n} views in {}", dir.join("manifest.csv").display());
         }
     }
     Ok(())
