@@ -137,7 +137,6 @@ fn invocations(file: &str, md: &str) -> Vec<Invocation> {
             for seg in line.split(['|', ';', '&', '(', ')', '$']) {
                 let w = words(seg);
                 let Some(pos) = w.iter().enumerate().position(|(i, x)| {
-                    let name = x.rsplit('/').next().unwrap_or(x);
                     // In command position: first, after variable assignments or a wrapper, or
                     // as cargo's `--bin` (so `[ $n = pav ]` is no command).
                     let placed =
