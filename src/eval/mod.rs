@@ -7,6 +7,7 @@ pub mod bench;
 mod charts;
 pub mod compare;
 pub mod digital;
+#[cfg(feature = "eval")]
 pub mod merge;
 pub mod physical;
 #[cfg(feature = "eval")]
