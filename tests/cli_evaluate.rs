@@ -340,3 +340,59 @@ fn bad_defences_are_refused_naming_the_config() {
         assert!(!out.exists(), "nothing runs half-configured");
     }
 }
+
+/// `--squeeze` (feature squeezing as an attack detector): each detector is also scored behind bit
+/// depth 4 and a 3×3 median; a frame's gap is the largest change of its best car score under
+/// them, and the threshold set on the clean video flags at most 5 % of its frames.
+#[test]
+fn squeeze_flags_frames_whose_car_score_moves_under_squeezing() {
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let turntable = common::repo().join("fixtures/turntable.mp4").display().to_string();
+    let run = |extra: &[&str]| {
+        pav_rig()
+            .args(["evaluate", &turntable, &fixture(), "--label", "original", "--label", "orbit"])
+            .args(["-d", &cfg("yolov3-tiny"), "--stride", "1", "--no-plots", "-o"])
+            .arg(tmp.path())
+            .args(extra)
+            .env("RUST_BACKTRACE", "0")
+            .output()
+            .unwrap()
+    };
+    let o = run(&["--squeeze", "--squeeze-clean", "original"]);
+    assert!(o.status.success(), "{}", common::output_text(&o));
+    let frames = std::fs::read_to_string(tmp.path().join("frames.csv")).unwrap();
+    let header: Vec<&str> = frames.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let mut score = std::collections::HashMap::new();
+    for l in frames.lines().skip(1) {
+        let c: Vec<&str> = l.split(',').collect();
+        score.insert(
+            (c[col("video")].to_string(), c[col("frame")].to_string(), c[col("detector")].to_string()),
+            c[col("max_score")].parse::<f32>().unwrap(),
+        );
+    }
+    let squeeze = std::fs::read_to_string(tmp.path().join("squeeze.csv")).unwrap();
+    let (mut clean, mut flagged) = (0, 0);
+    for l in squeeze.lines().skip(1) {
+        let c: Vec<&str> = l.split(',').collect();
+        let (video, frame, det, gap) = (c[0], c[2], c[3], c[4].parse::<f32>().unwrap());
+        let s = |d: &str| score[&(video.to_string(), frame.to_string(), d.to_string())];
+        let want = (s(det) - s(&format!("{det}+bits4"))).abs().max((s(det) - s(&format!("{det}+median3"))).abs());
+        assert!((gap - want).abs() < 1e-6, "{l}: gap {gap}, scores say {want}");
+        if video == "original" {
+            clean += 1;
+            flagged += usize::from(c[5] == "true");
+        }
+    }
+    assert!(clean >= 40 && flagged * 20 <= clean, "{flagged} of {clean} clean frames flagged");
+    let md = std::fs::read_to_string(tmp.path().join("squeeze.md")).unwrap();
+    assert!(md.contains("| yolov3-tiny |") && md.contains("original: flagged"), "{md}");
+    let record = std::fs::read_to_string(tmp.path().join("run.toml")).unwrap();
+    assert!(record.contains("squeeze = \"0.05 of the frames of original flagged\""), "{record}");
+    assert_clean_failure(&run(&["--squeeze"]), "--squeeze needs --squeeze-clean");
+    assert_clean_failure(
+        &run(&["--squeeze", "--squeeze-clean", "nope"]),
+        "no video has that label (labels: original, orbit)",
+    );
+}

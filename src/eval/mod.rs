@@ -14,3 +14,4 @@ pub mod physical;
 pub mod report;
 #[cfg(feature = "eval")]
 pub mod run;
+pub mod squeeze;

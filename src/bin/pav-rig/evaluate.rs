@@ -2,7 +2,7 @@
 
 use crate::common::{ctrl_c_flag, defence_chains, parse_defence, Bar, DefenceArg, ShardArgs};
 use crate::port::parse_seconds;
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use pav::detect::load::load_detectors;
 use pav::eval::report::summary_table;
 use pav::eval::run::{default_label, evaluate, EvalOptions, Frames, VideoJob};
@@ -61,6 +61,21 @@ pub struct Args {
     /// several; the undefended detectors stay, so each defence's clean cost shows beside it.
     #[arg(long = "defence", value_name = "SPEC", value_parser = parse_defence)]
     defences: Vec<DefenceArg>,
+    /// Feature squeezing as an attack detector (Xu et al.): also score each detector behind bit
+    /// depth 4 and a 3×3 median (`DETECTOR+bits4`, `DETECTOR+median3`) and flag the frames whose
+    /// best car score either moves by more than a threshold; writes squeeze.csv and squeeze.md.
+    #[arg(long)]
+    squeeze: bool,
+    /// With --squeeze: labels of legitimate videos (the original paint); each detector's threshold
+    /// flags --squeeze-false-flags of their frames. Repeatable.
+    #[arg(long = "squeeze-clean", value_name = "LABEL", requires = "squeeze")]
+    squeeze_clean: Vec<String>,
+    /// With --squeeze-clean: the share of legitimate frames flagged.
+    #[arg(long, default_value_t = 0.05, requires = "squeeze_clean")]
+    squeeze_false_flags: f64,
+    /// With --squeeze: one fixed threshold for every detector instead.
+    #[arg(long, requires = "squeeze", conflicts_with = "squeeze_clean")]
+    squeeze_threshold: Option<f32>,
     /// Skip the PNG plots.
     #[arg(long)]
     no_plots: bool,
@@ -108,7 +123,9 @@ pub fn run(a: &Args) -> Result<()> {
         Some(n) => Frames::Even(n as usize),
         None => Frames::Stride(a.stride as usize),
     };
-    let (chains, defence_labels) = defence_chains(&a.defences);
+    let squeezers = squeezers(a, &jobs)?;
+    let defences: Vec<DefenceArg> = a.defences.iter().chain(&squeezers).cloned().collect();
+    let (chains, defence_labels) = defence_chains(&defences);
     let count = pav::detect::load::expand_configs(&a.detectors)?.len() * (1 + chains.len());
     let (parallel, threads) = pav::eval::run::side_by_side(count, cores, a.parallel, a.threads);
     let opts = EvalOptions {
@@ -135,12 +152,14 @@ pub fn run(a: &Args) -> Result<()> {
         .setting("sampling", frames.tag())
         .setting("rotation_period_s", a.rotation_period)
         .setting("start_angle_deg", a.start_angle)
+        .setting("squeeze", squeeze_setting(a))
         .tool("onnxruntime", pav_onnx::runtime::runtime_version())
         .tool("opencv", pav::video::opencv_version());
     let shards = a.shard.write_record(record, &a.out)?;
     if let Some(shards) = shards {
         let out = pav::eval::merge::merge(&shards, jobs.len(), &opts)?;
         eprintln!("joined {} shards of {} video(s)", shards.len(), jobs.len());
+        squeeze_report(a, &out, &opts.out_dir)?;
         return report(&out, a.threshold);
     }
     // A shard scores its own videos into its folder; the merge puts them back in order.
@@ -164,8 +183,72 @@ pub fn run(a: &Args) -> Result<()> {
     if a.shard.shard.is_some() && !out.interrupted {
         let names: Vec<String> = detectors.iter().map(|d| d.name().to_string()).collect();
         pav::eval::merge::write_index(&opts.out_dir, &names, &out, &picked)?;
+    } else if !out.interrupted {
+        squeeze_report(a, &out, &opts.out_dir)?;
     }
     report(&out, a.threshold)
+}
+
+/// The squeezers `--squeeze` adds to the defences (those not given already), after checking
+/// its options against the videos' labels.
+fn squeezers(a: &Args, jobs: &[VideoJob]) -> Result<Vec<DefenceArg>> {
+    if !a.squeeze {
+        return Ok(Vec::new());
+    }
+    if a.squeeze_clean.is_empty() && a.squeeze_threshold.is_none() {
+        bail!("--squeeze needs --squeeze-clean LABEL (legitimate videos that set each threshold) or --squeeze-threshold T");
+    }
+    if !(0.0..1.0).contains(&a.squeeze_false_flags) {
+        bail!("--squeeze-false-flags {} must be a share in [0, 1)", a.squeeze_false_flags);
+    }
+    if let Some(t) = a.squeeze_threshold.filter(|t| !(0.0..=1.0).contains(t)) {
+        bail!("--squeeze-threshold {t} must be a score change in [0, 1]");
+    }
+    for l in &a.squeeze_clean {
+        if !jobs.iter().any(|j| &j.label == l) {
+            let labels: Vec<&str> = jobs.iter().map(|j| j.label.as_str()).collect();
+            bail!("--squeeze-clean {l}: no video has that label (labels: {})", labels.join(", "));
+        }
+    }
+    let given: Vec<String> = a.defences.iter().map(|d| pav::detect::defence::chain_label(&d.0)).collect();
+    pav::eval::squeeze::SQUEEZERS
+        .iter()
+        .map(|s| parse_defence(s).map_err(anyhow::Error::msg))
+        .filter(|d| d.as_ref().map_or(true, |d| !given.contains(&pav::detect::defence::chain_label(&d.0))))
+        .collect()
+}
+
+fn squeeze_setting(a: &Args) -> String {
+    match (a.squeeze, a.squeeze_threshold) {
+        (false, _) => "off".into(),
+        (true, Some(t)) => format!("threshold {t}"),
+        (true, None) => format!("{} of the frames of {} flagged", a.squeeze_false_flags, a.squeeze_clean.join(", ")),
+    }
+}
+
+/// With --squeeze: the per-frame gaps, each detector's threshold and the flagged shares per video
+/// label, written as squeeze.csv and squeeze.md and printed.
+fn squeeze_report(a: &Args, out: &pav::eval::run::EvalOutcome, dir: &std::path::Path) -> Result<()> {
+    use pav::eval::squeeze;
+    if !a.squeeze {
+        return Ok(());
+    }
+    let labels: Vec<String> = squeeze::SQUEEZERS
+        .iter()
+        .map(|s| parse_defence(s).map(|d| pav::detect::defence::chain_label(&d.0)).map_err(anyhow::Error::msg))
+        .collect::<Result<_>>()?;
+    let mut frames = squeeze::gaps(&out.records, &labels);
+    let thresholds = match a.squeeze_threshold {
+        Some(t) => frames.iter().map(|f| (f.detector.clone(), t)).collect(),
+        None => squeeze::thresholds(&frames, &a.squeeze_clean, a.squeeze_false_flags),
+    };
+    let rows = squeeze::flag(&mut frames, &thresholds);
+    pav::table::write_csv(&dir.join("squeeze.csv"), &frames)?;
+    let md = squeeze::markdown(&rows, &squeeze_setting(a));
+    std::fs::write(dir.join("squeeze.md"), &md)
+        .with_context(|| format!("writing {}", dir.join("squeeze.md").display()))?;
+    println!("{md}");
+    Ok(())
 }
 
 /// Prints the summary and the files written; fails when the run was cut short or had problems.

@@ -1,9 +1,9 @@
 //! `pav views`.
 
 use crate::common::{Bar, ShardArgs};
+use anyhow::Result;
 #[cfg(feature = "video")]
 use anyhow::{bail, Context};
-use anyhow::Result;
 use pav::scene::blender::Blender;
 #[cfg(feature = "video")]
 use pav::scene::rig::RigConfig;
