@@ -327,3 +327,54 @@ fn eval_digital_and_crossval_score_defended_detectors() {
     let o = pav().args(["crossval", "--config"]).arg(&cfg).args(["--defence", "jpeg:q=0"]).output().unwrap();
     assert!(!o.status.success() && common::output_text(&o).contains("q = 0 must be a quality from 1 to 100"));
 }
+
+/// `eval-digital --squeeze` (feature squeezing as an attack detector): every view's gap is the
+/// largest change of its best car score under bit depth 4 and a 3×3 median, as
+/// `digital_views.csv` records the scores, and the thresholds flag at most 5 % of the legitimate
+/// views (the photo and the random textures).
+#[cfg(feature = "optimize")]
+#[test]
+fn eval_digital_squeeze_flags_views_whose_score_moves_under_squeezing() {
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let rauca = common::shared_data().join("rauca-e2e/RAUCA_E2E.png");
+    let o = eval_digital_yolov3_tiny()
+        .args(["--squeeze", "--random-seeds", "2", "-t"])
+        .arg(&rauca)
+        .arg("-o")
+        .arg(tmp.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", common::output_text(&o));
+    let table = |name: &str| -> Vec<std::collections::HashMap<String, String>> {
+        let text = std::fs::read_to_string(tmp.path().join(name)).unwrap();
+        let header: Vec<String> = text.lines().next().unwrap().split(',').map(String::from).collect();
+        text.lines().skip(1).map(|l| header.iter().cloned().zip(l.split(',').map(String::from)).collect()).collect()
+    };
+    let views = table("digital_views.csv");
+    let score = |v: &std::collections::HashMap<String, String>, det: &str| -> f32 {
+        let r = views
+            .iter()
+            .find(|r| {
+                r["view"] == v["view"] && r["texture"] == v["texture"] && r["seed"] == v["seed"] && r["detector"] == det
+            })
+            .unwrap_or_else(|| panic!("no {det} row for {v:?}"));
+        r["score"].parse().unwrap()
+    };
+    let squeeze = table("digital_squeeze.csv");
+    let (mut legit, mut flagged) = (0, 0);
+    for v in &squeeze {
+        assert_eq!(v["detector"], "yolov3-tiny");
+        let s = score(v, "yolov3-tiny");
+        let want = (s - score(v, "yolov3-tiny+bits4")).abs().max((s - score(v, "yolov3-tiny+median3")).abs());
+        assert!((v["gap"].parse::<f32>().unwrap() - want).abs() < 1e-6, "{v:?}: {want}");
+        if ["original", "random", "random32"].contains(&v["texture"].as_str()) {
+            legit += 1;
+            flagged += usize::from(v["flagged"] == "true");
+        }
+    }
+    assert!(squeeze.iter().any(|v| v["texture"] == "rauca-e2e"), "the given texture is scored too");
+    assert!(legit >= 40 && flagged * 20 <= legit, "{flagged} of {legit} legitimate views flagged");
+    let md = std::fs::read_to_string(tmp.path().join("digital.md")).unwrap();
+    assert!(md.contains("Feature squeezing as an attack detector") && md.contains("| yolov3-tiny |"), "{md}");
+}

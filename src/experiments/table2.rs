@@ -211,11 +211,13 @@ pub fn score_textures(
 /// texture file in `textures` (named by its folder) on the views of `config`; writes
 /// `digital.csv`, every view's scores (`digital_views.csv`), each file's paired comparisons on
 /// held-out views (`digital_paired.csv`) and `digital.md` into `out`, and returns the Markdown.
+#[allow(clippy::too_many_arguments)]
 pub fn eval_digital(
     config: &Path,
     textures: &[PathBuf],
     random_seeds: u64,
     scoring: &Scoring,
+    squeeze: Option<f64>,
     out: &Path,
     progress: &dyn Progress,
 ) -> Result<String, ExperimentError> {
@@ -249,7 +251,11 @@ pub fn eval_digital(
         mine.push(name.clone());
         conditions.push(Condition { name, seed: 0, texture: Some(tex) });
     }
-    let mut dets = load_detectors(&scoring.detectors, &[], &scoring.defences, 1)?;
+    let mut defences = scoring.defences.clone();
+    if squeeze.is_some() {
+        crate::eval::squeeze::add_squeezers(&mut defences);
+    }
+    let mut dets = load_detectors(&scoring.detectors, &[], &defences, 1)?;
     let white_box = |name: &str| own_wb.get(name).cloned().unwrap_or_else(|| config_wb.clone());
     let (rows, records) = score_textures(&setup, &mut dets, &conditions, threshold, &white_box, progress)?;
     create_dir(out)?;
@@ -286,8 +292,66 @@ pub fn eval_digital(
             ));
         }
     }
+    if let Some(false_flags) = squeeze {
+        md.push_str(&squeeze_section(&records, false_flags, out)?);
+    }
     write_markdown(out, "digital.md", &md)?;
     Ok(md)
+}
+
+/// One view's squeeze gap under one texture, as `digital_squeeze.csv` lists it.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SqueezeView {
+    /// Texture name.
+    pub texture: String,
+    /// Its seed (random textures).
+    pub seed: u64,
+    /// View name.
+    pub view: String,
+    /// The undefended detector.
+    pub detector: String,
+    /// The largest change of the best car score under bit depth 4 or a 3×3 median.
+    pub gap: f32,
+    /// Whether it is above the detector's threshold.
+    pub flagged: bool,
+}
+
+/// The textures whose views count as legitimate when the squeezing detector's thresholds are set.
+const LEGITIMATE: [&str; 3] = ["original", "random", "random32"];
+
+/// Feature squeezing as an attack detector over the scored views: each detector's threshold
+/// flags `false_flags` of the legitimate views (the photo and the random textures); writes
+/// `digital_squeeze.csv` and returns the Markdown section.
+fn squeeze_section(records: &[ViewRecord], false_flags: f64, out: &Path) -> Result<String, ExperimentError> {
+    use crate::eval::squeeze;
+    let scores: Vec<_> = records
+        .iter()
+        .map(|r| ((r.view.clone(), r.texture.clone(), r.seed), r.texture.as_str(), r.detector.as_str(), r.score))
+        .collect();
+    let mut gaps = squeeze::gaps(&scores, &squeeze::labels());
+    let legit: Vec<String> = LEGITIMATE.map(String::from).to_vec();
+    let thresholds = squeeze::thresholds(&gaps, &legit, false_flags);
+    let rows = squeeze::flag(&mut gaps, &thresholds);
+    let views: Vec<SqueezeView> = gaps
+        .iter()
+        .map(|g| SqueezeView {
+            texture: g.group.clone(),
+            seed: g.key.2,
+            view: g.key.0.clone(),
+            detector: g.detector.clone(),
+            gap: g.gap,
+            flagged: g.flagged,
+        })
+        .collect();
+    write_csv(&out.join("digital_squeeze.csv"), &views)?;
+    Ok(format!(
+        "\n## Feature squeezing as an attack detector (Xu et al.)\n\n{}\nPer-view gaps: `digital_squeeze.csv`.\n",
+        squeeze::markdown(
+            &rows,
+            "view",
+            &format!("set so that {} % of the views of {} are flagged", 100.0 * false_flags, LEGITIMATE.join(", "))
+        )
+    ))
 }
 
 /// The table in the paper's shape: detectors down, textures across, "ASR / P@0.5" in percent,

@@ -123,9 +123,12 @@ pub fn run(a: &Args) -> Result<()> {
         Some(n) => Frames::Even(n as usize),
         None => Frames::Stride(a.stride as usize),
     };
-    let squeezers = squeezers(a, &jobs)?;
-    let defences: Vec<DefenceArg> = a.defences.iter().chain(&squeezers).cloned().collect();
-    let (chains, defence_labels) = defence_chains(&defences);
+    check_squeeze(a, &jobs)?;
+    let (mut chains, _) = defence_chains(&a.defences);
+    if a.squeeze {
+        pav::eval::squeeze::add_squeezers(&mut chains);
+    }
+    let defence_labels = chains.iter().map(|c| pav::detect::defence::chain_label(c)).collect::<Vec<_>>().join(";");
     let count = pav::detect::load::expand_configs(&a.detectors)?.len() * (1 + chains.len());
     let (parallel, threads) = pav::eval::run::side_by_side(count, cores, a.parallel, a.threads);
     let opts = EvalOptions {
@@ -189,11 +192,10 @@ pub fn run(a: &Args) -> Result<()> {
     report(&out, a.threshold)
 }
 
-/// The squeezers `--squeeze` adds to the defences (those not given already), after checking
-/// its options against the videos' labels.
-fn squeezers(a: &Args, jobs: &[VideoJob]) -> Result<Vec<DefenceArg>> {
+/// Checks `--squeeze`'s options against the videos' labels.
+fn check_squeeze(a: &Args, jobs: &[VideoJob]) -> Result<()> {
     if !a.squeeze {
-        return Ok(Vec::new());
+        return Ok(());
     }
     if a.squeeze_clean.is_empty() && a.squeeze_threshold.is_none() {
         bail!("--squeeze needs --squeeze-clean LABEL (legitimate videos that set each threshold) or --squeeze-threshold T");
@@ -210,12 +212,7 @@ fn squeezers(a: &Args, jobs: &[VideoJob]) -> Result<Vec<DefenceArg>> {
             bail!("--squeeze-clean {l}: no video has that label (labels: {})", labels.join(", "));
         }
     }
-    let given: Vec<String> = a.defences.iter().map(|d| pav::detect::defence::chain_label(&d.0)).collect();
-    pav::eval::squeeze::SQUEEZERS
-        .iter()
-        .map(|s| parse_defence(s).map_err(anyhow::Error::msg))
-        .filter(|d| d.as_ref().map_or(true, |d| !given.contains(&pav::detect::defence::chain_label(&d.0))))
-        .collect()
+    Ok(())
 }
 
 fn squeeze_setting(a: &Args) -> String {
@@ -233,18 +230,17 @@ fn squeeze_report(a: &Args, out: &pav::eval::run::EvalOutcome, dir: &std::path::
     if !a.squeeze {
         return Ok(());
     }
-    let labels: Vec<String> = squeeze::SQUEEZERS
-        .iter()
-        .map(|s| parse_defence(s).map(|d| pav::detect::defence::chain_label(&d.0)).map_err(anyhow::Error::msg))
-        .collect::<Result<_>>()?;
-    let mut frames = squeeze::gaps(&out.records, &labels);
+    let mut gaps = squeeze::frame_gaps(&out.records, &squeeze::labels());
     let thresholds = match a.squeeze_threshold {
-        Some(t) => frames.iter().map(|f| (f.detector.clone(), t)).collect(),
-        None => squeeze::thresholds(&frames, &a.squeeze_clean, a.squeeze_false_flags),
+        Some(t) => gaps.iter().map(|g| (g.detector.clone(), t)).collect(),
+        None => squeeze::thresholds(&gaps, &a.squeeze_clean, a.squeeze_false_flags),
     };
-    let rows = squeeze::flag(&mut frames, &thresholds);
-    pav::table::write_csv(&dir.join("squeeze.csv"), &frames)?;
-    let md = squeeze::markdown(&rows, &squeeze_setting(a));
+    let rows = squeeze::flag(&mut gaps, &thresholds);
+    pav::table::write_csv(&dir.join("squeeze.csv"), &gaps.iter().map(squeeze::frame_row).collect::<Vec<_>>())?;
+    let md = format!(
+        "# Feature squeezing as an attack detector\n\n{}\nPer-frame gaps: `squeeze.csv`.\n",
+        squeeze::markdown(&rows, "frame", &squeeze_setting(a))
+    );
     std::fs::write(dir.join("squeeze.md"), &md)
         .with_context(|| format!("writing {}", dir.join("squeeze.md").display()))?;
     println!("{md}");
