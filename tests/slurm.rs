@@ -227,6 +227,9 @@ fn crossval_and_evaluate_run_as_slurm_arrays_and_merge_to_the_one_process_result
         }
     };
     same_files(&t.join("cv-one"), &t.join("cv"), &timing, &header_aside);
+    // Each seed's folder is a run of its own, with its seed in its record.
+    let seed1 = std::fs::read_to_string(t.join("cv/seed1/run.toml")).unwrap();
+    assert!(seed1.contains("seed = \"1\""), "{seed1}");
     // The scores themselves are the same too, the requeued fold's included.
     for f in ["seed0/fold0of2", "seed0/fold1of2", "seed1/fold0of2", "seed1/fold1of2"] {
         let read = |d: &Path| pav::experiments::crossval::read_fold_scores(&d.join(f)).unwrap();

@@ -2,7 +2,7 @@
 
 use crate::common::{ctrl_c_flag, Bar, ShardArgs};
 use crate::Scoring;
-use anyhow::Result;
+use anyhow::{Context, Result};
 use pav::experiments::crossval::{crossval_report, CrossvalJob, Cut};
 use std::path::PathBuf;
 
@@ -70,7 +70,15 @@ pub fn run(a: &Args) -> Result<()> {
         .setting("curve_every", a.curve_every)
         .setting("curve_mean_from", a.curve_mean_from.map_or("none".to_string(), |m| m.to_string()))
         .tool("onnxruntime", pav_onnx::runtime::runtime_version());
-    let shards = a.shard.write_record(record, &a.out)?;
+    let shards = a.shard.write_record(record.clone(), &a.out)?;
+    if a.shard.shard.is_none() {
+        // Each seed's folder is a crossval run of its own (`pav table1` reads it, `eval-digital`
+        // finds the config of a fold's texture through it), so it gets its own record.
+        for s in &a.seeds {
+            let path = a.out.join(format!("seed{s}")).join(pav::provenance::FILE);
+            record.clone().setting("seed", s).write(&path).with_context(|| format!("writing {}", path.display()))?;
+        }
+    }
     let stop = ctrl_c_flag()?;
     let job = CrossvalJob {
         folds: a.folds,
