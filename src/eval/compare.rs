@@ -323,20 +323,7 @@ mod tests {
     use super::*;
 
     fn rec(video: &str, angle: f64, score: f32) -> FrameRecord {
-        FrameRecord {
-            video: video.into(),
-            frame: 0,
-            time_s: 0.0,
-            angle_deg: Some(angle),
-            detector: "d".into(),
-            detected: score >= 0.5,
-            max_score: score,
-            x1: None,
-            y1: None,
-            x2: None,
-            y2: None,
-            file: format!("{video}.mp4"),
-        }
+        FrameRecord { angle_deg: Some(angle), ..FrameRecord::scored(video, 0, "d", score) }
     }
 
     /// A car score that peaks twice a turn (side views) and has a bump at 60°.

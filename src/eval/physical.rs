@@ -29,6 +29,27 @@ pub struct FrameRecord {
     pub file: String,
 }
 
+#[cfg(test)]
+impl FrameRecord {
+    /// `detector`'s best car score on frame `frame` of `video` (no box, no angle), for tests.
+    pub(crate) fn scored(video: &str, frame: usize, detector: &str, score: f32) -> FrameRecord {
+        FrameRecord {
+            video: video.into(),
+            frame,
+            time_s: 0.0,
+            angle_deg: None,
+            detector: detector.into(),
+            detected: score >= 0.5,
+            max_score: score,
+            x1: None,
+            y1: None,
+            x2: None,
+            y2: None,
+            file: format!("{video}.mp4"),
+        }
+    }
+}
+
 /// Detected / total frame counts.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Accuracy {

@@ -202,20 +202,7 @@ mod tests {
     use super::*;
 
     fn rec(video: &str, frame: usize, detector: &str, score: f32) -> FrameRecord {
-        FrameRecord {
-            video: video.into(),
-            frame,
-            time_s: 0.0,
-            angle_deg: None,
-            detector: detector.into(),
-            detected: score >= 0.5,
-            max_score: score,
-            x1: None,
-            y1: None,
-            x2: None,
-            y2: None,
-            file: format!("{video}.mp4"),
-        }
+        FrameRecord::scored(video, frame, detector, score)
     }
 
     #[test]
