@@ -69,11 +69,11 @@ impl ClusterJob {
         self.command.iter().map(|w| shell_word(w)).collect::<Vec<_>>().join(" ")
     }
 
-    fn header(&self, name: &str, extra: &[String]) -> String {
+    fn header(&self, name: &str, cpus: usize, extra: &[String]) -> String {
         let mut h = format!(
             "#!/usr/bin/env bash\n#SBATCH --job-name={}\n#SBATCH --cpus-per-task={}\n#SBATCH --mem={}\n#SBATCH --time={}\n#SBATCH --chdir={}\n#SBATCH --export=ALL\n",
             shell_word(name),
-            self.cpus,
+            cpus,
             self.mem,
             self.time,
             shell_word(&self.workdir)
@@ -98,7 +98,7 @@ impl ClusterJob {
         ];
         format!(
             "{}set -euo pipefail\necho \"task $SLURM_ARRAY_TASK_ID of {n} on $(hostname), restart ${{SLURM_RESTART_COUNT:-0}}\"\nexec {} --shard \"$SLURM_ARRAY_TASK_ID/{n}\"\n",
-            self.header(&self.name, &extra),
+            self.header(&self.name, self.cpus, &extra),
             self.command_line(),
             n = self.tasks
         )
@@ -109,8 +109,7 @@ impl ClusterJob {
         let extra = [format!("--output={}/merge.log", shell_word(&self.logs))];
         format!(
             "{}set -euo pipefail\nexec {} --merge\n",
-            self.header(&format!("{}-merge", self.name), &extra)
-                .replace(&format!("#SBATCH --cpus-per-task={}\n", self.cpus), "#SBATCH --cpus-per-task=1\n"),
+            self.header(&format!("{}-merge", self.name), 1, &extra),
             self.command_line()
         )
     }

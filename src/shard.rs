@@ -152,6 +152,9 @@ impl Shard {
 /// folders of different cuts lie side by side, or when any shard of the cut is missing (all named).
 pub fn find(out: &Path) -> Result<Vec<(Shard, PathBuf)>, ShardError> {
     let io = |e: std::io::Error| ShardError::Record { path: out.to_path_buf(), why: e.to_string() };
+    if !out.is_dir() {
+        return Err(ShardError::None(out.to_path_buf()));
+    }
     let mut found: Vec<(Shard, PathBuf)> = Vec::new();
     for e in std::fs::read_dir(out).map_err(io)? {
         let e = e.map_err(io)?;
@@ -326,6 +329,7 @@ mod tests {
     fn find_names_missing_shards_and_refuses_mixed_cuts() {
         let dir = tempfile::tempdir().unwrap();
         assert!(matches!(find(dir.path()), Err(ShardError::None(_))));
+        assert!(matches!(find(&dir.path().join("not-there")), Err(ShardError::None(_))));
         for name in ["shard-1-of-4", "shard-3-of-4", "shard-9-of-4", "other"] {
             std::fs::create_dir(dir.path().join(name)).unwrap();
         }
