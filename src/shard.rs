@@ -236,6 +236,30 @@ pub fn find_checked(out: &Path, merge: &Run) -> Result<Vec<(Shard, PathBuf)>, Sh
     Ok(shards)
 }
 
+/// The folder of the shard among `shards` (one whole cut, as [`find`] returns it) that owns unit
+/// `unit` ([`Shard::owner`]).
+pub fn owner_dir(shards: &[(Shard, PathBuf)], unit: usize) -> PathBuf {
+    let owner = Shard::owner(unit, shards.first().map_or(1, |s| s.0.n));
+    shards.iter().find(|s| s.0 == owner).map_or_else(|| owner.dir_name().into(), |s| s.1.clone())
+}
+
+/// Writes `value` as JSON to `path` whole or not at all (written beside it, then renamed), so a
+/// shard killed mid-write never leaves a file that a merge would read as finished.
+pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), ShardError> {
+    let bad = |path: &Path, why: String| ShardError::Record { path: path.to_path_buf(), why };
+    let text = serde_json::to_vec(value).map_err(|e| bad(path, e.to_string()))?;
+    let part = path.with_extension("json.part");
+    std::fs::write(&part, text).map_err(|e| bad(&part, e.to_string()))?;
+    std::fs::rename(&part, path).map_err(|e| bad(path, e.to_string()))
+}
+
+/// Reads a file written by [`write_json`].
+pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, ShardError> {
+    let bad = |why: String| ShardError::Record { path: path.to_path_buf(), why };
+    let text = std::fs::read(path).map_err(|e| bad(e.to_string()))?;
+    serde_json::from_slice(&text).map_err(|e| bad(e.to_string()))
+}
+
 /// One unit of a job: what to call it in errors, and its folder relative to a shard's folder
 /// (and to the job's output folder once gathered).
 pub struct Unit {
@@ -254,15 +278,13 @@ pub fn gather(
     done: &dyn Fn(&Path) -> bool,
     out: &Path,
 ) -> Result<(), ShardError> {
-    let n = shards.first().map_or(1, |s| s.0.n);
     let mut links = Vec::new();
     for (u, unit) in units.iter().enumerate() {
-        let owner = Shard::owner(u, n);
-        let own = shards.iter().find(|(s, _)| *s == owner).map_or_else(|| owner.dir(out), |s| s.1.clone());
+        let own = owner_dir(shards, u);
         if !done(&own.join(&unit.dir)) {
             return Err(ShardError::Unfinished { shard: own, what: unit.what.clone() });
         }
-        if let Some((_, other)) = shards.iter().find(|(s, d)| *s != owner && done(&d.join(&unit.dir))) {
+        if let Some((_, other)) = shards.iter().find(|(_, d)| *d != own && done(&d.join(&unit.dir))) {
             return Err(ShardError::Duplicate { what: unit.what.clone(), a: own, b: other.clone() });
         }
         links.push((own.join(&unit.dir), out.join(&unit.dir)));

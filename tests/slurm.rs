@@ -43,6 +43,23 @@ impl Cluster {
         o.stdout.is_empty()
     }
 
+    /// Writes `command` as a 2-task array (1 CPU each) and its merge job into `jobs` with
+    /// `pav cluster slurm`, submits both, and returns the array's job id.
+    fn submit_array(&self, jobs: &Path, command: &[String]) -> String {
+        run_ok(
+            pav()
+                .args(["cluster", "slurm", "--tasks", "2", "--cpus-per-task", "1", "--mem", "2G", "-o"])
+                .arg(jobs)
+                .arg("--")
+                .args(command),
+        );
+        let o = self.command("bash").arg(jobs.join("submit.sh")).output().unwrap();
+        assert!(o.status.success(), "{}", common::output_text(&o));
+        // submit.sh prints `array ID, merge ID`.
+        let ids = String::from_utf8_lossy(&o.stdout).to_string();
+        ids.split_whitespace().nth(1).unwrap().trim_end_matches(',').to_string()
+    }
+
     /// Waits until no job is queued or running; panics with the logs after `limit`.
     fn wait(&self, limit: Duration, logs: &Path) {
         let t = Instant::now();
@@ -174,17 +191,7 @@ fn crossval_and_evaluate_run_as_slurm_arrays_and_merge_to_the_one_process_result
     let cluster = Cluster::start();
     // The crossval as a 2-task array (1 CPU each) plus its merge.
     let jobs = t.join("cv-jobs");
-    run_ok(
-        pav()
-            .args(["cluster", "slurm", "--tasks", "2", "--cpus-per-task", "1", "--mem", "2G", "-o"])
-            .arg(&jobs)
-            .arg("--")
-            .args(crossval(&t.join("cv"))),
-    );
-    let o = cluster.command("bash").arg(jobs.join("submit.sh")).output().unwrap();
-    assert!(o.status.success(), "{}", common::output_text(&o));
-    let ids = String::from_utf8_lossy(&o.stdout).to_string();
-    let array = ids.split_whitespace().nth(1).unwrap().trim_end_matches(',').to_string();
+    let array = cluster.submit_array(&jobs, &crossval(&t.join("cv")));
     // Requeue task 1 once it is optimizing (a fold with a checkpoint and no scores yet): Slurm
     // stops it and starts it again from the beginning of its script; pav resumes.
     let shard1 = t.join("cv/shard-1-of-2");
@@ -240,15 +247,7 @@ fn crossval_and_evaluate_run_as_slurm_arrays_and_merge_to_the_one_process_result
 
     // The evaluate of three videos as a 2-task array: reports and plots as one process wrote them.
     let jobs = t.join("ev-jobs");
-    run_ok(
-        pav()
-            .args(["cluster", "slurm", "--tasks", "2", "--cpus-per-task", "1", "--mem", "2G", "-o"])
-            .arg(&jobs)
-            .arg("--")
-            .args(evaluate(&t.join("ev"))),
-    );
-    let o = cluster.command("bash").arg(jobs.join("submit.sh")).output().unwrap();
-    assert!(o.status.success(), "{}", common::output_text(&o));
+    cluster.submit_array(&jobs, &evaluate(&t.join("ev")));
     cluster.wait(Duration::from_secs(300), &jobs.join("logs"));
     assert!(
         t.join("ev/summary.csv").is_file(),

@@ -196,6 +196,11 @@ pub fn chain_label(chain: &[Defence]) -> String {
     chain.iter().map(Defence::label).collect::<Vec<_>>().join("+")
 }
 
+/// The labels of several chains, as a run records them (`median3;jpeg75`).
+pub fn chains_label(chains: &[Vec<Defence>]) -> String {
+    chains.iter().map(|c| chain_label(c)).collect::<Vec<_>>().join(";")
+}
+
 /// Applies `chain` to `img` in order. Random defences draw from their seed mixed with a hash of
 /// the image as it reaches them, so a frame gets the same draw whatever order or thread scores it.
 pub fn apply_chain(chain: &[Defence], img: &mut Frame) -> Result<(), DefenceError> {

@@ -27,21 +27,12 @@ pub fn write_index(dir: &Path, detectors: &[String], out: &EvalOutcome, indices:
     let videos =
         out.videos.iter().map(|v| VideoPart { index: indices[v.index], ..v.clone() }).collect::<Vec<VideoPart>>();
     let index = ShardIndex { detectors: detectors.to_vec(), videos };
-    let path = dir.join(SHARD_INDEX);
-    let text =
-        serde_json::to_vec_pretty(&index).map_err(|e| ReportError::Read { path: path.clone(), why: e.to_string() })?;
-    let part = path.with_extension("json.part");
-    std::fs::write(&part, text).map_err(|e| super::report::io_err(&part, e))?;
-    std::fs::rename(&part, &path).map_err(|e| super::report::io_err(&path, e))
+    Ok(crate::shard::write_json(&dir.join(SHARD_INDEX), &index)?)
 }
 
 fn read_index(dir: &Path) -> Result<Option<ShardIndex>, ReportError> {
     let path = dir.join(SHARD_INDEX);
-    if !path.exists() {
-        return Ok(None);
-    }
-    let text = std::fs::read(&path).map_err(|e| ReportError::Read { path: path.clone(), why: e.to_string() })?;
-    serde_json::from_slice(&text).map(Some).map_err(|e| ReportError::Read { path, why: e.to_string() })
+    Ok(if path.exists() { Some(crate::shard::read_json(&path)?) } else { None })
 }
 
 fn read_frames(path: &Path) -> Result<Vec<FrameRecord>, ReportError> {
@@ -94,10 +85,8 @@ pub fn merge(shards: &[(Shard, PathBuf)], videos: usize, opts: &EvalOptions) -> 
         }
     }
     if let Some(i) = parts.iter().position(Option::is_none) {
-        let n = shards.first().map_or(1, |s| s.0.n);
-        let owner = Shard::owner(i, n);
-        let dir = shards.iter().find(|s| s.0 == owner).map_or_else(|| owner.dir_name().into(), |s| s.1.clone());
-        return Err(ShardError::Unfinished { shard: dir, what: format!("video {}", i + 1) }.into());
+        let shard = crate::shard::owner_dir(shards, i);
+        return Err(ShardError::Unfinished { shard, what: format!("video {}", i + 1) }.into());
     }
     std::fs::create_dir_all(&opts.out_dir).map_err(|e| super::report::io_err(&opts.out_dir, e))?;
     let frames_path = opts.out_dir.join("frames.csv");

@@ -191,19 +191,12 @@ pub struct Pooled {
 pub const FOLD_SCORES: &str = "scores.json";
 
 fn write_fold_scores(dir: &Path, s: &FoldScores) -> Result<(), ExperimentError> {
-    let path = dir.join(FOLD_SCORES);
-    let io = |source| ExperimentError::Io { path: path.clone(), source };
-    let text = serde_json::to_vec(s).map_err(|e| io(std::io::Error::other(e)))?;
-    let part = path.with_extension("json.part");
-    std::fs::write(&part, text).map_err(io)?;
-    std::fs::rename(&part, &path).map_err(io)
+    Ok(crate::shard::write_json(&dir.join(FOLD_SCORES), s)?)
 }
 
 /// Reads a fold's scores ([`FoldScores`]) from its folder.
 pub fn read_fold_scores(dir: &Path) -> Result<FoldScores, ExperimentError> {
-    let path = dir.join(FOLD_SCORES);
-    let text = std::fs::read(&path).map_err(|source| ExperimentError::Io { path: path.clone(), source })?;
-    serde_json::from_slice(&text).map_err(|e| ExperimentError::Invalid(format!("{}: {e}", path.display())))
+    Ok(crate::shard::read_json(&dir.join(FOLD_SCORES))?)
 }
 
 /// Pushes `im` onto the entry of (role, texture, detector), in first-seen order.

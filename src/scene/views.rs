@@ -952,10 +952,8 @@ pub fn merge_shards(cfg: &ViewsConfig, shards: &[(Shard, PathBuf)], out: &Path) 
             rows.insert(row.name.clone(), (row, dir.clone()));
         }
     }
-    let n = shards.first().map_or(1, |s| s.0.n);
     if let Some((i, v)) = all.iter().enumerate().find(|(_, v)| !rows.contains_key(&v.name)) {
-        let owner = Shard::owner(i, n);
-        let dir = shards.iter().find(|s| s.0 == owner).map_or_else(|| owner.dir(out), |s| s.1.clone());
+        let dir = crate::shard::owner_dir(shards, i);
         let missing = all.iter().filter(|v| !rows.contains_key(&v.name)).count();
         let what = format!("view {} ({missing} of {} views missing)", v.name, all.len());
         return Err(ShardError::Unfinished { shard: dir, what }.into());

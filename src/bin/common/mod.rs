@@ -128,7 +128,7 @@ pub fn parse_defence(s: &str) -> Result<DefenceArg, String> {
 /// The chains of `--defence` values, and their labels for `run.toml` (`median3;jpeg75`).
 pub fn defence_chains(args: &[DefenceArg]) -> (Vec<Vec<pav::detect::defence::Defence>>, String) {
     let chains: Vec<_> = args.iter().map(|a| a.0.clone()).collect();
-    let labels = chains.iter().map(|c| pav::detect::defence::chain_label(c)).collect::<Vec<_>>().join(";");
+    let labels = pav::detect::defence::chains_label(&chains);
     (chains, labels)
 }
 

@@ -128,7 +128,7 @@ pub fn run(a: &Args) -> Result<()> {
     if a.squeeze {
         pav::eval::squeeze::add_squeezers(&mut chains);
     }
-    let defence_labels = chains.iter().map(|c| pav::detect::defence::chain_label(c)).collect::<Vec<_>>().join(";");
+    let defence_labels = pav::detect::defence::chains_label(&chains);
     let count = pav::detect::load::expand_configs(&a.detectors)?.len() * (1 + chains.len());
     let (parallel, threads) = pav::eval::run::side_by_side(count, cores, a.parallel, a.threads);
     let opts = EvalOptions {
