@@ -1,26 +1,23 @@
 //! `capture` over the simulated turntable and camera: one revolution yields the right frames
 //! with angles within 0.5° of the truth, and every fault ends in saved, readable files.
+//!
+//! The captures run in simulated time ([`SimClock`], [`SimTransport`]): waiting moves the clock
+//! on at once, so a 28 s turn takes only the computer's time, machine load changes nothing, and
+//! a run repeats exactly. One capture runs in real time over a pseudo-terminal, end to end.
 
 mod common;
 
 use pav::progress::Silent;
-use pav::rig::capture::{capture, CaptureError, CaptureOptions};
-use pav::rig::sim::{Faults, SimOptions, SimTurntable};
+use pav::rig::capture::{capture, CaptureError, CaptureOptions, CaptureSummary};
+use pav::rig::clock::{Clock, SimClock};
+use pav::rig::sim::{Faults, SimOptions, SimTransport, SimTurntable};
 use pav::rig::source::{CameraError, FrameSource, LiveCapture, SimCamera};
 use pav::rig::turntable::Turntable;
 use pav::sidecar;
 use std::path::Path;
-use std::sync::atomic::AtomicBool;
-use std::time::Duration;
-
-/// Captures in this file run one test at a time: each is timed against a simulated table, and
-/// two cores shared by a dozen captures (the matrix runs several itself) plus other load
-/// starved them for seconds.
-static RIG: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
-    RIG.lock().unwrap_or_else(|e| e.into_inner())
-}
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 fn opts(video: &Path) -> CaptureOptions {
     CaptureOptions {
@@ -31,10 +28,39 @@ fn opts(video: &Path) -> CaptureOptions {
     }
 }
 
-fn rig(scale: f64, faults: Faults) -> (SimTurntable, Turntable) {
-    let s = SimTurntable::spawn(SimOptions { time_scale: scale, faults, ..SimOptions::default() }).unwrap();
-    let t = Turntable::open(&s.path().to_string_lossy(), 115_200, Duration::from_millis(500)).unwrap();
-    (s, t)
+/// A simulated table in simulated time, and the client connected to it.
+fn rig(scale: f64, faults: Faults) -> (pav::rig::sim::Truth, Turntable) {
+    let clock: Arc<dyn Clock> = Arc::new(SimClock::new());
+    let link =
+        SimTransport::new(SimOptions { time_scale: scale, faults, ..SimOptions::default() }, clock.clone()).unwrap();
+    let truth = link.truth();
+    (truth, Turntable::connect(Box::new(link), clock, Duration::from_millis(500)).unwrap())
+}
+
+/// A camera that raises `stop` (as Ctrl-C does) once its clock passes `at`.
+struct StopAt {
+    cam: SimCamera,
+    at: Instant,
+    stop: Arc<AtomicBool>,
+    clock: Arc<dyn Clock>,
+}
+
+impl FrameSource for StopAt {
+    fn describe(&self) -> String {
+        self.cam.describe()
+    }
+    fn size(&self) -> (usize, usize) {
+        self.cam.size()
+    }
+    fn fps(&self) -> f64 {
+        self.cam.fps()
+    }
+    fn grab(&mut self) -> Result<Option<(pav::image::Frame, Instant)>, CameraError> {
+        if self.clock.now() >= self.at {
+            self.stop.store(true, Ordering::Relaxed);
+        }
+        self.cam.grab()
+    }
 }
 
 /// The largest sidecar angle error against the simulated camera's truth, degrees; frames off by
@@ -55,28 +81,47 @@ fn decoded_frames(video: &Path) -> usize {
     common::decoded_frames(video).unwrap()
 }
 
-#[test]
-fn one_revolution_has_every_frame_within_half_a_degree() {
-    let _rig = one_at_a_time();
-    let tmp = tempfile::tempdir().unwrap();
-    let video = tmp.path().join("rev.mp4");
-    // 28 s per turn at 5x: 5.6 s of wall time at 30 fps.
-    let (s, mut table) = rig(5.0, Faults::default());
-    let mut cam = SimCamera::new(s.truth(), 320, 240, 30.0);
-    let sum = capture(&mut table, &mut cam, &opts(&video), &Silent, &AtomicBool::new(false)).unwrap();
-    assert!((165..=176).contains(&sum.frames), "{} frames for a 5.6 s turn at 30 fps", sum.frames);
+/// One revolution's checks: every frame, each within half a degree and within its stated bound.
+fn check_revolution(sum: &CaptureSummary, video: &Path, truth: &[f64]) -> f64 {
     assert_eq!(sum.interpolated, sum.frames, "every angle came from reports around its frame");
     assert!((sum.final_deg.unwrap() - 360.0).abs() < 1e-9);
-    let rows = sidecar::read(&sidecar::sidecar_path(&video)).unwrap();
+    let rows = sidecar::read(&sidecar::sidecar_path(video)).unwrap();
     assert_eq!(rows.len(), sum.frames);
-    assert_eq!(decoded_frames(&video), sum.frames);
-    let worst = worst_angle_error(&rows, &cam.true_angles, 0.2);
+    assert_eq!(decoded_frames(video), sum.frames);
+    let worst = worst_angle_error(&rows, truth, 0.2);
     let bound = sum.angle_bound_deg.unwrap();
     eprintln!("worst angle error over {} frames: {worst:.4}° (bound ±{bound:.4}°)", rows.len());
     assert!(worst < 0.5, "worst angle error {worst:.3}°");
     assert!(worst <= bound + 0.01, "error {worst:.3}° beyond the bound ±{bound:.3}°");
     // The table turned through the full circle during the recording.
     assert!(rows.iter().any(|r| (170.0..190.0).contains(&r.angle_deg)));
+    worst
+}
+
+#[test]
+fn one_revolution_has_every_frame_within_half_a_degree() {
+    let tmp = tempfile::tempdir().unwrap();
+    let video = tmp.path().join("rev.mp4");
+    // 28 s per turn at 30 fps, in simulated time: the table's ramps add a few frames.
+    let (truth, mut table) = rig(1.0, Faults::default());
+    let mut cam = SimCamera::new(truth, 320, 240, 30.0);
+    let sum = capture(&mut table, &mut cam, &opts(&video), &Silent, &AtomicBool::new(false)).unwrap();
+    assert!((840..=850).contains(&sum.frames), "{} frames for a 28 s turn at 30 fps", sum.frames);
+    check_revolution(&sum, &video, &cam.true_angles);
+}
+
+#[test]
+fn one_revolution_over_a_pseudo_terminal_in_real_time() {
+    // The end-to-end proof: the serial client, its reader thread and the simulator's own thread,
+    // on the system clock. 28 s per turn at 5x: 5.6 s of wall time at 30 fps.
+    let tmp = tempfile::tempdir().unwrap();
+    let video = tmp.path().join("rev.mp4");
+    let s = SimTurntable::spawn(SimOptions { time_scale: 5.0, ..SimOptions::default() }).unwrap();
+    let mut table = Turntable::open(&s.path().to_string_lossy(), 115_200, Duration::from_millis(500)).unwrap();
+    let mut cam = SimCamera::new(s.truth(), 320, 240, 30.0);
+    let sum = capture(&mut table, &mut cam, &opts(&video), &Silent, &AtomicBool::new(false)).unwrap();
+    assert!((165..=176).contains(&sum.frames), "{} frames for a 5.6 s turn at 30 fps", sum.frames);
+    check_revolution(&sum, &video, &cam.true_angles);
 }
 
 fn expect_stopped(r: Result<pav::rig::capture::CaptureSummary, CaptureError>, needle: &str, video: &Path) -> usize {
@@ -94,11 +139,10 @@ fn expect_stopped(r: Result<pav::rig::capture::CaptureSummary, CaptureError>, ne
 
 #[test]
 fn camera_failure_saves_what_was_recorded() {
-    let _rig = one_at_a_time();
     let tmp = tempfile::tempdir().unwrap();
     let video = tmp.path().join("cam.mp4");
-    let (s, mut table) = rig(14.0, Faults::default());
-    let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
+    let (truth, mut table) = rig(14.0, Faults::default());
+    let mut cam = SimCamera::new(truth, 160, 120, 30.0);
     cam.fail_at = Some(20);
     let n = expect_stopped(
         capture(&mut table, &mut cam, &opts(&video), &Silent, &AtomicBool::new(false)),
@@ -107,17 +151,18 @@ fn camera_failure_saves_what_was_recorded() {
     );
     assert_eq!(n, 20);
     // The table was told to stop.
-    std::thread::sleep(Duration::from_millis(300));
+    let clock = table.clock();
+    clock.sleep_until(clock.now() + Duration::from_millis(300));
     assert_eq!(table.status().unwrap().state, turntable_proto::State::Idle);
 }
 
 #[test]
 fn serial_disconnect_and_stall_save_what_was_recorded() {
-    let _rig = one_at_a_time();
     let tmp = tempfile::tempdir().unwrap();
     let video = tmp.path().join("disc.mp4");
-    let (s, mut table) = rig(14.0, Faults { disconnect_after: Some(Duration::from_millis(1200)), ..Faults::default() });
-    let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
+    let (truth, mut table) =
+        rig(14.0, Faults { disconnect_after: Some(Duration::from_millis(1200)), ..Faults::default() });
+    let mut cam = SimCamera::new(truth, 160, 120, 30.0);
     let n = expect_stopped(
         capture(&mut table, &mut cam, &opts(&video), &Silent, &AtomicBool::new(false)),
         "disconnected",
@@ -126,8 +171,8 @@ fn serial_disconnect_and_stall_save_what_was_recorded() {
     assert!(n > 5, "{n}");
 
     let video = tmp.path().join("stall.mp4");
-    let (s, mut table) = rig(14.0, Faults { stall_after: Some(Duration::from_secs(8)), ..Faults::default() });
-    let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
+    let (truth, mut table) = rig(14.0, Faults { stall_after: Some(Duration::from_secs(8)), ..Faults::default() });
+    let mut cam = SimCamera::new(truth, 160, 120, 30.0);
     let mut o = opts(&video);
     o.home = false;
     expect_stopped(
@@ -139,17 +184,17 @@ fn serial_disconnect_and_stall_save_what_was_recorded() {
 
 #[test]
 fn ctrl_c_stops_the_table_and_saves() {
-    let _rig = one_at_a_time();
     let tmp = tempfile::tempdir().unwrap();
     let video = tmp.path().join("int.mp4");
-    let (s, mut table) = rig(7.0, Faults::default());
-    let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
-    let stop = std::sync::Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    std::thread::spawn(move || {
-        std::thread::sleep(Duration::from_millis(800));
-        flag.store(true, std::sync::atomic::Ordering::Relaxed);
-    });
+    let (truth, mut table) = rig(7.0, Faults::default());
+    let stop = Arc::new(AtomicBool::new(false));
+    let clock = table.clock();
+    let mut cam = StopAt {
+        cam: SimCamera::new(truth, 160, 120, 30.0),
+        at: clock.now() + Duration::from_millis(800),
+        stop: stop.clone(),
+        clock,
+    };
     let n = expect_stopped(
         capture(&mut table, &mut cam, &opts(&video), &Silent, &stop),
         "interrupted (Ctrl-C or SIGTERM)",
@@ -160,7 +205,6 @@ fn ctrl_c_stops_the_table_and_saves() {
 
 #[test]
 fn camera_sources_fail_clearly_or_stream() {
-    let _rig = one_at_a_time();
     let e = LiveCapture::v4l2(Path::new("/dev/video-not-here"), 640, 480, 30.0).err().unwrap();
     assert!(matches!(e, CameraError::NoDevice(_)));
     assert!(e.to_string().contains("no V4L2 camera at /dev/video-not-here"), "{e}");
@@ -173,14 +217,13 @@ fn camera_sources_fail_clearly_or_stream() {
 
 #[test]
 fn dropped_bytes_cost_reports_never_angles() {
-    let _rig = one_at_a_time();
     // Protocol 1 turned a dropped digit in `@t pos` into another valid report: with 1 % of the
     // device's bytes dropped, 3 of 120 frames were stamped 60–120° off. The CRC drops such lines.
     for (k, drop) in [0.01, 0.03].into_iter().enumerate() {
         let tmp = tempfile::tempdir().unwrap();
         let video = tmp.path().join("drops.mp4");
-        let (s, mut table) = rig(5.0, Faults { drop_byte: drop, ..Faults::default() });
-        let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
+        let (truth, mut table) = rig(5.0, Faults { drop_byte: drop, ..Faults::default() });
+        let mut cam = SimCamera::new(truth, 160, 120, 30.0);
         let mut o = opts(&video);
         o.home = false;
         // A lost `done` is recovered by status probes, which the same drops hit: give them time.
@@ -202,11 +245,10 @@ fn dropped_bytes_cost_reports_never_angles() {
 
 #[test]
 fn a_lost_end_of_motion_still_completes_the_capture() {
-    let _rig = one_at_a_time();
     let tmp = tempfile::tempdir().unwrap();
     let video = tmp.path().join("end.mp4");
-    let (s, mut table) = rig(5.0, Faults { lose_end: true, ..Faults::default() });
-    let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
+    let (truth, mut table) = rig(5.0, Faults { lose_end: true, ..Faults::default() });
+    let mut cam = SimCamera::new(truth, 160, 120, 30.0);
     let mut o = opts(&video);
     o.home = false;
     let sum = capture(&mut table, &mut cam, &o, &Silent, &AtomicBool::new(false)).unwrap();
@@ -221,7 +263,6 @@ fn a_lost_end_of_motion_still_completes_the_capture() {
 
 #[test]
 fn reply_latency_is_bounded_and_too_much_of_it_is_flagged() {
-    let _rig = one_at_a_time();
     // Constant latency cannot be told from a clock offset by one-way reports: it put every
     // angle 3.9° / 10.3° / 23.2° late at 50 / 100 / 200 ms, with exit 0. Round trips bound the
     // offset from the other side; the angles' error stays within that bound, and a bound wider
@@ -233,8 +274,8 @@ fn reply_latency_is_bounded_and_too_much_of_it_is_flagged() {
         .map(|ms| {
             let tmp = tempfile::tempdir().unwrap();
             let video = tmp.path().join("late.mp4");
-            let (s, mut table) = rig(4.0, Faults { delay: Duration::from_millis(ms), ..Faults::default() });
-            let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
+            let (truth, mut table) = rig(4.0, Faults { delay: Duration::from_millis(ms), ..Faults::default() });
+            let mut cam = SimCamera::new(truth, 160, 120, 30.0);
             let mut o = opts(&video);
             o.home = false;
             // Between 10 ms's bound (±0.49° at 51°/s, with a step or two for the spin's start) and
@@ -277,6 +318,27 @@ fn reply_latency_is_bounded_and_too_much_of_it_is_flagged() {
     }
 }
 
+#[test]
+fn a_simulated_capture_repeats_exactly() {
+    // Time is an input: the same faults and dice give the same capture, row for row, however
+    // loaded the machine is.
+    let run = || {
+        let tmp = tempfile::tempdir().unwrap();
+        let video = tmp.path().join("again.mp4");
+        let (truth, mut table) =
+            rig(4.0, Faults { drop_byte: 0.03, delay: Duration::from_millis(5), ..Faults::default() });
+        let mut cam = SimCamera::new(truth, 160, 120, 30.0);
+        let mut o = opts(&video);
+        o.home = false;
+        let sum = capture(&mut table, &mut cam, &o, &Silent, &AtomicBool::new(false)).unwrap();
+        let rows = std::fs::read_to_string(sidecar::sidecar_path(&video)).unwrap();
+        (sum.frames, sum.angle_bound_deg, sum.round_trip_ms, table.garbage_lines, rows, cam.true_angles)
+    };
+    let (a, b) = (run(), run());
+    assert!(a.3 > 0, "bytes were dropped but no line was refused");
+    assert_eq!(a, b);
+}
+
 /// How a capture under one fault ended.
 #[derive(Debug, PartialEq, Clone, Copy)]
 enum Outcome {
@@ -290,9 +352,7 @@ type Case = (&'static str, Faults, Option<usize>, Option<u64>, &'static [Outcome
 
 #[test]
 fn fault_matrix_loses_no_frame_and_flags_every_doubtful_angle() {
-    let _rig = one_at_a_time();
-    // Every fault the simulator can inject, each in its own capture at 2x (25.7°/s), all at
-    // once. Whatever happens: the video and the sidecar hold every frame recorded, and a
+    // Every fault the simulator can inject, each in its own capture at 2x (25.7°/s). Whatever happens: the video and the sidecar hold every frame recorded, and a
     // capture that ends well has every angle within its stated bound (never beyond the 0.5°
     // limit); anything else ends in an error (a non-zero exit in pav-rig).
     use Outcome::*;
@@ -313,37 +373,34 @@ fn fault_matrix_loses_no_frame_and_flags_every_doubtful_angle() {
         ("camera fails at frame 60", Faults::default(), Some(60), None, &[Stopped]),
         ("interrupted at 3 s", Faults::default(), None, Some(3000), &[Stopped]),
     ];
-    // Five at a time: enough to share the wait, few enough for two loaded cores.
+    // Two at a time, one per core: in simulated time a capture waits for nothing.
     let mut cases = cases.into_iter().peekable();
     let mut results = Vec::new();
     while cases.peek().is_some() {
         let runs: Vec<_> = cases
             .by_ref()
-            .take(5)
+            .take(2)
             .map(|(name, faults, fail_at, stop_ms, allowed)| {
                 std::thread::spawn(move || {
                     let tmp = tempfile::tempdir().unwrap();
                     let video = tmp.path().join("m.mp4");
-                    let (s, mut table) = rig(2.0, faults);
-                    let mut cam = SimCamera::new(s.truth(), 160, 120, 30.0);
-                    cam.fail_at = fail_at;
+                    let (truth, mut table) = rig(2.0, faults);
+                    let clock = table.clock();
+                    let stop = Arc::new(AtomicBool::new(false));
+                    let mut cam = StopAt {
+                        cam: SimCamera::new(truth, 160, 120, 30.0),
+                        at: stop_ms.map_or(clock.now() + Duration::from_secs(3600), |t| clock.now() + ms(t)),
+                        stop: stop.clone(),
+                        clock,
+                    };
+                    cam.cam.fail_at = fail_at;
                     let mut o = opts(&video);
                     o.home = false;
-                    // In a full-suite run under four busy loops, all five links of a batch once
-                    // went without a report for over 5 s at the same moment, faults or none: host
-                    // starvation, not a fault of the link. The hang and stall cases still stop.
-                    o.no_progress = Duration::from_secs(15);
-                    let stop = std::sync::Arc::new(AtomicBool::new(false));
-                    if let Some(t) = stop_ms {
-                        let flag = stop.clone();
-                        std::thread::spawn(move || {
-                            std::thread::sleep(Duration::from_millis(t));
-                            flag.store(true, std::sync::atomic::Ordering::Relaxed);
-                        });
-                    }
+                    // pav-rig capture's default.
+                    o.no_progress = Duration::from_secs(3);
                     let r = capture(&mut table, &mut cam, &o, &Silent, &stop);
                     let rows = sidecar::read(&sidecar::sidecar_path(&video)).unwrap();
-                    let worst = worst_angle_error(&rows, &cam.true_angles, 90.0);
+                    let worst = worst_angle_error(&rows, &cam.cam.true_angles, 90.0);
                     let (outcome, frames, bound, why) = match r {
                         Result::Ok(s) => (Ok, s.frames, s.angle_bound_deg, String::new()),
                         Err(CaptureError::Uncertain { summary, reason, .. }) => {

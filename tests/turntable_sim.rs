@@ -192,3 +192,31 @@ fn a_motion_whose_ok_is_lost_is_taken_not_sent_twice() {
     let seq = t.start_motion(Command::MoveBy(Milli(0))).unwrap();
     assert_eq!(t.wait_done(seq, Duration::from_secs(3)).unwrap(), pos);
 }
+
+#[test]
+fn in_simulated_time_a_hang_costs_exactly_its_timeouts_and_an_unplugged_table_stays_gone() {
+    use pav::rig::clock::{Clock, SimClock};
+    use pav::rig::sim::SimTransport;
+    use std::sync::Arc;
+    let clock = Arc::new(SimClock::new());
+    let connect = |faults: Faults| {
+        let link = SimTransport::new(SimOptions { faults, ..SimOptions::default() }, clock.clone()).unwrap();
+        Turntable::connect(Box::new(link), clock.clone(), Duration::from_millis(200)).unwrap()
+    };
+    // A hung firmware: the command and the resynchronising ping each wait their 200 ms.
+    let mut t = connect(Faults { hang_after: Some(Duration::from_secs(1)), ..Faults::default() });
+    let seq = t.command(Command::MoveTo(Milli(90_000))).unwrap();
+    assert_eq!(t.wait_done(seq, Duration::from_secs(2)).unwrap(), 800);
+    clock.sleep_until(clock.now() + Duration::from_secs(1));
+    let t0 = clock.now();
+    let e = t.command(Command::Ping).unwrap_err();
+    assert!(matches!(e, TurntableError::Timeout { .. }), "{e}");
+    assert_eq!(clock.since(t0), Duration::from_millis(400));
+
+    let mut t = connect(Faults { disconnect_after: Some(Duration::from_millis(300)), ..Faults::default() });
+    clock.sleep_until(clock.now() + Duration::from_millis(300));
+    let e = t.command(Command::Ping).unwrap_err();
+    assert!(matches!(e, TurntableError::Disconnected(_)), "{e}");
+    let e = t.reconnect(3, Duration::from_millis(50)).unwrap_err();
+    assert!(e.to_string().contains("simulated turntable was unplugged"), "{e}");
+}

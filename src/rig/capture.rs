@@ -520,6 +520,7 @@ pub fn capture(
     // Safe to repeat, and a lost `ok` on a lossy line must not end the capture before it starts.
     table.command_retry(Command::Report(opts.report_ms.max(1)), 6).map_err(CaptureError::Table)?;
     let rev = table.usteps_per_rev() as f64;
+    let clock = table.clock();
     let mut track =
         AngleTrack { motion: Some((opts.period_s.signum(), rev / opts.period_s.abs())), ..AngleTrack::default() };
     // Round trips before the spin, while the line is quiet: they bound the device clock from
@@ -535,7 +536,7 @@ pub fn capture(
 
     let period_ms = (opts.period_s * 1000.0).round() as i64;
     // The table stands still until the spin command reaches it, so no sooner than it left.
-    track.start = before.map(|b| (Instant::now(), b.1));
+    track.start = before.map(|b| (clock.now(), b.1));
     let seq = table
         .start_motion(Command::Spin { period_s: Milli(period_ms), turns: opts.turns })
         .map_err(CaptureError::Table)?;
@@ -545,13 +546,13 @@ pub fn capture(
     let mut pending: VecDeque<(usize, Instant)> = VecDeque::new();
     let mut first_at: Option<Instant> = None;
     let (mut frames, mut interpolated) = (0usize, 0usize);
-    let mut last_event = Instant::now();
+    let mut last_event = clock.now();
     let mut final_pos = None;
     // Silence longer than this while spinning means lost reports or a lost `done`.
     let quiet = Duration::from_millis(20 * opts.report_ms.max(1) as u64)
         .max(Duration::from_millis(200))
         .min(opts.no_progress / 2);
-    let (mut asked, mut done_lost) = (Instant::now(), false);
+    let (mut asked, mut done_lost) = (clock.now(), false);
     // Every row as written, to judge at the end against the final clock.
     let mut written: Vec<(Instant, f64)> = Vec::new();
     let write_row = |side: &mut sidecar::Writer, idx: usize, at: Instant, pos: f64, first: Instant| {
@@ -613,8 +614,8 @@ pub fn capture(
             break None;
         }
         // Reports stopped: the motion may be over with its `done` lost on the line. Ask.
-        if track.end.is_none() && last_event.max(asked).elapsed() > quiet {
-            asked = Instant::now();
+        if track.end.is_none() && clock.since(last_event.max(asked)) > quiet {
+            asked = clock.now();
             match table.motion_ended(seq) {
                 Ok(Some(pos)) => {
                     track.end = Some(pos);
@@ -625,7 +626,7 @@ pub fn capture(
                 Err(e) => break Some(e.to_string()),
             }
         }
-        if last_event.elapsed() > opts.no_progress {
+        if clock.since(last_event) > opts.no_progress {
             break Some(format!("turntable sent no angle report for {:?}", opts.no_progress));
         }
     };

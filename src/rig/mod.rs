@@ -2,7 +2,9 @@
 
 pub mod bench;
 pub mod capture;
+pub mod clock;
 pub mod clockmap;
 pub mod sim;
 pub mod source;
+pub mod transport;
 pub mod turntable;

@@ -1,13 +1,17 @@
-//! A simulated turntable: the firmware's own protocol logic ([`turntable_proto::Device`]) served
-//! on a pseudo-terminal, with optional fault injection for tests.
+//! A simulated turntable: the firmware's own protocol logic ([`turntable_proto::Device`]) with
+//! optional fault injection, served on a pseudo-terminal in real time ([`SimTurntable`]) or on an
+//! in-memory wire in the time of any [`Clock`] ([`SimTransport`]).
 
+use super::clock::Clock;
+use super::transport::{Lines, LinkError, Transport};
 use serialport::{SerialPort, TTYPort};
+use std::collections::VecDeque;
 use std::io::{ErrorKind, Read, Write};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
-use turntable_proto::{Alarm, Config, Device, Motion, Sink};
+use turntable_proto::{Alarm, Config, Device, Sink};
 
 /// Faults the simulator can inject.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -19,7 +23,8 @@ pub struct Faults {
     /// Latency of every line the device sends (replies arrive this much later; the line's
     /// throughput is unchanged).
     pub delay: Duration,
-    /// Close the port (as an unplugged USB cable) after this long.
+    /// Close the port (as an unplugged USB cable) after this long (wall time on a pty, the
+    /// clock's time in memory).
     pub disconnect_after: Option<Duration>,
     /// Raise one stall alarm this long (simulated time) into the first motion.
     pub stall_after: Option<Duration>,
@@ -86,37 +91,28 @@ impl Default for SimOptions {
     }
 }
 
-/// The simulated table's exact motion, readable from outside: the simulated camera and tests
-/// use it as ground truth.
-#[derive(Clone)]
-pub struct Truth {
-    start: Instant,
+/// The device polls this often, in device time: a motion's reports and its end are stamped to
+/// the millisecond, as the firmware's are.
+const TICK_US: u64 = 1000;
+
+/// The simulated table and its side of the line: the firmware's logic, the injected faults and
+/// the lines on their way to the host, all in device microseconds.
+struct World {
+    dev: Device,
+    faults: Faults,
     time_scale: f64,
-    usteps_per_rev: u32,
-    motion: Arc<Mutex<(Motion, i64)>>,
-}
-
-impl Truth {
-    /// True position in microsteps from home at wall-clock instant `at`.
-    pub fn position_at(&self, at: Instant) -> i64 {
-        let sim_us = (at.saturating_duration_since(self.start).as_secs_f64() * self.time_scale * 1e6) as u64;
-        let (m, origin) = *self.motion.lock().expect("truth lock");
-        m.position_at(sim_us) - origin
-    }
-
-    /// True turntable angle in degrees, [0, 360), at `at`.
-    pub fn angle_at(&self, at: Instant) -> f64 {
-        let rev = self.usteps_per_rev as i64;
-        self.position_at(at).rem_euclid(rev) as f64 * 360.0 / rev as f64
-    }
-}
-
-/// A running simulator; dropping it stops the thread and closes the port.
-pub struct SimTurntable {
-    path: PathBuf,
-    stop: Arc<AtomicBool>,
-    thread: Option<std::thread::JoinHandle<()>>,
-    truth: Truth,
+    dice: Dice,
+    /// Device time reached.
+    t_us: u64,
+    motion_started: Option<u64>,
+    stalled: bool,
+    oks: usize,
+    /// Lines the device sent since the last flush.
+    sent: Vec<String>,
+    /// Bytes on the line with the device time they arrive.
+    outbox: VecDeque<(u64, Vec<u8>)>,
+    /// The device time the line was cut, if it was.
+    cut_at: Option<u64>,
 }
 
 struct Out<'a> {
@@ -139,6 +135,189 @@ impl Dice {
     }
 }
 
+impl World {
+    fn new(opts: &SimOptions) -> Self {
+        let mut dev = Device::new(opts.config, 0);
+        let mut sent = Vec::new();
+        dev.reset(0, &mut Out { lines: &mut sent });
+        let mut w = World {
+            dev,
+            faults: opts.faults.clone(),
+            time_scale: opts.time_scale,
+            dice: Dice(opts.seed.max(1)),
+            t_us: 0,
+            motion_started: None,
+            stalled: false,
+            oks: 0,
+            sent,
+            outbox: VecDeque::new(),
+            cut_at: None,
+        };
+        w.flush();
+        w
+    }
+
+    /// Device microseconds as wall (or clock) time.
+    fn wall(&self, t_us: u64) -> Duration {
+        Duration::from_secs_f64(t_us as f64 / 1e6 / self.time_scale)
+    }
+
+    fn hung(&self) -> bool {
+        self.faults.hang_after.is_some_and(|d| self.wall(self.t_us) >= d)
+    }
+
+    /// Moves device time on to `to_us` (never back), a tick at a time.
+    fn advance(&mut self, to_us: u64) {
+        while self.t_us < to_us && self.cut_at.is_none() {
+            self.t_us = (self.t_us + TICK_US).min(to_us);
+            if self.faults.disconnect_after.is_some_and(|d| self.wall(self.t_us) >= d) {
+                self.cut_at = Some(self.t_us);
+                return;
+            }
+            self.step();
+        }
+    }
+
+    fn step(&mut self) {
+        let t = self.t_us;
+        self.dev.poll(t, &mut Out { lines: &mut self.sent });
+        let moving = matches!(
+            self.dev.state(),
+            turntable_proto::State::Moving | turntable_proto::State::Spinning | turntable_proto::State::Homing
+        );
+        if moving && self.motion_started.is_none() {
+            self.motion_started = Some(t);
+        }
+        if let (Some(s), Some(after)) = (self.motion_started, self.faults.stall_after) {
+            // One stall, in the first motion; the table works again after UNLOCK.
+            if moving && !self.stalled && t - s >= after.as_micros() as u64 {
+                self.stalled = true;
+                self.dev.fault(Alarm::Stall, t, &mut Out { lines: &mut self.sent });
+            }
+        }
+        self.flush();
+    }
+
+    /// Bytes from the host, arriving now.
+    fn feed(&mut self, bytes: &[u8]) {
+        if self.hung() || self.cut_at.is_some() {
+            return;
+        }
+        for &b in bytes {
+            self.dev.feed(b, self.t_us, &mut Out { lines: &mut self.sent });
+        }
+        self.flush();
+    }
+
+    /// Puts the lines the device sent on the line, through the faults.
+    fn flush(&mut self) {
+        let f = &self.faults;
+        if self.hung() {
+            self.sent.clear();
+            return;
+        }
+        if f.lose_end {
+            // The device sends a motion's last `@t pos` and its `done` together.
+            while let Some(i) = self.sent.iter().position(|l| l.starts_with("done")) {
+                self.sent.remove(i);
+                if i > 0 && self.sent[i - 1].starts_with('@') {
+                    self.sent.remove(i - 1);
+                }
+            }
+        }
+        if let Some(n) = f.lose_ok_after {
+            let oks = &mut self.oks;
+            self.sent.retain(|l| {
+                let ok = l.starts_with("ok");
+                *oks += usize::from(ok);
+                !(ok && *oks > n)
+            });
+        }
+        // Latency holds each line back without slowing the line down: lines queue with the
+        // instant they are due, as on a link that is slow to deliver but not narrow.
+        let due = self.t_us + (f.delay.as_secs_f64() * self.time_scale * 1e6) as u64;
+        for line in self.sent.drain(..) {
+            let mut bytes = Vec::with_capacity(line.len() + 8);
+            if f.garbage_line > 0.0 && self.dice.unit() < f.garbage_line {
+                bytes.extend_from_slice(b"\x07#%garbage~\n");
+            }
+            bytes.extend_from_slice(line.as_bytes());
+            bytes.push(b'\n');
+            if f.drop_byte > 0.0 {
+                bytes.retain(|_| self.dice.unit() >= f.drop_byte);
+            }
+            self.outbox.push_back((due, bytes));
+        }
+    }
+
+    /// Bytes that have reached the host by device time `t_us` (none sent after the cut arrive).
+    fn arrived(&mut self, t_us: u64) -> Vec<(u64, Vec<u8>)> {
+        let until = self.cut_at.map_or(t_us, |c| c.min(t_us));
+        let n = self.outbox.iter().take_while(|(due, _)| *due <= until).count();
+        self.outbox.drain(..n).collect()
+    }
+}
+
+/// The simulated table's exact motion, readable from outside: the simulated camera and tests
+/// use it as ground truth.
+#[derive(Clone)]
+pub struct Truth {
+    start: Instant,
+    time_scale: f64,
+    usteps_per_rev: u32,
+    world: Arc<Mutex<World>>,
+    clock: Arc<dyn Clock>,
+    /// The table runs when it is looked at ([`SimTransport`]), not on a thread of its own.
+    lazy: bool,
+}
+
+impl Truth {
+    fn world(&self) -> MutexGuard<'_, World> {
+        self.world.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Device microseconds at instant `at`.
+    fn device_us(&self, at: Instant) -> u64 {
+        (at.saturating_duration_since(self.start).as_secs_f64() * self.time_scale * 1e6) as u64
+    }
+
+    /// The instant of device microsecond `t_us`.
+    fn instant(&self, t_us: u64) -> Instant {
+        self.start + Duration::from_secs_f64(t_us as f64 / 1e6 / self.time_scale)
+    }
+
+    /// The clock the table runs on; a camera filming it waits on the same one.
+    pub fn clock(&self) -> Arc<dyn Clock> {
+        self.clock.clone()
+    }
+
+    /// True position in microsteps from home at instant `at`.
+    pub fn position_at(&self, at: Instant) -> i64 {
+        let t = self.device_us(at);
+        let mut w = self.world();
+        if self.lazy {
+            w.advance(t);
+        }
+        let (m, origin) = w.dev.motion();
+        m.position_at(t) - origin
+    }
+
+    /// True turntable angle in degrees, [0, 360), at `at`.
+    pub fn angle_at(&self, at: Instant) -> f64 {
+        let rev = self.usteps_per_rev as i64;
+        self.position_at(at).rem_euclid(rev) as f64 * 360.0 / rev as f64
+    }
+}
+
+/// A running simulator on a pseudo-terminal, in real time; dropping it stops the thread and
+/// closes the port.
+pub struct SimTurntable {
+    path: PathBuf,
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+    truth: Truth,
+}
+
 impl SimTurntable {
     /// Starts a simulator; the host opens [`SimTurntable::path`] like a real serial device.
     pub fn spawn(opts: SimOptions) -> Result<Self, SimError> {
@@ -151,13 +330,15 @@ impl SimTurntable {
             start: Instant::now(),
             time_scale: opts.time_scale,
             usteps_per_rev: opts.config.usteps_per_rev,
-            motion: Arc::new(Mutex::new((Motion::Idle(0), 0))),
+            world: Arc::new(Mutex::new(World::new(&opts))),
+            clock: Arc::new(super::clock::SystemClock),
+            lazy: false,
         };
         let (stop2, truth2) = (stop.clone(), truth.clone());
         let thread = std::thread::Builder::new().name("sim-turntable".into()).spawn(move || {
             // Keep the slave end open so the master never reads EIO between host connections.
             let _slave = slave;
-            serve(master, opts, stop2, truth2);
+            serve(master, stop2, truth2);
         })?;
         Ok(SimTurntable { path, stop, thread: Some(thread), truth })
     }
@@ -187,93 +368,130 @@ impl Drop for SimTurntable {
     }
 }
 
-fn serve(mut port: TTYPort, opts: SimOptions, stop: Arc<AtomicBool>, truth: Truth) {
-    let start = truth.start;
-    let now_us = || (start.elapsed().as_secs_f64() * opts.time_scale * 1e6) as u64;
-    let mut dev = Device::new(opts.config, 0);
-    let mut lines = Vec::new();
-    dev.reset(0, &mut Out { lines: &mut lines });
-    let mut dice = Dice(opts.seed.max(1));
+fn serve(mut port: TTYPort, stop: Arc<AtomicBool>, truth: Truth) {
     let mut buf = [0u8; 256];
-    let mut motion_started: Option<u64> = None;
-    let mut stalled = false;
-    let f = &opts.faults;
-    let mut outbox: std::collections::VecDeque<(Instant, Vec<u8>)> = std::collections::VecDeque::new();
-    let mut oks = 0usize;
     while !stop.load(Ordering::Relaxed) {
-        let wall = start.elapsed();
-        if f.disconnect_after.is_some_and(|d| wall >= d) {
-            return; // dropping the master hangs up the line
-        }
-        let hung = f.hang_after.is_some_and(|d| wall >= d);
-        match port.read(&mut buf) {
-            Ok(n) if !hung => {
-                let t = now_us();
-                for &b in &buf[..n] {
-                    dev.feed(b, t, &mut Out { lines: &mut lines });
-                }
+        let n = match port.read(&mut buf) {
+            Ok(n) => n,
+            Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::WouldBlock => 0,
+            Err(_) => {
+                std::thread::sleep(Duration::from_millis(5));
+                0
             }
-            Ok(_) => {}
-            Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::WouldBlock => {}
-            Err(_) => std::thread::sleep(Duration::from_millis(5)),
-        }
-        let t = now_us();
-        dev.poll(t, &mut Out { lines: &mut lines });
-        let moving = matches!(
-            dev.state(),
-            turntable_proto::State::Moving | turntable_proto::State::Spinning | turntable_proto::State::Homing
-        );
-        if moving && motion_started.is_none() {
-            motion_started = Some(t);
-        }
-        if let (Some(s), Some(after)) = (motion_started, f.stall_after) {
-            // One stall, in the first motion; the table works again after UNLOCK.
-            if moving && !stalled && t - s >= after.as_micros() as u64 {
-                stalled = true;
-                dev.fault(Alarm::Stall, t, &mut Out { lines: &mut lines });
+        };
+        let arrived = {
+            let mut w = truth.world();
+            w.advance(truth.device_us(Instant::now()));
+            if w.cut_at.is_some() {
+                return; // dropping the master hangs up the line
             }
-        }
-        *truth.motion.lock().expect("truth lock") = dev.motion();
-        if hung {
-            lines.clear();
-            continue;
-        }
-        if f.lose_end {
-            // The device sends a motion's last `@t pos` and its `done` together.
-            while let Some(i) = lines.iter().position(|l| l.starts_with("done")) {
-                lines.remove(i);
-                if i > 0 && lines[i - 1].starts_with('@') {
-                    lines.remove(i - 1);
-                }
-            }
-        }
-        if let Some(n) = f.lose_ok_after {
-            lines.retain(|l| {
-                let ok = l.starts_with("ok");
-                oks += usize::from(ok);
-                !(ok && oks > n)
-            });
-        }
-        // Latency holds each line back without slowing the line down: lines queue with the
-        // instant they are due, as on a link that is slow to deliver but not narrow.
-        let now = Instant::now();
-        for line in lines.drain(..) {
-            let mut bytes = Vec::with_capacity(line.len() + 8);
-            if f.garbage_line > 0.0 && dice.unit() < f.garbage_line {
-                bytes.extend_from_slice(b"\x07#%garbage~\n");
-            }
-            bytes.extend_from_slice(line.as_bytes());
-            bytes.push(b'\n');
-            if f.drop_byte > 0.0 {
-                bytes.retain(|_| dice.unit() >= f.drop_byte);
-            }
-            outbox.push_back((now + f.delay, bytes));
-        }
-        while outbox.front().is_some_and(|(due, _)| *due <= Instant::now()) {
-            let (_, bytes) = outbox.pop_front().expect("checked above");
+            w.feed(&buf[..n]);
+            let t = w.t_us;
+            w.arrived(t)
+        };
+        for (_, bytes) in arrived {
             if port.write_all(&bytes).is_err() {
                 break;
             }
         }
+    }
+}
+
+/// The simulated table on an in-memory wire, in the time of `clock`: waiting for a reply moves
+/// the clock on, so with a [`super::clock::SimClock`] a 28 s capture takes the computer's time
+/// only, and every run with the same faults and seed is the same run.
+pub struct SimTransport {
+    truth: Truth,
+    lines: Lines,
+    ready: VecDeque<(String, Instant)>,
+}
+
+impl SimTransport {
+    /// A simulator at rest at home, booted at the clock's present instant.
+    pub fn new(opts: SimOptions, clock: Arc<dyn Clock>) -> Result<Self, SimError> {
+        opts.check()?;
+        let truth = Truth {
+            start: clock.now(),
+            time_scale: opts.time_scale,
+            usteps_per_rev: opts.config.usteps_per_rev,
+            world: Arc::new(Mutex::new(World::new(&opts))),
+            clock,
+            lazy: true,
+        };
+        Ok(SimTransport { truth, lines: Lines::default(), ready: VecDeque::new() })
+    }
+
+    /// Ground truth of the simulated table.
+    pub fn truth(&self) -> Truth {
+        self.truth.clone()
+    }
+
+    /// Runs the table to the clock's present and takes the lines that reached the host;
+    /// returns whether the line was cut.
+    fn pump(&mut self) -> bool {
+        let now = self.truth.device_us(self.truth.clock.now());
+        let (arrived, cut) = {
+            let mut w = self.truth.world();
+            w.advance(now);
+            (w.arrived(now), w.cut_at.is_some())
+        };
+        for (due, bytes) in arrived {
+            let at = self.truth.instant(due);
+            self.ready.extend(self.lines.push(&bytes).into_iter().map(|l| (l, at)));
+        }
+        cut
+    }
+
+    fn unplugged(&self) -> LinkError {
+        LinkError::Closed(format!("{} was unplugged", self.name()))
+    }
+}
+
+impl Transport for SimTransport {
+    fn name(&self) -> &str {
+        "simulated turntable"
+    }
+
+    fn write(&mut self, bytes: &[u8]) -> Result<(), LinkError> {
+        if self.pump() {
+            return Err(self.unplugged());
+        }
+        self.truth.world().feed(bytes);
+        Ok(())
+    }
+
+    fn read_line(&mut self, deadline: Instant) -> Result<Option<(String, Instant)>, LinkError> {
+        let clock = self.truth.clock.clone();
+        // The device's own tick, as host time: nothing new reaches the host between two.
+        let tick = Duration::from_secs_f64(TICK_US as f64 / 1e6 / self.truth.time_scale);
+        loop {
+            let cut = self.pump();
+            if let Some(line) = self.ready.pop_front() {
+                return Ok(Some(line));
+            }
+            if cut {
+                return Err(self.unplugged());
+            }
+            let now = clock.now();
+            if now >= deadline {
+                return Ok(None);
+            }
+            clock.sleep_until((now + tick).min(deadline));
+        }
+    }
+
+    fn discard_input(&mut self) {
+        self.pump();
+        self.ready.clear();
+        self.lines.clear();
+    }
+
+    fn reopen(&mut self) -> Result<(), LinkError> {
+        if self.pump() {
+            let why = std::io::Error::new(ErrorKind::NotFound, "the simulated turntable was unplugged");
+            return Err(LinkError::Open { path: self.name().into(), source: why });
+        }
+        self.discard_input();
+        Ok(())
     }
 }

@@ -1,6 +1,7 @@
 //! Frame sources for capture: a V4L2 camera, a video file, GStreamer's live test source, and a
 //! simulated camera that films the simulated turntable.
 
+use super::clock::{Clock, SystemClock};
 use super::sim::Truth;
 use crate::image::Frame;
 use crate::scene::turntable::CarScene;
@@ -109,13 +110,10 @@ pub trait FrameSource {
     fn grab(&mut self) -> Result<Option<(Frame, Instant)>, CameraError>;
 }
 
-/// Sleeps until `due`, then moves it one frame period on (never bursting to catch up).
-fn pace(due: &mut Instant, period: Duration) -> Instant {
-    let now = Instant::now();
-    if *due > now {
-        std::thread::sleep(*due - now);
-    }
-    let at = Instant::now();
+/// Waits on `clock` until `due`, then moves it one frame period on (never bursting to catch up).
+fn pace(clock: &dyn Clock, due: &mut Instant, period: Duration) -> Instant {
+    clock.sleep_until(*due);
+    let at = clock.now();
     *due = (*due + period).max(at);
     at
 }
@@ -263,7 +261,7 @@ impl FrameSource for FileSource {
         self.reader.info().fps
     }
     fn grab(&mut self) -> Result<Option<(Frame, Instant)>, CameraError> {
-        let at = pace(&mut self.due, self.period);
+        let at = pace(&SystemClock, &mut self.due, self.period);
         match self.reader.read() {
             Ok(Some((_, f))) => Ok(Some((f, at))),
             Ok(None) => Ok(None),
@@ -273,7 +271,7 @@ impl FrameSource for FileSource {
 }
 
 /// A camera filming the simulated turntable: a disc with a marker at the true angle, or, given a
-/// [`CarScene`], the textured car turned by it.
+/// [`CarScene`], the textured car turned by it. It runs on the table's clock.
 pub struct SimCamera {
     truth: Truth,
     car: Option<CarScene>,
@@ -291,11 +289,11 @@ impl SimCamera {
     /// A `width × height` camera at `fps` watching the simulator's table.
     pub fn new(truth: Truth, width: usize, height: usize, fps: f64) -> Self {
         SimCamera {
-            truth,
+            truth: truth.clone(),
             car: None,
             size: (width, height),
             fps,
-            due: Instant::now(),
+            due: truth.clock().now(),
             index: 0,
             true_angles: Vec::new(),
             fail_at: None,
@@ -357,7 +355,7 @@ impl FrameSource for SimCamera {
                 source: SourceFault::Stream("injected camera failure"),
             });
         }
-        let at = pace(&mut self.due, Duration::from_secs_f64(1.0 / self.fps));
+        let at = pace(self.truth.clock().as_ref(), &mut self.due, Duration::from_secs_f64(1.0 / self.fps));
         let angle = self.truth.angle_at(at);
         let err = |source: SourceFault| CameraError::Read {
             source_name: "simulated camera".into(),

@@ -1,12 +1,12 @@
 //! Host-side turntable client over a serial port: commands with sequence numbers sealed by a
 //! CRC-16, replies read only when their own CRC-16 matches, per-command timeouts,
-//! resynchronisation after timeouts, and reconnection.
+//! resynchronisation after timeouts, and reconnection. The wire is a [`Transport`] and time a
+//! [`Clock`], so the same client drives a real table and a simulated one in simulated time.
 
-use serialport::{ClearBuffer, SerialPort};
+use super::clock::{Clock, SystemClock};
+use super::transport::{LinkError, SerialTransport, Transport};
 use std::collections::VecDeque;
-use std::io::{ErrorKind, Read, Write};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{self, Receiver, RecvTimeoutError, TryRecvError};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use turntable_proto::frame::{self, Check};
@@ -16,13 +16,8 @@ use turntable_proto::{Alarm, Command, ErrorCode, Frame, Reply, State, PROTOCOL_V
 #[derive(Debug, thiserror::Error)]
 pub enum TurntableError {
     /// The port could not be opened.
-    #[error("cannot open turntable port {path}: {source}")]
-    Open {
-        /// Port path.
-        path: String,
-        /// The serial library's error.
-        source: serialport::Error,
-    },
+    #[error("{0}")]
+    Open(#[source] LinkError),
     /// Something answered, but not as a pav turntable.
     #[error("{path}: no pav turntable answered within {after:?} (wrong port or baud rate, or firmware not running)")]
     NoDevice {
@@ -124,12 +119,8 @@ pub struct ClockProbe {
 
 /// A connected turntable.
 pub struct Turntable {
-    /// `None` only while reconnecting (the old port must close before the device can be reopened).
-    port: Option<Box<dyn SerialPort>>,
-    /// Lines stamped with their arrival time by the reader thread.
-    lines: Option<Reader>,
-    path: String,
-    baud: u32,
+    link: Box<dyn Transport>,
+    clock: Arc<dyn Clock>,
     seq: u32,
     usteps_per_rev: u32,
     firmware: String,
@@ -145,87 +136,29 @@ pub struct Turntable {
     last_alive: Instant,
 }
 
-/// A thread that reads the port and stamps every line with the instant it arrived, so the
-/// host-to-device clock mapping does not depend on how often the caller polls.
-struct Reader {
-    rx: Receiver<std::result::Result<(String, Instant), String>>,
-    stop: Arc<AtomicBool>,
-    thread: Option<std::thread::JoinHandle<()>>,
-}
-
-impl Reader {
-    fn spawn(mut port: Box<dyn SerialPort>, path: String) -> Self {
-        let (tx, rx) = mpsc::channel();
-        let stop = Arc::new(AtomicBool::new(false));
-        let flag = stop.clone();
-        let thread = std::thread::Builder::new()
-            .name("turntable-rx".into())
-            .spawn(move || {
-                let mut partial: Vec<u8> = Vec::new();
-                let mut buf = [0u8; 256];
-                while !flag.load(Ordering::Relaxed) {
-                    match port.read(&mut buf) {
-                        Ok(0) => {
-                            let _ = tx.send(Err(format!("{path} closed")));
-                            return;
-                        }
-                        Ok(n) => {
-                            let at = Instant::now();
-                            partial.extend_from_slice(&buf[..n]);
-                            while let Some(i) = partial.iter().position(|&b| b == b'\n') {
-                                let line: Vec<u8> = partial.drain(..=i).collect();
-                                if tx.send(Ok((String::from_utf8_lossy(&line).trim().to_string(), at))).is_err() {
-                                    return;
-                                }
-                            }
-                            // A line this long is noise; drop it rather than grow without bound.
-                            if partial.len() > 4096 {
-                                partial.clear();
-                            }
-                        }
-                        Err(e)
-                            if matches!(
-                                e.kind(),
-                                ErrorKind::TimedOut | ErrorKind::WouldBlock | ErrorKind::Interrupted
-                            ) => {}
-                        Err(e) => {
-                            let _ = tx.send(Err(format!("{path}: {e}")));
-                            return;
-                        }
-                    }
-                }
-            })
-            .expect("spawning the serial reader thread");
-        Reader { rx, stop, thread: Some(thread) }
-    }
-}
-
-impl Drop for Reader {
-    fn drop(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
+impl From<LinkError> for TurntableError {
+    fn from(e: LinkError) -> Self {
+        match e {
+            LinkError::Open { .. } => TurntableError::Open(e),
+            LinkError::Closed(msg) => TurntableError::Disconnected(msg),
         }
     }
 }
 
-fn open_port(path: &str, baud: u32) -> Result<Box<dyn SerialPort>> {
-    serialport::new(path, baud)
-        .timeout(Duration::from_millis(20))
-        .open()
-        .map_err(|e| TurntableError::Open { path: path.into(), source: e })
-}
-
 impl Turntable {
-    /// Opens `path` and checks that a pav turntable answers; `timeout` bounds each command.
+    /// Opens the serial port `path` and checks that a pav turntable answers; `timeout` bounds
+    /// each command.
     pub fn open(path: &str, baud: u32, timeout: Duration) -> Result<Self> {
-        let port = open_port(path, baud)?;
-        let reader = port.try_clone().map_err(|e| TurntableError::Open { path: path.into(), source: e })?;
+        Turntable::connect(Box::new(SerialTransport::open(path, baud)?), Arc::new(SystemClock), timeout)
+    }
+
+    /// Checks that a pav turntable answers on `link`, whose deadlines and stamps are instants
+    /// of `clock`; `timeout` bounds each command.
+    pub fn connect(link: Box<dyn Transport>, clock: Arc<dyn Clock>, timeout: Duration) -> Result<Self> {
+        let now = clock.now();
         let mut t = Turntable {
-            lines: Some(Reader::spawn(reader, path.into())),
-            port: Some(port),
-            path: path.into(),
-            baud,
+            link,
+            clock,
             seq: 0,
             usteps_per_rev: 0,
             firmware: String::new(),
@@ -234,7 +167,7 @@ impl Turntable {
             garbage_lines: 0,
             bare_replies: 0,
             proto: None,
-            last_alive: Instant::now(),
+            last_alive: now,
         };
         t.handshake()?;
         Ok(t)
@@ -255,23 +188,22 @@ impl Turntable {
         pos as f64 * 360.0 / self.usteps_per_rev.max(1) as f64
     }
 
-    fn port(&mut self) -> Result<&mut Box<dyn SerialPort>> {
-        let path = &self.path;
-        self.port.as_mut().ok_or_else(|| TurntableError::Disconnected(format!("{path} is not open")))
+    /// The clock this table's times are read on: capture stamps its frames on the same one.
+    pub fn clock(&self) -> Arc<dyn Clock> {
+        self.clock.clone()
+    }
+
+    fn now(&self) -> Instant {
+        self.clock.now()
     }
 
     fn write(&mut self, bytes: &[u8]) -> Result<()> {
-        let path = self.path.clone();
-        let p = self.port()?;
-        p.write_all(bytes).and_then(|_| p.flush()).map_err(|e| TurntableError::Disconnected(format!("{path}: {e}")))
+        Ok(self.link.write(bytes)?)
     }
 
     /// Drops every byte and line received but not yet read.
     fn discard_input(&mut self) -> Result<()> {
-        let _ = self.port()?.clear(ClearBuffer::Input);
-        if let Some(r) = &self.lines {
-            while let Ok(Ok(_)) = r.rx.try_recv() {}
-        }
+        self.link.discard_input();
         Ok(())
     }
 
@@ -291,13 +223,13 @@ impl Turntable {
         if self.bare_replies > 0 {
             return Err(self.older_protocol());
         }
-        Err(TurntableError::NoDevice { path: self.path.clone(), after: self.timeout * 3 })
+        Err(TurntableError::NoDevice { path: self.link.name().to_string(), after: self.timeout * 3 })
     }
 
     fn same_protocol(&self) -> Result<()> {
         match self.proto {
             Some(p) if p != PROTOCOL_VERSION => {
-                Err(TurntableError::Protocol { path: self.path.clone(), found: p, need: PROTOCOL_VERSION })
+                Err(TurntableError::Protocol { path: self.link.name().to_string(), found: p, need: PROTOCOL_VERSION })
             }
             _ => Ok(()),
         }
@@ -309,7 +241,7 @@ impl Turntable {
         let _ = self.discard_input();
         let mut found = 1;
         if self.write(b"INFO\n").is_ok() {
-            let deadline = Instant::now() + self.timeout;
+            let deadline = self.now() + self.timeout;
             while let Ok(Some((l, _))) = self.read_line(deadline) {
                 if let Some(Reply::Banner { proto, .. }) = Reply::parse(&l) {
                     found = proto;
@@ -317,32 +249,13 @@ impl Turntable {
                 }
             }
         }
-        TurntableError::Protocol { path: self.path.clone(), found, need: PROTOCOL_VERSION }
+        TurntableError::Protocol { path: self.link.name().to_string(), found, need: PROTOCOL_VERSION }
     }
 
     /// Next line with its arrival time, or `None` when `deadline` passes first (a past deadline
     /// still returns a line that is already waiting, so this doubles as a non-blocking poll).
     fn read_line(&mut self, deadline: Instant) -> Result<Option<(String, Instant)>> {
-        let path = self.path.clone();
-        let r = self.lines.as_ref().ok_or_else(|| TurntableError::Disconnected(format!("{path} is not open")))?;
-        let got = match r.rx.try_recv() {
-            Ok(x) => Some(x),
-            Err(TryRecvError::Disconnected) => {
-                return Err(TurntableError::Disconnected(format!("{path}: reader stopped")))
-            }
-            Err(TryRecvError::Empty) => match r.rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
-                Ok(x) => Some(x),
-                Err(RecvTimeoutError::Timeout) => None,
-                Err(RecvTimeoutError::Disconnected) => {
-                    return Err(TurntableError::Disconnected(format!("{path}: reader stopped")))
-                }
-            },
-        };
-        match got {
-            None => Ok(None),
-            Some(Ok(line)) => Ok(Some(line)),
-            Some(Err(msg)) => Err(TurntableError::Disconnected(msg)),
-        }
+        Ok(self.link.read_line(deadline)?)
     }
 
     /// Files an unsolicited line as an event; returns the parsed reply for the caller to inspect.
@@ -390,7 +303,7 @@ impl Turntable {
     /// Sends `cmd` and waits for its `ok`; returns the sequence number and the status line, if any.
     fn request(&mut self, cmd: Command, timeout: Duration) -> Result<(u32, Option<Status>)> {
         let seq = self.send(cmd)?;
-        let deadline = Instant::now() + timeout;
+        let deadline = self.now() + timeout;
         let mut status = None;
         while let Some((l, rx)) = self.read_line(deadline)? {
             match self.file(&l, rx) {
@@ -420,7 +333,7 @@ impl Turntable {
     fn resync(&mut self) -> Result<()> {
         self.discard_input()?;
         let seq = self.send(Command::Ping)?;
-        let deadline = Instant::now() + self.timeout;
+        let deadline = self.now() + self.timeout;
         while let Some((l, rx)) = self.read_line(deadline)? {
             if let Some(Reply::Ok { seq: Some(s) }) = self.file(&l, rx) {
                 if s == seq {
@@ -443,7 +356,7 @@ impl Turntable {
     /// the command; its `done` carries this sequence number.
     pub fn start_motion(&mut self, cmd: Command) -> Result<u32> {
         let seq = (self.seq + 1) % SEQ_MODULUS;
-        let sent = Instant::now();
+        let sent = self.now();
         let e = match self.command(cmd) {
             Err(e @ TurntableError::Timeout { .. }) => e,
             other => return other,
@@ -458,7 +371,7 @@ impl Turntable {
                 _ => false,
             })
         };
-        let deadline = Instant::now() + (self.timeout / 2).max(Duration::from_millis(200));
+        let deadline = self.now() + (self.timeout / 2).max(Duration::from_millis(200));
         while !taken(&self.events) {
             let Some((l, rx)) = self.read_line(deadline)? else { break };
             self.file(&l, rx);
@@ -469,7 +382,7 @@ impl Turntable {
                 Some(st) if matches!(st.state, State::Moving | State::Spinning | State::Homing)
             );
         if moving {
-            self.last_alive = Instant::now();
+            self.last_alive = self.now();
             Ok(seq)
         } else {
             Err(e)
@@ -512,7 +425,7 @@ impl Turntable {
     /// (a timeout is no error here: the caller tries again). The status line counts only when
     /// the `ok` of this very request follows it, so a late reply cannot pass for this one.
     pub fn clock_probe(&mut self) -> Result<Option<ClockProbe>> {
-        let sent = Instant::now();
+        let sent = self.now();
         let seq = self.send(Command::Status)?;
         let deadline = sent + self.timeout;
         let mut status = None;
@@ -547,7 +460,7 @@ impl Turntable {
         // Poll often enough to act on `stop` promptly.
         const POLL: Duration = Duration::from_millis(100);
         let quiet = (no_progress / 3).max(POLL);
-        let start = Instant::now();
+        let start = self.now();
         let mut asked = start;
         let mut stopping = false;
         loop {
@@ -560,13 +473,13 @@ impl Turntable {
                 Some(Event::Alarm(a)) => return Err(TurntableError::Alarm(a)),
                 _ => {}
             }
-            if self.last_alive.max(asked).elapsed() >= quiet {
-                asked = Instant::now();
+            if self.clock.since(self.last_alive.max(asked)) >= quiet {
+                asked = self.now();
                 if let Some(pos) = self.motion_ended(seq)? {
                     return Ok(pos);
                 }
             }
-            if self.last_alive.max(start).elapsed() >= no_progress {
+            if self.clock.since(self.last_alive.max(start)) >= no_progress {
                 return Err(TurntableError::NoProgress(no_progress));
             }
         }
@@ -589,7 +502,7 @@ impl Turntable {
         match st.state {
             State::Idle | State::Alarm => Ok(Some(st.pos)),
             State::Moving | State::Spinning | State::Homing => {
-                self.last_alive = Instant::now();
+                self.last_alive = self.now();
                 Ok(None)
             }
         }
@@ -600,7 +513,7 @@ impl Turntable {
     fn realtime_status(&mut self) -> Result<Option<Status>> {
         for _ in 0..3 {
             self.write(&[turntable_proto::Realtime::Status.byte()])?;
-            let deadline = Instant::now() + Duration::from_millis(150).min(self.timeout);
+            let deadline = self.now() + Duration::from_millis(150).min(self.timeout);
             while let Some((l, rx)) = self.read_line(deadline)? {
                 if let Some(Reply::Status { state, alarm, pos, t_ms }) = self.file(&l, rx) {
                     return Ok(Some(Status { state, alarm, pos, t_ms }));
@@ -612,7 +525,7 @@ impl Turntable {
 
     /// Next event, waiting up to `timeout` for one; keep-alives reset nothing here but count as traffic.
     pub fn next_event(&mut self, timeout: Duration) -> Result<Option<Event>> {
-        let mut deadline = Instant::now() + timeout;
+        let mut deadline = self.now() + timeout;
         loop {
             if let Some(e) = self.events.pop_front() {
                 return Ok(Some(e));
@@ -621,7 +534,7 @@ impl Turntable {
                 return Ok(None);
             };
             if let Some(Reply::Busy { .. }) = self.file(&l, rx) {
-                deadline = Instant::now() + timeout;
+                deadline = self.now() + timeout;
             }
         }
     }
@@ -633,26 +546,19 @@ impl Turntable {
 
     /// Reopens the port (after a USB re-enumeration or cable glitch) and handshakes again.
     pub fn reconnect(&mut self, attempts: usize, wait: Duration) -> Result<()> {
-        let mut last = TurntableError::Disconnected(self.path.clone());
-        self.lines = None;
-        self.port = None;
+        let mut last = TurntableError::Disconnected(self.link.name().to_string());
         for _ in 0..attempts.max(1) {
-            match open_port(&self.path, self.baud).and_then(|p| {
-                let r = p.try_clone().map_err(|e| TurntableError::Open { path: self.path.clone(), source: e })?;
-                Ok((p, r))
-            }) {
-                Ok((p, r)) => {
-                    self.lines = Some(Reader::spawn(r, self.path.clone()));
-                    self.port = Some(p);
+            match self.link.reopen() {
+                Ok(()) => {
                     self.events.clear();
                     match self.handshake() {
                         Ok(()) => return Ok(()),
                         Err(e) => last = e,
                     }
                 }
-                Err(e) => last = e,
+                Err(e) => last = e.into(),
             }
-            std::thread::sleep(wait);
+            self.clock.sleep_until(self.now() + wait);
         }
         Err(last)
     }
