@@ -411,6 +411,19 @@ impl Setup {
         })
     }
 
+    /// The photo of view `name` at the views' size with its car painted out: the same street
+    /// without the car, where a detector should find none (`None` for a view without a photo).
+    pub fn car_free(&self, name: &str) -> Option<Result<Frame, BakeError>> {
+        let s = self.samples.get(name)?;
+        let n = self.maker.size;
+        let photo = if (s.image.width, s.image.height) == (n, n) {
+            s.image.clone()
+        } else {
+            Frame::from_levels(n, n, &resize(&s.image, n, n, Interpolation::Antialias))
+        };
+        Some(Plate::new(&self.mesh, &photo, &self.maker.camera(s, 0.0), n / 50).map(|p| p.frame()))
+    }
+
     /// The synthetic views of `views.turns` for the photos named `names`, from an appearance
     /// baked from those photos only (so a held-out photo never leaks into training).
     pub fn turned_views(&self, names: &[&str]) -> Result<Vec<View>, SetupError> {

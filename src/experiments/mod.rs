@@ -1,6 +1,7 @@
 //! Experiments that combine the optimizer with scoring: a `pav optimize` run and what it leaves
 //! behind, the paper's Table 2 on composites, and cross-validation of the whole attack.
 
+pub mod advtrain;
 pub mod boxes;
 pub mod crossval;
 pub mod curve;

@@ -207,6 +207,15 @@ pub fn score_textures(
     Ok((rows, records))
 }
 
+/// A texture file's name in tables: its folder's (a run's `texture.png`), else its stem.
+pub fn texture_name(t: &Path) -> String {
+    t.parent()
+        .and_then(|p| p.file_name())
+        .or(t.file_stem())
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| t.display().to_string())
+}
+
 /// `pav eval-digital`: the original paint, `random_seeds` random textures of each kind and each
 /// texture file in `textures` (named by its folder) on the views of `config`; writes
 /// `digital.csv`, every view's scores (`digital_views.csv`), each file's paired comparisons on
@@ -238,12 +247,7 @@ pub fn eval_digital(
     let mut own_wb: HashMap<String, Vec<String>> = HashMap::new();
     for t in textures {
         let tex = setup.load_texture(t)?;
-        let name = t
-            .parent()
-            .and_then(|p| p.file_name())
-            .or(t.file_stem())
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| t.display().to_string());
+        let name = texture_name(t);
         let recorded = t.parent().and_then(crate::provenance::recorded_config);
         if let Some(wb) = recorded.and_then(|c| OptimizeConfig::load(&c).ok()?.white_box_names().ok()) {
             own_wb.insert(name.clone(), wb);

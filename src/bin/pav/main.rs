@@ -6,6 +6,8 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+#[cfg(feature = "optimize")]
+mod adv_train;
 mod bench_render;
 #[cfg(feature = "optimize")]
 mod bench_step;
@@ -54,6 +56,10 @@ enum Cmd {
     /// detector, and each run against every baseline with paired 95 % intervals.
     #[cfg(feature = "optimize")]
     Table1(table1::Args),
+    /// Adversarial training (a defence): tune a YOLOX detector's head on composites carrying
+    /// adversarial textures; writes the tuned ONNX model, its detector config and its sha256.
+    #[cfg(feature = "optimize")]
+    AdvTrain(adv_train::Args),
     /// UV map tools.
     #[command(subcommand)]
     Uv(uv::Cmd),
@@ -146,6 +152,8 @@ fn main() -> Result<()> {
         Cmd::Crossval(a) => crossval::run(&a),
         #[cfg(feature = "optimize")]
         Cmd::Table1(a) => table1::run(&a),
+        #[cfg(feature = "optimize")]
+        Cmd::AdvTrain(a) => adv_train::run(&a),
         Cmd::Uv(c) => uv::run(&c),
         Cmd::BenchRender(a) => bench_render::run(&a),
         #[cfg(feature = "optimize")]
