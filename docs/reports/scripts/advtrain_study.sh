@@ -14,7 +14,7 @@ seeds=0,1,2,3
 # pav's texture: the print-base recipe, which never trains against YOLOX-Nano.
 [ -f "$out/pav/seed3/texture.png" ] || "$pav" optimize --config $base --seeds $seeds -o "$out/pav"
 # The tuned head from the recipe (its sha256 is checked).
-[ -f "$out/recipe/yolox_nano_advtrain.onnx" ] || "$pav" adv-train configs/defences/advtrain-yolox-nano.toml -o "$out/recipe"
+[ -f "$out/recipe/yolox_nano_advtrain.onnx" ] || "$pav" adv-train configs/advtrain/yolox_nano.toml -o "$out/recipe"
 tuned=$(realpath "$out/recipe/yolox_nano_advtrain.toml")
 # The attacker who knows the defence: the tuned head as a fourth white box (adaptive); the
 # control trains against the plain YOLOX-Nano instead, so the difference is the defence's, not
@@ -41,7 +41,7 @@ tests=()
 for kind in pav adaptive control alone; do
   for s in 0 1 2 3; do tests+=(--test-texture "$kind=$out/$kind/seed$s/texture.png"); done
 done
-[ -f "$out/scored/advtrain.csv" ] || "$pav" adv-train configs/defences/advtrain-yolox-nano.toml "${tests[@]}" -o "$out/scored"
+[ -f "$out/scored/advtrain.csv" ] || "$pav" adv-train configs/advtrain/yolox_nano.toml "${tests[@]}" -o "$out/scored"
 # P@0.5 on the held-out photos (boxes against FCA's labels).
 textures=(--texture data:rauca-e2e/RAUCA_E2E.png)
 for s in 0 1 2 3; do textures+=(--texture "$out/pav/seed$s/texture.png"); done

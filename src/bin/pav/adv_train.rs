@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The recipe (e.g. configs/defences/advtrain-yolox-nano.toml).
+    /// The recipe (e.g. configs/advtrain/yolox_nano.toml).
     recipe: PathBuf,
     /// Another adversarial texture to tune on (repeat for several); the recipe's sha256 is then
     /// not checked, since the model is another.
