@@ -1,6 +1,6 @@
-//! `loss.iou` on real photos and the four white boxes: each prediction's box as the white box
+//! `loss.iou` on real photos and the five white boxes: each prediction's box as the white box
 //! reads it (decoded darknet and YOLOX outputs; the forward-only box outputs of the YOLOv8n and
-//! DEIMv2 graphs) agrees with evaluate's boxes, the view's car box agrees with the photo's label,
+//! DEIMv2 graphs; NanoDet's forward-only box maps) agrees with evaluate's boxes, the view's car box agrees with the photo's label,
 //! and the IoU-weighted log-max counts the car and not the rest of the street.
 #![cfg(feature = "optimize")]
 
@@ -16,12 +16,17 @@ use pav::detect::{Detector, DetectorConfig};
 use pav::image::Frame;
 
 fn check(detector: &str, surrogate: bool) {
+    check_config(&common::detector_config(detector), surrogate)
+}
+
+fn check_config(config: &std::path::Path, surrogate: bool) {
+    let detector = config.file_stem().unwrap().to_string_lossy().into_owned();
     common::real_data();
     let mut cfg = OptimizeConfig::load(&common::repo().join("configs/optimize/paper.toml")).unwrap();
     cfg.views.train.truncate(2);
     cfg.views.test.clear();
     let s = Setup::load(&cfg, Some(416)).unwrap();
-    let d = DetectorConfig::load(&common::detector_config(detector)).unwrap();
+    let d = DetectorConfig::load(config).unwrap();
     let loss = DetectionLoss {
         box_threshold: 0.05,
         target: d.target_classes.clone(),
@@ -80,4 +85,9 @@ fn yolov8n_box_branch_runs_forward_only_and_weighs_the_car() {
 #[test]
 fn deimv2_decoder_boxes_run_forward_only_and_weigh_the_car() {
     check("deimv2_atto_int8", true);
+}
+
+#[test]
+fn nanodet_class_maps_score_and_its_box_maps_weigh_the_car() {
+    check_config(&common::repo().join("configs/detectors-wide/nanodet_m_416.toml"), false);
 }

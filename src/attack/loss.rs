@@ -217,6 +217,23 @@ impl Predictions {
         Ok(p)
     }
 
+    /// Rows of class probabilities `[R, C]`, one map per output (GFL heads: each grid level's
+    /// class map, already through a sigmoid), without objectness, as [`Predictions::ultralytics`].
+    pub fn class_rows(maps: &[Vec<f32>], classes: usize) -> Result<Self, HeadShapeError> {
+        let mut p = Predictions::empty(classes, Raw::Probability, false);
+        for (output, map) in maps.iter().enumerate() {
+            if classes == 0 || map.len() % classes != 0 {
+                return Err(HeadShapeError(format!("{} values are not rows of {classes} classes", map.len())));
+            }
+            for r in 0..map.len() / classes {
+                let row = &map[r * classes..(r + 1) * classes];
+                let k = (0..classes).fold(0, |m, k| if row[k] > row[m] { k } else { m });
+                p.push(map, At { output, obj: r * classes + k, cls0: r * classes, stride: 1 });
+            }
+        }
+        Ok(p)
+    }
+
     /// No predictions yet, for heads of `classes` classes read as `raw`.
     fn empty(classes: usize, raw: Raw, objectness: bool) -> Self {
         Predictions { classes, raw, obj: vec![], cls: vec![], at: vec![], objectness, weight: None }

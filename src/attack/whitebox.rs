@@ -5,10 +5,11 @@
 //! one `evaluate` runs), differentiated as a graph (`detect::autodiff`) and run by ONNX Runtime
 //! (`detect::ortgrad`). The input transform the config describes (resize, channel order, scale,
 //! mean and std) is applied here with its exact adjoint. Outputs are read by their layout:
-//! darknet heads and YOLOX rows with objectness, Ultralytics class scores and DETR class logits
-//! without (see `attack::loss`). Under `loss.iou` each prediction's box is read too (decoded from
-//! the darknet and YOLOX outputs; for Ultralytics and DETR a forward-only second output, the box
-//! branch the gradient graph leaves out), to weight its score by its overlap with the car.
+//! darknet heads and YOLOX rows with objectness, Ultralytics class scores, DETR class logits and
+//! GFL class maps without (see `attack::loss`). Under `loss.iou` each prediction's box is read too
+//! (decoded from the darknet and YOLOX outputs; for Ultralytics, DETR and GFL forward-only
+//! outputs, the box branches the gradient graph leaves out), to weight its score by its overlap
+//! with the car.
 
 use super::config::OptimizeConfig;
 use super::defended::{self, Tape};
@@ -53,6 +54,9 @@ enum Heads {
     Ultralytics { classes: usize },
     /// DETR class logits `[Q, C]` (the graph cut before its post-processor, shapes folded).
     Detr { classes: usize },
+    /// GFL class maps `[R, C]` per grid level, in the config's stride order; the box maps of
+    /// `4 · bins` follow them forward only under `loss.iou`.
+    Gfl { classes: usize, bins: usize },
 }
 
 /// A detector with the paper's loss and its input gradient.
@@ -158,6 +162,53 @@ pub fn class_branch(mut model: Model, boxes: bool) -> Result<Model, String> {
     Ok(model)
 }
 
+/// A GFL graph's outputs put in the order its white box reads them: each level's class map
+/// `[1, R, classes]` in `strides` order, then (with `boxes`) each level's box map
+/// `[1, R, 4 · bins]`, matched by their declared shapes since exporters number them. Returns the
+/// number of forward-only outputs.
+fn gfl_outputs(
+    model: &mut Model,
+    strides: &[usize],
+    bins: usize,
+    classes: usize,
+    side: usize,
+    boxes: bool,
+) -> Result<usize, String> {
+    let fixed = |o: &ValueInfo| -> Option<Vec<i64>> {
+        o.dims.iter().map(|d| if let Dim::Fixed(v) = d { Some(*v) } else { None }).collect()
+    };
+    let find = |rows: usize, width: usize| {
+        model.outputs.iter().find(|o| {
+            fixed(o).is_some_and(|d| d.len() == 3 && d[0] == 1 && d[1] == rows as i64 && d[2] == width as i64)
+        })
+    };
+    let shown = || model.outputs.iter().map(|o| format!("{} {:?}", o.name, fixed(o))).collect::<Vec<_>>().join(", ");
+    let (mut cls, mut reg) = (Vec::new(), Vec::new());
+    for &s in strides {
+        let rows = (side / s) * (side / s);
+        match (find(rows, classes), find(rows, 4 * bins)) {
+            (Some(c), Some(r)) => {
+                cls.push(c.clone());
+                reg.push(r.clone());
+            }
+            _ => {
+                return Err(format!(
+                    "gfl at {side}²: stride {s} needs a [1, {rows}, {classes}] class map and a [1, {rows}, {}] box map declared among the graph's outputs: {}",
+                    4 * bins,
+                    shown()
+                ))
+            }
+        }
+    }
+    let n = if boxes { reg.len() } else { 0 };
+    model.outputs = cls;
+    if boxes {
+        model.outputs.extend(reg);
+    }
+    model.prune();
+    Ok(n)
+}
+
 impl WhiteBox {
     /// Loads the detector of `cfg` for composites of `size × size` pixels.
     pub fn load(cfg: &DetectorConfig, loss: DetectionLoss, size: usize) -> Result<Self, WhiteBoxError> {
@@ -220,6 +271,10 @@ impl WhiteBox {
             let x = model.inputs.first().map(|i| i.name.clone()).unwrap_or_default();
             model = fold_shapes(&model, &[(x.as_str(), vec![1, 3, side as i64, side as i64])], &cfg.name)?.0;
         }
+        if let OutputLayout::Gfl { strides, bins } = &cfg.output {
+            forward_only =
+                gfl_outputs(&mut model, strides, *bins, cfg.class_names.len(), side, loss.iou).map_err(&unsupported)?;
+        }
         if let Some(x) = model.inputs.first() {
             if x.dims.len() == 4 && x.dims[2..].iter().any(|d| matches!(d, Dim::Fixed(v) if *v != side as i64)) {
                 return Err(unsupported(format!("the graph's input is fixed at {:?}, not {side}²", x.dims)));
@@ -244,6 +299,7 @@ impl WhiteBox {
             OutputLayout::Yolox { .. } if d.outputs.len() == 1 => Heads::Yolox { classes },
             OutputLayout::Ultralytics { .. } => Heads::Ultralytics { classes },
             OutputLayout::Detr { .. } => Heads::Detr { classes },
+            OutputLayout::Gfl { bins, .. } => Heads::Gfl { classes, bins: *bins },
             other => {
                 return Err(unsupported(format!(
                     "no white-box loss for the {} layout (objectness-based losses need darknet or yolox outputs)",
@@ -359,6 +415,28 @@ impl WhiteBox {
                 (0..n).map(|i| centred(&[b[i], b[n + i], b[2 * n + i], b[3 * n + i]], 1.0)).collect()
             }
             Heads::Detr { .. } => aux()?.chunks_exact(4).map(|v| centred(v, self.input as f32)).collect(),
+            Heads::Gfl { classes, bins } => {
+                // The class maps and, after them, the box maps, level by level: decoded as
+                // evaluate decodes them (matched by shape).
+                let levels = self.out_shapes.len();
+                aux()?;
+                let raw: Vec<RawOutput> = self
+                    .out_shapes
+                    .iter()
+                    .zip(outs)
+                    .map(|((name, shape), data)| RawOutput {
+                        name: name.clone(),
+                        shape: shape.clone(),
+                        data: data.clone(),
+                    })
+                    .chain(self.out_shapes.iter().zip(&outs[levels..]).map(|((name, shape), data)| RawOutput {
+                        name: format!("{name} boxes"),
+                        shape: vec![1, shape[shape.len() - 2], 4 * bins],
+                        data: data.clone(),
+                    }))
+                    .collect();
+                decode(&self.layout, &raw, self.input, self.input, *classes, &map)?.boxes
+            }
         })
     }
 
@@ -389,6 +467,7 @@ impl WhiteBox {
             Heads::Yolox { classes } => Predictions::yolox(&seeded[0], *classes)?,
             Heads::Ultralytics { classes } => Predictions::ultralytics(&seeded[0], *classes)?,
             Heads::Detr { classes } => Predictions::detr(&seeded[0], *classes)?,
+            Heads::Gfl { classes, .. } => Predictions::class_rows(seeded, *classes)?,
         })
     }
 

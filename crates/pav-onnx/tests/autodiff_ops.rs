@@ -325,6 +325,24 @@ fn resize() {
 }
 
 #[test]
+fn resize_linear() {
+    // NanoDet's FPN: up to twice and down to half by sizes under pytorch_half_pixel; and a
+    // factor of 5/3 under each other transformation, whose source coordinates leave the input
+    // at the edges (clamped there).
+    let linear = |ctm: &str| {
+        vec![("mode", Attr::Str("linear".into())), ("coordinate_transformation_mode", Attr::Str(ctm.into()))]
+    };
+    for (shape, to) in [([1, 2, 3, 4], [1, 2, 6, 8]), ([1, 2, 6, 4], [1, 2, 3, 2])] {
+        let sizes = ints("sz", to.to_vec());
+        check(single("Resize", &["", "", "sz"], linear("pytorch_half_pixel"), vec![sizes]), shape, 2e-3);
+    }
+    for ctm in ["half_pixel", "align_corners", "asymmetric"] {
+        let scales = Initializer::f32("sc", &[4], vec![1.0, 1.0, 5.0 / 3.0, 5.0 / 3.0]);
+        check(single("Resize", &["", "sc"], linear(ctm), vec![scales]), [1, 1, 3, 3], 2e-3);
+    }
+}
+
+#[test]
 fn slice() {
     // Negative bounds and axis, two axes in one node; the last step of 3 runs past the end.
     let m = single(

@@ -323,10 +323,10 @@ pub(super) fn infer(
             let out = |i: usize| (x[2 + i] + p[i] + p[i + 2] - k[i]) / s[i] + 1;
             vec![x[0], x[1], out(0), out(1)]
         }
-        "Resize" => {
-            let f = resize_factor(n, consts, &x)?;
-            vec![x[0], x[1], x[2] * f, x[3] * f]
-        }
+        "Resize" => match resize_plan(n, consts, &x)? {
+            ResizePlan::Nearest(f) => vec![x[0], x[1], x[2] * f, x[3] * f],
+            ResizePlan::Linear { out, .. } => vec![x[0], x[1], out[0], out[1]],
+        },
         "Slice" => {
             let mut out = x.clone();
             for (a, _, _, count) in slice_ranges(n, consts, &x)? {
@@ -353,27 +353,82 @@ pub(super) fn infer(
     })
 }
 
-/// The integer factor of a nearest-neighbour Resize (the same on both spatial axes).
-pub(super) fn resize_factor(n: &Node, consts: &HashMap<&str, &Initializer>, x: &[i64]) -> Result<i64, AutodiffError> {
+/// What a Resize does on the two spatial axes.
+pub(super) enum ResizePlan {
+    /// Nearest neighbour by one integer factor on both axes.
+    Nearest(i64),
+    /// Linear interpolation to `out` (height, width); `weights[a]` is axis a's `[out × in]`
+    /// matrix of interpolation weights, so the output is `W_h · X · W_wᵀ` per channel.
+    Linear { out: [i64; 2], weights: [Vec<f32>; 2] },
+}
+
+/// The plan of a 4-D Resize with constant scales or sizes: nearest by equal integer factors, or
+/// linear by any factors under the `half_pixel`, `pytorch_half_pixel`, `align_corners` or
+/// `asymmetric` coordinate transformation (source coordinates clamped to the input, as ONNX
+/// Runtime clamps them).
+pub(super) fn resize_plan(
+    n: &Node,
+    consts: &HashMap<&str, &Initializer>,
+    x: &[i64],
+) -> Result<ResizePlan, AutodiffError> {
     let bad = |msg: String| AutodiffError::Settings { node: n.name.clone(), op: "Resize".into(), msg };
-    if string(n, "mode").as_deref() != Some("nearest") {
-        return Err(bad("only mode = nearest".into()));
-    }
-    let from = |i: usize| n.inputs.get(i).filter(|s| !s.is_empty()).and_then(|s| consts.get(s.as_str()));
-    let f = match (from(2), from(3)) {
+    let mode = string(n, "mode").unwrap_or_else(|| "nearest".into());
+    let from = |i: usize| {
+        n.inputs.get(i).filter(|s| !s.is_empty()).and_then(|s| consts.get(s.as_str())).filter(|c| c.data.len() == 4)
+    };
+    // Per axis: the output size and the scale the coordinates are mapped by.
+    let (out, f): (Vec<i64>, Vec<f64>) = match (from(2), from(3)) {
         (Some(c), _) => match &c.data {
-            InitData::F32(v) if v.len() == 4 => v.iter().map(|&s| s as f64).collect::<Vec<_>>(),
+            // The product in f32, as ONNX Runtime takes it: 3 × (5/3 as f32) is 5, not 4.
+            InitData::F32(v) => v.iter().zip(x).map(|(&s, &d)| ((d as f32 * s).floor() as i64, s as f64)).unzip(),
             _ => return Err(bad("scales must be 4 constant floats".into())),
         },
         (None, Some(c)) => match &c.data {
-            InitData::I64(v) if v.len() == 4 => v.iter().zip(x).map(|(&a, &b)| a as f64 / b as f64).collect(),
+            InitData::I64(v) => v.iter().zip(x).map(|(&a, &b)| (a, a as f64 / b as f64)).unzip(),
             _ => return Err(bad("sizes must be 4 constant integers".into())),
         },
         _ => return Err(bad("needs constant scales or sizes".into())),
     };
-    let k = f[2].round() as i64;
-    if f[0] != 1.0 || f[1] != 1.0 || f[2] != f[3] || (f[2] - k as f64).abs() > 1e-9 || k < 1 {
-        return Err(bad(format!("only equal integer spatial factors, got {f:?}")));
+    if x.len() != 4 || out[0] != x[0] || out[1] != x[1] {
+        return Err(bad(format!("only the two spatial axes of a 4-D tensor may be resized, got {f:?}")));
     }
-    Ok(k)
+    match mode.as_str() {
+        "nearest" => {
+            let k = f[2].round() as i64;
+            if f[2] != f[3] || (f[2] - k as f64).abs() > 1e-9 || k < 1 {
+                return Err(bad(format!("nearest: only equal integer spatial factors, got {f:?}")));
+            }
+            Ok(ResizePlan::Nearest(k))
+        }
+        "linear" => {
+            let ctm = string(n, "coordinate_transformation_mode").unwrap_or_else(|| "half_pixel".into());
+            let axis = |a: usize| -> Result<Vec<f32>, AutodiffError> {
+                let (len_in, len_out, s) = (x[a], out[a], f[a]);
+                if len_out < 1 {
+                    return Err(bad(format!("an output of {len_out} on axis {a}")));
+                }
+                let mut w = vec![0f32; (len_out * len_in) as usize];
+                for o in 0..len_out {
+                    let src = match ctm.as_str() {
+                        "half_pixel" => (o as f64 + 0.5) / s - 0.5,
+                        "pytorch_half_pixel" if len_out > 1 => (o as f64 + 0.5) / s - 0.5,
+                        "pytorch_half_pixel" => 0.0,
+                        "align_corners" if len_out > 1 => o as f64 * (len_in - 1) as f64 / (len_out - 1) as f64,
+                        "align_corners" => 0.0,
+                        "asymmetric" => o as f64 / s,
+                        other => return Err(bad(format!("linear with coordinate_transformation_mode = {other}"))),
+                    };
+                    let src = src.clamp(0.0, (len_in - 1) as f64);
+                    let i0 = src.floor() as i64;
+                    let i1 = (i0 + 1).min(len_in - 1);
+                    let t = (src - i0 as f64) as f32;
+                    w[(o * len_in + i0) as usize] += 1.0 - t;
+                    w[(o * len_in + i1) as usize] += t;
+                }
+                Ok(w)
+            };
+            Ok(ResizePlan::Linear { out: [out[2], out[3]], weights: [axis(2)?, axis(3)?] })
+        }
+        other => Err(bad(format!("mode = {other} (nearest and linear have rules)"))),
+    }
 }

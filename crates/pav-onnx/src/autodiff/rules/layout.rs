@@ -1,7 +1,9 @@
 //! Operators that move values without changing them: the gradient moved back.
 
 use super::{Back, Ctx};
-use crate::autodiff::shapes::{const_ints, int, ints, resize_factor, slice_ranges, split_sizes, transpose_perm};
+use crate::autodiff::shapes::{
+    const_ints, int, ints, resize_plan, slice_ranges, split_sizes, transpose_perm, ResizePlan,
+};
 use crate::autodiff::AutodiffError;
 use crate::proto::Attr;
 
@@ -127,14 +129,33 @@ pub(super) fn transpose(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), Autodi
 pub(super) fn resize(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;
     let x = n.inputs[0].clone();
-    let f = resize_factor(n, cx.consts, &cx.shape[&x])?;
-    let pooled = bw.tape.node(
-        "AveragePool",
-        vec![g],
-        vec![("kernel_shape", Attr::Ints(vec![f, f])), ("strides", Attr::Ints(vec![f, f]))],
-    );
-    let area = bw.tape.scalar((f * f) as f32);
-    let gx = bw.tape.node("Mul", vec![pooled, area], vec![]);
+    let dims = &cx.shape[&x];
+    let gx = match resize_plan(n, cx.consts, dims)? {
+        // Each input pixel was copied into an f × f block: its gradient is the block's sum.
+        ResizePlan::Nearest(f) => {
+            let pooled = bw.tape.node(
+                "AveragePool",
+                vec![g],
+                vec![("kernel_shape", Attr::Ints(vec![f, f])), ("strides", Attr::Ints(vec![f, f]))],
+            );
+            let area = bw.tape.scalar((f * f) as f32);
+            bw.tape.node("Mul", vec![pooled, area], vec![])
+        }
+        // y = W_h · x · W_wᵀ per channel, so x̄ = W_hᵀ · ȳ · W_w.
+        ResizePlan::Linear { out, weights: [wh, ww] } => {
+            let (ih, iw) = (dims[2], dims[3]);
+            let mut wht = vec![0f32; wh.len()];
+            for o in 0..out[0] {
+                for i in 0..ih {
+                    wht[(i * out[0] + o) as usize] = wh[(o * ih + i) as usize];
+                }
+            }
+            let wht = bw.tape.f32s(vec![ih, out[0]], wht);
+            let ww = bw.tape.f32s(vec![out[1], iw], ww);
+            let rows = bw.tape.node("MatMul", vec![wht, g], vec![]);
+            bw.tape.node("MatMul", vec![rows, ww], vec![])
+        }
+    };
     bw.add(&x, gx);
     Ok(())
 }

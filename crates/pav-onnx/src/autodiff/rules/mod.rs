@@ -146,7 +146,7 @@ pub(super) const RULES: &[Rule] = &[
     first("ReduceSum", "", reduce::reduce_mean_sum),
     several("Concat", "", layout::concat),
     Rule { op: "Split", covers: "", several_inputs: false, backward: Backward::Each(layout::split) },
-    first("Resize", "nearest", layout::resize),
+    first("Resize", "nearest (integer factors), linear (any constant size)", layout::resize),
     first("Slice", "", layout::slice),
     first("Reshape", "", layout::reshape),
     first("Flatten", "", layout::reshape_like),
