@@ -18,7 +18,7 @@ use crate::detect::onnx::OnnxDetector;
 use crate::detect::preprocess::prepare;
 use crate::detect::Detector;
 use crate::eval::digital::{paired_bootstrap, Interval};
-use crate::image::{to_u8, Frame};
+use crate::image::Frame;
 use crate::progress::Progress;
 use pav_onnx::proto::{InitData, Model, ValueInfo};
 use serde::Deserialize;
@@ -350,17 +350,9 @@ fn fit(
     (unflat(&p), losses)
 }
 
-/// The composite of `view` with `tex` (or the photo itself) as an 8-bit BGR frame.
+/// The composite of `view` with `tex` (or the photo itself), as scores see it.
 fn composite(view: &View, tex: Option<&[f32]>, setup: &Setup) -> Frame {
-    let img = match tex {
-        Some(t) => view.composite(&setup.scored(t), &setup.eval_scene()),
-        None => view.photo.clone(),
-    };
-    Frame {
-        width: view.size,
-        height: view.size,
-        bgr: img.chunks(3).flat_map(|c| [to_u8(c[2]), to_u8(c[1]), to_u8(c[0])]).collect(),
-    }
+    super::table2::frame(view, tex.map(|t| setup.scored(t)).as_deref(), setup)
 }
 
 /// The held-out photos with their car painted out.

@@ -48,8 +48,9 @@ pub struct DigitalRow {
     pub threshold: f32,
 }
 
-/// The composite of `view` with `tex` (or the photo itself) as an 8-bit BGR frame.
-fn frame(view: &View, tex: Option<&[f32]>, setup: &Setup) -> Frame {
+/// The composite of `view` with `tex` (as scores see it, or the photo itself) as an 8-bit BGR
+/// frame.
+pub(crate) fn frame(view: &View, tex: Option<&[f32]>, setup: &Setup) -> Frame {
     let img = match tex {
         Some(t) => view.composite(t, &setup.eval_scene()),
         None => view.photo.clone(),
