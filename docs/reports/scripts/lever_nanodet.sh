@@ -22,4 +22,4 @@ TOML
 common=(--folds 3 --random-seeds 1 --reference data:rauca-e2e/RAUCA_E2E.png -d configs/detectors -d configs/detectors-wide)
 [ -f "$out/base/crossval.csv" ] || "$pav" crossval --config $base "${common[@]}" -o "$out/base"
 [ -f "$out/nanodet/crossval.csv" ] || "$pav" crossval --config "$out/configs/nanodet.toml" "${common[@]}" -o "$out/nanodet"
-"$pav" table1 "$out/base" "$out/nanodet" --label base --label "+nanodet" -o "$out/table1"
+"$pav" table1 "$out/base" "$out/nanodet" --label base --label "+nanodet" --against base -o "$out/table1"
