@@ -153,6 +153,16 @@ fn relu() {
 }
 
 #[test]
+fn hard_sigmoid() {
+    // PP-LCNet's squeeze-excitation gate (alpha 1/6, beta 1/2): the inputs in [−1, 1] reach past
+    // both kinks at the larger slope.
+    for alpha in [1.0 / 6.0, 0.8] {
+        let attrs = vec![("alpha", Attr::Float(alpha)), ("beta", Attr::Float(0.5))];
+        check(single("HardSigmoid", &[], attrs, vec![]), [1, 2, 4, 4], 2e-3);
+    }
+}
+
+#[test]
 fn sigmoid() {
     // SiLU as YOLOX writes it: x · sigmoid(x), one value read twice.
     let silu = model(vec![node("Sigmoid", &["x"], "s", vec![]), node("Mul", &["x", "s"], "y", vec![])], vec![], &["y"]);

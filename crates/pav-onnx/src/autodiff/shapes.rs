@@ -217,8 +217,8 @@ pub(super) fn infer(
     let x = get(0)?;
     Ok(match n.op_type.as_str() {
         // Split: the input's shape here; each output's is cut from it by `split_sizes`.
-        "Identity" | "LeakyRelu" | "Relu" | "Sigmoid" | "Split" | "Pow" | "Sqrt" | "Log" | "Softmax" | "Cast"
-        | "Clip" | "Neg" => x,
+        "Identity" | "LeakyRelu" | "Relu" | "Sigmoid" | "HardSigmoid" | "Split" | "Pow" | "Sqrt" | "Log"
+        | "Softmax" | "Cast" | "Clip" | "Neg" => x,
         "Add" | "Mul" | "Sub" | "Div" => {
             let y = get(1)?;
             broadcast(&x, &y).ok_or_else(|| bad(format!("operands {x:?} and {y:?} do not broadcast")))?

@@ -53,6 +53,26 @@ pub(super) fn sigmoid(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), Autodiff
     Ok(())
 }
 
+/// `alpha·g` where `alpha·x + beta` lies strictly inside (0, 1), else 0 (HardSigmoid, which
+/// PP-LCNet's squeeze-excitation uses; ONNX's defaults alpha 0.2, beta 0.5).
+pub(super) fn hard_sigmoid(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
+    let n = cx.n;
+    let x = n.inputs[0].clone();
+    let alpha = float(n, "alpha").unwrap_or(0.2);
+    let y = n.outputs[0].clone();
+    // The output is clamped to [0, 1]: strictly inside, the input was on the slope.
+    bw.save(&y);
+    let (zero, one) = (bw.tape.scalar(0.0), bw.tape.scalar(1.0));
+    let above = bw.tape.node("Greater", vec![y.clone(), zero.clone()], vec![]);
+    let below = bw.tape.node("Less", vec![y, one], vec![]);
+    let slope = bw.tape.node("And", vec![above, below], vec![]);
+    let a = bw.tape.scalar(alpha);
+    let scaled = bw.tape.node("Mul", vec![g, a], vec![]);
+    let gx = bw.tape.node("Where", vec![slope, scaled, zero], vec![]);
+    bw.add(&x, gx);
+    Ok(())
+}
+
 /// `g·c·x^(c−1)` for a constant scalar exponent `c`.
 pub(super) fn pow(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
     let n = cx.n;

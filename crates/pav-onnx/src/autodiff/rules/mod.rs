@@ -131,6 +131,7 @@ pub(super) const RULES: &[Rule] = &[
     first("LeakyRelu", "", elementwise::leaky_relu),
     first("Relu", "", elementwise::leaky_relu),
     first("Sigmoid", "", elementwise::sigmoid),
+    first("HardSigmoid", "", elementwise::hard_sigmoid),
     several("Add", "", binary::add_sub),
     several("Sub", "", binary::add_sub),
     several("Mul", "", binary::mul),
