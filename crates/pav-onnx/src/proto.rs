@@ -12,6 +12,8 @@ pub const UINT8: i32 = 2;
 pub const INT8: i32 = 3;
 /// ONNX int64 element type code.
 pub const INT64: i32 = 7;
+/// ONNX element type code of int32.
+pub const INT32: i32 = 6;
 
 #[derive(Default)]
 struct Buf(Vec<u8>);
@@ -100,6 +102,8 @@ pub enum InitData {
     F32(Vec<f32>),
     /// int64 values.
     I64(Vec<i64>),
+    /// int32 values (Paddle exports write some constants so).
+    I32(Vec<i32>),
     /// uint8 values (quantized weights and zero points).
     U8(Vec<u8>),
     /// int8 values (quantized weights and zero points).
@@ -112,6 +116,7 @@ impl InitData {
         match self {
             InitData::F32(v) => v.len(),
             InitData::I64(v) => v.len(),
+            InitData::I32(v) => v.len(),
             InitData::U8(v) => v.len(),
             InitData::I8(v) => v.len(),
         }
@@ -291,6 +296,7 @@ fn encode_init(t: &Initializer) -> Buf {
     let (code, raw): (i32, Vec<u8>) = match &t.data {
         InitData::F32(v) => (FLOAT, v.iter().flat_map(|x| x.to_le_bytes()).collect()),
         InitData::I64(v) => (INT64, v.iter().flat_map(|x| x.to_le_bytes()).collect()),
+        InitData::I32(v) => (INT32, v.iter().flat_map(|x| x.to_le_bytes()).collect()),
         InitData::U8(v) => (UINT8, v.clone()),
         InitData::I8(v) => (INT8, v.iter().map(|x| *x as u8).collect()),
     };
@@ -572,6 +578,10 @@ fn decode_init(b: &[u8]) -> Result<Initializer, ProtoError> {
             InitData::I64(r.chunks_exact(8).map(|c| i64::from_le_bytes(c.try_into().unwrap_or([0; 8]))).collect())
         }
         (INT64, None) => InitData::I64(ints),
+        (INT32, Some(r)) if r.len() % 4 == 0 => {
+            InitData::I32(r.chunks_exact(4).map(|c| i32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
+        }
+        (INT32, None) => InitData::I32(ints.iter().map(|&i| i as i32).collect()),
         (UINT8, Some(r)) => InitData::U8(r.to_vec()),
         (UINT8, None) => InitData::U8(ints.iter().map(|&i| i as u8).collect()),
         (INT8, Some(r)) => InitData::I8(r.iter().map(|&b| b as i8).collect()),
@@ -739,6 +749,7 @@ mod tests {
                 Initializer { name: "s".into(), dims: vec![2], data: InitData::I64(vec![-1, 1 << 40]) },
                 Initializer { name: "q".into(), dims: vec![3], data: InitData::U8(vec![0, 128, 255]) },
                 Initializer { name: "z".into(), dims: vec![2], data: InitData::I8(vec![-128, 127]) },
+                Initializer { name: "i".into(), dims: vec![2], data: InitData::I32(vec![i32::MIN, 7]) },
             ],
             inputs: vec![ValueInfo {
                 name: "x".into(),

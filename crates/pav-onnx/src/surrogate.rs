@@ -51,6 +51,7 @@ fn values(init: &Initializer) -> Vec<f32> {
     match &init.data {
         InitData::F32(v) => v.clone(),
         InitData::I64(v) => v.iter().map(|&x| x as f32).collect(),
+        InitData::I32(v) => v.iter().map(|&x| x as f32).collect(),
         InitData::U8(v) => v.iter().map(|&x| x as f32).collect(),
         InitData::I8(v) => v.iter().map(|&x| x as f32).collect(),
     }
