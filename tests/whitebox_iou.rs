@@ -1,6 +1,6 @@
-//! `loss.iou` on real photos and the five white boxes: each prediction's box as the white box
+//! `loss.iou` on real photos and the six white boxes: each prediction's box as the white box
 //! reads it (decoded darknet and YOLOX outputs; the forward-only box outputs of the YOLOv8n and
-//! DEIMv2 graphs; NanoDet's forward-only box maps) agrees with evaluate's boxes, the view's car box agrees with the photo's label,
+//! DEIMv2 graphs; NanoDet's forward-only box maps; PicoDet cut before its NMS) agrees with evaluate's boxes, the view's car box agrees with the photo's label,
 //! and the IoU-weighted log-max counts the car and not the rest of the street.
 #![cfg(feature = "optimize")]
 
@@ -90,4 +90,9 @@ fn deimv2_decoder_boxes_run_forward_only_and_weigh_the_car() {
 #[test]
 fn nanodet_class_maps_score_and_its_box_maps_weigh_the_car() {
     check_config(&common::repo().join("configs/detectors-wide/nanodet_m_416.toml"), false);
+}
+
+#[test]
+fn picodet_cut_before_its_nms_scores_and_weighs_the_car() {
+    check_config(&common::repo().join("configs/detectors-wide/picodet_xs_320.toml"), false);
 }

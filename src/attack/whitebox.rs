@@ -6,15 +6,15 @@
 //! (`detect::ortgrad`). The input transform the config describes (resize, channel order, scale,
 //! mean and std) is applied here with its exact adjoint. Outputs are read by their layout:
 //! darknet heads and YOLOX rows with objectness, Ultralytics class scores, DETR class logits and
-//! GFL class maps without (see `attack::loss`). Under `loss.iou` each prediction's box is read too
-//! (decoded from the darknet and YOLOX outputs; for Ultralytics, DETR and GFL forward-only
-//! outputs, the box branches the gradient graph leaves out), to weight its score by its overlap
-//! with the car.
+//! GFL class maps without, and the class scores a graph's own NMS reads (see `attack::loss`). Under `loss.iou` each prediction's box is read too
+//! (decoded from the darknet and YOLOX outputs; for Ultralytics, DETR, GFL and a graph cut before
+//! its NMS forward-only outputs, the box branches the gradient graph leaves out), to weight its
+//! score by its overlap with the car.
 
 use super::config::OptimizeConfig;
 use super::defended::{self, Tape};
 use super::loss::{DetectionLoss, HeadShapeError, Predictions};
-use crate::detect::config::{ChannelOrder, DetectorConfig, OutputLayout};
+use crate::detect::config::{ChannelOrder, DetectorConfig, ExtraValue, OutputLayout};
 use crate::detect::decode::{decode, LayoutError, RawOutput};
 use crate::detect::defence::Defence;
 use crate::detect::preprocess::InputMap;
@@ -22,7 +22,7 @@ use crate::detect::DetectError;
 use crate::image::resize::Resampler;
 use pav_onnx::autodiff::{differentiate_first, AutodiffError, Kernels};
 use pav_onnx::fold::fold_shapes;
-use pav_onnx::proto::{Dim, Model, ProtoError, ValueInfo, FLOAT};
+use pav_onnx::proto::{Dim, Initializer, Model, ProtoError, ValueInfo, FLOAT};
 use pav_onnx::session::{GradSession, Pass};
 use pav_onnx::surrogate::dequantize;
 use std::path::PathBuf;
@@ -57,6 +57,9 @@ enum Heads {
     /// GFL class maps `[R, C]` per grid level, in the config's stride order; the box maps of
     /// `4 · bins` follow them forward only under `loss.iou`.
     Gfl { classes: usize, bins: usize },
+    /// Class scores `[C, N]` before a graph's own NMS (class-major, as Ultralytics'); the boxes
+    /// `[N, 4]` (xyxy, input pixels) follow forward only under `loss.iou`.
+    BeforeNms { classes: usize },
 }
 
 /// A detector with the paper's loss and its input gradient.
@@ -271,6 +274,37 @@ impl WhiteBox {
             let x = model.inputs.first().map(|i| i.name.clone()).unwrap_or_default();
             model = fold_shapes(&model, &[(x.as_str(), vec![1, 3, side as i64, side as i64])], &cfg.name)?.0;
         }
+        if let OutputLayout::Rows { scores, boxes, .. } = &cfg.output {
+            let scores = scores.clone().ok_or_else(|| {
+                unsupported("a white box of the rows layout needs `scores` in the config's [output]: the class scores its NMS reads".into())
+            })?;
+            // The extra inputs become constants: a scale of 1 leaves the boxes in input pixels.
+            for e in &i.extra {
+                model.inputs.retain(|v| v.name != e.name);
+                model.initializers.push(match e.value {
+                    ExtraValue::ScaleYx => Initializer::f32(&e.name, &[1, 2], vec![1.0, 1.0]),
+                    ExtraValue::SizeWh => Initializer::i64(&e.name, &[1, 2], vec![side as i64; 2]),
+                });
+            }
+            let mut outputs = vec![scores];
+            if loss.iou {
+                outputs.push(boxes.clone().ok_or_else(|| {
+                    unsupported(
+                        "loss.iou on a rows white box needs `boxes` in the config's [output]: the boxes its NMS reads"
+                            .into(),
+                    )
+                })?);
+                forward_only = 1;
+            }
+            if let Some(o) = outputs.iter().find(|o| !model.nodes.iter().any(|n| n.outputs.contains(o))) {
+                return Err(unsupported(format!("no value `{o}` (named in the config's [output]) in the graph")));
+            }
+            model.outputs =
+                outputs.into_iter().map(|name| ValueInfo { name, elem_type: FLOAT, dims: vec![] }).collect();
+            model.prune();
+            let x = model.inputs.first().map(|v| v.name.clone()).unwrap_or_default();
+            model = fold_shapes(&model, &[(x.as_str(), vec![1, 3, side as i64, side as i64])], &cfg.name)?.0;
+        }
         if let OutputLayout::Gfl { strides, bins } = &cfg.output {
             forward_only =
                 gfl_outputs(&mut model, strides, *bins, cfg.class_names.len(), side, loss.iou).map_err(&unsupported)?;
@@ -300,6 +334,7 @@ impl WhiteBox {
             OutputLayout::Ultralytics { .. } => Heads::Ultralytics { classes },
             OutputLayout::Detr { .. } => Heads::Detr { classes },
             OutputLayout::Gfl { bins, .. } => Heads::Gfl { classes, bins: *bins },
+            OutputLayout::Rows { .. } => Heads::BeforeNms { classes },
             other => {
                 return Err(unsupported(format!(
                     "no white-box loss for the {} layout (objectness-based losses need darknet or yolox outputs)",
@@ -415,6 +450,7 @@ impl WhiteBox {
                 (0..n).map(|i| centred(&[b[i], b[n + i], b[2 * n + i], b[3 * n + i]], 1.0)).collect()
             }
             Heads::Detr { .. } => aux()?.chunks_exact(4).map(|v| centred(v, self.input as f32)).collect(),
+            Heads::BeforeNms { .. } => aux()?.chunks_exact(4).map(|v| map.to_frame([v[0], v[1], v[2], v[3]])).collect(),
             Heads::Gfl { classes, bins } => {
                 // The class maps and, after them, the box maps, level by level: decoded as
                 // evaluate decodes them (matched by shape).
@@ -468,6 +504,7 @@ impl WhiteBox {
             Heads::Ultralytics { classes } => Predictions::ultralytics(&seeded[0], *classes)?,
             Heads::Detr { classes } => Predictions::detr(&seeded[0], *classes)?,
             Heads::Gfl { classes, .. } => Predictions::class_rows(seeded, *classes)?,
+            Heads::BeforeNms { classes } => Predictions::ultralytics(&seeded[0], *classes)?,
         })
     }
 

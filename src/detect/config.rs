@@ -209,6 +209,16 @@ pub enum OutputLayout {
         /// Which pixels the boxes are in.
         #[serde(default)]
         frame: BoxFrame,
+        /// The class scores `[1, C, N]` the graph's NMS reads (class-major probabilities): what
+        /// a white box differentiates, the graph cut before its NMS. Optional; only
+        /// `pav optimize` reads it.
+        #[serde(default)]
+        scores: Option<String>,
+        /// The boxes `[1, N, 4]` (x1, y1, x2, y2) the graph's NMS reads, in input pixels once
+        /// the extra inputs are neutral (a `scale_yx` of 1): what a white box weights its scores
+        /// by under `loss.iou`. Optional; only `pav optimize` reads it.
+        #[serde(default)]
+        boxes: Option<String>,
     },
     /// DETR family (RT-DETR, D-FINE, DEIM): per-query labels, xyxy boxes and scores.
     Detr {

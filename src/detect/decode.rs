@@ -266,7 +266,7 @@ pub fn decode(
                 p.scores.extend((0..num_classes).map(|c| at(4 + c, i)));
             }
         }
-        OutputLayout::Rows { output, columns, frame } => {
+        OutputLayout::Rows { output, columns, frame, .. } => {
             let width = columns.len();
             let o = match output {
                 Some(_) => find(outs, output.as_deref())?,
@@ -445,8 +445,13 @@ mod tests {
             },
         ];
         let half = InputMap { scale_x: 0.5, scale_y: 0.5, pad_x: 0.0, pad_y: 0.0, frame_w: 100.0, frame_h: 100.0 };
-        let layout =
-            |frame| OutputLayout::Rows { output: None, columns: crate::detect::config::Column::xyxy_rows(), frame };
+        let layout = |frame| OutputLayout::Rows {
+            output: None,
+            columns: crate::detect::config::Column::xyxy_rows(),
+            frame,
+            scores: None,
+            boxes: None,
+        };
         let p = decode(&layout(BoxFrame::Input), &outs, 32, 32, 2, &half).unwrap();
         assert_eq!(p.len(), 2);
         assert_eq!(p.best(&[1]).unwrap().bbox, [8.0, 8.0, 16.0, 16.0]);
@@ -454,8 +459,13 @@ mod tests {
         let p = decode(&layout(BoxFrame::Image), &outs, 32, 32, 2, &half).unwrap();
         assert_eq!(p.best(&[1]).unwrap().bbox, [4.0, 4.0, 8.0, 8.0]);
         // Rows of another width are refused by name.
-        let l =
-            OutputLayout::Rows { output: Some("r".into()), columns: vec![Column::Class; 7], frame: BoxFrame::Input };
+        let l = OutputLayout::Rows {
+            output: Some("r".into()),
+            columns: vec![Column::Class; 7],
+            frame: BoxFrame::Input,
+            scores: None,
+            boxes: None,
+        };
         assert!(decode(&l, &outs, 32, 32, 2, &half).unwrap_err().to_string().contains("7 columns"));
     }
 

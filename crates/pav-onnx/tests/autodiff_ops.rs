@@ -267,6 +267,25 @@ fn sqrt() {
         &["y"],
     );
     check(m, [1, 2, 3, 3], 2e-3);
+    // PicoDet's score sqrt(σ(a)·σ(b)): where both sigmoids saturate the product is exactly 0 in
+    // f32, and the gradient stays finite (0) instead of ∞·0 = NaN.
+    let m = model(
+        vec![
+            node("Mul", &["x", "big"], "a", vec![]),
+            node("Sigmoid", &["a"], "s", vec![]),
+            node("Mul", &["s", "s"], "p", vec![]),
+            node("Sqrt", &["p"], "y", vec![]),
+        ],
+        vec![scalar("big", 300.0)],
+        &["y"],
+    );
+    for kernels in [Kernels::Onnx, Kernels::Fused] {
+        let mut g = GradSession::new("test", differentiate_with(&m, &[1, 1, 2, 2], kernels).unwrap(), 1).unwrap();
+        let (outs, pass) = g.forward(vec![-1.0, -0.5, 0.5, 1.0]).unwrap();
+        assert_eq!(&outs[0][..2], &[0.0, 0.0], "the saturated scores are exactly 0");
+        let grad = g.backward(&pass, vec![vec![1.0; 4]]).unwrap();
+        assert!(grad.iter().all(|v| v.is_finite()), "{kernels:?}: {grad:?}");
+    }
 }
 
 #[test]

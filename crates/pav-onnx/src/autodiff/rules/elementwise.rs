@@ -107,7 +107,12 @@ pub(super) fn sqrt(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffErr
     bw.save(&y);
     let half = bw.tape.scalar(0.5);
     let h = bw.tape.node("Mul", vec![g, half], vec![]);
-    let gx = bw.tape.node("Div", vec![h, y], vec![]);
+    let slope = bw.tape.node("Div", vec![h, y.clone()], vec![]);
+    // At 0 the slope is infinite: a score sqrt(σ(a)·σ(b)) of two saturated sigmoids is exactly 0
+    // in f32, and ∞·0 would turn every gradient behind it into NaN. It passes nothing there.
+    let zero = bw.tape.scalar(0.0);
+    let positive = bw.tape.node("Greater", vec![y, zero.clone()], vec![]);
+    let gx = bw.tape.node("Where", vec![positive, slope, zero], vec![]);
     bw.add(&x, gx);
     Ok(())
 }
