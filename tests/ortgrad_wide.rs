@@ -4,17 +4,17 @@
 //! a constant), each differentiated, its forward equal to plain inference on real photos (for
 //! PicoDet: the car score its NMS keeps), and its gradient equal to central differences along
 //! two directions.
-#![cfg(feature = "eval")]
+#![cfg(feature = "optimize")]
 
 mod common;
 
+use pav::attack::whitebox::cut_before_post;
 use pav::dataset::fca::CarlaSample;
 use pav::detect::onnx::OnnxDetector;
 use pav::detect::preprocess::{prepare, InputMap};
 use pav::detect::DetectorConfig;
 use pav_onnx::autodiff::{differentiate_with, Kernels};
-use pav_onnx::fold::fold_shapes;
-use pav_onnx::proto::{Dim, Initializer, Model, ValueInfo, FLOAT};
+use pav_onnx::proto::{Dim, Model};
 use pav_onnx::session::GradSession;
 
 fn config() -> DetectorConfig {
@@ -38,8 +38,13 @@ fn session(kernels: Kernels) -> GradSession {
 }
 
 fn frame_input(name: &str) -> Vec<f32> {
+    photo_input(&config(), name)
+}
+
+/// An FCA test photo prepared as `cfg`'s model reads it.
+fn photo_input(cfg: &DetectorConfig, name: &str) -> Vec<f32> {
     let sample = CarlaSample::load(&common::real_data().join("fca/carla_dataset/test").join(name)).unwrap();
-    prepare(&sample.image, &config().input).unwrap().0
+    prepare(&sample.image, &cfg.input).unwrap().0
 }
 
 #[test]
@@ -111,14 +116,11 @@ fn picodet_config() -> DetectorConfig {
     DetectorConfig::load(&common::repo().join("configs/detectors-wide/picodet_xs_320.toml")).unwrap()
 }
 
-/// PicoDet's graph cut at the class scores its NMS reads, `scale_factor` fixed at 1, shapes folded.
+/// PicoDet's graph cut at the class scores its NMS reads, as its white box cuts it.
 fn picodet_scores() -> Model {
-    let mut m = Model::from_bytes(&std::fs::read(picodet_config().model).unwrap()).unwrap();
-    m.inputs.retain(|i| i.name != "scale_factor");
-    m.initializers.push(Initializer::f32("scale_factor", &[1, 2], vec![1.0, 1.0]));
-    m.outputs = vec![ValueInfo { name: "concat_4.tmp_0".into(), elem_type: FLOAT, dims: vec![] }];
-    m.prune();
-    fold_shapes(&m, &[("image", vec![1, 3, 320, 320])], "picodet").unwrap().0
+    let cfg = picodet_config();
+    let m = Model::from_bytes(&std::fs::read(&cfg.model).unwrap()).unwrap();
+    cut_before_post(m, &[("concat_4.tmp_0".into(), "scores")], &cfg.input.extra, 320, "picodet").unwrap()
 }
 
 fn picodet_session(kernels: Kernels) -> GradSession {
@@ -127,8 +129,7 @@ fn picodet_session(kernels: Kernels) -> GradSession {
 }
 
 fn picodet_input(name: &str) -> Vec<f32> {
-    let sample = CarlaSample::load(&common::real_data().join("fca/carla_dataset/test").join(name)).unwrap();
-    prepare(&sample.image, &picodet_config().input).unwrap().0
+    photo_input(&picodet_config(), name)
 }
 
 #[test]
@@ -141,8 +142,7 @@ fn picodet_before_its_nms_keeps_the_car_score_inference_reports() {
         assert_eq!(outs[0].len(), 80 * 2125);
         // COCO's car is class 2: its best score before the NMS is the best car row after it.
         let before = outs[0][2 * 2125..3 * 2125].iter().cloned().fold(0f32, f32::max);
-        let map = InputMap { scale_x: 1.0, scale_y: 1.0, pad_x: 0.0, pad_y: 0.0, frame_w: 320.0, frame_h: 320.0 };
-        let raw = det.infer(input, &map).unwrap();
+        let raw = det.infer(input, &InputMap::identity(320, 320)).unwrap();
         let rows = &raw[0];
         let after = rows.data.chunks(6).filter(|r| r[0] == 2.0).map(|r| r[1]).fold(0f32, f32::max);
         eprintln!("{photo}: best car score before the NMS {before}, after {after}");

@@ -14,7 +14,7 @@
 use super::config::OptimizeConfig;
 use super::defended::{self, Tape};
 use super::loss::{DetectionLoss, HeadShapeError, Predictions};
-use crate::detect::config::{ChannelOrder, DetectorConfig, ExtraValue, OutputLayout};
+use crate::detect::config::{ChannelOrder, DetectorConfig, ExtraInput, ExtraValue, OutputLayout};
 use crate::detect::decode::{decode, LayoutError, RawOutput};
 use crate::detect::defence::Defence;
 use crate::detect::preprocess::InputMap;
@@ -212,6 +212,36 @@ fn gfl_outputs(
     Ok(n)
 }
 
+/// `model` cut to compute the values of `outputs` (each with the config key that names it), its
+/// extra inputs made neutral constants (a `scale_yx` of 1 leaves boxes in input pixels; a
+/// `size_wh` is the input's), its shapes folded for a `side`² input: a graph whose
+/// post-processor (top-k, NMS) has no gradient, cut where that begins. `name`: the detector's.
+pub fn cut_before_post(
+    mut model: Model,
+    outputs: &[(String, &str)],
+    extra: &[ExtraInput],
+    side: usize,
+    name: &str,
+) -> Result<Model, WhiteBoxError> {
+    for e in extra {
+        model.inputs.retain(|v| v.name != e.name);
+        model.initializers.push(match e.value {
+            ExtraValue::ScaleYx => Initializer::f32(&e.name, &[1, 2], vec![1.0, 1.0]),
+            ExtraValue::SizeWh => Initializer::i64(&e.name, &[1, 2], vec![side as i64; 2]),
+        });
+    }
+    if let Some((o, key)) = outputs.iter().find(|(o, _)| !model.nodes.iter().any(|n| n.outputs.contains(o))) {
+        let why = format!("no value `{o}` (the config's `{key}`) in the graph");
+        return Err(WhiteBoxError::Unsupported { name: name.into(), why });
+    }
+    model.outputs =
+        outputs.iter().map(|(o, _)| ValueInfo { name: o.clone(), elem_type: FLOAT, dims: vec![] }).collect();
+    model.prune();
+    // The exported graph computes its reshapes from run-time shapes: fixed here.
+    let x = model.inputs.first().map(|i| i.name.clone()).unwrap_or_default();
+    Ok(fold_shapes(&model, &[(x.as_str(), vec![1, 3, side as i64, side as i64])], name)?.0)
+}
+
 impl WhiteBox {
     /// Loads the detector of `cfg` for composites of `size × size` pixels.
     pub fn load(cfg: &DetectorConfig, loss: DetectionLoss, size: usize) -> Result<Self, WhiteBoxError> {
@@ -255,55 +285,32 @@ impl WhiteBox {
             let logits = logits.clone().ok_or_else(|| {
                 unsupported("a DETR white box needs `logits` in the config's [output]: the class logits before the post-processor".into())
             })?;
-            if !model.nodes.iter().any(|n| n.outputs.contains(&logits)) {
-                return Err(unsupported(format!("no value `{logits}` (the config's `logits`) in the graph")));
-            }
-            model.outputs = vec![ValueInfo { name: logits, elem_type: FLOAT, dims: vec![] }];
+            let mut outputs = vec![(logits, "logits")];
             if loss.iou {
                 let b = pred_boxes.clone().ok_or_else(|| {
                     unsupported("loss.iou on a DETR white box needs `pred_boxes` in the config's [output]: the decoder's boxes before the post-processor".into())
                 })?;
-                if !model.nodes.iter().any(|n| n.outputs.contains(&b)) {
-                    return Err(unsupported(format!("no value `{b}` (the config's `pred_boxes`) in the graph")));
-                }
-                model.outputs.push(ValueInfo { name: b, elem_type: FLOAT, dims: vec![] });
+                outputs.push((b, "pred_boxes"));
                 forward_only = 1;
             }
-            model.prune();
-            // The exported graph computes its reshapes from run-time shapes: fixed here.
-            let x = model.inputs.first().map(|i| i.name.clone()).unwrap_or_default();
-            model = fold_shapes(&model, &[(x.as_str(), vec![1, 3, side as i64, side as i64])], &cfg.name)?.0;
+            model = cut_before_post(model, &outputs, &i.extra, side, &cfg.name)?;
         }
         if let OutputLayout::Rows { scores, boxes, .. } = &cfg.output {
             let scores = scores.clone().ok_or_else(|| {
                 unsupported("a white box of the rows layout needs `scores` in the config's [output]: the class scores its NMS reads".into())
             })?;
-            // The extra inputs become constants: a scale of 1 leaves the boxes in input pixels.
-            for e in &i.extra {
-                model.inputs.retain(|v| v.name != e.name);
-                model.initializers.push(match e.value {
-                    ExtraValue::ScaleYx => Initializer::f32(&e.name, &[1, 2], vec![1.0, 1.0]),
-                    ExtraValue::SizeWh => Initializer::i64(&e.name, &[1, 2], vec![side as i64; 2]),
-                });
-            }
-            let mut outputs = vec![scores];
+            let mut outputs = vec![(scores, "scores")];
             if loss.iou {
-                outputs.push(boxes.clone().ok_or_else(|| {
+                let b = boxes.clone().ok_or_else(|| {
                     unsupported(
                         "loss.iou on a rows white box needs `boxes` in the config's [output]: the boxes its NMS reads"
                             .into(),
                     )
-                })?);
+                })?;
+                outputs.push((b, "boxes"));
                 forward_only = 1;
             }
-            if let Some(o) = outputs.iter().find(|o| !model.nodes.iter().any(|n| n.outputs.contains(o))) {
-                return Err(unsupported(format!("no value `{o}` (named in the config's [output]) in the graph")));
-            }
-            model.outputs =
-                outputs.into_iter().map(|name| ValueInfo { name, elem_type: FLOAT, dims: vec![] }).collect();
-            model.prune();
-            let x = model.inputs.first().map(|v| v.name.clone()).unwrap_or_default();
-            model = fold_shapes(&model, &[(x.as_str(), vec![1, 3, side as i64, side as i64])], &cfg.name)?.0;
+            model = cut_before_post(model, &outputs, &i.extra, side, &cfg.name)?;
         }
         if let OutputLayout::Gfl { strides, bins } = &cfg.output {
             forward_only =
@@ -430,19 +437,17 @@ impl WhiteBox {
             outs.get(self.out_shapes.len())
                 .ok_or_else(|| LayoutError("no box output: the white box was loaded without loss.iou".into()))
         };
+        // The differentiated outputs as evaluate's decoder reads them.
+        let seeded = || {
+            self.out_shapes.iter().zip(outs).map(|((name, shape), data)| RawOutput {
+                name: name.clone(),
+                shape: shape.clone(),
+                data: data.clone(),
+            })
+        };
         Ok(match &self.heads {
             Heads::Darknet { classes, .. } | Heads::Yolox { classes } => {
-                let raw: Vec<RawOutput> = self
-                    .out_shapes
-                    .iter()
-                    .zip(outs)
-                    .map(|((name, shape), data)| RawOutput {
-                        name: name.clone(),
-                        shape: shape.clone(),
-                        data: data.clone(),
-                    })
-                    .collect();
-                decode(&self.layout, &raw, self.input, self.input, *classes, &map)?.boxes
+                decode(&self.layout, &seeded().collect::<Vec<_>>(), self.input, self.input, *classes, &map)?.boxes
             }
             Heads::Ultralytics { .. } => {
                 let b = aux()?;
@@ -456,15 +461,7 @@ impl WhiteBox {
                 // evaluate decodes them (matched by shape).
                 let levels = self.out_shapes.len();
                 aux()?;
-                let raw: Vec<RawOutput> = self
-                    .out_shapes
-                    .iter()
-                    .zip(outs)
-                    .map(|((name, shape), data)| RawOutput {
-                        name: name.clone(),
-                        shape: shape.clone(),
-                        data: data.clone(),
-                    })
+                let raw: Vec<RawOutput> = seeded()
                     .chain(self.out_shapes.iter().zip(&outs[levels..]).map(|((name, shape), data)| RawOutput {
                         name: format!("{name} boxes"),
                         shape: vec![1, shape[shape.len() - 2], 4 * bins],

@@ -8,7 +8,7 @@
 //! they read, so no weight gradient of the network is needed, and the detector is otherwise the
 //! one it was.
 
-use super::{create_dir, write_markdown, ExperimentError};
+use super::{create_dir, write_file, write_markdown, ExperimentError};
 use crate::attack::config::OptimizeConfig;
 use crate::attack::setup::{random_block_side, random_blocks, Setup};
 use crate::attack::view::View;
@@ -169,12 +169,9 @@ struct Head {
 impl Head {
     fn read(model: &Model, levels: &[Level], class: usize) -> Head {
         let unit = |c: &HeadConv, row: usize| {
-            let w = floats(model, &c.weight);
-            let k = w.len() / floats(model, &c.bias).len();
-            Unit {
-                w: w[row * k..(row + 1) * k].iter().map(|&v| v as f64).collect(),
-                b: floats(model, &c.bias)[row] as f64,
-            }
+            let (w, b) = (floats(model, &c.weight), floats(model, &c.bias));
+            let k = w.len() / b.len();
+            Unit { w: w[row * k..(row + 1) * k].iter().map(|&v| v as f64).collect(), b: b[row] as f64 }
         };
         Head { levels: levels.iter().map(|l| (unit(&l.cls, class), unit(&l.obj, 0))).collect() }
     }
@@ -441,8 +438,7 @@ pub fn adv_train(
         }
     }
     let exposed_path = out.join("features.onnx");
-    std::fs::write(&exposed_path, exposed.to_bytes())
-        .map_err(|source| ExperimentError::Io { path: exposed_path.clone(), source })?;
+    write_file(&exposed_path, exposed.to_bytes())?;
     let mut feat_cfg = det_cfg.clone();
     feat_cfg.model = exposed_path.clone();
     let mut features = OnnxDetector::new(feat_cfg, 0)?;
@@ -503,8 +499,7 @@ pub fn adv_train(
     let name = format!("{}_advtrain", det_cfg.name);
     let model_path = out.join(format!("{name}.onnx"));
     let tuned_bytes = model.to_bytes();
-    std::fs::write(&model_path, &tuned_bytes)
-        .map_err(|source| ExperimentError::Io { path: model_path.clone(), source })?;
+    write_file(&model_path, &tuned_bytes)?;
     let sha256 = format!("{:x}", Sha256::digest(&tuned_bytes));
     let config_path = out.join(format!("{name}.toml"));
     let toml = format!(
@@ -515,12 +510,11 @@ pub fn adv_train(
         format!("{name}.onnx"),
         format!("{} with its head adversarially trained (pav adv-train)", det_cfg.description),
     );
-    std::fs::write(&config_path, toml).map_err(|source| ExperimentError::Io { path: config_path.clone(), source })?;
+    write_file(&config_path, toml)?;
     let loss_csv: String = std::iter::once("step,loss\n".to_string())
         .chain(losses.iter().enumerate().map(|(i, l)| format!("{i},{l:.6}\n")))
         .collect();
-    let p = out.join("loss.csv");
-    std::fs::write(&p, loss_csv).map_err(|source| ExperimentError::Io { path: p, source })?;
+    write_file(&out.join("loss.csv"), loss_csv)?;
 
     // Held-out views, through the whole detection path of both models.
     let mut tests = named(&cfg.test_textures);
@@ -561,8 +555,7 @@ pub fn adv_train(
     }
     pool(NO_CAR, pairs);
     progress.end(None);
-    let p = out.join("advtrain.csv");
-    std::fs::write(&p, rows.join("\n") + "\n").map_err(|source| ExperimentError::Io { path: p, source })?;
+    write_file(&out.join("advtrain.csv"), rows.join("\n") + "\n")?;
     let markdown = report(
         &det_cfg.name,
         &per,

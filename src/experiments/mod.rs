@@ -111,6 +111,10 @@ fn create_dir(dir: &Path) -> Result<(), ExperimentError> {
 
 /// Writes a Markdown report to `out/name`.
 fn write_markdown(out: &Path, name: &str, md: &str) -> Result<(), ExperimentError> {
-    let path = out.join(name);
-    std::fs::write(&path, md).map_err(|source| ExperimentError::Io { path, source })
+    write_file(&out.join(name), md)
+}
+
+/// Writes `bytes` to `path`, naming the file in the error.
+fn write_file(path: &Path, bytes: impl AsRef<[u8]>) -> Result<(), ExperimentError> {
+    std::fs::write(path, bytes).map_err(|source| ExperimentError::Io { path: path.into(), source })
 }
