@@ -28,6 +28,7 @@ fn kind(l: &OutputLayout) -> &'static str {
         OutputLayout::Detr { .. } => "detr",
         OutputLayout::Gfl { .. } => "gfl",
         OutputLayout::Rows { .. } => "rows",
+        OutputLayout::Custom(_) => "custom",
     }
 }
 

@@ -2,6 +2,8 @@
 
 use super::coco::COCO80;
 use super::defence::{chain_label, Defence};
+pub use super::layout::BoxFrame;
+use super::layout::{Activation, Arrange, CellOrder, Centre, Description, Encoding, Level, Part};
 use super::DetectError;
 use crate::extends::{load, ExtendsError};
 use crate::image::resize::Interpolation;
@@ -121,17 +123,6 @@ pub enum Column {
     Skip,
 }
 
-/// Which pixels a [`OutputLayout::Rows`] output's boxes are in.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum BoxFrame {
-    /// The model's input (mapped back through the resize and padding).
-    #[default]
-    Input,
-    /// The frame itself (the graph mapped them back, e.g. with a `scale_yx` extra input).
-    Image,
-}
-
 impl Column {
     /// Class, score, x1, y1, x2, y2: the default row.
     pub fn xyxy_rows() -> Vec<Column> {
@@ -220,6 +211,9 @@ pub enum OutputLayout {
         #[serde(default)]
         boxes: Option<String>,
     },
+    /// Any other layout, written out as a [`Description`]: which outputs hold the boxes, the
+    /// scores, an objectness or labels, the box encoding, the activations and the grid.
+    Custom(Box<Description>),
     /// DETR family (RT-DETR, D-FINE, DEIM): per-query labels, xyxy boxes and scores.
     Detr {
         /// Labels output (int64).
@@ -474,7 +468,112 @@ impl DetectorConfig {
             {
                 Err("rows in image pixels need input.resize = \"stretch\" or a top-left letterbox".into())
             }
+            OutputLayout::Custom(d)
+                if d.boxes.frame == BoxFrame::Image && i.resize == Resize::Letterbox && i.align == Align::Center =>
+            {
+                Err("boxes in image pixels need input.resize = \"stretch\" or a top-left letterbox".into())
+            }
+            OutputLayout::Custom(d) => d.validate(self.class_names.len()),
             _ => Ok(()),
+        }
+    }
+}
+
+fn named(output: &Option<String>) -> Vec<String> {
+    output.iter().cloned().collect()
+}
+
+impl OutputLayout {
+    /// The layout as a [`Description`]; the named layouts are presets of one.
+    pub fn describe(&self, classes: usize) -> Description {
+        let grid =
+            |strides: &[usize]| strides.iter().map(|&s| Level { stride: Some(s), anchors: Vec::new() }).collect();
+        match self {
+            OutputLayout::Custom(d) => (**d).clone(),
+            OutputLayout::Darknet { heads } => {
+                let src = Part {
+                    output: heads.iter().map(|h| h.output.clone()).collect(),
+                    arrange: Arrange::Planes,
+                    per_level: true,
+                    ..Part::default()
+                };
+                Description {
+                    levels: heads.iter().map(|h| Level { stride: None, anchors: h.anchors.clone() }).collect(),
+                    order: CellOrder::AnchorCell,
+                    centre: Centre::Cell,
+                    boxes: Part { encoding: Some(Encoding::Darknet), ..src.clone() },
+                    objectness: Some(Part { column: 4, activation: Activation::Sigmoid, ..src.clone() }),
+                    scores: Part { column: 5, activation: Activation::Sigmoid, ..src },
+                    labels: None,
+                }
+            }
+            OutputLayout::Yolox { output, strides } => {
+                let src = Part { output: named(output), ..Part::default() };
+                Description {
+                    levels: grid(strides),
+                    order: CellOrder::AnchorCell,
+                    centre: Centre::Cell,
+                    boxes: Part { encoding: Some(Encoding::Grid), ..src.clone() },
+                    objectness: Some(Part { column: 4, ..src.clone() }),
+                    scores: Part { column: 5, ..src },
+                    labels: None,
+                }
+            }
+            OutputLayout::Ultralytics { output } => {
+                let src = Part { output: named(output), arrange: Arrange::Columns, ..Part::default() };
+                Description {
+                    levels: Vec::new(),
+                    order: CellOrder::AnchorCell,
+                    centre: Centre::Cell,
+                    boxes: Part { encoding: Some(Encoding::Cxcywh), ..src.clone() },
+                    scores: Part { column: 4, ..src },
+                    objectness: None,
+                    labels: None,
+                }
+            }
+            OutputLayout::Gfl { strides, bins } => Description {
+                levels: grid(strides),
+                order: CellOrder::AnchorCell,
+                centre: Centre::Pixel,
+                boxes: Part {
+                    per_level: true,
+                    width: Some(4 * bins),
+                    encoding: Some(Encoding::LtrbBins),
+                    bins: Some(*bins),
+                    clip: true,
+                    ..Part::default()
+                },
+                scores: Part { per_level: true, width: Some(classes), ..Part::default() },
+                objectness: None,
+                labels: None,
+            },
+            OutputLayout::Rows { output, columns, frame, .. } => {
+                let at = |c: Column| columns.iter().position(|k| *k == c).unwrap_or(0);
+                let src = Part { output: named(output), width: Some(columns.len()), ..Part::default() };
+                Description {
+                    levels: Vec::new(),
+                    order: CellOrder::AnchorCell,
+                    centre: Centre::Cell,
+                    boxes: Part {
+                        encoding: Some(Encoding::Xyxy),
+                        coords: Some([Column::X1, Column::Y1, Column::X2, Column::Y2].map(at)),
+                        frame: *frame,
+                        ..src.clone()
+                    },
+                    scores: Part { column: at(Column::Score), ..src.clone() },
+                    labels: Some(Part { column: at(Column::Class), ..src }),
+                    objectness: None,
+                }
+            }
+            OutputLayout::Detr { labels, boxes, scores, .. } => Description {
+                levels: Vec::new(),
+                order: CellOrder::AnchorCell,
+                centre: Centre::Cell,
+                boxes: Part { output: vec![boxes.clone()], encoding: Some(Encoding::Xyxy), ..Part::default() },
+                scores: Part { output: vec![scores.clone()], ..Part::default() },
+                labels: Some(Part { output: vec![labels.clone()], ..Part::default() }),
+                objectness: None,
+            },
         }
     }
 }
@@ -545,6 +644,58 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("scale_yx"), "{e}");
+    }
+
+    #[test]
+    fn widths_are_shared_by_parts_of_one_tensor_and_own_where_given() {
+        let d = OutputLayout::Yolox { output: None, strides: vec![8] }.describe(80);
+        assert_eq!(
+            [
+                crate::detect::layout::Role::Boxes,
+                crate::detect::layout::Role::Scores,
+                crate::detect::layout::Role::Objectness
+            ]
+            .map(|r| d.width(r, 80)),
+            [85; 3]
+        );
+        let g = OutputLayout::Gfl { strides: vec![8], bins: 8 }.describe(80);
+        assert_eq!(
+            (g.width(crate::detect::layout::Role::Boxes, 80), g.width(crate::detect::layout::Role::Scores, 80)),
+            (32, 80)
+        );
+        let r = OutputLayout::Rows {
+            output: None,
+            columns: vec![Column::Skip, Column::Y1, Column::X1, Column::Y2, Column::X2, Column::Score, Column::Class],
+            frame: BoxFrame::Input,
+            scores: None,
+            boxes: None,
+        }
+        .describe(80);
+        assert_eq!(r.boxes.coords, Some([2, 1, 4, 3]));
+        assert_eq!(
+            (r.scores.column, r.labels.as_ref().unwrap().column, r.width(crate::detect::layout::Role::Boxes, 80)),
+            (5, 6, 7)
+        );
+        for l in [OutputLayout::Ultralytics { output: None }, OutputLayout::Gfl { strides: vec![8, 16], bins: 4 }] {
+            l.describe(80).validate(80).unwrap();
+        }
+    }
+
+    #[test]
+    fn a_custom_layout_is_read_and_checked_when_the_config_loads() {
+        let d = tempfile::tempdir().unwrap();
+        let ssd = "[output]\nlayout='custom'\n[[output.levels]]\nstride=8\nanchors=[[10,10]]\n[output.boxes]\nencoding='prior'\nvariances=[0.1,0.2]\nwidth=4\n[output.scores]\nactivation='softmax'\nbackground=0\nwidth=81\n";
+        let c = DetectorConfig::load(&write(d.path(), &format!("{BASE}{ssd}"))).unwrap();
+        let OutputLayout::Custom(l) = &c.output else { panic!("{:?}", c.output) };
+        assert_eq!((l.levels.len(), l.scores.background), (1, Some(0)));
+        let e = DetectorConfig::load(&write(d.path(), &format!("{BASE}{}", ssd.replace("width=81", "width=80"))))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("d.toml") && e.contains("columns up to 81 of rows 80 wide"), "{e}");
+        let e = DetectorConfig::load(&write(d.path(), &format!("{BASE}{}", ssd.replace("stride=8", "strid=8"))))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("strid"), "{e}");
     }
 
     #[test]

@@ -1,6 +1,7 @@
 //! Raw model outputs → scored proposals in frame pixels, for each supported output layout.
 
-use super::config::{BoxFrame, Column, OutputLayout};
+use super::config::{BoxFrame, OutputLayout};
+use super::layout::{Activation, Arrange, CellOrder, Centre, Description, Encoding, Role};
 use super::nms::nms;
 use super::preprocess::InputMap;
 use super::{BBox, Detection, TargetScore};
@@ -102,31 +103,201 @@ fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + (-x).exp())
 }
 
-fn find<'a>(outs: &'a [RawOutput], name: Option<&str>) -> Result<&'a RawOutput, LayoutError> {
-    match name {
-        Some(n) => outs.iter().find(|o| o.name == n).ok_or_else(|| {
-            LayoutError(format!(
-                "model has no output `{n}` (outputs: {})",
-                outs.iter().map(|o| o.name.as_str()).collect::<Vec<_>>().join(", ")
-            ))
-        }),
-        None => outs.first().ok_or_else(|| LayoutError("model produced no outputs".into())),
+fn find<'a>(outs: &'a [RawOutput], name: &str) -> Result<&'a RawOutput, LayoutError> {
+    outs.iter().find(|o| o.name == name).ok_or_else(|| {
+        LayoutError(format!(
+            "model has no output `{name}` (outputs: {})",
+            outs.iter().map(|o| o.name.as_str()).collect::<Vec<_>>().join(", ")
+        ))
+    })
+}
+
+/// The model's outputs with their shapes, for messages.
+fn listing(outs: &[RawOutput]) -> String {
+    outs.iter().map(|o| format!("`{}` {:?}", o.name, o.shape)).collect::<Vec<_>>().join(", ")
+}
+
+/// One part's tensor for one level (or for every row), read by row and value.
+struct View<'a> {
+    data: &'a [f32],
+    rows: usize,
+    width: usize,
+    arrange: Arrange,
+    /// Cells of a `planes` map.
+    plane: usize,
+}
+
+impl View<'_> {
+    #[inline]
+    fn at(&self, r: usize, f: usize) -> f32 {
+        match self.arrange {
+            Arrange::Rows => self.data[r * self.width + f],
+            Arrange::Columns => self.data[f * self.rows + r],
+            Arrange::Planes => self.data[((r / self.plane) * self.width + f) * self.plane + r % self.plane],
+        }
+    }
+
+    /// Appends values `f .. f + n` of row `r` to `out`.
+    #[inline]
+    fn gather(&self, r: usize, f: usize, n: usize, out: &mut Vec<f32>) {
+        match self.arrange {
+            Arrange::Rows => out.extend_from_slice(&self.data[r * self.width + f..r * self.width + f + n]),
+            Arrange::Columns => out.extend(self.data[f * self.rows + r..].iter().step_by(self.rows).take(n)),
+            Arrange::Planes => {
+                let base = (r / self.plane) * self.width * self.plane + r % self.plane;
+                out.extend(self.data[base + f * self.plane..].iter().step_by(self.plane).take(n))
+            }
+        }
     }
 }
 
-/// Drops leading size-1 dimensions beyond `rank` (batch 1) and checks the rank.
-fn squeeze<'a>(o: &'a RawOutput, rank: usize, what: &str) -> Result<&'a [usize], LayoutError> {
+/// The rows, row width and (for `planes`) grid `(h, w)` of an output read as `arrange`, after
+/// leading batch dimensions of 1; None when its rank does not fit.
+fn read_as(o: &RawOutput, arrange: Arrange, width: usize) -> Option<(usize, usize, (usize, usize))> {
+    let rank = if arrange == Arrange::Planes { 3 } else { 2 };
     let mut s = o.shape.as_slice();
-    while s.len() > rank && s[0] == 1 {
+    if width == 1 && arrange == Arrange::Rows && s.last() == Some(&1) && s.len() > 1 {
+        s = &s[..s.len() - 1];
+    }
+    let single = width == 1 && arrange == Arrange::Rows;
+    while s.len() > rank && s[0] == 1 || single && s.len() > 1 && s[0] == 1 {
         s = &s[1..];
     }
-    if s.len() != rank {
-        return Err(LayoutError(format!(
-            "output `{}` has shape {:?}, the {what} layout needs rank {rank} (batch 1)",
-            o.name, o.shape
-        )));
+    match (arrange, s) {
+        (Arrange::Rows, [r]) if single => Some((*r, 1, (0, 0))),
+        (Arrange::Rows, [r, w]) => Some((*r, *w, (0, 0))),
+        (Arrange::Columns, [w, r]) => Some((*r, *w, (0, 0))),
+        (Arrange::Planes, [c, h, w]) if width > 0 && c % width == 0 => Some((c / width * h * w, width, (*h, *w))),
+        _ => None,
     }
-    Ok(s)
+}
+
+/// One grid level as decoded: cells, steps in input pixels, anchors.
+struct Grid {
+    gw: usize,
+    gh: usize,
+    sx: f32,
+    sy: f32,
+    anchors: Vec<[f32; 2]>,
+}
+
+impl Grid {
+    fn anchors(&self) -> usize {
+        self.anchors.len().max(1)
+    }
+
+    fn rows(&self) -> usize {
+        self.gw * self.gh * self.anchors()
+    }
+}
+
+/// A part's tensors: one per level, or one for every row.
+fn locate<'a>(
+    d: &Description,
+    role: Role,
+    outs: &'a [RawOutput],
+    grids: &[Grid],
+    classes: usize,
+) -> Result<Vec<View<'a>>, LayoutError> {
+    let p = d.part(role);
+    let width = d.width(role, classes);
+    let t = role.table();
+    let what = |rows: Option<usize>| {
+        let r = rows.map_or("R".to_string(), |r| r.to_string());
+        match p.arrange {
+            Arrange::Rows => format!("[{r}, {width}]"),
+            Arrange::Columns => format!("[{width}, {r}]"),
+            Arrange::Planes => format!("[{} anchors × {width}, H, W] maps", r),
+        }
+    };
+    let view = |o: &'a RawOutput, rows: Option<usize>| -> Result<View<'a>, LayoutError> {
+        let fits = read_as(o, p.arrange, width).filter(|(r, w, _)| *w == width && rows.is_none_or(|n| n == *r));
+        let Some((r, w, (gh, gw))) = fits else {
+            return Err(LayoutError(format!(
+                "[{t}] needs output `{}` as {}; it is {:?} (outputs: {})",
+                o.name,
+                what(rows),
+                o.shape,
+                listing(outs)
+            )));
+        };
+        Ok(View { data: &o.data, rows: r, width: w, arrange: p.arrange, plane: gh * gw })
+    };
+    let pick = |rows: Option<usize>, level: Option<usize>| -> Result<View<'a>, LayoutError> {
+        let fit: Vec<&RawOutput> = outs
+            .iter()
+            .filter(|o| read_as(o, p.arrange, width).is_some_and(|(r, w, _)| w == width && rows.is_none_or(|n| n == r)))
+            .collect();
+        let at = level.map(|l| format!(" for level {}", l + 1)).unwrap_or_default();
+        match fit.as_slice() {
+            [o] => view(o, rows),
+            [] => Err(LayoutError(format!(
+                "[{t}]{at} needs an output shaped {}; the model's outputs are {}",
+                what(rows),
+                listing(outs)
+            ))),
+            many => Err(LayoutError(format!(
+                "[{t}]{at}: outputs {} all fit {}; name one with `output`",
+                many.iter().map(|o| format!("`{}`", o.name)).collect::<Vec<_>>().join(", "),
+                what(rows)
+            ))),
+        }
+    };
+    if p.per_level {
+        let planes = p.arrange == Arrange::Planes;
+        grids
+            .iter()
+            .enumerate()
+            .map(|(l, g)| {
+                let rows = (!planes || d.levels[l].stride.is_some()).then(|| g.rows());
+                match p.output.get(l) {
+                    Some(n) => view(find(outs, n)?, rows),
+                    None => pick(rows, Some(l)),
+                }
+            })
+            .collect()
+    } else {
+        let rows = (!grids.is_empty()).then(|| grids.iter().map(Grid::rows).sum());
+        Ok(vec![match p.output.first() {
+            Some(n) => view(find(outs, n)?, rows)?,
+            None => pick(rows, None)?,
+        }])
+    }
+}
+
+/// The levels' grids: from their strides, or from the boxes' maps for a `planes` level without.
+fn grids(
+    d: &Description,
+    outs: &[RawOutput],
+    input_w: usize,
+    input_h: usize,
+    classes: usize,
+) -> Result<Vec<Grid>, LayoutError> {
+    d.levels
+        .iter()
+        .enumerate()
+        .map(|(l, level)| {
+            let (gw, gh, sx, sy) = match level.stride {
+                Some(st) => (input_w / st, input_h / st, st as f32, st as f32),
+                None => {
+                    let width = d.width(Role::Boxes, classes);
+                    let name = d.boxes.output.get(l).map(String::as_str).unwrap_or("");
+                    let o = find(outs, name)?;
+                    let Some((_, _, (gh, gw))) = read_as(o, Arrange::Planes, width).filter(|(r, _, (gh, gw))| *r == gh * gw * level.anchors.len().max(1)) else {
+                        return Err(LayoutError(format!(
+                            "output `{}` has shape {:?}; level {} needs {} anchors × {width} channels over an H × W grid",
+                            o.name,
+                            o.shape,
+                            l + 1,
+                            level.anchors.len().max(1)
+                        )));
+                    };
+                    (gw, gh, input_w as f32 / gw as f32, input_h as f32 / gh as f32)
+                }
+            };
+            Ok(Grid { gw, gh, sx, sy, anchors: level.anchors.clone() })
+        })
+        .collect()
 }
 
 /// Decodes `outs` under `layout` for an input of `input_w × input_h`, mapping boxes by `map`.
@@ -138,202 +309,171 @@ pub fn decode(
     num_classes: usize,
     map: &InputMap,
 ) -> Result<Proposals, LayoutError> {
-    let mut p;
-    match layout {
-        OutputLayout::Darknet { heads } => {
-            p = Proposals::with_capacity(num_classes, 0);
-            for head in heads {
-                let o = find(outs, Some(&head.output))?;
-                let s = squeeze(o, 3, "darknet")?;
-                let (ch, gh, gw) = (s[0], s[1], s[2]);
-                let na = head.anchors.len();
-                if ch != na * (5 + num_classes) {
-                    return Err(LayoutError(format!(
-                        "output `{}` has {ch} channels; {na} anchors × (5 + {num_classes} classes) = {} expected",
-                        o.name,
-                        na * (5 + num_classes)
-                    )));
-                }
-                let (sx, sy) = (input_w as f32 / gw as f32, input_h as f32 / gh as f32);
-                let plane = gh * gw;
-                for (a, anchor) in head.anchors.iter().enumerate() {
-                    let base = a * (5 + num_classes) * plane;
-                    for y in 0..gh {
-                        for x in 0..gw {
-                            let at = |k: usize| o.data[base + k * plane + y * gw + x];
-                            let cx = (sigmoid(at(0)) + x as f32) * sx;
-                            let cy = (sigmoid(at(1)) + y as f32) * sy;
-                            let w = at(2).exp() * anchor[0];
-                            let h = at(3).exp() * anchor[1];
-                            let obj = sigmoid(at(4));
-                            p.boxes.push(map.to_frame([cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0]));
-                            p.scores.extend((0..num_classes).map(|c| obj * sigmoid(at(5 + c))));
-                        }
-                    }
-                }
-            }
+    decode_described(&layout.describe(num_classes), outs, input_w, input_h, num_classes, map)
+}
+
+/// Decodes `outs` under a [`Description`].
+pub fn decode_described(
+    d: &Description,
+    outs: &[RawOutput],
+    input_w: usize,
+    input_h: usize,
+    classes: usize,
+    map: &InputMap,
+) -> Result<Proposals, LayoutError> {
+    let grids = grids(d, outs, input_w, input_h, classes)?;
+    let boxes = locate(d, Role::Boxes, outs, &grids, classes)?;
+    let scores = locate(d, Role::Scores, outs, &grids, classes)?;
+    let obj = d.objectness.as_ref().map(|_| locate(d, Role::Objectness, outs, &grids, classes)).transpose()?;
+    let labels = d.labels.as_ref().map(|_| locate(d, Role::Labels, outs, &grids, classes)).transpose()?;
+    // Without a grid, every part must hold as many rows as the boxes.
+    let total = if grids.is_empty() { boxes[0].rows } else { grids.iter().map(Grid::rows).sum() };
+    for (role, v) in [(Role::Scores, Some(&scores)), (Role::Objectness, obj.as_ref()), (Role::Labels, labels.as_ref())]
+    {
+        if let Some(v) = v.filter(|v| v.len() == 1 && v[0].rows != total) {
+            return Err(LayoutError(format!(
+                "[{}] holds {} rows, [output.boxes] {total} (outputs: {})",
+                role.table(),
+                v[0].rows,
+                listing(outs)
+            )));
         }
-        OutputLayout::Yolox { output, strides } => {
-            let o = find(outs, output.as_deref())?;
-            let s = squeeze(o, 2, "yolox")?;
-            let (rows, cols) = (s[0], s[1]);
-            let expect_rows: usize = strides.iter().map(|st| (input_h / st) * (input_w / st)).sum();
-            if cols != 5 + num_classes || rows != expect_rows {
-                return Err(LayoutError(format!(
-                    "output `{}` is {rows}×{cols}; yolox with strides {strides:?} at {input_w}×{input_h} and {num_classes} classes needs {expect_rows}×{}",
-                    o.name,
-                    5 + num_classes
-                )));
-            }
-            p = Proposals::with_capacity(num_classes, rows);
-            let mut r = 0;
-            for &st in strides {
-                for gy in 0..input_h / st {
-                    for gx in 0..input_w / st {
-                        let v = &o.data[r * cols..(r + 1) * cols];
-                        let cx = (v[0] + gx as f32) * st as f32;
-                        let cy = (v[1] + gy as f32) * st as f32;
-                        let (w, h) = (v[2].exp() * st as f32, v[3].exp() * st as f32);
-                        p.boxes.push(map.to_frame([cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0]));
-                        p.scores.extend(v[5..].iter().map(|c| c * v[4]));
-                        r += 1;
+    }
+    let b = &d.boxes;
+    let enc = b.encoding.unwrap_or(Encoding::Xyxy);
+    let cols = b.coords.unwrap_or([b.column, b.column + 1, b.column + 2, b.column + 3]);
+    let bins = b.bins.unwrap_or(0);
+    let [var_c, var_s] = b.variances.unwrap_or([1.0, 1.0]);
+    let (nx, ny) = if b.normalized { (input_w as f32, input_h as f32) } else { (1.0, 1.0) };
+    // Boxes the graph mapped back itself are only clipped to the frame.
+    let to_frame = match b.frame {
+        BoxFrame::Input => *map,
+        BoxFrame::Image => InputMap { scale_x: 1.0, scale_y: 1.0, pad_x: 0.0, pad_y: 0.0, ..*map },
+    };
+    let s = &d.scores;
+    let width = d.count(Role::Scores, classes);
+    let mut p = Proposals::with_capacity(classes, total);
+    let mut logits = Vec::with_capacity(width);
+    let label_col = d.labels.as_ref().map_or(0, |p| p.column);
+    let (obj_col, obj_act) = d.objectness.as_ref().map_or((0, Activation::None), |p| (p.column, p.activation));
+    let one = [Grid { gw: total, gh: 1, sx: 1.0, sy: 1.0, anchors: Vec::new() }];
+    let levels: &[Grid] = if grids.is_empty() { &one } else { &grids };
+    let mut start = 0;
+    for (l, g) in levels.iter().enumerate() {
+        // A part's view for this level and the row in it of the level's first row.
+        let pick = |v: &'_ [View<'_>]| if v.len() == 1 { (0, start) } else { (l, 0) };
+        let ((bv, bo), (sv, so)) = (pick(&boxes), pick(&scores));
+        let (bv, sv) = (&boxes[bv], &scores[sv]);
+        let ov = obj.as_ref().map(|v| (&v[pick(v).0], pick(v).1));
+        let lv = labels.as_ref().map(|v| (&v[pick(v).0], pick(v).1));
+        let (cells, na) = (g.gw * g.gh, g.anchors());
+        for lr in 0..g.rows() {
+            let label = match lv {
+                Some((v, o)) => {
+                    let label = v.at(o + lr, label_col);
+                    // Exports pad to a fixed row count with class −1.
+                    if label < 0.0 || label as usize >= classes {
+                        continue;
                     }
+                    Some(label as usize)
                 }
-            }
-        }
-        OutputLayout::Gfl { strides, bins } => {
-            let shapes = || outs.iter().map(|o| format!("{} {:?}", o.name, o.shape)).collect::<Vec<_>>().join(", ");
-            // Each level's maps, found by their row count and width.
-            let level = |rows: usize, width: usize| {
-                outs.iter().find(|o| {
-                    let s = &o.shape;
-                    s.len() >= 2
-                        && s[s.len() - 2] == rows
-                        && s[s.len() - 1] == width
-                        && s[..s.len() - 2].iter().all(|d| *d == 1)
-                })
+                None => None,
             };
-            let total: usize = strides.iter().map(|st| (input_h / st) * (input_w / st)).sum();
-            p = Proposals::with_capacity(num_classes, total);
-            for &st in strides {
-                let (gw, gh) = (input_w / st, input_h / st);
-                let rows = gw * gh;
-                let (Some(cls), Some(reg)) = (level(rows, num_classes), level(rows, 4 * bins)) else {
-                    return Err(LayoutError(format!(
-                        "gfl at {input_w}×{input_h}: stride {st} needs a [1, {rows}, {num_classes}] class map and a [1, {rows}, {}] box map; the model's outputs are {}",
-                        4 * bins,
-                        shapes()
-                    )));
-                };
-                let half = (st as f32 - 1.0) / 2.0;
-                for r in 0..rows {
-                    let (cx, cy) = ((r % gw * st) as f32 + half, (r / gw * st) as f32 + half);
-                    let mut d = [0f32; 4];
-                    for (side, dist) in d.iter_mut().enumerate() {
-                        let logits = &reg.data[(r * 4 + side) * bins..(r * 4 + side + 1) * bins];
-                        let m = logits.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
-                        let e: Vec<f32> = logits.iter().map(|v| (v - m).exp()).collect();
+            let (a, cell) = match d.order {
+                CellOrder::AnchorCell => (lr / cells, lr % cells),
+                CellOrder::CellAnchor => (lr % na, lr / na),
+            };
+            let (gx, gy) = ((cell % g.gw) as f32, (cell / g.gw) as f32);
+            let [aw, ah] = g.anchors.get(a).copied().unwrap_or([g.sx, g.sy]);
+            let (cx0, cy0) = match d.centre {
+                Centre::Cell => ((gx + 0.5) * g.sx, (gy + 0.5) * g.sy),
+                Centre::Pixel => (gx * g.sx + (g.sx - 1.0) / 2.0, gy * g.sy + (g.sy - 1.0) / 2.0),
+            };
+            let br = bo + lr;
+            let v = |k: usize| bv.at(br, cols[k]);
+            let corners = |cx: f32, cy: f32, w: f32, h: f32| [cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0];
+            let mut bx = match enc {
+                Encoding::Xyxy => [v(0) * nx, v(1) * ny, v(2) * nx, v(3) * ny],
+                Encoding::Cxcywh => corners(v(0) * nx, v(1) * ny, v(2) * nx, v(3) * ny),
+                Encoding::Grid => corners((v(0) + gx) * g.sx, (v(1) + gy) * g.sy, v(2).exp() * aw, v(3).exp() * ah),
+                Encoding::Darknet => {
+                    corners((sigmoid(v(0)) + gx) * g.sx, (sigmoid(v(1)) + gy) * g.sy, v(2).exp() * aw, v(3).exp() * ah)
+                }
+                Encoding::Yolov5 => corners(
+                    (sigmoid(v(0)) * 2.0 - 0.5 + gx) * g.sx,
+                    (sigmoid(v(1)) * 2.0 - 0.5 + gy) * g.sy,
+                    (sigmoid(v(2)) * 2.0).powi(2) * aw,
+                    (sigmoid(v(3)) * 2.0).powi(2) * ah,
+                ),
+                Encoding::Ltrb => [cx0 - v(0) * g.sx, cy0 - v(1) * g.sy, cx0 + v(2) * g.sx, cy0 + v(3) * g.sy],
+                Encoding::LtrbBins => {
+                    let mut dist = [0f32; 4];
+                    for (side, out) in dist.iter_mut().enumerate() {
+                        let at = |k: usize| bv.at(br, b.column + side * bins + k);
+                        let m = (0..bins).map(at).fold(f32::NEG_INFINITY, f32::max);
+                        let e: Vec<f32> = (0..bins).map(|k| (at(k) - m).exp()).collect();
                         let z: f32 = e.iter().sum();
-                        *dist = e.iter().enumerate().map(|(k, v)| k as f32 * v).sum::<f32>() / z * st as f32;
+                        let step = if side % 2 == 0 { g.sx } else { g.sy };
+                        *out = e.iter().enumerate().map(|(k, v)| k as f32 * v).sum::<f32>() / z * step;
                     }
-                    let clip = |v: f32, hi: usize| v.clamp(0.0, hi as f32);
-                    p.boxes.push(map.to_frame([
-                        clip(cx - d[0], input_w),
-                        clip(cy - d[1], input_h),
-                        clip(cx + d[2], input_w),
-                        clip(cy + d[3], input_h),
-                    ]));
-                    p.scores.extend_from_slice(&cls.data[r * num_classes..(r + 1) * num_classes]);
+                    [cx0 - dist[0], cy0 - dist[1], cx0 + dist[2], cy0 + dist[3]]
                 }
-            }
-        }
-        OutputLayout::Ultralytics { output } => {
-            let o = find(outs, output.as_deref())?;
-            let s = squeeze(o, 2, "ultralytics")?;
-            let (feat, n) = (s[0], s[1]);
-            if feat != 4 + num_classes {
-                return Err(LayoutError(format!(
-                    "output `{}` is {feat}×{n}; ultralytics with {num_classes} classes needs {}×N (cx, cy, w, h, classes)",
-                    o.name,
-                    4 + num_classes
-                )));
-            }
-            p = Proposals::with_capacity(num_classes, n);
-            let at = |f: usize, i: usize| o.data[f * n + i];
-            for i in 0..n {
-                let (cx, cy, w, h) = (at(0, i), at(1, i), at(2, i), at(3, i));
-                p.boxes.push(map.to_frame([cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0]));
-                p.scores.extend((0..num_classes).map(|c| at(4 + c, i)));
-            }
-        }
-        OutputLayout::Rows { output, columns, frame, .. } => {
-            let width = columns.len();
-            let o = match output {
-                Some(_) => find(outs, output.as_deref())?,
-                None => outs.iter().find(|o| squeeze(o, 2, "rows").is_ok_and(|s| s[1] == width)).ok_or_else(|| {
-                    LayoutError(format!(
-                        "no output holds rows of {width} columns (outputs: {})",
-                        outs.iter().map(|o| format!("`{}` {:?}", o.name, o.shape)).collect::<Vec<_>>().join(", ")
-                    ))
-                })?,
+                Encoding::Prior => corners(
+                    cx0 + v(0) * var_c * aw,
+                    cy0 + v(1) * var_c * ah,
+                    aw * (v(2) * var_s).exp(),
+                    ah * (v(3) * var_s).exp(),
+                ),
             };
-            let s = squeeze(o, 2, "rows")?;
-            if s[1] != width {
-                return Err(LayoutError(format!(
-                    "output `{}` has rows of {} values, the config names {width} columns",
-                    o.name, s[1]
-                )));
-            }
-            let col = |c: Column| columns.iter().position(|k| *k == c).unwrap_or(0);
-            let (ci, si) = (col(Column::Class), col(Column::Score));
-            let corners = [Column::X1, Column::Y1, Column::X2, Column::Y2].map(col);
-            // Boxes the graph mapped back itself are only clipped to the frame.
-            let to_frame = match frame {
-                BoxFrame::Input => *map,
-                BoxFrame::Image => InputMap { scale_x: 1.0, scale_y: 1.0, pad_x: 0.0, pad_y: 0.0, ..*map },
-            };
-            p = Proposals::with_capacity(num_classes, s[0]);
-            for r in o.data.chunks_exact(width) {
-                let class = r[ci];
-                // Exports pad to a fixed row count with class −1.
-                if class < 0.0 || class as usize >= num_classes {
-                    continue;
+            if b.clip {
+                for (k, c) in bx.iter_mut().enumerate() {
+                    *c = c.clamp(0.0, if k % 2 == 0 { input_w } else { input_h } as f32);
                 }
-                p.boxes.push(to_frame.to_frame(corners.map(|c| r[c])));
-                let mut row = vec![0f32; num_classes];
-                row[class as usize] = r[si];
+            }
+            p.boxes.push(to_frame.to_frame(bx));
+            let sr = so + lr;
+            if let Some(label) = label {
+                let mut row = vec![0f32; classes];
+                let x = sv.at(sr, s.column);
+                row[label] = if s.activation == Activation::Sigmoid { sigmoid(x) } else { x };
                 p.scores.extend(row);
+                continue;
+            }
+            if s.activation == Activation::Softmax {
+                logits.clear();
+                sv.gather(sr, s.column, width, &mut logits);
+                let m = logits.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+                let z: f32 = logits.iter().map(|x| (x - m).exp()).sum();
+                let bg = s.background;
+                p.scores
+                    .extend(logits.iter().enumerate().filter(|(k, _)| Some(*k) != bg).map(|(_, x)| (x - m).exp() / z));
+                continue;
+            }
+            let from = p.scores.len();
+            match s.background {
+                Some(bg) => {
+                    sv.gather(sr, s.column, bg, &mut p.scores);
+                    sv.gather(sr, s.column + bg + 1, width - bg - 1, &mut p.scores);
+                }
+                None => sv.gather(sr, s.column, width, &mut p.scores),
+            }
+            let row = &mut p.scores[from..];
+            if s.activation == Activation::Sigmoid {
+                row.iter_mut().for_each(|x| *x = sigmoid(*x));
+            }
+            if let Some((v, o)) = ov {
+                let x = v.at(o + lr, obj_col);
+                let o = if obj_act == Activation::Sigmoid { sigmoid(x) } else { x };
+                row.iter_mut().for_each(|x| *x *= o);
             }
         }
-        OutputLayout::Detr { labels, boxes, scores, .. } => {
-            let (l, b, sc) = (find(outs, Some(labels))?, find(outs, Some(boxes))?, find(outs, Some(scores))?);
-            let q = squeeze(l, 1, "detr")?[0];
-            let bs = squeeze(b, 2, "detr")?;
-            let ss = squeeze(sc, 1, "detr")?;
-            if bs != [q, 4] || ss != [q] {
-                return Err(LayoutError(format!(
-                    "detr outputs disagree: labels {:?}, boxes {:?}, scores {:?} (need [Q], [Q,4], [Q])",
-                    l.shape, b.shape, sc.shape
-                )));
-            }
-            p = Proposals::with_capacity(num_classes, q);
-            for i in 0..q {
-                let label = l.data[i];
-                let mut row = vec![0f32; num_classes];
-                if label >= 0.0 && (label as usize) < num_classes {
-                    row[label as usize] = sc.data[i];
-                }
-                let bb = &b.data[i * 4..i * 4 + 4];
-                p.boxes.push(map.to_frame([bb[0], bb[1], bb[2], bb[3]]));
-                p.scores.extend(row);
-            }
-        }
+        start += g.rows();
     }
     if let Some(bad) = p.scores.iter().position(|s| !s.is_finite()) {
         return Err(LayoutError(format!(
             "non-finite score at proposal {} class {}",
-            bad / num_classes.max(1),
-            bad % num_classes.max(1)
+            bad / classes.max(1),
+            bad % classes.max(1)
         )));
     }
     Ok(p)
@@ -342,7 +482,7 @@ pub fn decode(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::detect::config::HeadConfig;
+    use crate::detect::config::{Column, HeadConfig};
 
     const ID: InputMap = InputMap { scale_x: 1.0, scale_y: 1.0, pad_x: 0.0, pad_y: 0.0, frame_w: 1e6, frame_h: 1e6 };
 
@@ -385,7 +525,7 @@ mod tests {
         assert!((t.score - 0.45).abs() < 1e-6);
         assert_eq!(t.bbox, [4.0, 4.0, 8.0, 8.0]);
         let wrong = decode(&OutputLayout::Yolox { output: None, strides: vec![8] }, &outs, 8, 8, 1, &ID).unwrap_err();
-        assert!(wrong.to_string().contains("needs 1×6"), "{wrong}");
+        assert!(wrong.to_string().contains("shaped [1, 6]") && wrong.to_string().contains("`o` [1, 5, 6]"), "{wrong}");
     }
 
     #[test]
@@ -402,7 +542,7 @@ mod tests {
         assert_eq!(t.bbox, [3.5, 0.0, 7.5, 3.5]);
         let wrong = decode(&OutputLayout::Gfl { strides: vec![4], bins: 4 }, &[reg, cls], 8, 8, 1, &ID).unwrap_err();
         assert!(
-            wrong.to_string().contains("[1, 4, 16] box map") && wrong.to_string().contains("795 [1, 4, 8]"),
+            wrong.to_string().contains("shaped [4, 16]") && wrong.to_string().contains("`795` [1, 4, 8]"),
             "{wrong}"
         );
     }
@@ -466,7 +606,129 @@ mod tests {
             scores: None,
             boxes: None,
         };
-        assert!(decode(&l, &outs, 32, 32, 2, &half).unwrap_err().to_string().contains("7 columns"));
+        assert!(decode(&l, &outs, 32, 32, 2, &half).unwrap_err().to_string().contains("`r` as [R, 7]"));
+    }
+
+    fn described(toml: &str) -> OutputLayout {
+        let d: Description = toml::from_str(toml).unwrap();
+        d.validate(2).unwrap();
+        OutputLayout::Custom(Box::new(d))
+    }
+
+    #[test]
+    fn anchor_rows_flattened_with_activated_values_match_the_darknet_heads_they_come_from() {
+        // Two levels (strides 16 and 32 at 32²) of two anchors, two classes: darknet planes, and
+        // the same numbers decoded, flattened to rows (cx, cy, w, h, obj, classes) anchor by
+        // anchor, as YOLOv5's export writes them.
+        let (nc, anchors) = (2, [[[4.0, 6.0], [9.0, 5.0]], [[12.0, 20.0], [30.0, 24.0]]]);
+        let heads: Vec<RawOutput> = [2usize, 1]
+            .iter()
+            .enumerate()
+            .map(|(l, &g)| RawOutput {
+                name: format!("h{l}"),
+                shape: vec![1, 2 * (5 + nc), g, g],
+                data: (0..2 * (5 + nc) * g * g).map(|k| ((k * 7 + l * 3) % 11) as f32 / 5.0 - 1.0).collect(),
+            })
+            .collect();
+        let dark = OutputLayout::Darknet {
+            heads: (0..2).map(|l| HeadConfig { output: format!("h{l}"), anchors: anchors[l].to_vec() }).collect(),
+        };
+        let want = decode(&dark, &heads, 32, 32, nc, &ID).unwrap();
+        let mut rows = Vec::new();
+        for (l, h) in heads.iter().enumerate() {
+            let (g, st) = (h.shape[2], 32.0 / h.shape[2] as f32);
+            for (a, [aw, ah]) in anchors[l].iter().enumerate() {
+                for cell in 0..g * g {
+                    let at = |k: usize| h.data[(a * (5 + nc) + k) * g * g + cell];
+                    let (gx, gy) = ((cell % g) as f32, (cell / g) as f32);
+                    rows.extend([
+                        (sigmoid(at(0)) + gx) * st,
+                        (sigmoid(at(1)) + gy) * st,
+                        at(2).exp() * aw,
+                        at(3).exp() * ah,
+                    ]);
+                    rows.extend((4..5 + nc).map(|k| sigmoid(at(k))));
+                }
+            }
+        }
+        let flat = [RawOutput { name: "output".into(), shape: vec![1, 10, 5 + nc], data: rows }];
+        let got = decode(
+            &described("[boxes]\nencoding = 'cxcywh'\n[objectness]\ncolumn = 4\n[scores]\ncolumn = 5\n"),
+            &flat,
+            32,
+            32,
+            nc,
+            &ID,
+        )
+        .unwrap();
+        assert_eq!(got.len(), 10);
+        for i in 0..10 {
+            let (a, b) = (got.boxes[i], want.boxes[i]);
+            assert!(a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-5), "{i}: {a:?} vs {b:?}");
+            assert!(got.row(i).iter().zip(want.row(i)).all(|(x, y)| (x - y).abs() < 1e-6), "{i}");
+        }
+        // The raw heads as one described layout (planes, darknet encoding) give the preset's
+        // numbers bit for bit.
+        let planes = "[[levels]]\nanchors = [[4, 6], [9, 5]]\n[[levels]]\nanchors = [[12, 20], [30, 24]]\n[boxes]\noutput = ['h0', 'h1']\narrange = 'planes'\nper_level = true\nencoding = 'darknet'\n[objectness]\noutput = ['h0', 'h1']\narrange = 'planes'\nper_level = true\ncolumn = 4\nactivation = 'sigmoid'\n[scores]\noutput = ['h0', 'h1']\narrange = 'planes'\nper_level = true\ncolumn = 5\nactivation = 'sigmoid'\n";
+        assert_eq!(decode(&described(planes), &heads, 32, 32, nc, &ID).unwrap(), want);
+    }
+
+    #[test]
+    fn ssd_priors_cell_by_cell_with_softmax_and_a_background_column() {
+        // One level of stride 16 at 32² (2×2 cells), two priors per cell, cell by cell; boxes in
+        // TensorFlow's order (ty, tx, th, tw); scores softmax over background + 2 classes.
+        let mut boxes = vec![0f32; 8 * 4];
+        let mut scores = vec![0f32; 8 * 3];
+        // Row 5 = cell 2 (x 0, y 1), prior 1 (20 × 10): shifted right by 0.5 of its width, twice
+        // as tall.
+        boxes[5 * 4..5 * 4 + 4].copy_from_slice(&[0.0, 0.5 / 0.1, (2f32).ln() / 0.2, 0.0]);
+        scores[5 * 3..5 * 3 + 3].copy_from_slice(&[0.0, (3f32).ln(), 0.0]);
+        let outs = [
+            RawOutput { name: "scores".into(), shape: vec![1, 8, 3], data: scores },
+            RawOutput { name: "boxes".into(), shape: vec![1, 8, 4], data: boxes },
+        ];
+        let l = described(
+            "order = 'cell-anchor'\n[[levels]]\nstride = 16\nanchors = [[10, 10], [20, 10]]\n[boxes]\nwidth = 4\nencoding = 'prior'\ncoords = [1, 0, 3, 2]\nvariances = [0.1, 0.2]\n[scores]\nwidth = 3\nactivation = 'softmax'\nbackground = 0\n",
+        );
+        let p = decode(&l, &outs, 32, 32, 2, &ID).unwrap();
+        assert_eq!((p.len(), p.num_classes), (8, 2));
+        // Softmax of (0, ln 3, 0): 3/5 for class 0, 1/5 for class 1; the background dropped.
+        assert!((p.row(5)[0] - 0.6).abs() < 1e-6 && (p.row(5)[1] - 0.2).abs() < 1e-6, "{:?}", p.row(5));
+        // Prior centre (8, 24), size 20 × 10 → centre (18, 24), size 20 × 20.
+        let b = p.boxes[5];
+        assert!(b.iter().zip([8.0, 14.0, 28.0, 34.0]).all(|(x, y)| (x - y).abs() < 1e-4), "{b:?}");
+        assert!((p.row(0)[0] - 1.0 / 3.0).abs() < 1e-6);
+        // A grid the scores do not fit is refused with the model's outputs.
+        let wrong = described("order = 'cell-anchor'\n[[levels]]\nstride = 8\nanchors = [[10, 10], [20, 10]]\n[boxes]\nwidth = 4\nencoding = 'prior'\nvariances = [0.1, 0.2]\n[scores]\nwidth = 3\nactivation = 'softmax'\nbackground = 0\n");
+        let e = decode(&wrong, &outs, 32, 32, 2, &ID).unwrap_err().to_string();
+        assert!(e.contains("[32, 4]") && e.contains("`boxes` [1, 8, 4]"), "{e}");
+    }
+
+    #[test]
+    fn point_distances_normalized_corners_and_labelled_rows_decode_as_described() {
+        // ltrb: distances in strides from the cell centre; stride 16, cell (1, 0) → centre (24, 8).
+        let outs =
+            [RawOutput { name: "o".into(), shape: vec![1, 4, 6], data: [[0.5, 0.5, 0.5, 0.5, 0.9, 0.1]; 4].concat() }];
+        let l = described("[[levels]]\nstride = 16\n[boxes]\nencoding = 'ltrb'\n[scores]\ncolumn = 4\n");
+        let p = decode(&l, &outs, 32, 32, 2, &ID).unwrap();
+        assert_eq!(p.boxes[1], [16.0, 0.0, 32.0, 16.0]);
+        assert_eq!(p.row(1), [0.9, 0.1]);
+        // Normalized corners, a label column, a score: final detections, padding skipped.
+        let outs = [
+            RawOutput { name: "det".into(), shape: vec![1, 2, 4], data: vec![0.25, 0.5, 0.5, 1.0, 0.0, 0.0, 1.0, 1.0] },
+            RawOutput { name: "cls".into(), shape: vec![1, 2], data: vec![1.0, -1.0] },
+            RawOutput { name: "conf".into(), shape: vec![1, 2, 1], data: vec![0.7, 0.9] },
+        ];
+        let l = described(
+            "[boxes]\noutput = 'det'\nencoding = 'xyxy'\nnormalized = true\n[scores]\noutput = 'conf'\n[labels]\noutput = 'cls'\n",
+        );
+        let p = decode(&l, &outs, 32, 16, 2, &ID).unwrap();
+        assert_eq!(p.len(), 1);
+        assert_eq!((p.boxes[0], p.row(0)), ([8.0, 8.0, 16.0, 16.0], &[0.0, 0.7][..]));
+        // Unnamed outputs that fit a part equally are refused, not guessed.
+        let l = described("[boxes]\noutput = 'det'\nencoding = 'xyxy'\n[scores]\n[labels]\noutput = 'cls'\n");
+        let e = decode(&l, &outs, 32, 16, 2, &ID).unwrap_err().to_string();
+        assert!(e.contains("`cls`, `conf` all fit") && e.contains("name one"), "{e}");
     }
 
     #[test]

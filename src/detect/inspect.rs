@@ -39,7 +39,8 @@ pub struct Inspection {
 /// pav's guess at a model's output layout.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Guess {
-    /// A layout pav decodes (`darknet`, `yolox`, `ultralytics`, `detr`, `gfl`), or None.
+    /// A layout pav decodes (`darknet`, `yolox`, `ultralytics`, `detr`, `gfl`, `rows`, or
+    /// `custom` for one to describe), or None.
     pub layout: Option<&'static str>,
     /// What in the shapes led to it.
     pub why: String,
@@ -142,6 +143,21 @@ impl Inspection {
                     return g(Some("ultralytics"), format!("one [1, {a}, {b}] output: {b} columns = the grid cells of strides 8, 16, 32 at {side}², {a} = 4 box + {} classes, no objectness", a - 4));
                 }
             }
+            if let Some((strides, anchors)) =
+                (s.len() == 3 && s[2] > 5).then(|| flattened_anchors(side, s[1])).flatten()
+            {
+                return g(
+                    Some("custom"),
+                    format!(
+                        "one [1, {}, {}] output: {} rows = {anchors} anchors × the grid cells of strides {strides:?} at {side}², {} = 4 box + objectness + {} classes: anchor-based rows flattened into one matrix (YOLOv5's export)",
+                        s[1],
+                        s[2],
+                        s[1],
+                        s[2],
+                        s[2] - 5
+                    ),
+                );
+            }
         }
         if shapes.iter().all(|(_, s)| s.len() == 4 && s[2] * 32 >= side && side % s[2] == 0)
             && shapes.iter().all(|(_, s)| s[1] % 3 == 0 && s[1] / 3 > 5)
@@ -157,6 +173,17 @@ impl Inspection {
         }
         if shapes.iter().any(|(_, s)| s.len() == 2 && s[1] == 6) {
             return g(Some("rows"), "an [N, 6] output (class, score, box per row, likely with a count output): detections after an NMS inside the graph".into());
+        }
+        if let Some((b, sc)) = self.ssd_outputs() {
+            return g(
+                Some("custom"),
+                format!(
+                    "separate boxes `{}` [.., N, 4] and scores `{}` [.., N, {}] per proposal: SSD-style offsets from prior boxes",
+                    b.name,
+                    sc.name,
+                    self.shape(sc).and_then(|s| s.last().copied()).unwrap_or(0)
+                ),
+            );
         }
         let per_cell: Vec<usize> = shapes.iter().filter(|(_, s)| s.len() == 3).map(|(_, s)| s[1]).collect();
         if !per_cell.is_empty() && per_cell.iter().sum::<usize>() % rows(&[8, 16, 32]) == 0 {
@@ -242,6 +269,16 @@ impl Inspection {
                 let frame = if scale_input.is_some() { "image" } else { "input" };
                 t.push_str(&format!("layout = \"rows\"\noutput = \"{rows}\"\ncolumns = [\"class\", \"score\", \"x1\", \"y1\", \"x2\", \"y2\"]   # CHECK: the upstream post-processor's order\nframe = \"{frame}\"      # CHECK: image (boxes in frame pixels) or input\n"));
             }
+            Some("custom") => match self.ssd_outputs() {
+                Some((b, sc)) => t.push_str(&format!(
+                    "layout = \"custom\"\norder = \"cell-anchor\"     # CHECK: SSD's rows go cell by cell, each cell's priors together\n# CHECK: one level per feature map, with its stride and prior sizes [w, h] in input pixels,\n# from the model's anchor generator.\n[[output.levels]]\nstride = 16\nanchors = []\n\n[output.boxes]\noutput = \"{}\"\nencoding = \"prior\"\nvariances = [0.1, 0.2]     # CHECK: the box coder's scales\n# coords = [1, 0, 3, 2]      # CHECK: TensorFlow's exports give ty, tx, th, tw\n\n[output.scores]\noutput = \"{}\"\nactivation = \"softmax\"     # CHECK: softmax, sigmoid or none\nbackground = 0             # CHECK: the background column, if any\n",
+                    b.name, sc.name
+                )),
+                None => t.push_str(&format!(
+                    "layout = \"custom\"\n# Rows (cx, cy, w, h, objectness, classes), already decoded to input pixels as YOLOv5's\n# export writes them. CHECK: raw logits instead (values far outside the input) need\n# encoding = \"yolov5\", [[output.levels]] with strides and anchors, and activation = \"sigmoid\".\n[output.boxes]\noutput = \"{}\"\nencoding = \"cxcywh\"\n\n[output.objectness]\noutput = \"{0}\"\ncolumn = 4\n\n[output.scores]\noutput = \"{0}\"\ncolumn = 5\n",
+                    self.outputs[0].name
+                )),
+            },
             Some("gfl") => {
                 let bins = self.outputs.iter().filter_map(|p| self.shape(p)?.last().copied()).min().unwrap_or(32) / 4;
                 t.push_str(&format!("layout = \"gfl\"\nstrides = [8, 16, 32]\nbins = {bins}\n"));
@@ -251,6 +288,44 @@ impl Inspection {
         }
         t.push_str("\n[classes]\nnames = \"coco80\"\ntarget = [\"car\"]\n");
         t
+    }
+}
+
+/// The strides (a run of 8, 16, 32, 64) and anchors per cell (2 to 9) whose grids at `side`
+/// hold exactly `rows` rows, if any.
+fn flattened_anchors(side: usize, rows: usize) -> Option<(Vec<usize>, usize)> {
+    let all = [8, 16, 32, 64];
+    for anchors in 2..=9 {
+        for from in 0..all.len() {
+            for to in from + 1..=all.len() {
+                let strides = &all[from..to];
+                if anchors * strides.iter().map(|s| (side / s) * (side / s)).sum::<usize>() == rows {
+                    return Some((strides.to_vec(), anchors));
+                }
+            }
+        }
+    }
+    None
+}
+
+impl Inspection {
+    /// Exactly two float outputs holding a box and a score row per proposal, `[.., N, 4]` and
+    /// `[.., N, K ≥ 2]`: SSD's.
+    fn ssd_outputs(&self) -> Option<(&Port, &Port)> {
+        let float: Vec<(&Port, Vec<usize>)> = self
+            .outputs
+            .iter()
+            .filter(|p| p.dtype == "float32")
+            .filter_map(|p| Some((p, self.shape(p)?)))
+            .filter(|(_, s)| s.len() >= 2)
+            .collect();
+        if float.len() != 2 || self.outputs.len() != 2 {
+            return None;
+        }
+        let rows = |s: &[usize]| s[s.len() - 2];
+        let (b, sc) = if float[0].1.last() == Some(&4) { (&float[0], &float[1]) } else { (&float[1], &float[0]) };
+        (b.1.last() == Some(&4) && rows(&b.1) == rows(&sc.1) && sc.1.last().is_some_and(|k| *k >= 2))
+            .then_some((b.0, sc.0))
     }
 }
 

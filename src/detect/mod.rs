@@ -7,6 +7,7 @@ pub mod config;
 pub mod decode;
 pub mod defence;
 pub mod inspect;
+pub mod layout;
 #[cfg(feature = "eval")]
 pub mod load;
 pub mod nms;

@@ -73,7 +73,21 @@ impl OnnxDetector {
         if !unfed.is_empty() {
             return Err(model_err(format!("has inputs the config does not feed: {unfed:?}")));
         }
-        Ok(OnnxDetector { cfg, session, input_name, extra })
+        let mut det = OnnxDetector { cfg, session, input_name, extra };
+        det.check_layout()?;
+        Ok(det)
+    }
+
+    /// Decodes one run on a blank input, so that an output layout that does not fit the model
+    /// is refused when it loads rather than at its first frame.
+    fn check_layout(&mut self) -> Result<(), DetectError> {
+        let (w, h) = (self.cfg.input.width, self.cfg.input.height);
+        let map = InputMap::identity(w, h);
+        let raw = self.infer(vec![0.0; 3 * w * h], &map)?;
+        let c = &self.cfg;
+        decode(&c.output, &raw, w, h, c.class_names.len(), &map)
+            .map(|_| ())
+            .map_err(|source| DetectError::Output { detector: c.name.clone(), source })
     }
 
     /// Whether the model accepts any input height and width (symbolic spatial dimensions).
