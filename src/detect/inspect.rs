@@ -171,7 +171,7 @@ impl Inspection {
                 ),
             );
         }
-        if shapes.iter().any(|(_, s)| s.len() == 2 && s[1] == 6) {
+        if shapes.iter().any(|(_, s)| six_wide(s)) {
             return g(Some("rows"), "an [N, 6] output (class, score, box per row, likely with a count output): detections after an NMS inside the graph".into());
         }
         if let Some((b, sc)) = self.ssd_outputs() {
@@ -263,7 +263,7 @@ impl Inspection {
                 let rows = self
                     .outputs
                     .iter()
-                    .find(|p| self.shape(p).is_some_and(|s| s.len() == 2 && s[1] == 6))
+                    .find(|p| self.shape(p).is_some_and(|s| six_wide(&s)))
                     .map(|p| p.name.clone())
                     .unwrap_or_default();
                 let frame = if scale_input.is_some() { "image" } else { "input" };
@@ -291,13 +291,18 @@ impl Inspection {
     }
 }
 
-/// The strides (a run of 8, 16, 32, 64) and anchors per cell (2 to 9) whose grids at `side`
-/// hold exactly `rows` rows, if any.
+/// Rows of six values, `[N, 6]` or `[1, N, 6]`: detections after an NMS.
+fn six_wide(s: &[usize]) -> bool {
+    s.len() >= 2 && s[s.len() - 1] == 6 && s[..s.len() - 2].iter().all(|d| *d == 1)
+}
+
+/// The strides (a run of two or more of 8, 16, 32, 64) and anchors per cell (2 to 9) whose grids
+/// at `side` hold exactly `rows` rows, if any.
 fn flattened_anchors(side: usize, rows: usize) -> Option<(Vec<usize>, usize)> {
     let all = [8, 16, 32, 64];
     for anchors in 2..=9 {
         for from in 0..all.len() {
-            for to in from + 1..=all.len() {
+            for to in from + 2..=all.len() {
                 let strides = &all[from..to];
                 if anchors * strides.iter().map(|s| (side / s) * (side / s)).sum::<usize>() == rows {
                     return Some((strides.to_vec(), anchors));
@@ -420,4 +425,41 @@ pub fn from_session(model: &Path) -> Result<Inspection, super::DetectError> {
 pub fn inspect_file(model: &Path) -> Result<Inspection, String> {
     let bytes = std::fs::read(model).map_err(|e| format!("{}: {e}", model.display()))?;
     Inspection::from_bytes(&bytes).map_err(|e| format!("{}: {e}", model.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn model(outputs: &[(&str, &[usize])]) -> Inspection {
+        let port = |(n, s): &(&str, &[usize])| Port {
+            name: n.to_string(),
+            dtype: "float32".into(),
+            declared: s.iter().map(|d| d.to_string()).collect(),
+            ran: None,
+        };
+        Inspection {
+            producer: String::new(),
+            opset: 17,
+            domains: Vec::new(),
+            ops: BTreeMap::new(),
+            inputs: vec![port(&("images", &[1, 3, 640, 640]))],
+            outputs: outputs.iter().map(port).collect(),
+        }
+    }
+
+    #[test]
+    fn exports_of_other_layouts_are_named_for_what_they_are() {
+        let g = model(&[("output0", &[1, 25200, 85])]).guess(640);
+        assert_eq!(g.layout, Some("custom"));
+        assert!(g.why.contains("3 anchors × the grid cells of strides [8, 16, 32] at 640²"), "{}", g.why);
+        // YOLOX's anchor-free rows stay YOLOX.
+        assert_eq!(model(&[("output", &[1, 8400, 85])]).guess(640).layout, Some("yolox"));
+        // Ultralytics' export with NMS appended: [1, 300, 6].
+        assert_eq!(model(&[("output0", &[1, 300, 6])]).guess(640).layout, Some("rows"));
+        let g = model(&[("scores", &[1, 1917, 91]), ("boxes", &[1, 1917, 4])]).guess(300);
+        assert!(g.layout == Some("custom") && g.why.contains("`boxes` [.., N, 4]"), "{}", g.why);
+        let t = model(&[("scores", &[1, 1917, 91]), ("boxes", &[1, 1917, 4])]).skeleton("m", "m.onnx", 300, &g);
+        assert!(t.contains("encoding = \"prior\"") && t.contains("output = \"scores\""), "{t}");
+    }
 }
