@@ -27,6 +27,7 @@ pub mod provenance;
 pub mod rng;
 pub mod shard;
 pub mod sidecar;
+pub mod step;
 pub mod table;
 #[cfg(feature = "video")]
 pub mod video;

@@ -13,7 +13,7 @@ use pav::attack::whitebox::{Ensemble, WhiteBox};
 use pav::detect::defence::Defence;
 use pav::detect::DetectorConfig;
 use pav::rng::Rng;
-use pav::scene::{self, Effect, Scene};
+use pav::scene::{Effect, Scene};
 
 fn setup(size: usize, detector: &str) -> (OptimizeConfig, Setup, WhiteBox) {
     setup_defended(size, detector, &[])
@@ -103,7 +103,6 @@ fn check_defended_chain(detector: &str, zoom: Option<f32>, defence: &[Defence]) 
     );
     assert!(v.textured_share() > 0.01);
     // A smooth colour pattern, rendered lit without EoT so the map is deterministic.
-    let mut rng = Rng::new(5);
     let n = s.tex_size;
     let tex: Vec<f32> = (0..n * n * 3)
         .map(|i| {
@@ -111,16 +110,14 @@ fn check_defended_chain(detector: &str, zoom: Option<f32>, defence: &[Defence]) 
             0.5 + 0.2 * (x * 0.031 + c).sin() * (y * 0.027 - c).cos()
         })
         .collect();
-    let lit = Scene { lighting: s.scene.lighting, effects: vec![] };
-    let zoomed = Scene { lighting: None, effects: zoom.map(|f| Effect::Zoom { min: f, max: f }).into_iter().collect() };
-    // The same draw (scale and place) every time the chain is evaluated.
-    let compose = |tex: &[f32], rng: &mut Rng| {
-        let (mut img, tape) = v.render(tex, &lit, rng);
-        let z = scene::zoom::apply(&zoomed, &mut img, v.size, &mut Rng::new(11));
-        (img, tape, z)
+    let lit = Scene {
+        lighting: s.scene.lighting,
+        effects: zoom.map(|f| Effect::Zoom { min: f, max: f }).into_iter().collect(),
     };
-    let (img, tape, z) = compose(&tex, &mut rng);
-    if let Some(z) = &z {
+    // The same draw (scale and place) every time the chain is evaluated.
+    let compose = |tex: &[f32]| v.forward(tex, &lit, &mut Rng::new(11));
+    let (img, tape) = compose(&tex);
+    if let Some(z) = &tape.zoom {
         eprintln!("zoomed to {}² of {}²", z.scaled(), v.size);
     }
     let g = wb.loss_and_grad(&img, v.size, 1.0, None).unwrap();
@@ -132,10 +129,7 @@ fn check_defended_chain(detector: &str, zoom: Option<f32>, defence: &[Defence]) 
         g.loss
     );
     let mut grad = vec![0f32; tex.len()];
-    match &z {
-        Some(z) => v.backward(&tape, &scene::zoom::backward(z, &g.grad, v.size), &mut grad),
-        None => v.backward(&tape, &g.grad, &mut grad),
-    }
+    v.adjoint(&tape, &g.grad, &mut grad);
     assert!(grad.iter().all(|x| x.is_finite()));
     let region: std::collections::HashSet<u32> = s.region_values.iter().copied().collect();
     let off = grad.iter().enumerate().filter(|(i, x)| **x != 0.0 && !region.contains(&(*i as u32))).count();
@@ -150,7 +144,7 @@ fn check_defended_chain(detector: &str, zoom: Option<f32>, defence: &[Defence]) 
     let norm = dir.iter().map(|x| (*x as f64).powi(2)).sum::<f64>().sqrt();
     let loss_at = |t: f64| {
         let tt: Vec<f32> = tex.iter().zip(&dir).map(|(a, d)| a + (t * *d as f64 / norm) as f32).collect();
-        let (im, _, _) = compose(&tt, &mut Rng::new(0));
+        let (im, _) = compose(&tt);
         let l = wb.loss(&im, v.size).unwrap();
         (l.l1 as f64 + l.l2 as f64, (l.boxes, l.proposals))
     };

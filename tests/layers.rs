@@ -19,6 +19,7 @@ const LAYERS: [&[&str]; 4] = [
         "rng",
         "shard",
         "sidecar",
+        "step",
         "table",
         "plot",
         "progress",

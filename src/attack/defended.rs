@@ -92,6 +92,41 @@ pub fn backward(tape: &Tape, g: &mut Vec<f32>) {
     }
 }
 
+/// The input defences of a chain on a `side × side` planar RGB model input, as a step. Its
+/// adjoint is exact for median smoothing and cutout; the others pass the gradient straight
+/// through (BPDA), which no finite difference confirms.
+pub struct Defended<'a> {
+    /// The chain (model-side defences are skipped).
+    pub chain: &'a [Defence],
+    /// The input's side.
+    pub side: usize,
+}
+
+impl crate::step::Step for Defended<'_> {
+    type Tape = Tape;
+    type Error = DefenceError;
+
+    fn input_len(&self) -> usize {
+        3 * self.side * self.side
+    }
+
+    fn output_len(&self) -> usize {
+        3 * self.side * self.side
+    }
+
+    fn forward(&self, x: &[f32], _: &mut Rng) -> Result<(Vec<f32>, Tape), DefenceError> {
+        let mut y = x.to_vec();
+        let tape = forward(self.chain, &mut y, self.side)?;
+        Ok((y, tape))
+    }
+
+    fn adjoint(&self, tape: &Tape, gy: &[f32], gx: &mut [f32]) {
+        let mut g = gy.to_vec();
+        backward(tape, &mut g);
+        gx.iter_mut().zip(g).for_each(|(a, b)| *a += b);
+    }
+}
+
 /// Median of each `k × k` window per plane (border replicated), in place; returns, for each
 /// sample, the index of the input sample that is its median.
 fn median(x: &mut [f32], side: usize, k: usize) -> Vec<u32> {

@@ -17,7 +17,6 @@ use super::view::View;
 use super::whitebox::{Ensemble, EnsembleGrad};
 use crate::progress::Progress;
 use crate::rng::Rng;
-use crate::scene::{eot, zoom};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -258,20 +257,16 @@ pub fn step(
     let mut img = view.render_plain(printed.as_deref().unwrap_or(tex));
     let render_ms = ms(t);
     let t = Instant::now();
-    let tape = eot::apply(&setup.scene, &mut img, 3, &view.active, rng);
-    let zoomed = zoom::apply(&setup.scene, &mut img, view.size, rng);
+    let tape = view.effects(&mut img, &setup.scene, rng);
     let eot_ms = ms(t);
     let drawn = draw_members(wb.members.len(), cfg.optimizer.white_boxes_per_step, rng);
-    let car = view.car_box.map(|b| zoomed.as_ref().map_or(b, |z| z.map_box(b, view.size)));
+    let car = view.car_box.map(|b| tape.zoom.as_ref().map_or(b, |z| z.map_box(b, view.size)));
     let EnsembleGrad { sum: g, per_detector } = wb.loss_and_grad_of(&drawn, &img, view.size, cfg.loss.beta, car)?;
     let t = Instant::now();
     // Through the print channel the render's adjoint lands on the printed texture first.
     let mut grad_printed = setup.print.as_ref().map(|_| vec![0f32; grad.len()]);
     let into = grad_printed.as_deref_mut().unwrap_or(grad);
-    match &zoomed {
-        Some(z) => view.backward(&tape, &zoom::backward(z, &g.grad, view.size), into),
-        None => view.backward(&tape, &g.grad, into),
-    }
+    view.adjoint(&tape, &g.grad, into);
     let gamut = match (&setup.print, &grad_printed) {
         (Some(p), Some(gp)) => p.backward(tex, gp, &setup.region_texels, grad),
         _ => 0.0,

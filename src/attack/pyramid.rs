@@ -7,6 +7,8 @@
 //! With one level the parameters are the texels. With more, the composed texture is kept inside
 //! the clamp range and equal to the start outside the optimized region by [`Pyramid::project`],
 //! which moves the finest level only.
+use crate::rng::Rng;
+use crate::step::Step;
 
 /// The layout of the levels in one parameter vector (finest first, each RGB interleaved).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -158,6 +160,28 @@ impl Pyramid {
         for i in 0..n {
             p[i] += target[i] - t[i];
         }
+    }
+}
+
+/// The composition as a step from the parameters to the texture.
+impl Step for Pyramid {
+    type Tape = ();
+    type Error = std::convert::Infallible;
+
+    fn input_len(&self) -> usize {
+        self.len()
+    }
+
+    fn output_len(&self) -> usize {
+        self.size * self.size * 3
+    }
+
+    fn forward(&self, x: &[f32], _: &mut Rng) -> Result<(Vec<f32>, ()), Self::Error> {
+        Ok((self.compose(x), ()))
+    }
+
+    fn adjoint(&self, _: &(), gy: &[f32], gx: &mut [f32]) {
+        gx.iter_mut().zip(self.pullback(gy)).for_each(|(a, b)| *a += b);
     }
 }
 

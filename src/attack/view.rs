@@ -14,7 +14,9 @@ use crate::render::shade::{Lights, Shading};
 use crate::render::texture::Gather;
 use crate::rng::Rng;
 use crate::scene::eot::{self, EotTape};
+use crate::scene::zoom::{self, ZoomTape};
 use crate::scene::Scene;
+use crate::step::Step;
 
 /// A view ready for rendering.
 #[derive(Clone, Debug)]
@@ -35,8 +37,17 @@ pub struct View {
     pub car_box: Option<[f32; 4]>,
     /// Texture lookup at the active pixels.
     gather: Gather,
-    /// Shading factor and added light per active pixel, when the scene is lit.
-    shade: Option<(Vec<f32>, Vec<f32>)>,
+    /// The shading at the active pixels, when the scene is lit.
+    shade: Option<Shading>,
+}
+
+/// What [`View::adjoint`] needs from one pass of the scene's effects.
+#[derive(Clone, Debug)]
+pub struct ViewTape {
+    /// The EoT's gains.
+    pub eot: EotTape,
+    /// The zoom drawn, if the scene has one.
+    pub zoom: Option<ZoomTape>,
 }
 
 impl View {
@@ -62,10 +73,7 @@ impl View {
         let active = pick(&full.pixels);
         let taps = full.taps.iter().zip(&keep).filter(|(_, k)| **k).map(|(t, _)| *t).collect();
         let gather = Gather { tex_size: full.tex_size, pixels: active.clone(), taps };
-        let shade = lights.map(|l| {
-            let s = Shading::new(&g, mesh, normals, cam, l);
-            (active.iter().map(|p| s.mul[*p as usize]).collect(), active.iter().map(|p| s.add[*p as usize]).collect())
-        });
+        let shade = lights.map(|l| Shading::new(&g, mesh, normals, cam, l).restrict(&active));
         let bgr = resize(photo, size, size, Interpolation::Antialias);
         let photo = bgr.chunks(3).flat_map(|c| [c[2] / 255.0, c[1] / 255.0, c[0] / 255.0]).collect();
         Ok(View {
@@ -99,30 +107,47 @@ impl View {
     pub fn render_plain(&self, tex: &[f32]) -> Vec<f32> {
         let mut img = self.photo.clone();
         self.gather.apply(tex, 3, &mut img);
-        if let Some((mul, add)) = &self.shade {
-            for (k, p) in self.active.iter().enumerate() {
-                for v in &mut img[*p as usize * 3..*p as usize * 3 + 3] {
-                    *v = *v * mul[k] + add[k];
-                }
-            }
+        if let Some(s) = &self.shade {
+            s.apply(&mut img, 3);
         }
         img
     }
 
-    /// Accumulates `∂L/∂texture` into `grad_tex` from `∂L/∂image` (interleaved RGB).
-    pub fn backward(&self, tape: &EotTape, grad_img: &[f32], grad_tex: &mut [f32]) {
+    /// The scene's effects on a composite from [`View::render_plain`], in place: EoT at the
+    /// textured pixels, then the zoom; the tape for [`View::adjoint`].
+    pub fn effects(&self, img: &mut [f32], scene: &Scene, rng: &mut Rng) -> ViewTape {
+        let eot = eot::apply(scene, img, 3, &self.active, rng);
+        let zoom = zoom::apply(scene, img, self.size, rng);
+        ViewTape { eot, zoom }
+    }
+
+    /// What the detectors see for texture `tex`: the composite through the scene's effects.
+    pub fn forward(&self, tex: &[f32], scene: &Scene, rng: &mut Rng) -> (Vec<f32>, ViewTape) {
+        let mut img = self.render_plain(tex);
+        let tape = self.effects(&mut img, scene, rng);
+        (img, tape)
+    }
+
+    /// Accumulates `∂L/∂texture` into `grad_tex` from `∂L/∂image` of the image
+    /// [`View::forward`] gave.
+    pub fn adjoint(&self, tape: &ViewTape, grad_img: &[f32], grad_tex: &mut [f32]) {
+        match &tape.zoom {
+            Some(z) => self.backward(&tape.eot, &zoom::backward(z, grad_img, self.size), grad_tex),
+            None => self.backward(&tape.eot, grad_img, grad_tex),
+        }
+    }
+
+    /// Accumulates `∂L/∂texture` into `grad_tex` from `∂L/∂image` (interleaved RGB) of the
+    /// composite before the zoom.
+    fn backward(&self, tape: &EotTape, grad_img: &[f32], grad_tex: &mut [f32]) {
         let mut g = vec![0f32; grad_img.len()];
         for p in &self.active {
             let i = *p as usize * 3;
             g[i..i + 3].copy_from_slice(&grad_img[i..i + 3]);
         }
         eot::backward(tape, &mut g, 3, &self.active);
-        if let Some((mul, _)) = &self.shade {
-            for (k, p) in self.active.iter().enumerate() {
-                for v in &mut g[*p as usize * 3..*p as usize * 3 + 3] {
-                    *v *= mul[k];
-                }
-            }
+        if let Some(s) = &self.shade {
+            s.adjoint(&mut g, 3);
         }
         self.gather.adjoint(&g, 3, grad_tex);
     }
@@ -138,5 +163,35 @@ impl View {
     /// Share of the image that shows the texture (P = 1).
     pub fn textured_share(&self) -> f32 {
         self.active.len() as f32 / (self.size * self.size) as f32
+    }
+}
+
+/// A view's whole chain under a scene, as a step from the texture to what the detectors see.
+pub struct Rendered<'a> {
+    /// The view.
+    pub view: &'a View,
+    /// The scene whose effects are drawn.
+    pub scene: &'a Scene,
+}
+
+impl Step for Rendered<'_> {
+    type Tape = ViewTape;
+    type Error = std::convert::Infallible;
+
+    fn input_len(&self) -> usize {
+        let (w, h) = self.view.gather.tex_size;
+        w * h * 3
+    }
+
+    fn output_len(&self) -> usize {
+        self.view.size * self.view.size * 3
+    }
+
+    fn forward(&self, x: &[f32], rng: &mut Rng) -> Result<(Vec<f32>, ViewTape), Self::Error> {
+        Ok(self.view.forward(x, self.scene, rng))
+    }
+
+    fn adjoint(&self, tape: &ViewTape, gy: &[f32], gx: &mut [f32]) {
+        self.view.adjoint(tape, gy, gx);
     }
 }

@@ -2,6 +2,8 @@
 //! bit, and the same filters as a linear map with its exact adjoint for differentiable pipelines.
 
 use super::Frame;
+use crate::rng::Rng;
+use crate::step::Step;
 use serde::Deserialize;
 
 /// Resampling filter.
@@ -228,6 +230,28 @@ impl Resampler {
             }
         }
         out
+    }
+}
+
+/// Resampling an interleaved RGB image to planar RGB, as a step.
+impl Step for Resampler {
+    type Tape = ();
+    type Error = std::convert::Infallible;
+
+    fn input_len(&self) -> usize {
+        self.src * self.src * 3
+    }
+
+    fn output_len(&self) -> usize {
+        self.dst * self.dst * 3
+    }
+
+    fn forward(&self, x: &[f32], _: &mut Rng) -> Result<(Vec<f32>, ()), Self::Error> {
+        Ok((self.apply(x, 3), ()))
+    }
+
+    fn adjoint(&self, _: &(), gy: &[f32], gx: &mut [f32]) {
+        gx.iter_mut().zip(Resampler::adjoint(self, gy, 3)).for_each(|(a, b)| *a += b);
     }
 }
 

@@ -1,6 +1,8 @@
 //! The print channel of an optimization: the soft proof sampled into a [`Lut3`] whose first three
 //! channels are the printed colour and whose fourth is how far printing moves that colour
 //! (ΔE2000), so one trilinear lookup and its adjoint give both the render's input and the gamut term.
+use crate::rng::Rng;
+use crate::step::Step;
 
 use super::fit::Calibration;
 use super::lut::Lut3;
@@ -190,6 +192,41 @@ impl PrintChannel {
 /// The texels of a region (1 per optimizable texel) as indices.
 pub fn region_texels(region: &[f32]) -> Vec<u32> {
     region.iter().enumerate().filter(|(_, r)| **r > 0.5).map(|(i, _)| i as u32).collect()
+}
+
+/// Printing an RGB texture of `texels` texels, as a step (the gamut term, a loss of its own, is
+/// in [`PrintChannel::backward`]).
+pub struct Printing<'a> {
+    /// The channel.
+    pub channel: &'a PrintChannel,
+    /// Texels in the texture.
+    pub texels: usize,
+}
+
+impl Step for Printing<'_> {
+    /// The texture, where the map's Jacobian is taken.
+    type Tape = Vec<f32>;
+    type Error = std::convert::Infallible;
+
+    fn input_len(&self) -> usize {
+        self.texels * 3
+    }
+
+    fn output_len(&self) -> usize {
+        self.texels * 3
+    }
+
+    fn forward(&self, x: &[f32], _: &mut Rng) -> Result<(Vec<f32>, Vec<f32>), Self::Error> {
+        Ok((self.channel.printed(x), x.to_vec()))
+    }
+
+    fn adjoint(&self, tex: &Vec<f32>, gy: &[f32], gx: &mut [f32]) {
+        let mut g4 = vec![0f32; tex.len() / 3 * 4];
+        for (g, o) in gy.chunks_exact(3).zip(g4.chunks_exact_mut(4)) {
+            o[..3].copy_from_slice(g);
+        }
+        self.channel.lut.vjp(tex, &g4, gx, None);
+    }
 }
 
 #[cfg(test)]

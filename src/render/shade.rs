@@ -9,6 +9,8 @@ use super::raster::{GBuffer, EMPTY};
 use crate::geometry::camera::Camera;
 use crate::geometry::mesh::Mesh;
 use crate::geometry::vec3::{dot, normalize};
+use crate::rng::Rng;
+use crate::step::Step;
 
 /// Light intensities (white light) and the material's shininess; a scene's `[lighting]` table.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize)]
@@ -56,13 +58,18 @@ pub fn vertex_normals(mesh: &Mesh) -> Vec<[f32; 3]> {
     n.into_iter().map(normalize).collect()
 }
 
-/// Per-pixel affine shading terms: colour = albedo·mul + add.
+/// Per-pixel affine shading terms: colour = albedo·mul + add, over every pixel of an image or
+/// over some of them (a view's textured pixels).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Shading {
-    /// Factor on the albedo (ambient + diffuse), 0 where no surface.
+    /// Factor on the albedo (ambient + diffuse), 0 where no surface; one per shaded pixel.
     pub mul: Vec<f32>,
-    /// Added light (specular), 0 where no surface.
+    /// Added light (specular), 0 where no surface; one per shaded pixel.
     pub add: Vec<f32>,
+    /// The shaded pixels in the order of `mul` and `add`; `None`: every pixel, in order.
+    pub pixels: Option<Vec<u32>>,
+    /// Pixels in the image.
+    pub image_pixels: usize,
 }
 
 impl Shading {
@@ -95,21 +102,71 @@ impl Shading {
             mul[i] = if diffuse.is_finite() { lights.ambient + diffuse } else { lights.ambient };
             add[i] = if spec.is_finite() { spec } else { 0.0 };
         }
-        Shading { mul, add }
+        Shading { mul, add, pixels: None, image_pixels: n_px }
     }
 
-    /// In place: `img = img·mul + add` over `c` interleaved channels.
+    /// The same shading at `pixels` only (indices into the image), in their order.
+    pub fn restrict(&self, pixels: &[u32]) -> Shading {
+        let at = |k: u32| self.pixels.as_ref().map_or(Some(k as usize), |p| p.iter().position(|q| *q == k));
+        let keep: Vec<(u32, usize)> = pixels.iter().filter_map(|&p| Some((p, at(p)?))).collect();
+        Shading {
+            mul: keep.iter().map(|(_, i)| self.mul[*i]).collect(),
+            add: keep.iter().map(|(_, i)| self.add[*i]).collect(),
+            pixels: Some(keep.iter().map(|(p, _)| *p).collect()),
+            image_pixels: self.image_pixels,
+        }
+    }
+
+    /// The image index of shaded pixel `k`.
+    fn pixel(&self, k: usize) -> usize {
+        self.pixels.as_ref().map_or(k, |p| p[k] as usize)
+    }
+
+    /// In place: `img = img·mul + add` at the shaded pixels, over `c` interleaved channels.
     pub fn apply(&self, img: &mut [f32], c: usize) {
-        for (i, v) in img.iter_mut().enumerate() {
-            *v = *v * self.mul[i / c] + self.add[i / c];
+        for k in 0..self.mul.len() {
+            let p = self.pixel(k);
+            for v in &mut img[p * c..(p + 1) * c] {
+                *v = *v * self.mul[k] + self.add[k];
+            }
         }
     }
 
-    /// Gradient through the shading: `∂L/∂albedo = mul ⊙ ∂L/∂colour`.
+    /// Gradient through the shading, in place: `∂L/∂albedo = mul ⊙ ∂L/∂colour` at the shaded
+    /// pixels (the others pass unchanged).
     pub fn adjoint(&self, grad: &mut [f32], c: usize) {
-        for (i, v) in grad.iter_mut().enumerate() {
-            *v *= self.mul[i / c];
+        for k in 0..self.mul.len() {
+            let p = self.pixel(k);
+            for v in &mut grad[p * c..(p + 1) * c] {
+                *v *= self.mul[k];
+            }
         }
+    }
+}
+
+/// Shading as a step on RGB images (the unshaded pixels pass unchanged).
+impl Step for Shading {
+    type Tape = ();
+    type Error = std::convert::Infallible;
+
+    fn input_len(&self) -> usize {
+        self.image_pixels * 3
+    }
+
+    fn output_len(&self) -> usize {
+        self.image_pixels * 3
+    }
+
+    fn forward(&self, x: &[f32], _: &mut Rng) -> Result<(Vec<f32>, ()), Self::Error> {
+        let mut y = x.to_vec();
+        self.apply(&mut y, 3);
+        Ok((y, ()))
+    }
+
+    fn adjoint(&self, _: &(), gy: &[f32], gx: &mut [f32]) {
+        let mut g = gy.to_vec();
+        Shading::adjoint(self, &mut g, 3);
+        gx.iter_mut().zip(g).for_each(|(a, b)| *a += b);
     }
 }
 

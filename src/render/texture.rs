@@ -4,6 +4,9 @@
 //! render is `I = G·T` for a sparse matrix `G` with four taps per covered pixel. The gradient of
 //! any loss with respect to the texture is then `Gᵀ·∂L/∂I`, computed exactly by [`Gather::adjoint`].
 
+use crate::rng::Rng;
+use crate::step::Step;
+
 /// Texel convention: `align_corners = True` as in PyTorch3D's `TexturesUV`. u = 0 and u = 1 are
 /// the centres of the first and last columns; v = 1 is the top row; outside [0, 1] clamps.
 #[derive(Clone, Debug, PartialEq)]
@@ -64,6 +67,31 @@ impl Gather {
                 }
             }
         }
+    }
+}
+
+/// The lookup as a step from an RGB texture to an RGB image as long as its last covered pixel;
+/// pixels it does not cover are 0.
+impl Step for Gather {
+    type Tape = ();
+    type Error = std::convert::Infallible;
+
+    fn input_len(&self) -> usize {
+        self.tex_size.0 * self.tex_size.1 * 3
+    }
+
+    fn output_len(&self) -> usize {
+        self.pixels.iter().max().map_or(0, |p| *p as usize + 1) * 3
+    }
+
+    fn forward(&self, x: &[f32], _: &mut Rng) -> Result<(Vec<f32>, ()), Self::Error> {
+        let mut y = vec![0f32; self.output_len()];
+        self.apply(x, 3, &mut y);
+        Ok((y, ()))
+    }
+
+    fn adjoint(&self, _: &(), gy: &[f32], gx: &mut [f32]) {
+        Gather::adjoint(self, gy, 3, gx);
     }
 }
 

@@ -6,6 +6,7 @@
 
 use super::{Effect, Per, Scene};
 use crate::rng::Rng;
+use crate::step::Step;
 
 /// What the backward pass needs from one forward pass.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -70,6 +71,41 @@ fn draw(per: Per, once: &mut Option<f32>, mut sample: impl FnMut() -> f32) -> f3
 pub fn backward(tape: &EotTape, grad: &mut [f32], c: usize, active: &[u32]) {
     for (i, g) in tape.gain.iter().enumerate() {
         grad[active[i / c] as usize * c + i % c] *= g;
+    }
+}
+
+/// A scene's EoT at a view's textured pixels, as a step on the view's RGB composite.
+pub struct Eot<'a> {
+    /// The scene whose effects are drawn.
+    pub scene: &'a Scene,
+    /// The pixels transformed.
+    pub active: &'a [u32],
+    /// Pixels in the composite.
+    pub pixels: usize,
+}
+
+impl Step for Eot<'_> {
+    type Tape = EotTape;
+    type Error = std::convert::Infallible;
+
+    fn input_len(&self) -> usize {
+        self.pixels * 3
+    }
+
+    fn output_len(&self) -> usize {
+        self.pixels * 3
+    }
+
+    fn forward(&self, x: &[f32], rng: &mut Rng) -> Result<(Vec<f32>, EotTape), Self::Error> {
+        let mut y = x.to_vec();
+        let tape = apply(self.scene, &mut y, 3, self.active, rng);
+        Ok((y, tape))
+    }
+
+    fn adjoint(&self, tape: &EotTape, gy: &[f32], gx: &mut [f32]) {
+        let mut g = gy.to_vec();
+        backward(tape, &mut g, 3, self.active);
+        gx.iter_mut().zip(g).for_each(|(a, b)| *a += b);
     }
 }
 

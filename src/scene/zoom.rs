@@ -9,6 +9,7 @@
 use super::{Effect, Scene};
 use crate::image::resize::{Interpolation, Resampler};
 use crate::rng::Rng;
+use crate::step::Step;
 
 /// The canvas value where a zoomed-out composite leaves room (mid grey, as letterboxes are).
 pub const FILL: f32 = 0.5;
@@ -94,6 +95,41 @@ fn source(tape: &ZoomTape, x: usize, y: usize) -> Option<usize> {
     let (sx, sy) = (x as isize - tape.offset.0, y as isize - tape.offset.1);
     let n = tape.scaled as isize;
     ((0..n).contains(&sx) && (0..n).contains(&sy)).then(|| (sy * n + sx) as usize)
+}
+
+/// The scene's zoom as a step on a `size × size` RGB composite (the identity for a scene
+/// without one).
+pub struct Zoom<'a> {
+    /// The scene whose zoom is drawn.
+    pub scene: &'a Scene,
+    /// The composite's side.
+    pub size: usize,
+}
+
+impl Step for Zoom<'_> {
+    type Tape = Option<ZoomTape>;
+    type Error = std::convert::Infallible;
+
+    fn input_len(&self) -> usize {
+        self.size * self.size * 3
+    }
+
+    fn output_len(&self) -> usize {
+        self.size * self.size * 3
+    }
+
+    fn forward(&self, x: &[f32], rng: &mut Rng) -> Result<(Vec<f32>, Option<ZoomTape>), Self::Error> {
+        let mut y = x.to_vec();
+        let tape = apply(self.scene, &mut y, self.size, rng);
+        Ok((y, tape))
+    }
+
+    fn adjoint(&self, tape: &Option<ZoomTape>, gy: &[f32], gx: &mut [f32]) {
+        match tape {
+            Some(t) => gx.iter_mut().zip(backward(t, gy, self.size)).for_each(|(a, b)| *a += b),
+            None => gx.iter_mut().zip(gy).for_each(|(a, b)| *a += b),
+        }
+    }
 }
 
 #[cfg(test)]
