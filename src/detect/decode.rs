@@ -1,7 +1,7 @@
 //! Raw model outputs → scored proposals in frame pixels, for each supported output layout.
 
 use super::config::{BoxFrame, OutputLayout};
-use super::layout::{Activation, Arrange, CellOrder, Centre, Description, Encoding, Role};
+use super::layout::{sigmoid, Activation, Arrange, CellOrder, Centre, Description, Encoding, Role};
 use super::nms::nms;
 use super::preprocess::InputMap;
 use super::{BBox, Detection, TargetScore};
@@ -98,10 +98,6 @@ impl Proposals {
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
 pub struct LayoutError(pub String);
-
-fn sigmoid(x: f32) -> f32 {
-    1.0 / (1.0 + (-x).exp())
-}
 
 fn find<'a>(outs: &'a [RawOutput], name: &str) -> Result<&'a RawOutput, LayoutError> {
     outs.iter().find(|o| o.name == name).ok_or_else(|| {
@@ -210,9 +206,12 @@ fn locate<'a>(
             Arrange::Planes => format!("[{} anchors × {width}, H, W] maps", r),
         }
     };
+    // The output read as the part's arrangement, when its width and rows are the part's.
+    let fits = |o: &RawOutput, rows: Option<usize>| {
+        read_as(o, p.arrange, width).filter(|(r, w, _)| *w == width && rows.is_none_or(|n| n == *r))
+    };
     let view = |o: &'a RawOutput, rows: Option<usize>| -> Result<View<'a>, LayoutError> {
-        let fits = read_as(o, p.arrange, width).filter(|(r, w, _)| *w == width && rows.is_none_or(|n| n == *r));
-        let Some((r, w, (gh, gw))) = fits else {
+        let Some((r, w, (gh, gw))) = fits(o, rows) else {
             return Err(LayoutError(format!(
                 "[{t}] needs output `{}` as {}; it is {:?} (outputs: {})",
                 o.name,
@@ -224,10 +223,7 @@ fn locate<'a>(
         Ok(View { data: &o.data, rows: r, width: w, arrange: p.arrange, plane: gh * gw })
     };
     let pick = |rows: Option<usize>, level: Option<usize>| -> Result<View<'a>, LayoutError> {
-        let fit: Vec<&RawOutput> = outs
-            .iter()
-            .filter(|o| read_as(o, p.arrange, width).is_some_and(|(r, w, _)| w == width && rows.is_none_or(|n| n == r)))
-            .collect();
+        let fit: Vec<&RawOutput> = outs.iter().filter(|o| fits(o, rows).is_some()).collect();
         let at = level.map(|l| format!(" for level {}", l + 1)).unwrap_or_default();
         match fit.as_slice() {
             [o] => view(o, rows),
@@ -312,6 +308,16 @@ pub fn decode(
     decode_described(&layout.describe(num_classes), outs, input_w, input_h, num_classes, map)
 }
 
+/// A part's view for level `l` and the row in it of the level's first row (`start` in a tensor
+/// of every level).
+fn level_view<'v, 'o>(views: &'v [View<'o>], l: usize, start: usize) -> (&'v View<'o>, usize) {
+    if views.len() == 1 {
+        (&views[0], start)
+    } else {
+        (&views[l], 0)
+    }
+}
+
 /// Decodes `outs` under a [`Description`].
 pub fn decode_described(
     d: &Description,
@@ -360,12 +366,9 @@ pub fn decode_described(
     let levels: &[Grid] = if grids.is_empty() { &one } else { &grids };
     let mut start = 0;
     for (l, g) in levels.iter().enumerate() {
-        // A part's view for this level and the row in it of the level's first row.
-        let pick = |v: &'_ [View<'_>]| if v.len() == 1 { (0, start) } else { (l, 0) };
-        let ((bv, bo), (sv, so)) = (pick(&boxes), pick(&scores));
-        let (bv, sv) = (&boxes[bv], &scores[sv]);
-        let ov = obj.as_ref().map(|v| (&v[pick(v).0], pick(v).1));
-        let lv = labels.as_ref().map(|v| (&v[pick(v).0], pick(v).1));
+        let ((bv, bo), (sv, so)) = (level_view(&boxes, l, start), level_view(&scores, l, start));
+        let ov = obj.as_deref().map(|v| level_view(v, l, start));
+        let lv = labels.as_deref().map(|v| level_view(v, l, start));
         let (cells, na) = (g.gw * g.gh, g.anchors());
         for lr in 0..g.rows() {
             let label = match lv {
@@ -435,7 +438,7 @@ pub fn decode_described(
             if let Some(label) = label {
                 let mut row = vec![0f32; classes];
                 let x = sv.at(sr, s.column);
-                row[label] = if s.activation == Activation::Sigmoid { sigmoid(x) } else { x };
+                row[label] = s.activation.apply(x);
                 p.scores.extend(row);
                 continue;
             }
@@ -462,8 +465,7 @@ pub fn decode_described(
                 row.iter_mut().for_each(|x| *x = sigmoid(*x));
             }
             if let Some((v, o)) = ov {
-                let x = v.at(o + lr, obj_col);
-                let o = if obj_act == Activation::Sigmoid { sigmoid(x) } else { x };
+                let o = obj_act.apply(v.at(o + lr, obj_col));
                 row.iter_mut().for_each(|x| *x *= o);
             }
         }

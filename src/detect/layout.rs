@@ -90,6 +90,21 @@ pub enum Activation {
     Softmax,
 }
 
+/// The logistic function.
+pub fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+impl Activation {
+    /// One value through the activation (`softmax` works on whole rows, so it passes values on).
+    pub fn apply(self, x: f32) -> f32 {
+        match self {
+            Activation::Sigmoid => sigmoid(x),
+            Activation::None | Activation::Softmax => x,
+        }
+    }
+}
+
 /// One grid level.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]

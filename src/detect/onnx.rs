@@ -2,8 +2,9 @@
 
 use super::config::{DetectorConfig, OutputLayout};
 use super::config::{ExtraInput, ExtraValue, InputConfig};
-use super::decode::{decode, LayoutError, Proposals, RawOutput};
+use super::decode::{decode_described, LayoutError, Proposals, RawOutput};
 use super::defence::clip_graph;
+use super::layout::Description;
 use super::preprocess::InputMap;
 use super::{DetectError, Detector};
 use ort::session::Session;
@@ -27,6 +28,8 @@ pub struct OnnxDetector {
     input_name: String,
     /// The inputs beside the image: the config's, and a DETR's target size.
     extra: Vec<ExtraInput>,
+    /// The config's output layout as a description, built once rather than per frame.
+    layout: Description,
 }
 
 impl OnnxDetector {
@@ -73,7 +76,8 @@ impl OnnxDetector {
         if !unfed.is_empty() {
             return Err(model_err(format!("has inputs the config does not feed: {unfed:?}")));
         }
-        let mut det = OnnxDetector { cfg, session, input_name, extra };
+        let layout = cfg.output.describe(cfg.class_names.len());
+        let mut det = OnnxDetector { cfg, session, input_name, extra, layout };
         det.check_layout()?;
         Ok(det)
     }
@@ -84,9 +88,13 @@ impl OnnxDetector {
         let (w, h) = (self.cfg.input.width, self.cfg.input.height);
         let map = InputMap::identity(w, h);
         let raw = self.infer(vec![0.0; 3 * w * h], &map)?;
+        self.decode(&raw, &map).map(|_| ())
+    }
+
+    /// The proposals in one run's outputs, boxes mapped by `map`.
+    fn decode(&self, raw: &[RawOutput], map: &InputMap) -> Result<Proposals, DetectError> {
         let c = &self.cfg;
-        decode(&c.output, &raw, w, h, c.class_names.len(), &map)
-            .map(|_| ())
+        decode_described(&self.layout, raw, c.input.width, c.input.height, c.class_names.len(), map)
             .map_err(|source| DetectError::Output { detector: c.name.clone(), source })
     }
 
@@ -207,8 +215,6 @@ impl Detector for OnnxDetector {
 
     fn propose_prepared(&mut self, input: Vec<f32>, map: InputMap) -> Result<Proposals, DetectError> {
         let raw = self.infer(input, &map)?;
-        let c = &self.cfg;
-        decode(&c.output, &raw, c.input.width, c.input.height, c.class_names.len(), &map)
-            .map_err(|source| DetectError::Output { detector: c.name.clone(), source })
+        self.decode(&raw, &map)
     }
 }
