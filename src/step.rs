@@ -22,6 +22,11 @@ pub trait Step {
     fn adjoint(&self, tape: &Self::Tape, gy: &[f32], gx: &mut [f32]);
 }
 
+/// Adds `g` into `gx` value by value: how an adjoint accumulates a gradient it computed apart.
+pub fn accumulate(gx: &mut [f32], g: impl IntoIterator<Item = f32>) {
+    gx.iter_mut().zip(g).for_each(|(a, b)| *a += b);
+}
+
 /// How closely a step's adjoint agrees with its forward pass (relative errors).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Agreement {

@@ -8,6 +8,7 @@
 use crate::detect::defence::{Defence, DefenceError};
 use crate::image::{filter, Frame};
 use crate::rng::{fnv1a, Rng};
+use crate::step::accumulate;
 
 /// What a chain's backward needs from its forward, one entry per defence.
 #[derive(Clone, Debug, Default)]
@@ -123,7 +124,7 @@ impl crate::step::Step for Defended<'_> {
     fn adjoint(&self, tape: &Tape, gy: &[f32], gx: &mut [f32]) {
         let mut g = gy.to_vec();
         backward(tape, &mut g);
-        gx.iter_mut().zip(g).for_each(|(a, b)| *a += b);
+        accumulate(gx, g);
     }
 }
 

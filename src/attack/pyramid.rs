@@ -8,7 +8,7 @@
 //! the clamp range and equal to the start outside the optimized region by [`Pyramid::project`],
 //! which moves the finest level only.
 use crate::rng::Rng;
-use crate::step::Step;
+use crate::step::{accumulate, Step};
 
 /// The layout of the levels in one parameter vector (finest first, each RGB interleaved).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -181,7 +181,7 @@ impl Step for Pyramid {
     }
 
     fn adjoint(&self, _: &(), gy: &[f32], gx: &mut [f32]) {
-        gx.iter_mut().zip(self.pullback(gy)).for_each(|(a, b)| *a += b);
+        accumulate(gx, self.pullback(gy));
     }
 }
 

@@ -89,18 +89,12 @@ impl View {
         })
     }
 
-    /// The composite for texture `tex` (RGB interleaved, in [0, 1]) with the scene's EoT drawn
-    /// from `rng`, and the tape for [`View::backward`].
-    pub fn render(&self, tex: &[f32], scene: &Scene, rng: &mut Rng) -> (Vec<f32>, EotTape) {
-        let mut img = self.render_plain(tex);
-        let tape = eot::apply(scene, &mut img, 3, &self.active, rng);
-        (img, tape)
-    }
-
     /// The composite under a scene without random effects (the lit texture at P = 1, the photo
     /// elsewhere, clamped to [0, 1]): what scores and previews show.
     pub fn composite(&self, tex: &[f32], scene: &Scene) -> Vec<f32> {
-        self.render(tex, scene, &mut Rng::new(0)).0
+        let mut img = self.render_plain(tex);
+        eot::apply(scene, &mut img, 3, &self.active, &mut Rng::new(0));
+        img
     }
 
     /// The composite before EoT (lit texture at P = 1, photo elsewhere), not yet clamped.

@@ -3,7 +3,7 @@
 
 use super::Frame;
 use crate::rng::Rng;
-use crate::step::Step;
+use crate::step::{accumulate, Step};
 use serde::Deserialize;
 
 /// Resampling filter.
@@ -251,7 +251,7 @@ impl Step for Resampler {
     }
 
     fn adjoint(&self, _: &(), gy: &[f32], gx: &mut [f32]) {
-        gx.iter_mut().zip(Resampler::adjoint(self, gy, 3)).for_each(|(a, b)| *a += b);
+        accumulate(gx, Resampler::adjoint(self, gy, 3));
     }
 }
 

@@ -10,7 +10,7 @@ use crate::geometry::camera::Camera;
 use crate::geometry::mesh::Mesh;
 use crate::geometry::vec3::{dot, normalize};
 use crate::rng::Rng;
-use crate::step::Step;
+use crate::step::{accumulate, Step};
 
 /// Light intensities (white light) and the material's shininess; a scene's `[lighting]` table.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize)]
@@ -166,7 +166,7 @@ impl Step for Shading {
     fn adjoint(&self, _: &(), gy: &[f32], gx: &mut [f32]) {
         let mut g = gy.to_vec();
         Shading::adjoint(self, &mut g, 3);
-        gx.iter_mut().zip(g).for_each(|(a, b)| *a += b);
+        accumulate(gx, g);
     }
 }
 

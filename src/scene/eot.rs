@@ -6,7 +6,7 @@
 
 use super::{Effect, Per, Scene};
 use crate::rng::Rng;
-use crate::step::Step;
+use crate::step::{accumulate, Step};
 
 /// What the backward pass needs from one forward pass.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -105,7 +105,7 @@ impl Step for Eot<'_> {
     fn adjoint(&self, tape: &EotTape, gy: &[f32], gx: &mut [f32]) {
         let mut g = gy.to_vec();
         backward(tape, &mut g, 3, self.active);
-        gx.iter_mut().zip(g).for_each(|(a, b)| *a += b);
+        accumulate(gx, g);
     }
 }
 

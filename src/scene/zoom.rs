@@ -9,7 +9,7 @@
 use super::{Effect, Scene};
 use crate::image::resize::{Interpolation, Resampler};
 use crate::rng::Rng;
-use crate::step::Step;
+use crate::step::{accumulate, Step};
 
 /// The canvas value where a zoomed-out composite leaves room (mid grey, as letterboxes are).
 pub const FILL: f32 = 0.5;
@@ -126,8 +126,8 @@ impl Step for Zoom<'_> {
 
     fn adjoint(&self, tape: &Option<ZoomTape>, gy: &[f32], gx: &mut [f32]) {
         match tape {
-            Some(t) => gx.iter_mut().zip(backward(t, gy, self.size)).for_each(|(a, b)| *a += b),
-            None => gx.iter_mut().zip(gy).for_each(|(a, b)| *a += b),
+            Some(t) => accumulate(gx, backward(t, gy, self.size)),
+            None => accumulate(gx, gy.iter().copied()),
         }
     }
 }
