@@ -7,8 +7,7 @@
 # usage: [BASE=DIR] docs/reports/scripts/lever_longer.sh OUT   (from the repository root; about 15 min)
 set -euo pipefail
 out=$1
-pav=${PAV:-target/release/pav}
-base=configs/studies/print-base.toml
+source "$(dirname "$0")/lever_screen.sh"
 mkdir -p "$out/configs"
 cat > "$out/configs/longer.toml" <<TOML
 extends = "$(realpath $base)"
@@ -16,8 +15,4 @@ extends = "$(realpath $base)"
 [optimizer]
 epochs = 6
 TOML
-common=(--folds 3 --random-seeds 1 --reference data:rauca-e2e/RAUCA_E2E.png -d configs/detectors -d configs/detectors-wide)
-if [ -n "${BASE:-}" ] && [ ! -e "$out/base" ]; then ln -s "$(realpath "$BASE")" "$out/base"; fi
-[ -f "$out/base/crossval.csv" ] || "$pav" crossval --config $base "${common[@]}" -o "$out/base"
-[ -f "$out/longer/crossval.csv" ] || "$pav" crossval --config "$out/configs/longer.toml" "${common[@]}" -o "$out/longer"
-"$pav" table1 "$out/base" "$out/longer" --label base --label "6 epochs" --against base -o "$out/table1"
+screen "$out" longer "6 epochs"

@@ -6,8 +6,7 @@
 # usage: docs/reports/scripts/lever_nanodet.sh OUT   (from the repository root; about 20 min)
 set -euo pipefail
 out=$1
-pav=${PAV:-target/release/pav}
-base=configs/studies/print-base.toml
+source "$(dirname "$0")/lever_screen.sh"
 d=$(realpath configs/detectors)
 mkdir -p "$out/configs"
 cat > "$out/configs/nanodet.toml" <<TOML
@@ -19,7 +18,4 @@ white_box = [
   { detector = "$(realpath configs/detectors-wide/nanodet_m_416.toml)" },
 ]
 TOML
-common=(--folds 3 --random-seeds 1 --reference data:rauca-e2e/RAUCA_E2E.png -d configs/detectors -d configs/detectors-wide)
-[ -f "$out/base/crossval.csv" ] || "$pav" crossval --config $base "${common[@]}" -o "$out/base"
-[ -f "$out/nanodet/crossval.csv" ] || "$pav" crossval --config "$out/configs/nanodet.toml" "${common[@]}" -o "$out/nanodet"
-"$pav" table1 "$out/base" "$out/nanodet" --label base --label "+nanodet" --against base -o "$out/table1"
+screen "$out" nanodet "+nanodet"

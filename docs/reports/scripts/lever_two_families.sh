@@ -7,8 +7,7 @@
 # usage: [BASE=DIR] docs/reports/scripts/lever_two_families.sh OUT   (from the repository root; about 25 min)
 set -euo pipefail
 out=$1
-pav=${PAV:-target/release/pav}
-base=configs/studies/print-base.toml
+source "$(dirname "$0")/lever_screen.sh"
 d=$(realpath configs/detectors)
 w=$(realpath configs/detectors-wide)
 mkdir -p "$out/configs"
@@ -22,8 +21,4 @@ white_box = [
   { detector = "$w/picodet_xs_320.toml" },
 ]
 TOML
-common=(--folds 3 --random-seeds 1 --reference data:rauca-e2e/RAUCA_E2E.png -d configs/detectors -d configs/detectors-wide)
-if [ -n "${BASE:-}" ] && [ ! -e "$out/base" ]; then ln -s "$(realpath "$BASE")" "$out/base"; fi
-[ -f "$out/base/crossval.csv" ] || "$pav" crossval --config $base "${common[@]}" -o "$out/base"
-[ -f "$out/two-families/crossval.csv" ] || "$pav" crossval --config "$out/configs/two-families.toml" "${common[@]}" -o "$out/two-families"
-"$pav" table1 "$out/base" "$out/two-families" --label base --label "+nanodet+picodet" --against base -o "$out/table1"
+screen "$out" two-families "+nanodet+picodet"
