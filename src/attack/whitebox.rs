@@ -281,33 +281,23 @@ impl WhiteBox {
             model = class_branch(model, loss.iou).map_err(&unsupported)?;
             forward_only = usize::from(loss.iou);
         }
-        if let OutputLayout::Detr { logits, pred_boxes, .. } = &cfg.output {
-            let logits = logits.clone().ok_or_else(|| {
-                unsupported("a DETR white box needs `logits` in the config's [output]: the class logits before the post-processor".into())
-            })?;
-            let mut outputs = vec![(logits, "logits")];
+        // A graph with its post-processor inside is cut before it, at the class scores (and the
+        // boxes `loss.iou` weights by) that the config names.
+        let before_post = match &cfg.output {
+            OutputLayout::Detr { logits, pred_boxes, .. } => Some((
+                (logits, "logits", "a DETR white box needs `logits` in the config's [output]: the class logits before the post-processor"),
+                (pred_boxes, "pred_boxes", "loss.iou on a DETR white box needs `pred_boxes` in the config's [output]: the decoder's boxes before the post-processor"),
+            )),
+            OutputLayout::Rows { scores, boxes, .. } => Some((
+                (scores, "scores", "a white box of the rows layout needs `scores` in the config's [output]: the class scores its NMS reads"),
+                (boxes, "boxes", "loss.iou on a rows white box needs `boxes` in the config's [output]: the boxes its NMS reads"),
+            )),
+            _ => None,
+        };
+        if let Some(((scores, key, missing), (boxes, box_key, boxes_missing))) = before_post {
+            let mut outputs = vec![(scores.clone().ok_or_else(|| unsupported(missing.into()))?, key)];
             if loss.iou {
-                let b = pred_boxes.clone().ok_or_else(|| {
-                    unsupported("loss.iou on a DETR white box needs `pred_boxes` in the config's [output]: the decoder's boxes before the post-processor".into())
-                })?;
-                outputs.push((b, "pred_boxes"));
-                forward_only = 1;
-            }
-            model = cut_before_post(model, &outputs, &i.extra, side, &cfg.name)?;
-        }
-        if let OutputLayout::Rows { scores, boxes, .. } = &cfg.output {
-            let scores = scores.clone().ok_or_else(|| {
-                unsupported("a white box of the rows layout needs `scores` in the config's [output]: the class scores its NMS reads".into())
-            })?;
-            let mut outputs = vec![(scores, "scores")];
-            if loss.iou {
-                let b = boxes.clone().ok_or_else(|| {
-                    unsupported(
-                        "loss.iou on a rows white box needs `boxes` in the config's [output]: the boxes its NMS reads"
-                            .into(),
-                    )
-                })?;
-                outputs.push((b, "boxes"));
+                outputs.push((boxes.clone().ok_or_else(|| unsupported(boxes_missing.into()))?, box_key));
                 forward_only = 1;
             }
             model = cut_before_post(model, &outputs, &i.extra, side, &cfg.name)?;
