@@ -1,47 +1,39 @@
 //! pav: physical adversarial camouflage for vehicles (PAV-Camou) and the rig that scores it.
 //!
-//! The library is layered; a module only uses modules of its own layer or the layers below it
-//! (`tests/layers.rs` checks this):
+//! The workspace's crates are the library's layers; a crate only depends on crates of the layers
+//! below it, and no job depends on another (`tests/layers.rs` checks the manifests):
 //!
-//! | layer | modules |
+//! | layer | crates (modules of this crate) |
 //! |---|---|
-//! | 0 base | [`cluster`], [`colour`], [`data`], [`extends`], [`provenance`], [`image`], [`video`], [`geometry`], [`rng`], [`shard`], [`sidecar`], [`table`], [`plot`], [`progress`] |
-//! | 1 method blocks | [`print`], [`render`], [`scene`], [`dataset`], [`detect`] |
-//! | 2 jobs | [`attack`] (the optimizer), [`eval`] (scoring), [`rig`] (turntable and capture); no job uses another |
-//! | 3 experiments | [`experiments`]: what combines the optimizer and scoring |
+//! | 0 base | `pav-core`: [`cluster`], [`colour`], [`data`], [`extends`], [`provenance`], [`image`], [`video`], [`geometry`], [`rng`], [`shard`], [`sidecar`], [`step`], [`table`], [`plot`], [`progress`]; `pav-onnx` (ONNX graphs and their gradients, no pav dependency) |
+//! | 1 method blocks | `pav-print` ([`print`]), `pav-render` ([`render`]), `pav-scene` ([`scene`]), `pav-dataset` ([`dataset`]), `pav-detect` ([`detect`]) |
+//! | 2 jobs | `pav-attack` ([`attack`], the optimizer), `pav-eval` ([`eval`], scoring), `pav-rig` ([`rig`], turntable and capture) |
+//! | 3 experiments | this crate: [`experiments`], what combines the optimizer and scoring, and the binaries |
+//!
+//! This crate re-exports each lower crate under its module name, so `pav::detect` is
+//! `pav_detect` and `pav::image` is `pav_core::image`.
 //!
 //! Data flows one way: mesh + poses → G-buffers → textured render → EoT → composite → detector
 //! → loss → texture; and video → frames → detections → metrics → reports.
 #![warn(missing_docs)]
 
-pub mod cluster;
-pub mod colour;
-pub mod data;
-pub mod extends;
-pub mod geometry;
-pub mod image;
 #[cfg(feature = "plot")]
-pub mod plot;
-pub mod progress;
-pub mod provenance;
-pub mod rng;
-pub mod shard;
-pub mod sidecar;
-pub mod step;
-pub mod table;
+pub use pav_core::plot;
 #[cfg(feature = "video")]
-pub mod video;
+pub use pav_core::video;
+pub use pav_core::{
+    cluster, colour, data, extends, geometry, image, progress, provenance, rng, shard, sidecar, step, table,
+};
 
-pub mod dataset;
-pub mod detect;
-pub mod print;
-pub mod render;
-pub mod scene;
-
-pub mod attack;
-pub mod eval;
+pub use pav_attack as attack;
+pub use pav_dataset as dataset;
+pub use pav_detect as detect;
+pub use pav_eval as eval;
+pub use pav_print as print;
+pub use pav_render as render;
 #[cfg(feature = "rig")]
-pub mod rig;
+pub use pav_rig as rig;
+pub use pav_scene as scene;
 
 #[cfg(feature = "optimize")]
 pub mod experiments;

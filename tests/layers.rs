@@ -1,13 +1,16 @@
-//! The library's layers (see `src/lib.rs`): every `crate::` and `super::` path in `src/` (the
-//! binaries aside) is an edge from one module to another. An edge may not go up a layer, one job
-//! may not use another, no module re-exports another top-level module's items, and neither the
-//! top-level modules nor the files form a cycle.
+//! The library's layers (see `src/lib.rs`). The workspace's crates are the layers: a crate's
+//! manifest may not name a pav crate of a higher layer, nor a job another job. The compiler keeps
+//! the crates from forming a cycle; inside a crate it allows what this test refuses: every
+//! `crate::`, `super::` and `pav_…::` path in the crates' sources (the binaries aside) is an edge
+//! from one module to another, no module re-exports another top-level module's items, and
+//! neither the top-level modules (pav-core's are the base layer's) nor the files form a cycle.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
 const LAYERS: [&[&str]; 4] = [
     &[
+        "onnx",
         "cluster",
         "colour",
         "data",
@@ -81,12 +84,15 @@ fn expand(tree: &str) -> Vec<String> {
     parts.iter().filter(|p| !p.trim().is_empty()).flat_map(|p| expand(&format!("{prefix}{}", p.trim()))).collect()
 }
 
-/// Resolves `crate::…` / `super::…` written in `module` to an absolute path; `in_tests` when it
-/// sits inside the file's inline `mod tests`, where `super` is the file's own module.
-fn resolve(path: &str, module: &Module, in_tests: bool) -> Option<Module> {
+/// Resolves `crate::…` / `super::…` / `pav_x::…` written in `module` of the crate whose root is
+/// the module `root` to an absolute path; `in_tests` when it sits inside the file's inline
+/// `mod tests`, where `super` is the file's own module.
+fn resolve(path: &str, module: &Module, root: &Module, in_tests: bool) -> Option<Module> {
     let segs: Vec<&str> = path.split("::").map(str::trim).collect();
     let (mut base, rest) = match segs[0] {
-        "crate" => (Vec::new(), &segs[1..]),
+        "crate" => (root.clone(), &segs[1..]),
+        "pav_core" => (Vec::new(), &segs[1..]),
+        s if s.starts_with("pav_") => (vec![s["pav_".len()..].to_string()], &segs[1..]),
         "super" => {
             let mut b = module.clone();
             if !in_tests {
@@ -111,8 +117,28 @@ fn resolve(path: &str, module: &Module, in_tests: bool) -> Option<Module> {
     Some(base)
 }
 
-/// Every edge in the files under `src`, with the set of modules that have a file.
-fn edges(src: &Path) -> (Vec<Edge>, BTreeSet<Module>) {
+/// The module a crate's root stands for: pav-core's modules are top-level, pav-x's root is
+/// module `x`, and pav's own root re-exports them all.
+fn crate_root(name: &str) -> Module {
+    match name.strip_prefix("pav-") {
+        Some("core") | None => Vec::new(),
+        Some(m) => vec![m.to_string()],
+    }
+}
+
+/// Every edge in the files under each crate's `src`, with the set of modules that have a file.
+fn edges(crates: &[(Module, std::path::PathBuf)]) -> (Vec<Edge>, BTreeSet<Module>) {
+    let (mut out, mut modules) = (Vec::new(), BTreeSet::new());
+    for (root, src) in crates {
+        let (e, m) = crate_edges(root, src);
+        out.extend(e);
+        modules.extend(m);
+    }
+    (out, modules)
+}
+
+/// The edges of one crate whose root is module `root`.
+fn crate_edges(root: &Module, src: &Path) -> (Vec<Edge>, BTreeSet<Module>) {
     let mut files = Vec::new();
     let mut stack = vec![src.to_path_buf()];
     while let Some(d) = stack.pop() {
@@ -127,12 +153,14 @@ fn edges(src: &Path) -> (Vec<Edge>, BTreeSet<Module>) {
             }
         }
     }
-    let modules: BTreeSet<Module> = files.iter().map(|f| module_of(f.strip_prefix(src).unwrap())).collect();
+    let module_at =
+        |f: &Path| -> Module { root.iter().cloned().chain(module_of(f.strip_prefix(src).unwrap())).collect() };
+    let modules: BTreeSet<Module> = files.iter().map(|f| module_at(f)).collect();
     let path_re = |text: &str| -> Vec<(usize, String)> {
-        // Inline paths: `crate::a::b` or `super::x` outside `use` statements.
+        // Inline paths: `crate::a::b`, `super::x` or `pav_x::y` outside `use` statements.
         let mut out = Vec::new();
         let b = text.as_bytes();
-        for key in ["crate::", "super::"] {
+        for key in ["crate::", "super::", "pav_"] {
             let mut at = 0;
             while let Some(i) = text[at..].find(key) {
                 let s = at + i;
@@ -143,6 +171,9 @@ fn edges(src: &Path) -> (Vec<Edge>, BTreeSet<Module>) {
                 let end = text[s..]
                     .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_' || c == ':'))
                     .map_or(text.len(), |e| s + e);
+                if key == "pav_" && !text[s..end].contains("::") {
+                    continue; // a name such as `pav_version`, not a crate path
+                }
                 out.push((s, text[s..end].trim_end_matches(':').to_string()));
             }
         }
@@ -150,7 +181,7 @@ fn edges(src: &Path) -> (Vec<Edge>, BTreeSet<Module>) {
     };
     let mut out = Vec::new();
     for f in &files {
-        let module = module_of(f.strip_prefix(src).unwrap());
+        let module = module_at(f);
         let text = strip_comments(&std::fs::read_to_string(f).unwrap());
         let tests_at = text.find("mod tests {").unwrap_or(usize::MAX);
         let mut in_use = Vec::new();
@@ -161,13 +192,13 @@ fn edges(src: &Path) -> (Vec<Edge>, BTreeSet<Module>) {
             at = end;
             let word_start = s == 0 || !text.as_bytes()[s - 1].is_ascii_alphanumeric();
             let tree = text[s + 4..end].trim();
-            if !word_start || !(tree.starts_with("crate") || tree.starts_with("super")) {
+            if !word_start || !(tree.starts_with("crate") || tree.starts_with("super") || tree.starts_with("pav_")) {
                 continue;
             }
             in_use.push(s..end);
             let reexport = text[..s].trim_end().ends_with("pub") || text[..s].trim_end().ends_with(')');
             for p in expand(tree) {
-                if let Some(to) = resolve(&p, &module, s > tests_at) {
+                if let Some(to) = resolve(&p, &module, root, s > tests_at) {
                     out.push(Edge { from: module.clone(), to, reexport });
                 }
             }
@@ -176,7 +207,7 @@ fn edges(src: &Path) -> (Vec<Edge>, BTreeSet<Module>) {
             if in_use.iter().any(|r| r.contains(&pos)) {
                 continue;
             }
-            if let Some(to) = resolve(&p, &module, pos > tests_at) {
+            if let Some(to) = resolve(&p, &module, root, pos > tests_at) {
                 out.push(Edge { from: module.clone(), to, reexport: false });
             }
         }
@@ -264,10 +295,90 @@ fn violations(edges: &[Edge], modules: &BTreeSet<Module>) -> Vec<String> {
     bad.into_iter().collect()
 }
 
+/// The layer of a workspace crate: pav-core and pav-onnx are the base, pav-x sits where module
+/// `x` does, and pav itself holds the experiments.
+fn crate_layer(name: &str) -> Option<usize> {
+    match name {
+        "pav" => layer("experiments"),
+        "pav-core" => Some(0),
+        _ => layer(name.strip_prefix("pav-")?),
+    }
+}
+
+/// (crate, the pav crate its manifest's `[dependencies]` names) for each workspace manifest.
+fn manifest_edges(repo: &Path) -> Vec<(String, String)> {
+    let mut manifests = vec![repo.join("Cargo.toml")];
+    for e in std::fs::read_dir(repo.join("crates")).unwrap().flatten() {
+        manifests.push(e.path().join("Cargo.toml"));
+    }
+    let mut out = Vec::new();
+    for m in manifests {
+        let text = std::fs::read_to_string(&m).unwrap();
+        let name = text
+            .lines()
+            .find_map(|l| l.strip_prefix("name = \""))
+            .map(|n| n.trim_end_matches('"').to_string())
+            .unwrap();
+        let mut section = "";
+        for l in text.lines().map(str::trim) {
+            if l.starts_with('[') {
+                section = l;
+            } else if section == "[dependencies]" {
+                let dep = l.split(['=', '.', ' ']).next().unwrap_or("");
+                if dep.starts_with("pav-") || dep == "pav" {
+                    out.push((name.clone(), dep.to_string()));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Every manifest edge that goes up a layer or from one job to another.
+fn manifest_violations(deps: &[(String, String)]) -> Vec<String> {
+    let mut bad = Vec::new();
+    for (a, b) in deps {
+        match (crate_layer(a), crate_layer(b)) {
+            (Some(la), Some(lb)) if lb > la => {
+                bad.push(format!("{a} (layer {la}) depends on {b} (layer {lb}): an edge up"))
+            }
+            (Some(la), Some(lb)) if la == JOBS && lb == JOBS => {
+                bad.push(format!("{a} depends on {b}: one job uses another; combine them in experiments"))
+            }
+            (None, _) | (_, None) => bad.push(format!("{a} → {b}: a crate in no layer; add it to tests/layers.rs")),
+            _ => {}
+        }
+    }
+    bad
+}
+
+#[test]
+fn the_crates_keep_their_layers() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let deps = manifest_edges(repo);
+    let has = |a: &str, b: &str| deps.iter().any(|(x, y)| x == a && y == b);
+    for (a, b) in [("pav-attack", "pav-render"), ("pav", "pav-eval"), ("pav-rig", "pav-core")] {
+        assert!(has(a, b), "no dependency {a} → {b} found: the manifest reader is broken");
+    }
+    let bad = manifest_violations(&deps);
+    assert!(bad.is_empty(), "layer rules broken:\n  {}", bad.join("\n  "));
+    let d = |a: &str, b: &str| (a.to_string(), b.to_string());
+    assert!(manifest_violations(&[d("pav-render", "pav-attack")])[0].contains("an edge up"));
+    assert!(manifest_violations(&[d("pav-eval", "pav-rig")])[0].contains("one job uses another"));
+    assert!(manifest_violations(&[d("pav-scene", "pav-render")]).is_empty());
+}
+
 #[test]
 fn the_library_keeps_its_layers() {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let (edges, modules) = edges(&src);
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut crates = vec![(Vec::new(), repo.join("src"))];
+    for e in std::fs::read_dir(repo.join("crates")).unwrap().flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if name != "pav-onnx" {
+            crates.push((crate_root(&name), e.path().join("src")));
+        }
+    }
+    let (edges, modules) = edges(&crates);
     // The parser sees the edges that must exist, so an empty result means something.
     let has = |a: &str, b: &str| edges.iter().any(|e| e.from.first().is_some_and(|x| x == a) && e.to[0] == b);
     for (a, b) in [("attack", "render"), ("experiments", "attack"), ("experiments", "eval"), ("rig", "video")] {

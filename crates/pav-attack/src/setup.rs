@@ -1,0 +1,646 @@
+//! Everything an optimization or a digital evaluation reads once: the normalized mesh, the
+//! optimizable texels, the scene and the prepared views.
+
+use super::config::{Init, InitName, OptimizeConfig};
+use super::view::View;
+#[cfg(feature = "optimize")]
+use super::whitebox::{Ensemble, WhiteBoxError};
+use pav_core::geometry::camera::Camera;
+use pav_core::geometry::camera::CameraConvention;
+use pav_core::geometry::mesh::Mesh;
+use pav_core::geometry::parts::select_faces;
+use pav_core::geometry::uv::faces_mask;
+use pav_core::image::resize::{resize, Interpolation};
+use pav_core::image::{to_u8, Frame, ImageError, Rgb};
+use pav_dataset::fca::CarlaSample;
+use pav_detect::BBox;
+use pav_print::channel::{region_texels, PrintChannel};
+use pav_render::bake::{bake, BakeError, Plate, Shot, BAKE_SIZE};
+use pav_render::mask::MaskError;
+use pav_render::shade::{vertex_normals, Lights};
+use pav_scene::Scene;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// The random baseline has this many colour blocks across the atlas side, whatever its
+/// resolution (16 texels at 1024², about 5 mm when printed at 1:20), so baselines stay the same
+/// printed pattern when `mesh.texture_size` changes.
+pub const RANDOM_BLOCKS_PER_SIDE: usize = 64;
+
+/// The paper's random baseline: a random image of this many pixels across, scaled up to the atlas.
+pub const PAPER_RANDOM_SIDE: usize = 32;
+
+/// Errors preparing an optimization.
+#[derive(Debug, thiserror::Error)]
+pub enum SetupError {
+    /// The scene file.
+    #[error(transparent)]
+    Scene(#[from] pav_scene::SceneError),
+    /// The mesh.
+    #[error(transparent)]
+    Mesh(#[from] pav_core::geometry::mesh::MeshError),
+    /// The region image.
+    #[error(transparent)]
+    Image(#[from] pav_core::image::ImageError),
+    /// `mesh.parts`.
+    #[error("mesh.parts: {0}")]
+    Parts(#[from] pav_core::geometry::parts::PartError),
+    /// A view's npz file.
+    #[error(transparent)]
+    Sample(#[from] pav_dataset::npz::NpzError),
+    /// The ground-truth box file.
+    #[error("cannot read labels {path}: {source}")]
+    Labels {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A line of the ground-truth box file.
+    #[error("{path}:{line}: expected npz and four box columns")]
+    LabelLine {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: usize,
+    },
+    /// The dual-render mask of a view.
+    #[error("{view}: {source}")]
+    Mask {
+        /// The view (file or synthetic name).
+        view: String,
+        /// Why.
+        source: MaskError,
+    },
+    /// Baking the car's appearance or painting it out of a photo, for synthetic views.
+    #[error("{what}: {source}")]
+    Bake {
+        /// What was being done.
+        what: String,
+        /// Why.
+        source: BakeError,
+    },
+    /// The views or the region do not make a problem (nothing to optimize, a view listed twice).
+    #[error("{0}")]
+    Views(String),
+    /// A folder of rendered views that is not there yet, with the command that renders it.
+    #[error("{0}")]
+    NotRendered(super::config::MissingViews),
+    /// A folder of rendered views (`views.pbr`).
+    #[error("views.pbr: {0}")]
+    Pbr(#[from] pav_scene::views::ViewsError),
+    /// The `[print]` table's profile.
+    #[error("print.profile: {0}")]
+    Print(#[from] pav_print::proof::ProofError),
+}
+
+/// The prepared problem.
+pub struct Setup {
+    /// The normalized mesh.
+    pub mesh: Mesh,
+    /// Texture side.
+    pub tex_size: usize,
+    /// Per texel: 1 if optimizable.
+    pub region: Vec<f32>,
+    /// Indices of the optimizable values (texel × 3 + channel).
+    pub region_values: Vec<u32>,
+    /// Lighting and EoT.
+    pub scene: Scene,
+    /// Training views (photos).
+    pub train: Vec<View>,
+    /// Synthetic training views (`views.turns`): trained on, never scored.
+    pub synthetic: Vec<View>,
+    /// Rendered training views (`views.pbr`, Blender Cycles): trained on, never scored.
+    pub pbr: Vec<View>,
+    /// Held-out views.
+    pub test: Vec<View>,
+    /// Ground-truth car boxes by view name, in view pixels.
+    pub boxes: HashMap<String, BBox>,
+    /// Rendered views laid over a photo's background plate: view name → the photo's stem.
+    pub plates: HashMap<String, String>,
+    /// The `[print]` table's channel: the white boxes see the texture through it in training.
+    pub print: Option<PrintChannel>,
+    /// The channel scores see textures through (`experiments`): the `[print]` table's unless a
+    /// command names another.
+    pub print_scored: Option<PrintChannel>,
+    /// The optimizable texels (the region's, as texel indices), for the print channel's adjoint.
+    pub region_texels: Vec<u32>,
+    /// The photos behind `train` and `test` by view name, for synthetic views of any subset.
+    samples: Arc<HashMap<String, CarlaSample>>,
+    maker: ViewMaker,
+}
+
+/// What [`Setup::keep_detected_pbr`] kept.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PbrKept {
+    /// Rendered views kept.
+    pub kept: usize,
+    /// Rendered views before the filter.
+    pub total: usize,
+    /// The score a car needed.
+    pub min_score: f32,
+    /// Per white box: in how many of the `total` views it found the car.
+    pub seen_by: Vec<(String, usize)>,
+}
+
+impl std::fmt::Display for PbrKept {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let by: Vec<String> = self.seen_by.iter().map(|(n, k)| format!("{n} {k}")).collect();
+        write!(
+            f,
+            "kept {} of {} rendered views, those with a car scored ≥ {} by some white box as rendered (seen by {})",
+            self.kept,
+            self.total,
+            self.min_score,
+            by.join(", ")
+        )
+    }
+}
+
+/// What turns a CARLA sample into a [`View`].
+#[derive(Clone)]
+struct ViewMaker {
+    camera: CameraConvention,
+    size: usize,
+    normals: Vec<[f32; 3]>,
+    lights: Option<Lights>,
+    turns: Vec<f64>,
+}
+
+impl ViewMaker {
+    /// The camera of `s` with the car turned in place by `turn_deg`.
+    fn camera(&self, s: &CarlaSample, turn_deg: f64) -> Camera {
+        self.camera.camera(s.cam_trans, s.veh_trans, turn_deg)
+    }
+
+    fn view(
+        &self,
+        name: &str,
+        mesh: &Mesh,
+        cam: &Camera,
+        photo: &Frame,
+        region: &[f32],
+        ts: usize,
+    ) -> Result<View, MaskError> {
+        View::new(name, mesh, &self.normals, cam, photo, self.size, region, (ts, ts), self.lights.as_ref())
+    }
+}
+
+/// Nearest-neighbour resampling of a region mask to `size × size` texels.
+fn resample_region(mask: &[f32], w: usize, h: usize, size: usize) -> Vec<f32> {
+    let mut out = vec![0f32; size * size];
+    for y in 0..size {
+        let sy = ((y as f64 + 0.5) * h as f64 / size as f64) as usize;
+        for x in 0..size {
+            let sx = ((x as f64 + 0.5) * w as f64 / size as f64) as usize;
+            out[y * size + x] = mask[sy.min(h - 1) * w + sx.min(w - 1)];
+        }
+    }
+    out
+}
+
+/// Reads FCA's derived_test_labels.tsv: npz file stem → GT box in photo pixels.
+fn read_boxes(path: &Path) -> Result<HashMap<String, BBox>, SetupError> {
+    let text = std::fs::read_to_string(path).map_err(|source| SetupError::Labels { path: path.into(), source })?;
+    let mut out = HashMap::new();
+    for (i, line) in text.lines().enumerate().skip(1) {
+        let f: Vec<&str> = line.split('\t').collect();
+        let bad = || SetupError::LabelLine { path: path.into(), line: i + 1 };
+        if f.len() < 5 {
+            return Err(bad());
+        }
+        let v: Vec<f32> = f[1..5].iter().map(|s| s.trim().parse()).collect::<Result<_, _>>().map_err(|_| bad())?;
+        let stem = Path::new(f[0]).file_stem().map(|s| s.to_string_lossy().into_owned()).ok_or_else(bad)?;
+        out.insert(stem, [v[0], v[1], v[2], v[3]]);
+    }
+    Ok(out)
+}
+
+/// The views of the rendered folders `dirs` (`views.pbr` or `views.pbr_test`), after checking
+/// each was rendered from this config's mesh in the normalization its camera convention uses
+/// (the cameras are in that frame). Views that do not show the region are left out. With
+/// `boxes`, each kept view's car box (its silhouette's, in view pixels) goes in there.
+fn pbr_views(
+    cfg: &OptimizeConfig,
+    dirs: &[PathBuf],
+    maker: &ViewMaker,
+    mesh: &Mesh,
+    region: &[f32],
+    mut boxes: Option<&mut HashMap<String, BBox>>,
+    plates: &mut HashMap<String, String>,
+) -> Result<Vec<View>, SetupError> {
+    let mut out = Vec::new();
+    let normalize = match cfg.mesh.camera {
+        CameraConvention::Fca => "bbox",
+        CameraConvention::PavCamou => "pav",
+    };
+    let missing = cfg.missing_views();
+    for dir in dirs {
+        // Named with the command that renders it, rather than as a file the reader lacks.
+        if let Some(m) = missing.iter().find(|m| &m.dir == dir) {
+            return Err(SetupError::NotRendered(m.clone()));
+        }
+        let (info, rows) = pav_scene::views::read_view_set(dir)?;
+        if !info.shows(&cfg.mesh.obj) || info.normalize != normalize {
+            return Err(SetupError::Views(format!(
+                "views.pbr {}: rendered from {} normalized `{}`, but this config optimizes {} normalized `{normalize}`",
+                dir.display(),
+                info.obj.display(),
+                info.normalize,
+                cfg.mesh.obj.display()
+            )));
+        }
+        for r in rows {
+            let img = Rgb::load(&dir.join(&r.image))?;
+            let photo = Frame {
+                width: img.width,
+                height: img.height,
+                bgr: img.rgb.chunks(3).flat_map(|c| [to_u8(c[2]), to_u8(c[1]), to_u8(c[0])]).collect(),
+            };
+            let name = format!("pbr:{}", r.name);
+            let v = maker
+                .view(&name, mesh, &r.camera(), &photo, region, cfg.mesh.texture_size)
+                .map_err(|source| SetupError::Mask { view: name.clone(), source })?;
+            // A pose that hides the region teaches nothing, and no texture can change its score.
+            if v.active.is_empty() {
+                continue;
+            }
+            if !r.plate.is_empty() {
+                let stem = Path::new(&r.plate).file_stem().map(|s| s.to_string_lossy().into_owned());
+                plates.insert(name.clone(), stem.unwrap_or_default());
+            }
+            if let Some(b) = boxes.as_deref_mut() {
+                let mask = Rgb::load(&dir.join(&r.mask))?;
+                if let Some(bb) = silhouette_box(&mask, v.size) {
+                    b.insert(name.clone(), bb);
+                }
+            }
+            out.push(v);
+        }
+    }
+    Ok(out)
+}
+
+/// The box around a silhouette mask's lit pixels, scaled to a `size × size` view (None when
+/// the mask is empty).
+fn silhouette_box(mask: &Rgb, size: usize) -> Option<BBox> {
+    let [x0, y0, x1, y1] = pav_core::image::set_bounds(mask.width, mask.rgb.chunks(3).map(|c| c[0] > 0.5))?;
+    let (sx, sy) = (size as f32 / mask.width as f32, size as f32 / mask.height as f32);
+    Some([x0 as f32 * sx, y0 as f32 * sy, x1 as f32 * sx, y1 as f32 * sy])
+}
+
+/// The config's mesh in its camera convention's frame, and its optimizable region at the
+/// texture size: the white texels of `mesh.region` on the faces of `mesh.parts` (1 or 0 per texel).
+pub fn mesh_and_region(cfg: &OptimizeConfig) -> Result<(Mesh, Vec<f32>), SetupError> {
+    let mut mesh = Mesh::load_obj(&cfg.mesh.obj)?;
+    match cfg.mesh.camera {
+        CameraConvention::Fca => mesh.normalize_bbox(),
+        CameraConvention::PavCamou => {
+            mesh.normalize();
+        }
+    }
+    let mask = Rgb::load(&cfg.mesh.region)?;
+    let ts = cfg.mesh.texture_size;
+    let mut region = resample_region(&mask.white_mask(), mask.width, mask.height, ts);
+    let parts = cfg.parts()?;
+    if !parts.is_empty() {
+        let up = match cfg.mesh.camera {
+            CameraConvention::Fca => 2,
+            CameraConvention::PavCamou => 1,
+        };
+        let faces = select_faces(&mesh, up, &parts, cfg.mesh.parts_min_cos);
+        // Conservative: a face thinner than a texel still keeps the texels its corners read.
+        for (r, on) in region.iter_mut().zip(faces_mask(&mesh, &faces, ts)) {
+            if !on {
+                *r = 0.0;
+            }
+        }
+    }
+    Ok((mesh, region))
+}
+
+impl Setup {
+    /// Loads the config's mesh, region, scene and views, rendering views at `size` (default:
+    /// the config's), with the synthetic views of its training photos.
+    pub fn load(cfg: &OptimizeConfig, size: Option<usize>) -> Result<Setup, SetupError> {
+        let mut setup = Self::load_photos(cfg, size)?;
+        let names: Vec<&str> = setup.train.iter().map(|v| v.name.as_str()).collect();
+        setup.synthetic = setup.turned_views(&names)?;
+        Ok(setup)
+    }
+
+    /// [`Setup::load`] without synthetic views: for scoring, which never uses them, and for
+    /// cross-validation, which builds them per fold from [`Setup::turned_views`].
+    pub fn load_photos(cfg: &OptimizeConfig, size: Option<usize>) -> Result<Setup, SetupError> {
+        let scene = Scene::load(&cfg.scene)?;
+        let (mesh, region) = mesh_and_region(cfg)?;
+        let normals = if scene.lighting.is_some() { vertex_normals(&mesh) } else { Vec::new() };
+        let (ts, parts) = (cfg.mesh.texture_size, cfg.parts()?);
+        let region_values: Vec<u32> =
+            (0..ts * ts).filter(|i| region[*i] > 0.5).flat_map(|i| (0..3).map(move |c| (i * 3 + c) as u32)).collect();
+        if region_values.is_empty() {
+            return Err(SetupError::Views(format!(
+                "{} has no pure-white texel{}: nothing to optimize",
+                cfg.mesh.region.display(),
+                if parts.is_empty() { String::new() } else { format!(" on the parts {:?}", cfg.mesh.parts) }
+            )));
+        }
+        let size = size.unwrap_or(cfg.views.size);
+        let maker = ViewMaker {
+            camera: cfg.mesh.camera,
+            size,
+            normals,
+            lights: scene.lighting,
+            turns: cfg.views.turns.clone(),
+        };
+        let labels = match &cfg.views.labels {
+            Some(p) => read_boxes(p)?,
+            None => HashMap::new(),
+        };
+        let mut boxes = HashMap::new();
+        let mut samples = HashMap::new();
+        let mut views = |files: &[std::path::PathBuf]| -> Result<Vec<View>, SetupError> {
+            let mut out = Vec::new();
+            for f in files {
+                let s = CarlaSample::load(f)?;
+                let name = f.file_stem().map(|x| x.to_string_lossy().into_owned()).unwrap_or_default();
+                let v = maker
+                    .view(&name, &mesh, &maker.camera(&s, 0.0), &s.image, &region, ts)
+                    .map_err(|source| SetupError::Mask { view: f.display().to_string(), source })?;
+                if v.active.is_empty() {
+                    return Err(SetupError::Views(format!(
+                        "{}: the textured region is not visible in this view",
+                        f.display()
+                    )));
+                }
+                if let Some(b) = labels.get(&name) {
+                    let (sx, sy) = (size as f32 / s.image.width as f32, size as f32 / s.image.height as f32);
+                    boxes.insert(name.clone(), [b[0] * sx, b[1] * sy, b[2] * sx, b[3] * sy]);
+                }
+                if samples.insert(name.clone(), s).is_some() {
+                    return Err(SetupError::Views(format!("{}: a view named {name} is listed twice", f.display())));
+                }
+                out.push(v);
+            }
+            Ok(out)
+        };
+        let train = views(&cfg.views.train)?;
+        let mut test = views(&cfg.views.test)?;
+        let mut plates = HashMap::new();
+        let pbr = pbr_views(cfg, &cfg.views.pbr, &maker, &mesh, &region, None, &mut plates)?;
+        test.extend(pbr_views(cfg, &cfg.views.pbr_test, &maker, &mesh, &region, Some(&mut boxes), &mut plates)?);
+        let print = cfg.print.as_ref().map(PrintChannel::open).transpose()?;
+        Ok(Setup {
+            mesh,
+            tex_size: ts,
+            print_scored: print.clone(),
+            print,
+            region_texels: region_texels(&region),
+            region,
+            region_values,
+            scene,
+            train,
+            synthetic: Vec::new(),
+            pbr,
+            test,
+            boxes,
+            plates,
+            samples: Arc::new(samples),
+            maker,
+        })
+    }
+
+    /// The photo of view `name` at the views' size with its car painted out: the same street
+    /// without the car, where a detector should find none (`None` for a view without a photo).
+    pub fn car_free(&self, name: &str) -> Option<Result<Frame, BakeError>> {
+        let s = self.samples.get(name)?;
+        let n = self.maker.size;
+        let photo = if (s.image.width, s.image.height) == (n, n) {
+            s.image.clone()
+        } else {
+            Frame::from_levels(n, n, &resize(&s.image, n, n, Interpolation::Antialias))
+        };
+        Some(Plate::new(&self.mesh, &photo, &self.maker.camera(s, 0.0), n / 50).map(|p| p.frame()))
+    }
+
+    /// The synthetic views of `views.turns` for the photos named `names`, from an appearance
+    /// baked from those photos only (so a held-out photo never leaks into training).
+    pub fn turned_views(&self, names: &[&str]) -> Result<Vec<View>, SetupError> {
+        if self.maker.turns.is_empty() || names.is_empty() {
+            return Ok(Vec::new());
+        }
+        let samples: Vec<(&str, &CarlaSample)> = names
+            .iter()
+            .map(|n| {
+                self.samples.get(*n).map(|s| (*n, s)).ok_or_else(|| SetupError::Views(format!("no view named {n}")))
+            })
+            .collect::<Result<_, _>>()?;
+        let shots: Vec<Shot> =
+            samples.iter().map(|(_, s)| Shot { cam: self.maker.camera(s, 0.0), photo: &s.image }).collect();
+        let n = samples[0].1.image.width;
+        let app = bake(&self.mesh, &shots, BAKE_SIZE, (n / 200).max(2))
+            .map_err(|source| SetupError::Bake { what: "baking the car's appearance".into(), source })?;
+        let mut out = Vec::new();
+        for ((name, s), shot) in samples.iter().zip(&shots) {
+            let plate = Plate::new(&self.mesh, &s.image, &shot.cam, n / 50)
+                .map_err(|source| SetupError::Bake { what: format!("{name}: painting the car out"), source })?;
+            for &turn in &self.maker.turns {
+                let cam = self.maker.camera(s, turn);
+                let photo = plate.with_car(&self.mesh, &app, &cam);
+                let vname = format!("{name}@{turn:+}");
+                let v = self
+                    .maker
+                    .view(&vname, &self.mesh, &cam, &photo, &self.region, self.tex_size)
+                    .map_err(|source| SetupError::Mask { view: vname.clone(), source })?;
+                // A turn can hide the region (the car end-on under a side-only region): no view.
+                if !v.active.is_empty() {
+                    out.push(v);
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// The views an optimization steps through: the photos, the synthetic views, the rendered
+    /// views, less those laid over a held-out photo's background (its street and camera must
+    /// not be trained on).
+    pub fn training_views(&self) -> Vec<&View> {
+        self.train.iter().chain(&self.synthetic).chain(self.pbr.iter().filter(|v| !self.over_held_out(v))).collect()
+    }
+
+    /// Rendered views over photos' background plates (folders written by `pav views render`
+    /// with `[plates]`), to be scored, never trained on: each kept view's car box (its
+    /// silhouette's) goes into [`Setup::boxes`] and its photo into [`Setup::plates`]. A view
+    /// without a plate is refused: it belongs to no photo's fold.
+    pub fn rendered_over_plates(&mut self, cfg: &OptimizeConfig, dirs: &[PathBuf]) -> Result<Vec<View>, SetupError> {
+        let views =
+            pbr_views(cfg, dirs, &self.maker, &self.mesh, &self.region, Some(&mut self.boxes), &mut self.plates)?;
+        if let Some(v) = views.iter().find(|v| !self.plates.contains_key(&v.name)) {
+            return Err(SetupError::Views(format!(
+                "{}: not laid over a photo's plate; only views rendered with [plates] can be held out with their photo",
+                v.name
+            )));
+        }
+        Ok(views)
+    }
+
+    /// The photo whose background plate a rendered view lies over.
+    pub fn plate_of(&self, view: &str) -> Option<&str> {
+        self.plates.get(view).map(String::as_str)
+    }
+
+    /// Rendered training views left out because they lie over a held-out photo's background.
+    pub fn plates_held_out(&self) -> usize {
+        self.pbr.iter().filter(|v| self.over_held_out(v)).count()
+    }
+
+    fn over_held_out(&self, v: &View) -> bool {
+        self.plates.get(&v.name).is_some_and(|p| self.test.iter().any(|t| t.name == *p))
+    }
+
+    /// Shares of the optimizable texels that 0, 1 and 2 or more training views read: a texel
+    /// only one view reads is free to fit that view alone.
+    pub fn region_views_shares(&self) -> [f64; 3] {
+        let mut count = vec![0u32; self.tex_size * self.tex_size];
+        for v in self.training_views() {
+            for t in v.texels_read() {
+                count[t as usize] += 1;
+            }
+        }
+        let mut n = [0usize; 3];
+        let texels: Vec<usize> = (0..count.len()).filter(|i| self.region[*i] > 0.5).collect();
+        for &i in &texels {
+            n[(count[i] as usize).min(2)] += 1;
+        }
+        n.map(|k| k as f64 / texels.len().max(1) as f64)
+    }
+
+    /// Drops the rendered views in which no white box of `wb` finds a car at `min_score` as they
+    /// were rendered (`views.pbr_min_score`); the photos are kept whatever they score.
+    #[cfg(feature = "optimize")]
+    pub fn keep_detected_pbr(&mut self, wb: &Ensemble, min_score: f32) -> Result<PbrKept, WhiteBoxError> {
+        let total = self.pbr.len();
+        let mut seen_by = vec![0usize; wb.members.len()];
+        let mut kept = Vec::with_capacity(total);
+        for v in self.pbr.drain(..) {
+            let mut any = false;
+            for (k, (m, _)) in wb.members.iter().enumerate() {
+                if pav_detect::detected(m.loss(&v.photo, v.size)?.max_score, min_score) {
+                    seen_by[k] += 1;
+                    any = true;
+                }
+            }
+            if any {
+                kept.push(v);
+            }
+        }
+        self.pbr = kept;
+        let seen_by = wb.members.iter().map(|(m, _)| m.name().to_string()).zip(seen_by).collect();
+        Ok(PbrKept { kept: self.pbr.len(), total, min_score, seen_by })
+    }
+
+    /// The same problem over other views (cross-validation folds).
+    pub fn with_views(&self, train: Vec<View>, synthetic: Vec<View>, test: Vec<View>) -> Setup {
+        Setup {
+            mesh: self.mesh.clone(),
+            tex_size: self.tex_size,
+            region: self.region.clone(),
+            region_values: self.region_values.clone(),
+            scene: self.scene.clone(),
+            train,
+            synthetic,
+            pbr: self.pbr.clone(),
+            test,
+            boxes: self.boxes.clone(),
+            plates: self.plates.clone(),
+            print: self.print.clone(),
+            print_scored: self.print_scored.clone(),
+            region_texels: self.region_texels.clone(),
+            samples: self.samples.clone(),
+            maker: self.maker.clone(),
+        }
+    }
+
+    /// A texture as scores see it: through [`Setup::print_scored`] when set. Call it once per
+    /// texture, not per view.
+    pub fn scored<'a>(&self, tex: &'a [f32]) -> std::borrow::Cow<'a, [f32]> {
+        match &self.print_scored {
+            Some(p) => std::borrow::Cow::Owned(p.printed(tex)),
+            None => std::borrow::Cow::Borrowed(tex),
+        }
+    }
+
+    /// The deterministic scene that scores use: this run's lighting, no EoT.
+    pub fn eval_scene(&self) -> Scene {
+        Scene { lighting: self.scene.lighting, effects: Vec::new() }
+    }
+
+    /// Edge of the random baseline's blocks in texels at this atlas size.
+    pub fn random_block(&self) -> usize {
+        random_block_side(self.tex_size)
+    }
+
+    /// Block edge of the paper's random baseline ("random32", see [`PAPER_RANDOM_SIDE`]).
+    pub fn paper_random_block(&self) -> usize {
+        (self.tex_size / PAPER_RANDOM_SIDE).max(1)
+    }
+
+    /// The "random" baseline: uniform random colours in `block × block` texel squares (a
+    /// printable pattern, not sub-pixel noise that aliases in the render).
+    pub fn random_texture(&self, block: usize, seed: u64) -> Vec<f32> {
+        random_blocks(self.tex_size, block, seed)
+    }
+
+    /// The starting texture; a random start draws its blocks from `seed`.
+    pub fn initial_texture(&self, init: &Init, seed: u64) -> Result<Vec<f32>, ImageError> {
+        Ok(match init {
+            Init::Grey(g) => vec![*g; self.tex_size * self.tex_size * 3],
+            // Not seed itself: the random baselines of eval-digital and crossval draw small seeds.
+            Init::Named(InitName::Random) => self.random_texture(self.random_block(), seed ^ 0x1417_0000),
+            Init::File(p) => self.load_texture(p)?,
+        })
+    }
+
+    /// A texture image resampled to the atlas (antialiased when it shrinks, as PIL resizes), so
+    /// textures made at any size, a peer's included, can be scored and fine-tuned.
+    pub fn load_texture(&self, path: &Path) -> Result<Vec<f32>, ImageError> {
+        let t = Rgb::load(path)?;
+        let n = self.tex_size;
+        if (t.width, t.height) == (n, n) {
+            return Ok(t.rgb);
+        }
+        let frame = Frame { width: t.width, height: t.height, bgr: t.rgb.iter().map(|v| to_u8(*v)).collect() };
+        Ok(resize(&frame, n, n, Interpolation::Antialias).into_iter().map(|v| v / 255.0).collect())
+    }
+}
+
+/// An `n × n` RGB texture of uniform random colours in `block × block` squares drawn from
+/// `seed` (the "random" baseline; [`random_block_side`] is its block edge at atlas size `n`).
+pub fn random_blocks(n: usize, block: usize, seed: u64) -> Vec<f32> {
+    let b = block.max(1);
+    let cells = n.div_ceil(b);
+    let mut rng = pav_core::rng::Rng::new(seed);
+    let colours: Vec<f32> = (0..cells * cells * 3).map(|_| rng.unit()).collect();
+    (0..n * n * 3).map(|i| colours[(((i / 3) / n / b) * cells + ((i / 3) % n) / b) * 3 + i % 3]).collect()
+}
+
+/// Edge of the random baseline's blocks in texels at atlas size `n`.
+pub fn random_block_side(n: usize) -> usize {
+    (n / RANDOM_BLOCKS_PER_SIDE).max(1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn region_resampling_keeps_the_share() {
+        let (w, h) = (40, 20);
+        let mask: Vec<f32> = (0..w * h).map(|i| if (i % w) < 10 { 1.0 } else { 0.0 }).collect();
+        let r = resample_region(&mask, w, h, 16);
+        assert_eq!(r.iter().sum::<f32>(), 4.0 * 16.0);
+        assert_eq!(r[..4], [1.0; 4]);
+        assert_eq!(r[4], 0.0);
+    }
+}

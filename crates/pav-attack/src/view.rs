@@ -1,0 +1,191 @@
+//! One training or test view: a PBR photo, the camera that matches it, and everything the
+//! texture-to-image map needs, computed once (the geometry and poses are fixed).
+//!
+//! The composite `I_o = I_d'·P + I_p·(1−P)` with a binary P takes the transformed render at the
+//! P = 1 pixels and the photo elsewhere, so only those pixels are rendered, shaded and transformed.
+
+use pav_core::geometry::camera::Camera;
+use pav_core::geometry::mesh::Mesh;
+use pav_core::image::resize::{resize, Interpolation};
+use pav_core::image::Frame;
+use pav_core::rng::Rng;
+use pav_core::step::Step;
+use pav_render::mask::{dual_render_mask, MaskError};
+use pav_render::raster::GBuffer;
+use pav_render::shade::{Lights, Shading};
+use pav_render::texture::Gather;
+use pav_scene::eot::{self, EotTape};
+use pav_scene::zoom::{self, ZoomTape};
+use pav_scene::Scene;
+
+/// A view ready for rendering.
+#[derive(Clone, Debug)]
+pub struct View {
+    /// Name (the photo's file stem).
+    pub name: String,
+    /// Image side in pixels.
+    pub size: usize,
+    /// The photo resized to `size`, RGB in [0, 1], interleaved.
+    pub photo: Vec<f32>,
+    /// Pixels where P = 1, in the order of `gather`.
+    pub active: Vec<u32>,
+    /// Share of the image the car covers.
+    pub coverage: f32,
+    /// The mask threshold found for this view.
+    pub c_mid: f32,
+    /// The car's box in the view (its rendered silhouette's, xyxy pixels), if it is in view.
+    pub car_box: Option<[f32; 4]>,
+    /// Texture lookup at the active pixels.
+    gather: Gather,
+    /// The shading at the active pixels, when the scene is lit.
+    shade: Option<Shading>,
+}
+
+/// What [`View::adjoint`] needs from one pass of the scene's effects.
+#[derive(Clone, Debug)]
+pub struct ViewTape {
+    /// The EoT's gains.
+    pub eot: EotTape,
+    /// The zoom drawn, if the scene has one.
+    pub zoom: Option<ZoomTape>,
+}
+
+impl View {
+    /// Rasterizes `mesh` from `cam` at `size`, computes P from the texel `region` of a
+    /// `tex_w × tex_h` texture, and shades with `lights` (`None`: unlit albedo).
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        name: &str,
+        mesh: &Mesh,
+        normals: &[[f32; 3]],
+        cam: &Camera,
+        photo: &Frame,
+        size: usize,
+        region: &[f32],
+        (tex_w, tex_h): (usize, usize),
+        lights: Option<&Lights>,
+    ) -> Result<View, MaskError> {
+        let g = GBuffer::render(mesh, cam, size);
+        let full = Gather::new(g.uv_samples(mesh), tex_w, tex_h);
+        let (p, c_mid) = dual_render_mask(&full, region, size * size)?;
+        let keep: Vec<bool> = full.pixels.iter().map(|px| p[*px as usize] == 1.0).collect();
+        let pick = |v: &[u32]| v.iter().zip(&keep).filter(|(_, k)| **k).map(|(x, _)| *x).collect::<Vec<u32>>();
+        let active = pick(&full.pixels);
+        let taps = full.taps.iter().zip(&keep).filter(|(_, k)| **k).map(|(t, _)| *t).collect();
+        let gather = Gather { tex_size: full.tex_size, pixels: active.clone(), taps };
+        let shade = lights.map(|l| Shading::new(&g, mesh, normals, cam, l).restrict(&active));
+        let bgr = resize(photo, size, size, Interpolation::Antialias);
+        let photo = bgr.chunks(3).flat_map(|c| [c[2] / 255.0, c[1] / 255.0, c[0] / 255.0]).collect();
+        Ok(View {
+            name: name.into(),
+            size,
+            photo,
+            active,
+            coverage: g.coverage(),
+            c_mid,
+            car_box: g.bounds(),
+            gather,
+            shade,
+        })
+    }
+
+    /// The composite under a scene without random effects (the lit texture at P = 1, the photo
+    /// elsewhere, clamped to [0, 1]): what scores and previews show.
+    pub fn composite(&self, tex: &[f32], scene: &Scene) -> Vec<f32> {
+        let mut img = self.render_plain(tex);
+        eot::apply(scene, &mut img, 3, &self.active, &mut Rng::new(0));
+        img
+    }
+
+    /// The composite before EoT (lit texture at P = 1, photo elsewhere), not yet clamped.
+    pub fn render_plain(&self, tex: &[f32]) -> Vec<f32> {
+        let mut img = self.photo.clone();
+        self.gather.apply(tex, 3, &mut img);
+        if let Some(s) = &self.shade {
+            s.apply(&mut img, 3);
+        }
+        img
+    }
+
+    /// The scene's effects on a composite from [`View::render_plain`], in place: EoT at the
+    /// textured pixels, then the zoom; the tape for [`View::adjoint`].
+    pub fn effects(&self, img: &mut [f32], scene: &Scene, rng: &mut Rng) -> ViewTape {
+        let eot = eot::apply(scene, img, 3, &self.active, rng);
+        let zoom = zoom::apply(scene, img, self.size, rng);
+        ViewTape { eot, zoom }
+    }
+
+    /// What the detectors see for texture `tex`: the composite through the scene's effects.
+    pub fn forward(&self, tex: &[f32], scene: &Scene, rng: &mut Rng) -> (Vec<f32>, ViewTape) {
+        let mut img = self.render_plain(tex);
+        let tape = self.effects(&mut img, scene, rng);
+        (img, tape)
+    }
+
+    /// Accumulates `∂L/∂texture` into `grad_tex` from `∂L/∂image` of the image
+    /// [`View::forward`] gave.
+    pub fn adjoint(&self, tape: &ViewTape, grad_img: &[f32], grad_tex: &mut [f32]) {
+        match &tape.zoom {
+            Some(z) => self.backward(&tape.eot, &zoom::backward(z, grad_img, self.size), grad_tex),
+            None => self.backward(&tape.eot, grad_img, grad_tex),
+        }
+    }
+
+    /// Accumulates `∂L/∂texture` into `grad_tex` from `∂L/∂image` (interleaved RGB) of the
+    /// composite before the zoom.
+    fn backward(&self, tape: &EotTape, grad_img: &[f32], grad_tex: &mut [f32]) {
+        let mut g = vec![0f32; grad_img.len()];
+        for p in &self.active {
+            let i = *p as usize * 3;
+            g[i..i + 3].copy_from_slice(&grad_img[i..i + 3]);
+        }
+        eot::backward(tape, &mut g, 3, &self.active);
+        if let Some(s) = &self.shade {
+            s.adjoint(&mut g, 3);
+        }
+        self.gather.adjoint(&g, 3, grad_tex);
+    }
+
+    /// The texels this view reads (a bilinear tap with non-zero weight), each once, ascending.
+    pub fn texels_read(&self) -> Vec<u32> {
+        let mut t: Vec<u32> = self.gather.taps.iter().flatten().filter(|(_, w)| *w > 0.0).map(|(i, _)| *i).collect();
+        t.sort_unstable();
+        t.dedup();
+        t
+    }
+
+    /// Share of the image that shows the texture (P = 1).
+    pub fn textured_share(&self) -> f32 {
+        self.active.len() as f32 / (self.size * self.size) as f32
+    }
+}
+
+/// A view's whole chain under a scene, as a step from the texture to what the detectors see.
+pub struct Rendered<'a> {
+    /// The view.
+    pub view: &'a View,
+    /// The scene whose effects are drawn.
+    pub scene: &'a Scene,
+}
+
+impl Step for Rendered<'_> {
+    type Tape = ViewTape;
+    type Error = std::convert::Infallible;
+
+    fn input_len(&self) -> usize {
+        let (w, h) = self.view.gather.tex_size;
+        w * h * 3
+    }
+
+    fn output_len(&self) -> usize {
+        self.view.size * self.view.size * 3
+    }
+
+    fn forward(&self, x: &[f32], rng: &mut Rng) -> Result<(Vec<f32>, ViewTape), Self::Error> {
+        Ok(self.view.forward(x, self.scene, rng))
+    }
+
+    fn adjoint(&self, tape: &ViewTape, gy: &[f32], gx: &mut [f32]) {
+        self.view.adjoint(tape, gy, gx);
+    }
+}

@@ -1,0 +1,636 @@
+//! The white-box detector side of a step: composite image → detector → L1 + β·L2, and the exact
+//! gradient back to the composite's pixels.
+//!
+//! A white box is the evaluated model itself: the ONNX file its detector config names (the same
+//! one `evaluate` runs), differentiated as a graph (`detect::autodiff`) and run by ONNX Runtime
+//! (`detect::ortgrad`). The input transform the config describes (resize, channel order, scale,
+//! mean and std) is applied here with its exact adjoint. Outputs are read by their layout:
+//! darknet heads and YOLOX rows with objectness, Ultralytics class scores, DETR class logits and
+//! GFL class maps without, and the class scores a graph's own NMS reads (see `attack::loss`). Under `loss.iou` each prediction's box is read too
+//! (decoded from the darknet and YOLOX outputs; for Ultralytics, DETR, GFL and a graph cut before
+//! its NMS forward-only outputs, the box branches the gradient graph leaves out), to weight its
+//! score by its overlap with the car.
+
+use super::config::OptimizeConfig;
+use super::defended::{self, Tape};
+use super::loss::{DetectionLoss, HeadShapeError, Predictions};
+use pav_core::image::resize::Resampler;
+use pav_detect::config::{ChannelOrder, DetectorConfig, ExtraInput, ExtraValue, OutputLayout};
+use pav_detect::decode::{decode, LayoutError, RawOutput};
+use pav_detect::defence::Defence;
+use pav_detect::preprocess::InputMap;
+use pav_detect::DetectError;
+use pav_onnx::autodiff::{differentiate_first, AutodiffError, Kernels};
+use pav_onnx::fold::fold_shapes;
+use pav_onnx::proto::{Dim, Initializer, Model, ProtoError, ValueInfo, FLOAT};
+use pav_onnx::session::{GradSession, Pass};
+use pav_onnx::surrogate::dequantize;
+use std::path::PathBuf;
+use std::sync::Mutex;
+use std::time::Instant;
+
+pub use super::loss::LossTerms as DetectorLoss;
+
+/// Gradient of `L1 + β·L2` with respect to the composite, with the two timings.
+pub struct DetectorGrad {
+    /// The loss terms.
+    pub loss: DetectorLoss,
+    /// ∂(L1 + β·L2)/∂image, interleaved RGB like the image.
+    pub grad: Vec<f32>,
+    /// Forward time: resize, network, loss (ms).
+    pub forward_ms: f64,
+    /// Backward time: network gradient, resize adjoint (ms).
+    pub backward_ms: f64,
+}
+
+/// How the outputs are read.
+#[derive(Clone, Debug)]
+enum Heads {
+    /// Darknet heads: per graph output (in graph order), its anchor count.
+    Darknet { anchors: Vec<usize>, classes: usize },
+    /// YOLOX rows `[R, 5 + C]`.
+    Yolox { classes: usize },
+    /// Ultralytics class probabilities `[C, N]` (the graph cut to its class branch).
+    Ultralytics { classes: usize },
+    /// DETR class logits `[Q, C]` (the graph cut before its post-processor, shapes folded).
+    Detr { classes: usize },
+    /// GFL class maps `[R, C]` per grid level, in the config's stride order; the box maps of
+    /// `4 · bins` follow them forward only under `loss.iou`.
+    Gfl { classes: usize, bins: usize },
+    /// Class scores `[C, N]` before a graph's own NMS (class-major, as Ultralytics'); the boxes
+    /// `[N, 4]` (xyxy, input pixels) follow forward only under `loss.iou`.
+    BeforeNms { classes: usize },
+}
+
+/// A detector with the paper's loss and its input gradient.
+pub struct WhiteBox {
+    name: String,
+    session: Mutex<GradSession>,
+    heads: Heads,
+    head_sizes: Vec<(usize, usize)>,
+    /// The differentiated outputs' names and shapes (what the box decoder reads).
+    out_shapes: Vec<(String, Vec<usize>)>,
+    /// The config's output layout.
+    layout: OutputLayout,
+    loss: DetectionLoss,
+    input: usize,
+    resample: Resampler,
+    /// Model channel c reads RGB channel `channel[c]`, as `v·gain[c] + offset[c]` for v in [0, 1].
+    channel: [usize; 3],
+    gain: [f32; 3],
+    offset: [f32; 3],
+    composite: usize,
+    /// Input defences trained through (`attack::defended`).
+    defence: Vec<Defence>,
+}
+
+/// Errors of the white-box detector.
+#[derive(Debug, thiserror::Error)]
+pub enum WhiteBoxError {
+    /// The detector config or its model file.
+    #[error("white-box detector: {0}")]
+    Config(#[from] DetectError),
+    /// The model file is not an ONNX model pav reads.
+    #[error("white-box detector {path}: {source}")]
+    Model {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: ProtoError,
+    },
+    /// A graph without a gradient.
+    #[error("white-box detector: {0}")]
+    Autodiff(#[from] AutodiffError),
+    /// ONNX Runtime refused the graphs, or their shapes could not be folded.
+    #[error("white-box detector: {0}")]
+    Onnx(#[from] pav_onnx::OnnxError),
+    /// Outputs that do not fit the layout.
+    #[error("white-box detector: {0}")]
+    Heads(#[from] HeadShapeError),
+    /// Box outputs that do not fit the layout.
+    #[error("white-box detector boxes: {0}")]
+    Boxes(#[from] LayoutError),
+    /// A composite of another size than the one the detector was loaded for.
+    #[error("white-box detector: a {got}-value composite, expected {expected}² RGB")]
+    Size {
+        /// Values given.
+        got: usize,
+        /// The composite side it was loaded for.
+        expected: usize,
+    },
+    /// A set-up pav has no white-box loss or input transform for.
+    #[error("white-box detector {name}: {why}")]
+    Unsupported {
+        /// Detector name.
+        name: String,
+        /// What is missing.
+        why: String,
+    },
+}
+
+/// How a [`WhiteBox`] runs, beyond its config.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct WhiteBoxOptions {
+    /// Side of the composites it scores.
+    pub composite: usize,
+    /// Network input side (default: the cfg's).
+    pub input: Option<usize>,
+    /// ONNX Runtime threads per pass (0 = the runtime's default, the physical cores).
+    pub threads: usize,
+    /// Differentiate the float surrogate of a dynamically quantized model.
+    pub surrogate: bool,
+}
+
+/// An Ultralytics graph cut to its class branch: its output is `Concat(boxes [4], classes [C])` on
+/// axis 1, and L1 and L2 read the class probabilities only, so the box decoder (a softmax over
+/// distance bins) needs no gradient: dropped, or with `boxes` kept as a second output `[1, 4, N]`
+/// (cx, cy, w, h in input pixels) for [`differentiate_first`] to compute without a gradient.
+pub fn class_branch(mut model: Model, boxes: bool) -> Result<Model, String> {
+    let out = match model.outputs.as_slice() {
+        [o] => o.clone(),
+        _ => return Err(format!("{} graph outputs, expected one [1, 4 + C, N]", model.outputs.len())),
+    };
+    let concat = model
+        .nodes
+        .iter()
+        .find(|n| n.outputs.contains(&out.name))
+        .filter(|n| n.op_type == "Concat" && n.inputs.len() == 2)
+        .ok_or("the output is not a Concat of boxes and class probabilities")?;
+    let value = |name: &str| ValueInfo { name: name.into(), elem_type: FLOAT, dims: vec![] };
+    model.outputs = vec![value(&concat.inputs[1])];
+    if boxes {
+        model.outputs.push(value(&concat.inputs[0]));
+    }
+    model.prune();
+    Ok(model)
+}
+
+/// A GFL graph's outputs put in the order its white box reads them: each level's class map
+/// `[1, R, classes]` in `strides` order, then (with `boxes`) each level's box map
+/// `[1, R, 4 · bins]`, matched by their declared shapes since exporters number them. Returns the
+/// number of forward-only outputs.
+fn gfl_outputs(
+    model: &mut Model,
+    strides: &[usize],
+    bins: usize,
+    classes: usize,
+    side: usize,
+    boxes: bool,
+) -> Result<usize, String> {
+    let fixed = |o: &ValueInfo| -> Option<Vec<i64>> {
+        o.dims.iter().map(|d| if let Dim::Fixed(v) = d { Some(*v) } else { None }).collect()
+    };
+    let find = |rows: usize, width: usize| {
+        model.outputs.iter().find(|o| {
+            fixed(o).is_some_and(|d| d.len() == 3 && d[0] == 1 && d[1] == rows as i64 && d[2] == width as i64)
+        })
+    };
+    let shown = || model.outputs.iter().map(|o| format!("{} {:?}", o.name, fixed(o))).collect::<Vec<_>>().join(", ");
+    let (mut cls, mut reg) = (Vec::new(), Vec::new());
+    for &s in strides {
+        let rows = (side / s) * (side / s);
+        match (find(rows, classes), find(rows, 4 * bins)) {
+            (Some(c), Some(r)) => {
+                cls.push(c.clone());
+                reg.push(r.clone());
+            }
+            _ => {
+                return Err(format!(
+                    "gfl at {side}²: stride {s} needs a [1, {rows}, {classes}] class map and a [1, {rows}, {}] box map declared among the graph's outputs: {}",
+                    4 * bins,
+                    shown()
+                ))
+            }
+        }
+    }
+    let n = if boxes { reg.len() } else { 0 };
+    model.outputs = cls;
+    if boxes {
+        model.outputs.extend(reg);
+    }
+    model.prune();
+    Ok(n)
+}
+
+/// `model` cut to compute the values of `outputs` (each with the config key that names it), its
+/// extra inputs made neutral constants (a `scale_yx` of 1 leaves boxes in input pixels; a
+/// `size_wh` is the input's), its shapes folded for a `side`² input: a graph whose
+/// post-processor (top-k, NMS) has no gradient, cut where that begins. `name`: the detector's.
+pub fn cut_before_post(
+    mut model: Model,
+    outputs: &[(String, &str)],
+    extra: &[ExtraInput],
+    side: usize,
+    name: &str,
+) -> Result<Model, WhiteBoxError> {
+    for e in extra {
+        model.inputs.retain(|v| v.name != e.name);
+        model.initializers.push(match e.value {
+            ExtraValue::ScaleYx => Initializer::f32(&e.name, &[1, 2], vec![1.0, 1.0]),
+            ExtraValue::SizeWh => Initializer::i64(&e.name, &[1, 2], vec![side as i64; 2]),
+        });
+    }
+    if let Some((o, key)) = outputs.iter().find(|(o, _)| !model.nodes.iter().any(|n| n.outputs.contains(o))) {
+        let why = format!("no value `{o}` (the config's `{key}`) in the graph");
+        return Err(WhiteBoxError::Unsupported { name: name.into(), why });
+    }
+    model.outputs =
+        outputs.iter().map(|(o, _)| ValueInfo { name: o.clone(), elem_type: FLOAT, dims: vec![] }).collect();
+    model.prune();
+    // The exported graph computes its reshapes from run-time shapes: fixed here.
+    let x = model.inputs.first().map(|i| i.name.clone()).unwrap_or_default();
+    Ok(fold_shapes(&model, &[(x.as_str(), vec![1, 3, side as i64, side as i64])], name)?.0)
+}
+
+impl WhiteBox {
+    /// Loads the detector of `cfg` for composites of `size × size` pixels.
+    pub fn load(cfg: &DetectorConfig, loss: DetectionLoss, size: usize) -> Result<Self, WhiteBoxError> {
+        Self::with_options(cfg, loss, WhiteBoxOptions { composite: size, input: None, threads: 0, surrogate: false })
+    }
+
+    /// Loads the detector of `cfg` as `o` says.
+    pub fn with_options(cfg: &DetectorConfig, loss: DetectionLoss, o: WhiteBoxOptions) -> Result<Self, WhiteBoxError> {
+        let unsupported = |why: String| WhiteBoxError::Unsupported { name: cfg.name.clone(), why };
+        let i = &cfg.input;
+        // A square composite letterboxed into a square input is a plain resize.
+        if i.width != i.height {
+            return Err(unsupported(format!("a non-square input {}x{}", i.width, i.height)));
+        }
+        let side = o.input.unwrap_or(i.width);
+        let bytes = std::fs::read(&cfg.model).map_err(|source| DetectError::ConfigRead {
+            path: cfg.source.display().to_string(),
+            what: format!("the model {}", cfg.model.display()),
+            source,
+        })?;
+        let mut model =
+            Model::from_bytes(&bytes).map_err(|source| WhiteBoxError::Model { path: cfg.model.clone(), source })?;
+        let quantized = pav_detect::onnx::is_quantized(&model);
+        if quantized && !o.surrogate {
+            return Err(unsupported(
+                "a dynamically quantized model has no gradient; set `surrogate = true` on its [[white_box]] to train against its float surrogate".into(),
+            ));
+        }
+        if quantized {
+            model = dequantize(&model).map_err(|e| unsupported(e.to_string()))?.0;
+        }
+        // A clipped detector is trained through its clipping: the rewrite is differentiable.
+        pav_detect::defence::clip_graph(&mut model, &cfg.model_defence)?;
+        // The box outputs `loss.iou` reads come last and are computed forward only.
+        let mut forward_only = 0;
+        if matches!(cfg.output, OutputLayout::Ultralytics { .. }) {
+            model = class_branch(model, loss.iou).map_err(&unsupported)?;
+            forward_only = usize::from(loss.iou);
+        }
+        // A graph with its post-processor inside is cut before it, at the class scores (and the
+        // boxes `loss.iou` weights by) that the config names.
+        let before_post = match &cfg.output {
+            OutputLayout::Detr { logits, pred_boxes, .. } => Some((
+                (logits, "logits", "a DETR white box needs `logits` in the config's [output]: the class logits before the post-processor"),
+                (pred_boxes, "pred_boxes", "loss.iou on a DETR white box needs `pred_boxes` in the config's [output]: the decoder's boxes before the post-processor"),
+            )),
+            OutputLayout::Rows { scores, boxes, .. } => Some((
+                (scores, "scores", "a white box of the rows layout needs `scores` in the config's [output]: the class scores its NMS reads"),
+                (boxes, "boxes", "loss.iou on a rows white box needs `boxes` in the config's [output]: the boxes its NMS reads"),
+            )),
+            _ => None,
+        };
+        if let Some(((scores, key, missing), (boxes, box_key, boxes_missing))) = before_post {
+            let mut outputs = vec![(scores.clone().ok_or_else(|| unsupported(missing.into()))?, key)];
+            if loss.iou {
+                outputs.push((boxes.clone().ok_or_else(|| unsupported(boxes_missing.into()))?, box_key));
+                forward_only = 1;
+            }
+            model = cut_before_post(model, &outputs, &i.extra, side, &cfg.name)?;
+        }
+        if let OutputLayout::Gfl { strides, bins } = &cfg.output {
+            forward_only =
+                gfl_outputs(&mut model, strides, *bins, cfg.class_names.len(), side, loss.iou).map_err(&unsupported)?;
+        }
+        if let Some(x) = model.inputs.first() {
+            if x.dims.len() == 4 && x.dims[2..].iter().any(|d| matches!(d, Dim::Fixed(v) if *v != side as i64)) {
+                return Err(unsupported(format!("the graph's input is fixed at {:?}, not {side}²", x.dims)));
+            }
+        }
+        let seeded = model.outputs.len() - forward_only;
+        let d = differentiate_first(&model, &[1, 3, side as i64, side as i64], Kernels::Fused, seeded)?;
+        let names: Vec<&str> = d.outputs.iter().map(|(n, _)| n.as_str()).collect();
+        // As evaluate decodes: the config's class list; the loss checks the outputs against it.
+        let classes = cfg.class_names.len();
+        let heads = match &cfg.output {
+            OutputLayout::Darknet { heads } => {
+                let anchors = names
+                    .iter()
+                    .map(|n| heads.iter().find(|h| h.output == *n).map(|h| h.anchors.len()))
+                    .collect::<Option<Vec<usize>>>()
+                    .ok_or_else(|| {
+                        unsupported(format!("graph outputs {names:?} are not all darknet heads of the config"))
+                    })?;
+                Heads::Darknet { anchors, classes }
+            }
+            OutputLayout::Yolox { .. } if d.outputs.len() == 1 => Heads::Yolox { classes },
+            OutputLayout::Ultralytics { .. } => Heads::Ultralytics { classes },
+            OutputLayout::Detr { .. } => Heads::Detr { classes },
+            OutputLayout::Gfl { bins, .. } => Heads::Gfl { classes, bins: *bins },
+            OutputLayout::Rows { .. } => Heads::BeforeNms { classes },
+            other => {
+                return Err(unsupported(format!(
+                    "no white-box loss for the {} layout (objectness-based losses need darknet or yolox outputs)",
+                    format!("{other:?}").split([' ', '{']).next().unwrap_or("?")
+                )))
+            }
+        };
+        let head_sizes = d.outputs.iter().map(|(_, s)| (s[s.len() - 2] as usize, s[s.len() - 1] as usize)).collect();
+        let out_shapes = d.outputs.iter().map(|(n, s)| (n.clone(), s.iter().map(|&v| v as usize).collect())).collect();
+        let session = GradSession::new(&format!("{} (white-box)", cfg.name), d, o.threads)?;
+        let channel = match i.channels {
+            ChannelOrder::Rgb => [0, 1, 2],
+            ChannelOrder::Bgr => [2, 1, 0],
+        };
+        let gain = [0, 1, 2].map(|c| 255.0 * i.scale / i.std[c]);
+        let offset = [0, 1, 2].map(|c| -i.mean[c] / i.std[c]);
+        Ok(WhiteBox {
+            name: cfg.name.clone(),
+            session: Mutex::new(session),
+            heads,
+            head_sizes,
+            out_shapes,
+            layout: cfg.output.clone(),
+            loss,
+            input: side,
+            // The config's filter, as evaluate resizes (without its 8-bit rounding, which has no gradient).
+            resample: Resampler::new(o.composite, side, i.interpolation),
+            channel,
+            gain,
+            offset,
+            composite: o.composite,
+            defence: i.defence.clone(),
+        })
+    }
+
+    /// The detector's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Network input side.
+    pub fn input_size(&self) -> usize {
+        self.input
+    }
+
+    fn session(&self) -> std::sync::MutexGuard<'_, GradSession> {
+        self.session.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// The model input of the `size × size` composite `img`: resized, channels ordered and
+    /// normalized as the config says, behind its input defences (what their backward needs).
+    fn model_input(&self, img: &[f32], size: usize) -> Result<(Vec<f32>, Tape), WhiteBoxError> {
+        if size != self.composite || img.len() != size * size * 3 {
+            return Err(WhiteBoxError::Size { got: img.len(), expected: self.composite });
+        }
+        let mut rgb = self.resample.apply(img, 3);
+        let tape = defended::forward(&self.defence, &mut rgb, self.input)
+            .map_err(|source| DetectError::Defence { detector: self.name.clone(), source })?;
+        let plane = self.input * self.input;
+        let mut x = vec![0f32; 3 * plane];
+        for c in 0..3 {
+            let src = &rgb[self.channel[c] * plane..(self.channel[c] + 1) * plane];
+            let (g, o) = (self.gain[c], self.offset[c]);
+            x[c * plane..(c + 1) * plane].iter_mut().zip(src).for_each(|(d, &v)| *d = v * g + o);
+        }
+        Ok((x, tape))
+    }
+
+    /// The adjoint of [`WhiteBox::model_input`] (of its forward that left `tape`).
+    fn input_adjoint(&self, g: &[f32], tape: &Tape) -> Vec<f32> {
+        let plane = self.input * self.input;
+        let mut rgb = vec![0f32; 3 * plane];
+        for c in 0..3 {
+            let dst = &mut rgb[self.channel[c] * plane..(self.channel[c] + 1) * plane];
+            dst.iter_mut().zip(&g[c * plane..(c + 1) * plane]).for_each(|(d, &v)| *d += v * self.gain[c]);
+        }
+        defended::backward(tape, &mut rgb);
+        self.resample.adjoint(&rgb, 3)
+    }
+
+    /// Each prediction's box in composite pixels (xyxy), in the order [`Predictions`] reads them:
+    /// decoded as evaluate decodes darknet and YOLOX outputs, read from the forward-only box
+    /// output for Ultralytics (cx, cy, w, h in input pixels) and DETR (the same as input shares).
+    fn boxes(&self, outs: &[Vec<f32>]) -> Result<Vec<[f32; 4]>, WhiteBoxError> {
+        let k = self.input as f32 / self.composite as f32;
+        let c = self.composite as f32;
+        let map = InputMap { scale_x: k, scale_y: k, pad_x: 0.0, pad_y: 0.0, frame_w: c, frame_h: c };
+        let centred = |v: &[f32], unit: f32| {
+            let (cx, cy, w, h) = (v[0] * unit, v[1] * unit, v[2] * unit, v[3] * unit);
+            map.to_frame([cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0])
+        };
+        let aux = || {
+            outs.get(self.out_shapes.len())
+                .ok_or_else(|| LayoutError("no box output: the white box was loaded without loss.iou".into()))
+        };
+        // The differentiated outputs as evaluate's decoder reads them.
+        let seeded = || {
+            self.out_shapes.iter().zip(outs).map(|((name, shape), data)| RawOutput {
+                name: name.clone(),
+                shape: shape.clone(),
+                data: data.clone(),
+            })
+        };
+        Ok(match &self.heads {
+            Heads::Darknet { classes, .. } | Heads::Yolox { classes } => {
+                decode(&self.layout, &seeded().collect::<Vec<_>>(), self.input, self.input, *classes, &map)?.boxes
+            }
+            Heads::Ultralytics { .. } => {
+                let b = aux()?;
+                let n = b.len() / 4;
+                (0..n).map(|i| centred(&[b[i], b[n + i], b[2 * n + i], b[3 * n + i]], 1.0)).collect()
+            }
+            Heads::Detr { .. } => aux()?.chunks_exact(4).map(|v| centred(v, self.input as f32)).collect(),
+            Heads::BeforeNms { .. } => aux()?.chunks_exact(4).map(|v| map.to_frame([v[0], v[1], v[2], v[3]])).collect(),
+            Heads::Gfl { classes, bins } => {
+                // The class maps and, after them, the box maps, level by level: decoded as
+                // evaluate decodes them (matched by shape).
+                let levels = self.out_shapes.len();
+                aux()?;
+                let raw: Vec<RawOutput> = seeded()
+                    .chain(self.out_shapes.iter().zip(&outs[levels..]).map(|((name, shape), data)| RawOutput {
+                        name: format!("{name} boxes"),
+                        shape: vec![1, shape[shape.len() - 2], 4 * bins],
+                        data: data.clone(),
+                    }))
+                    .collect();
+                decode(&self.layout, &raw, self.input, self.input, *classes, &map)?.boxes
+            }
+        })
+    }
+
+    /// The loss terms of the outputs and their gradients, each score weighted by its box's IoU
+    /// with `car` (composite pixels, xyxy) when the loss says so.
+    fn score(
+        &self,
+        outs: &[Vec<f32>],
+        beta: f32,
+        car: Option<[f32; 4]>,
+    ) -> Result<(DetectorLoss, Vec<Vec<f32>>), WhiteBoxError> {
+        let seeded = &outs[..self.out_shapes.len()];
+        let mut p = self.read(seeded)?;
+        if let (true, Some(car)) = (self.loss.iou, car) {
+            p.weigh(&self.boxes(outs)?, car)?;
+        }
+        let raw: Vec<&[f32]> = seeded.iter().map(|v| v.as_slice()).collect();
+        Ok(self.loss.terms(&p, &raw, beta)?)
+    }
+
+    /// The differentiated outputs read as predictions.
+    fn read(&self, seeded: &[Vec<f32>]) -> Result<Predictions, HeadShapeError> {
+        Ok(match &self.heads {
+            Heads::Darknet { anchors, classes } => {
+                let maps: Vec<_> = seeded.iter().cloned().zip(self.head_sizes.iter().copied()).collect();
+                Predictions::darknet(&maps, anchors, *classes)?
+            }
+            Heads::Yolox { classes } => Predictions::yolox(&seeded[0], *classes)?,
+            Heads::Ultralytics { classes } => Predictions::ultralytics(&seeded[0], *classes)?,
+            Heads::Detr { classes } => Predictions::detr(&seeded[0], *classes)?,
+            Heads::Gfl { classes, .. } => Predictions::class_rows(seeded, *classes)?,
+            Heads::BeforeNms { classes } => Predictions::ultralytics(&seeded[0], *classes)?,
+        })
+    }
+
+    /// Each prediction's box in composite pixels and its unweighted detection score for the
+    /// target classes, for checks and plots (the box output is there under `loss.iou` only for
+    /// Ultralytics and DETR).
+    pub fn predictions(&self, img: &[f32], size: usize) -> Result<Vec<([f32; 4], f32)>, WhiteBoxError> {
+        let (outs, ..) = self.outputs(&mut self.session(), img, size)?;
+        let scores = self.read(&outs[..self.out_shapes.len()])?.target_scores(&self.loss.target);
+        Ok(self.boxes(&outs)?.into_iter().zip(scores).collect())
+    }
+
+    fn outputs(
+        &self,
+        s: &mut GradSession,
+        img: &[f32],
+        size: usize,
+    ) -> Result<(Vec<Vec<f32>>, Pass, Tape), WhiteBoxError> {
+        let (x, tape) = self.model_input(img, size)?;
+        let (outs, pass) = s.forward(x)?;
+        Ok((outs, pass, tape))
+    }
+
+    /// Loss of the `size × size` RGB composite `img` and its gradient for weight `beta` on L2;
+    /// `car` is the car's box in the composite (xyxy), which `loss.iou` weights scores by.
+    pub fn loss_and_grad(
+        &self,
+        img: &[f32],
+        size: usize,
+        beta: f32,
+        car: Option<[f32; 4]>,
+    ) -> Result<DetectorGrad, WhiteBoxError> {
+        let t0 = Instant::now();
+        let mut s = self.session();
+        let (outs, pass, tape) = self.outputs(&mut s, img, size)?;
+        let (loss, out_grads) = self.score(&outs, beta, car)?;
+        let forward_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let t1 = Instant::now();
+        let g = s.backward(&pass, out_grads)?;
+        let grad = self.input_adjoint(&g, &tape);
+        Ok(DetectorGrad { loss, grad, forward_ms, backward_ms: t1.elapsed().as_secs_f64() * 1e3 })
+    }
+
+    /// The loss terms of a composite, without gradients (for scoring).
+    pub fn loss(&self, img: &[f32], size: usize) -> Result<DetectorLoss, WhiteBoxError> {
+        let (outs, ..) = self.outputs(&mut self.session(), img, size)?;
+        Ok(self.score(&outs, 1.0, None)?.0)
+    }
+}
+
+/// Several white-box detectors with weights: the loss is their weighted sum.
+pub struct Ensemble {
+    /// The detectors and their weights.
+    pub members: Vec<(WhiteBox, f32)>,
+}
+
+/// One step's gradient over an ensemble, with each member's terms.
+pub struct EnsembleGrad {
+    /// The weighted sum over the members that took part: terms and gradient weighted (`boxes`,
+    /// `proposals` summed; `max_score` the highest), times summed.
+    pub sum: DetectorGrad,
+    /// Each member's own terms, in member order; `None` for a member that sat the step out.
+    pub per_detector: Vec<Option<DetectorLoss>>,
+}
+
+impl Ensemble {
+    /// Loads the `[[white_box]]` detectors of `cfg` for composites of `size × size` pixels.
+    pub fn load(cfg: &OptimizeConfig, size: usize) -> Result<Self, WhiteBoxError> {
+        let members = cfg
+            .white_box
+            .iter()
+            .map(|e| {
+                let d = e.detector_config()?;
+                let loss = DetectionLoss {
+                    box_threshold: cfg.loss.box_threshold,
+                    target: d.target_classes.clone(),
+                    reduce: cfg.loss.reduce,
+                    proposals: cfg.loss.proposals,
+                    iou: cfg.loss.iou,
+                };
+                let o = WhiteBoxOptions { composite: size, input: None, threads: 0, surrogate: e.surrogate };
+                Ok((WhiteBox::with_options(&d, loss, o)?, e.weight))
+            })
+            .collect::<Result<_, WhiteBoxError>>()?;
+        Ok(Ensemble { members })
+    }
+
+    /// Weighted `L1 + β·L2` over all members and its gradient (`car` as for [`WhiteBox::loss_and_grad`]).
+    pub fn loss_and_grad(
+        &self,
+        img: &[f32],
+        size: usize,
+        beta: f32,
+        car: Option<[f32; 4]>,
+    ) -> Result<EnsembleGrad, WhiteBoxError> {
+        let all: Vec<usize> = (0..self.members.len()).collect();
+        self.loss_and_grad_of(&all, img, size, beta, car)
+    }
+
+    /// Weighted `L1 + β·L2` over the members `drawn` (indices), their weights scaled so that they
+    /// sum to the whole ensemble's: the loss keeps its scale whichever members take part.
+    pub fn loss_and_grad_of(
+        &self,
+        drawn: &[usize],
+        img: &[f32],
+        size: usize,
+        beta: f32,
+        car: Option<[f32; 4]>,
+    ) -> Result<EnsembleGrad, WhiteBoxError> {
+        let mut sum = DetectorGrad {
+            loss: DetectorLoss { l1: 0.0, l2: 0.0, boxes: 0, proposals: 0, max_score: 0.0 },
+            grad: vec![0f32; img.len()],
+            forward_ms: 0.0,
+            backward_ms: 0.0,
+        };
+        let total: f32 = self.members.iter().map(|m| m.1).sum();
+        let taking_part: f32 = drawn.iter().map(|&i| self.members[i].1).sum();
+        let scale = total / taking_part;
+        let mut per_detector = vec![None; self.members.len()];
+        for &i in drawn {
+            let (wb, weight) = &self.members[i];
+            let w = weight * scale;
+            let g = wb.loss_and_grad(img, size, beta, car)?;
+            sum.grad.iter_mut().zip(&g.grad).for_each(|(a, b)| *a += w * b);
+            let l = &mut sum.loss;
+            l.l1 += w * g.loss.l1;
+            l.l2 += w * g.loss.l2;
+            l.boxes += g.loss.boxes;
+            l.proposals += g.loss.proposals;
+            l.max_score = l.max_score.max(g.loss.max_score);
+            sum.forward_ms += g.forward_ms;
+            sum.backward_ms += g.backward_ms;
+            per_detector[i] = Some(g.loss);
+        }
+        Ok(EnsembleGrad { sum, per_detector })
+    }
+
+    /// The first member, which scores the per-view reports.
+    pub fn first(&self) -> &WhiteBox {
+        &self.members[0].0
+    }
+}

@@ -1,0 +1,76 @@
+//! A finished detector config tried on images: every detection above a score, the target's best,
+//! and the picture with its boxes drawn, so that a wrong channel order, scale or layout shows at
+//! once (`pav-rig model check`).
+
+use super::onnx::OnnxDetector;
+use super::{DetectError, Detection, Detector, TargetScore};
+use pav_core::image::{draw_box, Frame};
+use pav_dataset::fca::CarlaSample;
+use std::path::Path;
+
+/// An image that cannot be read.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckError {
+    /// The file is missing or not an image, npz sample or video frame pav reads.
+    #[error("{path}: {msg}")]
+    Image {
+        /// The argument as given.
+        path: String,
+        /// Why.
+        msg: String,
+    },
+    /// The detector failed on it.
+    #[error(transparent)]
+    Detect(#[from] DetectError),
+}
+
+/// What a detector finds in one image.
+#[derive(Clone, Debug)]
+pub struct Checked {
+    /// Every detection above the score asked for, best first (after NMS).
+    pub detections: Vec<Detection>,
+    /// The best box of the target classes, at any score.
+    pub best: Option<TargetScore>,
+}
+
+/// Reads `spec`: an image file (any format OpenCV reads), an FCA `.npz` sample, or frame K of a
+/// video as `VIDEO#K`.
+pub fn read_input(spec: &str) -> Result<Frame, CheckError> {
+    let bad = |msg: String| CheckError::Image { path: spec.to_string(), msg };
+    if let Some((video, k)) = spec.rsplit_once('#') {
+        let k: usize = k.parse().map_err(|_| bad(format!("`{k}` is not a frame number")))?;
+        let mut rd = pav_core::video::VideoReader::open(Path::new(video)).map_err(|e| bad(e.to_string()))?;
+        while let Some((i, f)) = rd.read().map_err(|e| bad(e.to_string()))? {
+            if i == k {
+                return Ok(f);
+            }
+        }
+        return Err(bad(format!("the video has no frame {k}")));
+    }
+    let path = Path::new(spec);
+    if path.extension().is_some_and(|e| e == "npz") {
+        return CarlaSample::load(path).map(|s| s.image).map_err(|e| bad(e.to_string()));
+    }
+    pav_core::video::read_image(path).map_err(|e| bad(e.to_string()))
+}
+
+/// Runs `det` on `frame`: detections from `min_score` after the config's NMS, and the target's best.
+pub fn check(det: &mut OnnxDetector, frame: &Frame, min_score: f32) -> Result<Checked, DetectError> {
+    let props = det.propose(frame)?;
+    let mut detections = props.detections(min_score, det.config().nms_iou);
+    detections.sort_by(|a, b| b.score.total_cmp(&a.score));
+    Ok(Checked { best: props.best(det.target_classes()), detections })
+}
+
+/// `frame` with each detection's box drawn: the target classes in green, the others in orange.
+pub fn annotate(frame: &Frame, detections: &[Detection], targets: &[usize]) -> Frame {
+    let mut out = frame.clone();
+    let thick = (frame.width.max(frame.height) / 300).max(2);
+    // Others first, so a target's box stays on top where they overlap.
+    for target in [false, true] {
+        for d in detections.iter().filter(|d| targets.contains(&d.class_id) == target) {
+            draw_box(&mut out, d.bbox, if target { [60, 200, 60] } else { [0, 140, 255] }, thick);
+        }
+    }
+    out
+}

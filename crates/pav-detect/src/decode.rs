@@ -1,0 +1,742 @@
+//! Raw model outputs → scored proposals in frame pixels, for each supported output layout.
+
+use super::config::{BoxFrame, OutputLayout};
+use super::layout::{sigmoid, Activation, Arrange, CellOrder, Centre, Description, Encoding, Role};
+use super::nms::nms;
+use super::preprocess::InputMap;
+use super::{BBox, Detection, TargetScore};
+
+/// A model output tensor converted to f32 (labels included), with its shape.
+#[derive(Clone, Debug)]
+pub struct RawOutput {
+    /// Output name.
+    pub name: String,
+    /// Dimensions.
+    pub shape: Vec<usize>,
+    /// Row-major values.
+    pub data: Vec<f32>,
+}
+
+/// Every proposal of one frame: a box and a final score per class.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Proposals {
+    /// Number of classes (row length of `scores`).
+    pub num_classes: usize,
+    /// Boxes in frame pixels.
+    pub boxes: Vec<BBox>,
+    /// `boxes.len() × num_classes` scores (objectness × class probability where both exist).
+    pub scores: Vec<f32>,
+}
+
+impl Proposals {
+    fn with_capacity(num_classes: usize, n: usize) -> Self {
+        Proposals { num_classes, boxes: Vec::with_capacity(n), scores: Vec::with_capacity(n * num_classes) }
+    }
+
+    /// Number of proposals.
+    pub fn len(&self) -> usize {
+        self.boxes.len()
+    }
+
+    /// Whether there are no proposals.
+    pub fn is_empty(&self) -> bool {
+        self.boxes.is_empty()
+    }
+
+    /// Class scores of proposal `i`.
+    pub fn row(&self, i: usize) -> &[f32] {
+        &self.scores[i * self.num_classes..(i + 1) * self.num_classes]
+    }
+
+    /// The highest score any proposal gives one of `classes`, with its box.
+    pub fn best(&self, classes: &[usize]) -> Option<TargetScore> {
+        let mut best: Option<TargetScore> = None;
+        for (i, b) in self.boxes.iter().enumerate() {
+            let row = self.row(i);
+            for &c in classes {
+                let s = row.get(c).copied().unwrap_or(0.0);
+                if best.is_none_or(|t| s > t.score) {
+                    best = Some(TargetScore { score: s, bbox: *b, class_id: c });
+                }
+            }
+        }
+        best
+    }
+
+    /// Target-class detections: each proposal scored by its best target class (not its arg-max
+    /// class, so a car also rated "truck" still counts as a car), kept from `min_score`, NMS at `iou`.
+    pub fn target_detections(&self, classes: &[usize], min_score: f32, iou: f32) -> Vec<Detection> {
+        let mut out = Vec::new();
+        for (i, b) in self.boxes.iter().enumerate() {
+            let row = self.row(i);
+            if let Some((c, s)) =
+                classes.iter().filter_map(|&c| row.get(c).map(|s| (c, *s))).max_by(|a, b| a.1.total_cmp(&b.1))
+            {
+                if s >= min_score {
+                    out.push(Detection { class_id: c, score: s, bbox: *b });
+                }
+            }
+        }
+        nms(out, iou)
+    }
+
+    /// Arg-max class detections with score ≥ `min_score`, after per-class NMS at `iou`.
+    pub fn detections(&self, min_score: f32, iou: f32) -> Vec<Detection> {
+        let mut out = Vec::new();
+        for (i, b) in self.boxes.iter().enumerate() {
+            let row = self.row(i);
+            let (c, &s) = row.iter().enumerate().fold((0, &f32::NEG_INFINITY), |a, x| if x.1 > a.1 { x } else { a });
+            if s >= min_score {
+                out.push(Detection { class_id: c, score: s, bbox: *b });
+            }
+        }
+        nms(out, iou)
+    }
+}
+
+/// Raw outputs that do not fit the configured layout (a missing output, a wrong shape).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct LayoutError(pub String);
+
+fn find<'a>(outs: &'a [RawOutput], name: &str) -> Result<&'a RawOutput, LayoutError> {
+    outs.iter().find(|o| o.name == name).ok_or_else(|| {
+        LayoutError(format!(
+            "model has no output `{name}` (outputs: {})",
+            outs.iter().map(|o| o.name.as_str()).collect::<Vec<_>>().join(", ")
+        ))
+    })
+}
+
+/// The model's outputs with their shapes, for messages.
+fn listing(outs: &[RawOutput]) -> String {
+    outs.iter().map(|o| format!("`{}` {:?}", o.name, o.shape)).collect::<Vec<_>>().join(", ")
+}
+
+/// One part's tensor for one level (or for every row), read by row and value.
+struct View<'a> {
+    data: &'a [f32],
+    rows: usize,
+    width: usize,
+    arrange: Arrange,
+    /// Cells of a `planes` map.
+    plane: usize,
+}
+
+impl View<'_> {
+    #[inline]
+    fn at(&self, r: usize, f: usize) -> f32 {
+        match self.arrange {
+            Arrange::Rows => self.data[r * self.width + f],
+            Arrange::Columns => self.data[f * self.rows + r],
+            Arrange::Planes => self.data[((r / self.plane) * self.width + f) * self.plane + r % self.plane],
+        }
+    }
+
+    /// Appends values `f .. f + n` of row `r` to `out`.
+    #[inline]
+    fn gather(&self, r: usize, f: usize, n: usize, out: &mut Vec<f32>) {
+        match self.arrange {
+            Arrange::Rows => out.extend_from_slice(&self.data[r * self.width + f..r * self.width + f + n]),
+            Arrange::Columns => out.extend(self.data[f * self.rows + r..].iter().step_by(self.rows).take(n)),
+            Arrange::Planes => {
+                let base = (r / self.plane) * self.width * self.plane + r % self.plane;
+                out.extend(self.data[base + f * self.plane..].iter().step_by(self.plane).take(n))
+            }
+        }
+    }
+}
+
+/// The rows, row width and (for `planes`) grid `(h, w)` of an output read as `arrange`, after
+/// leading batch dimensions of 1; None when its rank does not fit.
+fn read_as(o: &RawOutput, arrange: Arrange, width: usize) -> Option<(usize, usize, (usize, usize))> {
+    let rank = if arrange == Arrange::Planes { 3 } else { 2 };
+    let mut s = o.shape.as_slice();
+    if width == 1 && arrange == Arrange::Rows && s.last() == Some(&1) && s.len() > 1 {
+        s = &s[..s.len() - 1];
+    }
+    let single = width == 1 && arrange == Arrange::Rows;
+    while s.len() > rank && s[0] == 1 || single && s.len() > 1 && s[0] == 1 {
+        s = &s[1..];
+    }
+    match (arrange, s) {
+        (Arrange::Rows, [r]) if single => Some((*r, 1, (0, 0))),
+        (Arrange::Rows, [r, w]) => Some((*r, *w, (0, 0))),
+        (Arrange::Columns, [w, r]) => Some((*r, *w, (0, 0))),
+        (Arrange::Planes, [c, h, w]) if width > 0 && c % width == 0 => Some((c / width * h * w, width, (*h, *w))),
+        _ => None,
+    }
+}
+
+/// One grid level as decoded: cells, steps in input pixels, anchors.
+struct Grid {
+    gw: usize,
+    gh: usize,
+    sx: f32,
+    sy: f32,
+    anchors: Vec<[f32; 2]>,
+}
+
+impl Grid {
+    fn anchors(&self) -> usize {
+        self.anchors.len().max(1)
+    }
+
+    fn rows(&self) -> usize {
+        self.gw * self.gh * self.anchors()
+    }
+}
+
+/// A part's tensors: one per level, or one for every row.
+fn locate<'a>(
+    d: &Description,
+    role: Role,
+    outs: &'a [RawOutput],
+    grids: &[Grid],
+    classes: usize,
+) -> Result<Vec<View<'a>>, LayoutError> {
+    let p = d.part(role);
+    let width = d.width(role, classes);
+    let t = role.table();
+    let what = |rows: Option<usize>| {
+        let r = rows.map_or("R".to_string(), |r| r.to_string());
+        match p.arrange {
+            Arrange::Rows => format!("[{r}, {width}]"),
+            Arrange::Columns => format!("[{width}, {r}]"),
+            Arrange::Planes => format!("[{} anchors × {width}, H, W] maps", r),
+        }
+    };
+    // The output read as the part's arrangement, when its width and rows are the part's.
+    let fits = |o: &RawOutput, rows: Option<usize>| {
+        read_as(o, p.arrange, width).filter(|(r, w, _)| *w == width && rows.is_none_or(|n| n == *r))
+    };
+    let view = |o: &'a RawOutput, rows: Option<usize>| -> Result<View<'a>, LayoutError> {
+        let Some((r, w, (gh, gw))) = fits(o, rows) else {
+            return Err(LayoutError(format!(
+                "[{t}] needs output `{}` as {}; it is {:?} (outputs: {})",
+                o.name,
+                what(rows),
+                o.shape,
+                listing(outs)
+            )));
+        };
+        Ok(View { data: &o.data, rows: r, width: w, arrange: p.arrange, plane: gh * gw })
+    };
+    let pick = |rows: Option<usize>, level: Option<usize>| -> Result<View<'a>, LayoutError> {
+        let fit: Vec<&RawOutput> = outs.iter().filter(|o| fits(o, rows).is_some()).collect();
+        let at = level.map(|l| format!(" for level {}", l + 1)).unwrap_or_default();
+        match fit.as_slice() {
+            [o] => view(o, rows),
+            [] => Err(LayoutError(format!(
+                "[{t}]{at} needs an output shaped {}; the model's outputs are {}",
+                what(rows),
+                listing(outs)
+            ))),
+            many => Err(LayoutError(format!(
+                "[{t}]{at}: outputs {} all fit {}; name one with `output`",
+                many.iter().map(|o| format!("`{}`", o.name)).collect::<Vec<_>>().join(", "),
+                what(rows)
+            ))),
+        }
+    };
+    if p.per_level {
+        let planes = p.arrange == Arrange::Planes;
+        grids
+            .iter()
+            .enumerate()
+            .map(|(l, g)| {
+                let rows = (!planes || d.levels[l].stride.is_some()).then(|| g.rows());
+                match p.output.get(l) {
+                    Some(n) => view(find(outs, n)?, rows),
+                    None => pick(rows, Some(l)),
+                }
+            })
+            .collect()
+    } else {
+        let rows = (!grids.is_empty()).then(|| grids.iter().map(Grid::rows).sum());
+        Ok(vec![match p.output.first() {
+            Some(n) => view(find(outs, n)?, rows)?,
+            None => pick(rows, None)?,
+        }])
+    }
+}
+
+/// The levels' grids: from their strides, or from the boxes' maps for a `planes` level without.
+fn grids(
+    d: &Description,
+    outs: &[RawOutput],
+    input_w: usize,
+    input_h: usize,
+    classes: usize,
+) -> Result<Vec<Grid>, LayoutError> {
+    d.levels
+        .iter()
+        .enumerate()
+        .map(|(l, level)| {
+            let (gw, gh, sx, sy) = match level.stride {
+                Some(st) => (input_w / st, input_h / st, st as f32, st as f32),
+                None => {
+                    let width = d.width(Role::Boxes, classes);
+                    let name = d.boxes.output.get(l).map(String::as_str).unwrap_or("");
+                    let o = find(outs, name)?;
+                    let Some((_, _, (gh, gw))) = read_as(o, Arrange::Planes, width).filter(|(r, _, (gh, gw))| *r == gh * gw * level.anchors.len().max(1)) else {
+                        return Err(LayoutError(format!(
+                            "output `{}` has shape {:?}; level {} needs {} anchors × {width} channels over an H × W grid",
+                            o.name,
+                            o.shape,
+                            l + 1,
+                            level.anchors.len().max(1)
+                        )));
+                    };
+                    (gw, gh, input_w as f32 / gw as f32, input_h as f32 / gh as f32)
+                }
+            };
+            Ok(Grid { gw, gh, sx, sy, anchors: level.anchors.clone() })
+        })
+        .collect()
+}
+
+/// Decodes `outs` under `layout` for an input of `input_w × input_h`, mapping boxes by `map`.
+pub fn decode(
+    layout: &OutputLayout,
+    outs: &[RawOutput],
+    input_w: usize,
+    input_h: usize,
+    num_classes: usize,
+    map: &InputMap,
+) -> Result<Proposals, LayoutError> {
+    decode_described(&layout.describe(num_classes), outs, input_w, input_h, num_classes, map)
+}
+
+/// A part's view for level `l` and the row in it of the level's first row (`start` in a tensor
+/// of every level).
+fn level_view<'v, 'o>(views: &'v [View<'o>], l: usize, start: usize) -> (&'v View<'o>, usize) {
+    if views.len() == 1 {
+        (&views[0], start)
+    } else {
+        (&views[l], 0)
+    }
+}
+
+/// Decodes `outs` under a [`Description`].
+pub fn decode_described(
+    d: &Description,
+    outs: &[RawOutput],
+    input_w: usize,
+    input_h: usize,
+    classes: usize,
+    map: &InputMap,
+) -> Result<Proposals, LayoutError> {
+    let grids = grids(d, outs, input_w, input_h, classes)?;
+    let boxes = locate(d, Role::Boxes, outs, &grids, classes)?;
+    let scores = locate(d, Role::Scores, outs, &grids, classes)?;
+    let obj = d.objectness.as_ref().map(|_| locate(d, Role::Objectness, outs, &grids, classes)).transpose()?;
+    let labels = d.labels.as_ref().map(|_| locate(d, Role::Labels, outs, &grids, classes)).transpose()?;
+    // Without a grid, every part must hold as many rows as the boxes.
+    let total = if grids.is_empty() { boxes[0].rows } else { grids.iter().map(Grid::rows).sum() };
+    for (role, v) in [(Role::Scores, Some(&scores)), (Role::Objectness, obj.as_ref()), (Role::Labels, labels.as_ref())]
+    {
+        if let Some(v) = v.filter(|v| v.len() == 1 && v[0].rows != total) {
+            return Err(LayoutError(format!(
+                "[{}] holds {} rows, [output.boxes] {total} (outputs: {})",
+                role.table(),
+                v[0].rows,
+                listing(outs)
+            )));
+        }
+    }
+    let b = &d.boxes;
+    let enc = b.encoding.unwrap_or(Encoding::Xyxy);
+    let cols = b.coords.unwrap_or([b.column, b.column + 1, b.column + 2, b.column + 3]);
+    let bins = b.bins.unwrap_or(0);
+    let [var_c, var_s] = b.variances.unwrap_or([1.0, 1.0]);
+    let (nx, ny) = if b.normalized { (input_w as f32, input_h as f32) } else { (1.0, 1.0) };
+    // Boxes the graph mapped back itself are only clipped to the frame.
+    let to_frame = match b.frame {
+        BoxFrame::Input => *map,
+        BoxFrame::Image => InputMap { scale_x: 1.0, scale_y: 1.0, pad_x: 0.0, pad_y: 0.0, ..*map },
+    };
+    let s = &d.scores;
+    let width = d.count(Role::Scores, classes);
+    let mut p = Proposals::with_capacity(classes, total);
+    let mut logits = Vec::with_capacity(width);
+    let label_col = d.labels.as_ref().map_or(0, |p| p.column);
+    let (obj_col, obj_act) = d.objectness.as_ref().map_or((0, Activation::None), |p| (p.column, p.activation));
+    let one = [Grid { gw: total, gh: 1, sx: 1.0, sy: 1.0, anchors: Vec::new() }];
+    let levels: &[Grid] = if grids.is_empty() { &one } else { &grids };
+    let mut start = 0;
+    for (l, g) in levels.iter().enumerate() {
+        let ((bv, bo), (sv, so)) = (level_view(&boxes, l, start), level_view(&scores, l, start));
+        let ov = obj.as_deref().map(|v| level_view(v, l, start));
+        let lv = labels.as_deref().map(|v| level_view(v, l, start));
+        let (cells, na) = (g.gw * g.gh, g.anchors());
+        for lr in 0..g.rows() {
+            let label = match lv {
+                Some((v, o)) => {
+                    let label = v.at(o + lr, label_col);
+                    // Exports pad to a fixed row count with class −1.
+                    if label < 0.0 || label as usize >= classes {
+                        continue;
+                    }
+                    Some(label as usize)
+                }
+                None => None,
+            };
+            let (a, cell) = match d.order {
+                CellOrder::AnchorCell => (lr / cells, lr % cells),
+                CellOrder::CellAnchor => (lr % na, lr / na),
+            };
+            let (gx, gy) = ((cell % g.gw) as f32, (cell / g.gw) as f32);
+            let [aw, ah] = g.anchors.get(a).copied().unwrap_or([g.sx, g.sy]);
+            let (cx0, cy0) = match d.centre {
+                Centre::Cell => ((gx + 0.5) * g.sx, (gy + 0.5) * g.sy),
+                Centre::Pixel => (gx * g.sx + (g.sx - 1.0) / 2.0, gy * g.sy + (g.sy - 1.0) / 2.0),
+            };
+            let br = bo + lr;
+            let v = |k: usize| bv.at(br, cols[k]);
+            let corners = |cx: f32, cy: f32, w: f32, h: f32| [cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0];
+            let mut bx = match enc {
+                Encoding::Xyxy => [v(0) * nx, v(1) * ny, v(2) * nx, v(3) * ny],
+                Encoding::Cxcywh => corners(v(0) * nx, v(1) * ny, v(2) * nx, v(3) * ny),
+                Encoding::Grid => corners((v(0) + gx) * g.sx, (v(1) + gy) * g.sy, v(2).exp() * aw, v(3).exp() * ah),
+                Encoding::Darknet => {
+                    corners((sigmoid(v(0)) + gx) * g.sx, (sigmoid(v(1)) + gy) * g.sy, v(2).exp() * aw, v(3).exp() * ah)
+                }
+                Encoding::Yolov5 => corners(
+                    (sigmoid(v(0)) * 2.0 - 0.5 + gx) * g.sx,
+                    (sigmoid(v(1)) * 2.0 - 0.5 + gy) * g.sy,
+                    (sigmoid(v(2)) * 2.0).powi(2) * aw,
+                    (sigmoid(v(3)) * 2.0).powi(2) * ah,
+                ),
+                Encoding::Ltrb => [cx0 - v(0) * g.sx, cy0 - v(1) * g.sy, cx0 + v(2) * g.sx, cy0 + v(3) * g.sy],
+                Encoding::LtrbBins => {
+                    let mut dist = [0f32; 4];
+                    for (side, out) in dist.iter_mut().enumerate() {
+                        let at = |k: usize| bv.at(br, b.column + side * bins + k);
+                        let m = (0..bins).map(at).fold(f32::NEG_INFINITY, f32::max);
+                        let e: Vec<f32> = (0..bins).map(|k| (at(k) - m).exp()).collect();
+                        let z: f32 = e.iter().sum();
+                        let step = if side % 2 == 0 { g.sx } else { g.sy };
+                        *out = e.iter().enumerate().map(|(k, v)| k as f32 * v).sum::<f32>() / z * step;
+                    }
+                    [cx0 - dist[0], cy0 - dist[1], cx0 + dist[2], cy0 + dist[3]]
+                }
+                Encoding::Prior => corners(
+                    cx0 + v(0) * var_c * aw,
+                    cy0 + v(1) * var_c * ah,
+                    aw * (v(2) * var_s).exp(),
+                    ah * (v(3) * var_s).exp(),
+                ),
+            };
+            if b.clip {
+                for (k, c) in bx.iter_mut().enumerate() {
+                    *c = c.clamp(0.0, if k % 2 == 0 { input_w } else { input_h } as f32);
+                }
+            }
+            p.boxes.push(to_frame.to_frame(bx));
+            let sr = so + lr;
+            if let Some(label) = label {
+                let mut row = vec![0f32; classes];
+                let x = sv.at(sr, s.column);
+                row[label] = s.activation.apply(x);
+                p.scores.extend(row);
+                continue;
+            }
+            if s.activation == Activation::Softmax {
+                logits.clear();
+                sv.gather(sr, s.column, width, &mut logits);
+                let m = logits.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+                let z: f32 = logits.iter().map(|x| (x - m).exp()).sum();
+                let bg = s.background;
+                p.scores
+                    .extend(logits.iter().enumerate().filter(|(k, _)| Some(*k) != bg).map(|(_, x)| (x - m).exp() / z));
+                continue;
+            }
+            let from = p.scores.len();
+            match s.background {
+                Some(bg) => {
+                    sv.gather(sr, s.column, bg, &mut p.scores);
+                    sv.gather(sr, s.column + bg + 1, width - bg - 1, &mut p.scores);
+                }
+                None => sv.gather(sr, s.column, width, &mut p.scores),
+            }
+            let row = &mut p.scores[from..];
+            if s.activation == Activation::Sigmoid {
+                row.iter_mut().for_each(|x| *x = sigmoid(*x));
+            }
+            if let Some((v, o)) = ov {
+                let o = obj_act.apply(v.at(o + lr, obj_col));
+                row.iter_mut().for_each(|x| *x *= o);
+            }
+        }
+        start += g.rows();
+    }
+    if let Some(bad) = p.scores.iter().position(|s| !s.is_finite()) {
+        return Err(LayoutError(format!(
+            "non-finite score at proposal {} class {}",
+            bad / classes.max(1),
+            bad % classes.max(1)
+        )));
+    }
+    Ok(p)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{Column, HeadConfig};
+
+    const ID: InputMap = InputMap { scale_x: 1.0, scale_y: 1.0, pad_x: 0.0, pad_y: 0.0, frame_w: 1e6, frame_h: 1e6 };
+
+    fn logit(p: f32) -> f32 {
+        (p / (1.0 - p)).ln()
+    }
+
+    #[test]
+    fn darknet_head_decodes_one_anchor_cell() {
+        // 1 anchor, 2 classes, 2x2 grid at 64x64 input (stride 32); cell (x=1, y=0) holds the object.
+        let (na, nc, g) = (1, 2, 2);
+        let mut data = vec![-20f32; na * (5 + nc) * g * g];
+        let set = |d: &mut Vec<f32>, k: usize, v: f32| d[k * 4 + 1] = v;
+        set(&mut data, 0, 0.0); // sigmoid 0.5 -> cx = (0.5+1)*32 = 48
+        set(&mut data, 1, 0.0); // cy = 16
+        set(&mut data, 2, 0.0); // w = anchor 10
+        set(&mut data, 3, (2.0f32).ln()); // h = 2*anchor 7 = 14
+        set(&mut data, 4, logit(0.8));
+        set(&mut data, 6, logit(0.5));
+        let outs = [RawOutput { name: "h".into(), shape: vec![1, 7, 2, 2], data }];
+        let layout =
+            OutputLayout::Darknet { heads: vec![HeadConfig { output: "h".into(), anchors: vec![[10.0, 7.0]] }] };
+        let p = decode(&layout, &outs, 64, 64, nc, &ID).unwrap();
+        assert_eq!(p.len(), 4);
+        let t = p.best(&[1]).unwrap();
+        assert!((t.score - 0.4).abs() < 1e-5);
+        let expect = [43.0, 9.0, 53.0, 23.0];
+        assert!(t.bbox.iter().zip(expect).all(|(a, b)| (a - b).abs() < 1e-4), "{:?}", t.bbox);
+    }
+
+    #[test]
+    fn yolox_rows_follow_grid_order_and_multiply_objectness() {
+        // 8x8 input, strides [4, 8] -> 4 + 1 rows, 1 class.
+        let mut data = vec![0f32; 5 * 6];
+        let r = 3; // stride 4, gx=1, gy=1
+        data[r * 6..r * 6 + 6].copy_from_slice(&[0.5, 0.5, 0.0, 0.0, 0.9, 0.5]);
+        let outs = [RawOutput { name: "o".into(), shape: vec![1, 5, 6], data }];
+        let p = decode(&OutputLayout::Yolox { output: None, strides: vec![4, 8] }, &outs, 8, 8, 1, &ID).unwrap();
+        let t = p.best(&[0]).unwrap();
+        assert!((t.score - 0.45).abs() < 1e-6);
+        assert_eq!(t.bbox, [4.0, 4.0, 8.0, 8.0]);
+        let wrong = decode(&OutputLayout::Yolox { output: None, strides: vec![8] }, &outs, 8, 8, 1, &ID).unwrap_err();
+        assert!(wrong.to_string().contains("shaped [1, 6]") && wrong.to_string().contains("`o` [1, 5, 6]"), "{wrong}");
+    }
+
+    #[test]
+    fn gfl_takes_the_expected_distance_from_the_cell_centre_and_matches_outputs_by_shape() {
+        // One 2×2 level of stride 4 at 8×8, one class, 2 bins: every side's distribution puts
+        // weight 0.5 on bins 0 and 1, so each distance is 0.5 × 4 = 2.
+        let reg = RawOutput { name: "795".into(), shape: vec![1, 4, 8], data: vec![0.0; 32] };
+        let cls = RawOutput { name: "792".into(), shape: vec![1, 4, 1], data: vec![0.1, 0.9, 0.2, 0.3] };
+        let l = OutputLayout::Gfl { strides: vec![4], bins: 2 };
+        let p = decode(&l, &[reg.clone(), cls.clone()], 8, 8, 1, &ID).unwrap();
+        let t = p.best(&[0]).unwrap();
+        assert!((t.score - 0.9).abs() < 1e-6);
+        // Cell (1, 0): centre (4 + 1.5, 1.5); the box clipped at the top.
+        assert_eq!(t.bbox, [3.5, 0.0, 7.5, 3.5]);
+        let wrong = decode(&OutputLayout::Gfl { strides: vec![4], bins: 4 }, &[reg, cls], 8, 8, 1, &ID).unwrap_err();
+        assert!(
+            wrong.to_string().contains("shaped [4, 16]") && wrong.to_string().contains("`795` [1, 4, 8]"),
+            "{wrong}"
+        );
+    }
+
+    #[test]
+    fn ultralytics_is_feature_major_and_detr_keeps_label() {
+        // 2 proposals, 2 classes: layout [4+2, 2]
+        let data = vec![10., 20., 10., 20., 4., 4., 4., 4., 0.1, 0.7, 0.3, 0.2];
+        let outs = [RawOutput { name: "o".into(), shape: vec![1, 6, 2], data }];
+        let p = decode(&OutputLayout::Ultralytics { output: None }, &outs, 32, 32, 2, &ID).unwrap();
+        assert_eq!(p.best(&[0]).unwrap().score, 0.7);
+        assert_eq!(p.best(&[0]).unwrap().bbox, [18.0, 18.0, 22.0, 22.0]);
+        let outs = [
+            RawOutput { name: "l".into(), shape: vec![1, 2], data: vec![1.0, 0.0] },
+            RawOutput { name: "b".into(), shape: vec![1, 2, 4], data: vec![0., 0., 1., 1., 2., 2., 3., 3.] },
+            RawOutput { name: "s".into(), shape: vec![1, 2], data: vec![0.9, 0.2] },
+        ];
+        let l = OutputLayout::Detr {
+            labels: "l".into(),
+            boxes: "b".into(),
+            scores: "s".into(),
+            size_input: None,
+            logits: None,
+            pred_boxes: None,
+        };
+        let p = decode(&l, &outs, 32, 32, 2, &ID).unwrap();
+        assert_eq!(p.best(&[1]).unwrap().score, 0.9);
+        assert_eq!(p.best(&[0]).unwrap().bbox, [2.0, 2.0, 3.0, 3.0]);
+    }
+
+    #[test]
+    fn rows_skip_empty_ones_and_map_boxes_by_their_frame() {
+        // PicoDet's order (class, score, box), padded with a class −1 row, behind a count output.
+        let outs = vec![
+            RawOutput { name: "n".into(), shape: vec![1], data: vec![2.0] },
+            RawOutput {
+                name: "r".into(),
+                shape: vec![3, 6],
+                data: vec![1.0, 0.8, 4.0, 4.0, 8.0, 8.0, 0.0, 0.6, 0.0, 0.0, 2.0, 2.0, -1.0, 0.9, 0.0, 0.0, 1.0, 1.0],
+            },
+        ];
+        let half = InputMap { scale_x: 0.5, scale_y: 0.5, pad_x: 0.0, pad_y: 0.0, frame_w: 100.0, frame_h: 100.0 };
+        let layout = |frame| OutputLayout::Rows {
+            output: None,
+            columns: crate::config::Column::xyxy_rows(),
+            frame,
+            scores: None,
+            boxes: None,
+        };
+        let p = decode(&layout(BoxFrame::Input), &outs, 32, 32, 2, &half).unwrap();
+        assert_eq!(p.len(), 2);
+        assert_eq!(p.best(&[1]).unwrap().bbox, [8.0, 8.0, 16.0, 16.0]);
+        assert_eq!(p.best(&[0]).unwrap().score, 0.6);
+        let p = decode(&layout(BoxFrame::Image), &outs, 32, 32, 2, &half).unwrap();
+        assert_eq!(p.best(&[1]).unwrap().bbox, [4.0, 4.0, 8.0, 8.0]);
+        // Rows of another width are refused by name.
+        let l = OutputLayout::Rows {
+            output: Some("r".into()),
+            columns: vec![Column::Class; 7],
+            frame: BoxFrame::Input,
+            scores: None,
+            boxes: None,
+        };
+        assert!(decode(&l, &outs, 32, 32, 2, &half).unwrap_err().to_string().contains("`r` as [R, 7]"));
+    }
+
+    fn described(toml: &str) -> OutputLayout {
+        let d: Description = toml::from_str(toml).unwrap();
+        d.validate(2).unwrap();
+        OutputLayout::Custom(Box::new(d))
+    }
+
+    #[test]
+    fn anchor_rows_flattened_with_activated_values_match_the_darknet_heads_they_come_from() {
+        // Two levels (strides 16 and 32 at 32²) of two anchors, two classes: darknet planes, and
+        // the same numbers decoded, flattened to rows (cx, cy, w, h, obj, classes) anchor by
+        // anchor, as YOLOv5's export writes them.
+        let (nc, anchors) = (2, [[[4.0, 6.0], [9.0, 5.0]], [[12.0, 20.0], [30.0, 24.0]]]);
+        let heads: Vec<RawOutput> = [2usize, 1]
+            .iter()
+            .enumerate()
+            .map(|(l, &g)| RawOutput {
+                name: format!("h{l}"),
+                shape: vec![1, 2 * (5 + nc), g, g],
+                data: (0..2 * (5 + nc) * g * g).map(|k| ((k * 7 + l * 3) % 11) as f32 / 5.0 - 1.0).collect(),
+            })
+            .collect();
+        let dark = OutputLayout::Darknet {
+            heads: (0..2).map(|l| HeadConfig { output: format!("h{l}"), anchors: anchors[l].to_vec() }).collect(),
+        };
+        let want = decode(&dark, &heads, 32, 32, nc, &ID).unwrap();
+        let mut rows = Vec::new();
+        for (l, h) in heads.iter().enumerate() {
+            let (g, st) = (h.shape[2], 32.0 / h.shape[2] as f32);
+            for (a, [aw, ah]) in anchors[l].iter().enumerate() {
+                for cell in 0..g * g {
+                    let at = |k: usize| h.data[(a * (5 + nc) + k) * g * g + cell];
+                    let (gx, gy) = ((cell % g) as f32, (cell / g) as f32);
+                    rows.extend([
+                        (sigmoid(at(0)) + gx) * st,
+                        (sigmoid(at(1)) + gy) * st,
+                        at(2).exp() * aw,
+                        at(3).exp() * ah,
+                    ]);
+                    rows.extend((4..5 + nc).map(|k| sigmoid(at(k))));
+                }
+            }
+        }
+        let flat = [RawOutput { name: "output".into(), shape: vec![1, 10, 5 + nc], data: rows }];
+        let got = decode(
+            &described("[boxes]\nencoding = 'cxcywh'\n[objectness]\ncolumn = 4\n[scores]\ncolumn = 5\n"),
+            &flat,
+            32,
+            32,
+            nc,
+            &ID,
+        )
+        .unwrap();
+        assert_eq!(got.len(), 10);
+        for i in 0..10 {
+            let (a, b) = (got.boxes[i], want.boxes[i]);
+            assert!(a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-5), "{i}: {a:?} vs {b:?}");
+            assert!(got.row(i).iter().zip(want.row(i)).all(|(x, y)| (x - y).abs() < 1e-6), "{i}");
+        }
+        // The raw heads as one described layout (planes, darknet encoding) give the preset's
+        // numbers bit for bit.
+        let planes = "[[levels]]\nanchors = [[4, 6], [9, 5]]\n[[levels]]\nanchors = [[12, 20], [30, 24]]\n[boxes]\noutput = ['h0', 'h1']\narrange = 'planes'\nper_level = true\nencoding = 'darknet'\n[objectness]\noutput = ['h0', 'h1']\narrange = 'planes'\nper_level = true\ncolumn = 4\nactivation = 'sigmoid'\n[scores]\noutput = ['h0', 'h1']\narrange = 'planes'\nper_level = true\ncolumn = 5\nactivation = 'sigmoid'\n";
+        assert_eq!(decode(&described(planes), &heads, 32, 32, nc, &ID).unwrap(), want);
+    }
+
+    #[test]
+    fn ssd_priors_cell_by_cell_with_softmax_and_a_background_column() {
+        // One level of stride 16 at 32² (2×2 cells), two priors per cell, cell by cell; boxes in
+        // TensorFlow's order (ty, tx, th, tw); scores softmax over background + 2 classes.
+        let mut boxes = vec![0f32; 8 * 4];
+        let mut scores = vec![0f32; 8 * 3];
+        // Row 5 = cell 2 (x 0, y 1), prior 1 (20 × 10): shifted right by 0.5 of its width, twice
+        // as tall.
+        boxes[5 * 4..5 * 4 + 4].copy_from_slice(&[0.0, 0.5 / 0.1, (2f32).ln() / 0.2, 0.0]);
+        scores[5 * 3..5 * 3 + 3].copy_from_slice(&[0.0, (3f32).ln(), 0.0]);
+        let outs = [
+            RawOutput { name: "scores".into(), shape: vec![1, 8, 3], data: scores },
+            RawOutput { name: "boxes".into(), shape: vec![1, 8, 4], data: boxes },
+        ];
+        let l = described(
+            "order = 'cell-anchor'\n[[levels]]\nstride = 16\nanchors = [[10, 10], [20, 10]]\n[boxes]\nwidth = 4\nencoding = 'prior'\ncoords = [1, 0, 3, 2]\nvariances = [0.1, 0.2]\n[scores]\nwidth = 3\nactivation = 'softmax'\nbackground = 0\n",
+        );
+        let p = decode(&l, &outs, 32, 32, 2, &ID).unwrap();
+        assert_eq!((p.len(), p.num_classes), (8, 2));
+        // Softmax of (0, ln 3, 0): 3/5 for class 0, 1/5 for class 1; the background dropped.
+        assert!((p.row(5)[0] - 0.6).abs() < 1e-6 && (p.row(5)[1] - 0.2).abs() < 1e-6, "{:?}", p.row(5));
+        // Prior centre (8, 24), size 20 × 10 → centre (18, 24), size 20 × 20.
+        let b = p.boxes[5];
+        assert!(b.iter().zip([8.0, 14.0, 28.0, 34.0]).all(|(x, y)| (x - y).abs() < 1e-4), "{b:?}");
+        assert!((p.row(0)[0] - 1.0 / 3.0).abs() < 1e-6);
+        // A grid the scores do not fit is refused with the model's outputs.
+        let wrong = described("order = 'cell-anchor'\n[[levels]]\nstride = 8\nanchors = [[10, 10], [20, 10]]\n[boxes]\nwidth = 4\nencoding = 'prior'\nvariances = [0.1, 0.2]\n[scores]\nwidth = 3\nactivation = 'softmax'\nbackground = 0\n");
+        let e = decode(&wrong, &outs, 32, 32, 2, &ID).unwrap_err().to_string();
+        assert!(e.contains("[32, 4]") && e.contains("`boxes` [1, 8, 4]"), "{e}");
+    }
+
+    #[test]
+    fn point_distances_normalized_corners_and_labelled_rows_decode_as_described() {
+        // ltrb: distances in strides from the cell centre; stride 16, cell (1, 0) → centre (24, 8).
+        let outs =
+            [RawOutput { name: "o".into(), shape: vec![1, 4, 6], data: [[0.5, 0.5, 0.5, 0.5, 0.9, 0.1]; 4].concat() }];
+        let l = described("[[levels]]\nstride = 16\n[boxes]\nencoding = 'ltrb'\n[scores]\ncolumn = 4\n");
+        let p = decode(&l, &outs, 32, 32, 2, &ID).unwrap();
+        assert_eq!(p.boxes[1], [16.0, 0.0, 32.0, 16.0]);
+        assert_eq!(p.row(1), [0.9, 0.1]);
+        // Normalized corners, a label column, a score: final detections, padding skipped.
+        let outs = [
+            RawOutput { name: "det".into(), shape: vec![1, 2, 4], data: vec![0.25, 0.5, 0.5, 1.0, 0.0, 0.0, 1.0, 1.0] },
+            RawOutput { name: "cls".into(), shape: vec![1, 2], data: vec![1.0, -1.0] },
+            RawOutput { name: "conf".into(), shape: vec![1, 2, 1], data: vec![0.7, 0.9] },
+        ];
+        let l = described(
+            "[boxes]\noutput = 'det'\nencoding = 'xyxy'\nnormalized = true\n[scores]\noutput = 'conf'\n[labels]\noutput = 'cls'\n",
+        );
+        let p = decode(&l, &outs, 32, 16, 2, &ID).unwrap();
+        assert_eq!(p.len(), 1);
+        assert_eq!((p.boxes[0], p.row(0)), ([8.0, 8.0, 16.0, 16.0], &[0.0, 0.7][..]));
+        // Unnamed outputs that fit a part equally are refused, not guessed.
+        let l = described("[boxes]\noutput = 'det'\nencoding = 'xyxy'\n[scores]\n[labels]\noutput = 'cls'\n");
+        let e = decode(&l, &outs, 32, 16, 2, &ID).unwrap_err().to_string();
+        assert!(e.contains("`cls`, `conf` all fit") && e.contains("name one"), "{e}");
+    }
+
+    #[test]
+    fn empty_proposals_have_no_best_and_no_detections() {
+        let p = Proposals::with_capacity(80, 0);
+        assert!(p.best(&[2]).is_none());
+        assert!(p.detections(0.0, 0.5).is_empty());
+    }
+}

@@ -1,0 +1,619 @@
+//! The `evaluate` pipeline: videos → frames → detections → per-frame records → reports.
+//!
+//! Every frame record is flushed as soon as it exists and the summary is written from whatever
+//! was scored, so a corrupt video, a failing detector or Ctrl-C never loses finished work.
+
+use super::charts::{accuracy_bars, polar_video};
+use super::physical::{Accuracy, FrameRecord};
+use super::report::{
+    summary_markdown, write_angles_csv, write_summary_csv, write_text, FrameCsv, ReportError, ReportSettings,
+    SummaryRow,
+};
+use pav_core::image::Frame;
+use pav_core::progress::Progress;
+use pav_core::sidecar::{self, AngleSample};
+use pav_core::table::unique;
+use pav_core::video::{Prefetch, Step, VideoReader};
+use pav_detect::config::InputConfig;
+use pav_detect::defence::DefenceError;
+use pav_detect::preprocess::{prepare, InputMap};
+use pav_detect::{DetectError, Detector, Proposals};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+/// One video to score.
+#[derive(Clone, Debug)]
+pub struct VideoJob {
+    /// Video file.
+    pub path: PathBuf,
+    /// Label in reports (row of the Table-4 matrix).
+    pub label: String,
+    /// Angle sidecar; when `None`, `<video>.angles.csv` is used if it exists.
+    pub sidecar: Option<PathBuf>,
+}
+
+/// Which frames of each video are scored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Frames {
+    /// Every N-th frame, from the first.
+    Stride(usize),
+    /// N frames evenly spaced over each video's declared length: the middle frame of each of N
+    /// equal stretches, so a turntable video at constant speed is sampled evenly in angle.
+    Even(usize),
+}
+
+impl Frames {
+    /// The frames to score in a video declaring `declared` frames: `None` for a stride (decided
+    /// per frame), the sorted indices for even sampling.
+    fn indices(self, declared: usize) -> Option<Vec<usize>> {
+        match self {
+            Frames::Stride(_) => None,
+            Frames::Even(n) if n >= declared => Some((0..declared).collect()),
+            Frames::Even(n) => Some((0..n).map(|k| ((2 * k + 1) * declared) / (2 * n)).collect()),
+        }
+    }
+
+    /// Short form for the reports' `sampling` column: `stride 4`, `even 44`.
+    pub fn tag(self) -> String {
+        match self {
+            Frames::Stride(n) => format!("stride {n}"),
+            Frames::Even(n) => format!("even {n}"),
+        }
+    }
+}
+
+impl std::fmt::Display for Frames {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            Frames::Stride(1) => write!(f, "every frame"),
+            Frames::Stride(n) => write!(f, "one frame in {n}"),
+            Frames::Even(n) => write!(f, "{n} evenly spaced frames per video"),
+        }
+    }
+}
+
+/// Evaluation settings.
+#[derive(Clone, Debug)]
+pub struct EvalOptions {
+    /// A frame counts as "car detected" when a target-class score is ≥ this.
+    pub threshold: f32,
+    /// Which frames are scored.
+    pub frames: Frames,
+    /// Seconds per turntable revolution, used when a video has no sidecar.
+    pub rotation_period_s: f64,
+    /// Angle at frame 0 when no sidecar.
+    pub start_angle_deg: f64,
+    /// Angle sectors in the per-angle breakdown.
+    pub angle_bins: usize,
+    /// Output directory (created).
+    pub out_dir: PathBuf,
+    /// Draw PNG plots.
+    pub plots: bool,
+    /// Threads that run the detectors side by side on each frame (1: one after another).
+    /// Records and reports come out in the same order either way.
+    pub parallel: usize,
+}
+
+/// Wall-clock split of a run, for benchmarks.
+#[derive(Clone, Debug, Default)]
+pub struct Timing {
+    /// Frames decoded (including skipped ones).
+    pub frames_decoded: usize,
+    /// Frames scored.
+    pub frames_scored: usize,
+    /// Seconds spent decoding.
+    pub decode_s: f64,
+    /// Seconds per detector (preprocess + inference + decode of outputs), same order as given.
+    pub detector_s: Vec<f64>,
+    /// Seconds for the whole run including reports.
+    pub total_s: f64,
+}
+
+/// Everything a run produced.
+#[derive(Debug, Default)]
+pub struct EvalOutcome {
+    /// One row per (video, detector) that scored at least one frame or failed.
+    pub rows: Vec<SummaryRow>,
+    /// Every frame record.
+    pub records: Vec<FrameRecord>,
+    /// Human-readable failures (video or detector errors); the run went on past each.
+    pub failures: Vec<String>,
+    /// Whether Ctrl-C stopped the run early.
+    pub interrupted: bool,
+    /// Time split.
+    pub timing: Timing,
+    /// Files written.
+    pub files: Vec<PathBuf>,
+    /// What each video added, in the order of the jobs given.
+    pub videos: Vec<VideoPart>,
+}
+
+/// What one video added to a run, so the shards of a run can be joined in the order one process
+/// would have scored them.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct VideoPart {
+    /// The video's place among the run's videos (0-based).
+    pub index: usize,
+    /// Its summary rows, before videos that share a label are pooled.
+    pub rows: Vec<SummaryRow>,
+    /// How many frame records it added (its lines of `frames.csv`, in order).
+    pub records: usize,
+    /// The failures it added.
+    pub failures: Vec<String>,
+    /// Where its angles came from: (label, source).
+    pub angle_source: Option<(String, String)>,
+}
+
+enum Angles {
+    Sidecar(HashMap<usize, AngleSample>),
+    Period { period_s: f64, start_deg: f64 },
+}
+
+impl Angles {
+    fn at(&self, frame: usize, fps: f64) -> (f64, Option<f64>) {
+        let t = frame as f64 / fps;
+        match self {
+            Angles::Sidecar(m) => m.get(&frame).map(|s| (s.timestamp_s, Some(s.angle_deg))).unwrap_or((t, None)),
+            Angles::Period { period_s, start_deg } => (t, Some((start_deg + 360.0 * t / period_s).rem_euclid(360.0))),
+        }
+    }
+}
+
+impl EvalOptions {
+    /// Refuses settings that would score nothing or place angles nowhere.
+    pub fn check(&self) -> Result<(), ReportError> {
+        let bad = |m: String| Err(ReportError::Options(m));
+        if !(0.0..=1.0).contains(&self.threshold) {
+            return bad(format!("threshold {} must be within [0, 1]", self.threshold));
+        }
+        if !(self.rotation_period_s.is_finite() && self.rotation_period_s != 0.0) {
+            return bad(format!("rotation period {} s must be a non-zero number", self.rotation_period_s));
+        }
+        if !self.start_angle_deg.is_finite() {
+            return bad(format!("start angle {}° must be a number", self.start_angle_deg));
+        }
+        if self.angle_bins == 0 {
+            return bad("the per-angle breakdown needs at least one sector".into());
+        }
+        if matches!(self.frames, Frames::Stride(0) | Frames::Even(0)) {
+            return bad(format!("{}: at least one frame must be scored", self.frames.tag()));
+        }
+        Ok(())
+    }
+}
+
+/// Error rows, one per detector, for a video that could not be scored at all.
+fn failed_rows(label: &str, detectors: &[Box<dyn Detector>], why: &str) -> Vec<SummaryRow> {
+    detectors
+        .iter()
+        .map(|d| SummaryRow {
+            video: label.to_string(),
+            detector: d.name().to_string(),
+            classes: d.target_label(),
+            accuracy: Accuracy::default(),
+            decoded_frames: 0,
+            declared_frames: 0,
+            videos: 1,
+            status: format!("failed: {why}"),
+        })
+        .collect()
+}
+
+/// How `detectors` detectors share `cores` cores: (detector groups run side by side, ONNX Runtime
+/// intra-op threads per detector). `parallel` and `threads` as asked, 0 = choose: with several
+/// detectors and cores and no thread count asked, one group per core, one thread each.
+pub fn side_by_side(detectors: usize, cores: usize, parallel: usize, threads: usize) -> (usize, usize) {
+    let groups = match parallel {
+        0 if threads == 0 && detectors > 1 && cores > 1 => detectors.min(cores),
+        0 => 1,
+        p => p.min(detectors.max(1)),
+    };
+    let threads = match threads {
+        0 if groups > 1 => (cores / groups).max(1),
+        t => t,
+    };
+    (groups, threads)
+}
+
+/// One detector's proposals for a frame and the seconds they took; `None` for a detector that
+/// failed on an earlier frame.
+type Scored = Option<(Result<Proposals, DetectError>, f64)>;
+
+/// A frame's prepared input for one detector (or why its defence failed on it); `None` for a
+/// detector that failed earlier.
+type Prepared = Option<Result<(Vec<f32>, InputMap), DefenceError>>;
+
+/// Every detector not yet failed on its prepared input, on `parallel` threads side by side;
+/// results in the detectors' order. Each thread takes the next detector not yet taken, in the
+/// order of `cost` (seconds so far, largest first), so that the slowest model starts first and
+/// the others fill the remaining threads around it.
+fn run_detectors(
+    detectors: &mut [Box<dyn Detector>],
+    prepared: &mut [Prepared],
+    failed: &[Option<String>],
+    cost: &[f64],
+    parallel: usize,
+) -> Vec<Scored> {
+    let one = |det: &mut Box<dyn Detector>, input: Prepared| -> Scored {
+        let (input, map) = match input? {
+            Ok(x) => x,
+            Err(source) => return Some((Err(DetectError::Defence { detector: det.name().to_string(), source }), 0.0)),
+        };
+        let t = Instant::now();
+        let r = det.propose_prepared(input, map);
+        Some((r, t.elapsed().as_secs_f64()))
+    };
+    let inputs: Vec<Prepared> = prepared
+        .iter_mut()
+        .zip(failed)
+        .map(|(p, f)| if f.is_some() { None } else { Some(p.take().expect("one input per detector")) })
+        .collect();
+    let n = detectors.len();
+    let threads = parallel.clamp(1, n.max(1));
+    if threads == 1 {
+        return detectors.iter_mut().zip(inputs).map(|(d, x)| one(d, x)).collect();
+    }
+    let mut work: Vec<_> = detectors.iter_mut().zip(inputs).enumerate().map(|(k, (d, x))| (k, d, x)).collect();
+    // Popped from the end: the costliest first, ties in the detectors' order.
+    work.sort_by(|a, b| cost[a.0].total_cmp(&cost[b.0]).then(b.0.cmp(&a.0)));
+    let queue = std::sync::Mutex::new(work);
+    let mut results: Vec<Scored> = (0..n).map(|_| None).collect();
+    std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads)
+            .map(|_| {
+                s.spawn(|| {
+                    let mut done = Vec::new();
+                    loop {
+                        let next = queue.lock().unwrap_or_else(|e| e.into_inner()).pop();
+                        let Some((k, d, x)) = next else { break };
+                        done.push((k, one(d, x)));
+                    }
+                    done
+                })
+            })
+            .collect();
+        for h in handles {
+            // A detector that panicked is a bug, not a frame to skip: let it surface.
+            for (k, r) in h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)) {
+                results[k] = r;
+            }
+        }
+    });
+    results
+}
+
+/// Runs every detector over the chosen frames of every video and writes the reports into
+/// `opts.out_dir`; each video is one stage of `progress`, in frames. Videos that share a label
+/// are pooled into one cell (the paper pools its two polar angles): one summary row per label and
+/// detector, while `frames.csv` keeps each frame's file.
+pub fn evaluate(
+    jobs: &[VideoJob],
+    detectors: &mut [Box<dyn Detector>],
+    opts: &EvalOptions,
+    progress: &dyn Progress,
+    stop: &AtomicBool,
+) -> Result<EvalOutcome, ReportError> {
+    opts.check()?;
+    let t_run = Instant::now();
+    std::fs::create_dir_all(&opts.out_dir).map_err(|e| super::report::io_err(&opts.out_dir, e))?;
+    let frames_path = opts.out_dir.join("frames.csv");
+    let mut csv = FrameCsv::create(&frames_path)?;
+    let mut out = EvalOutcome {
+        timing: Timing { detector_s: vec![0.0; detectors.len()], ..Timing::default() },
+        ..EvalOutcome::default()
+    };
+    out.files.push(frames_path);
+    let mut angle_sources = Vec::new();
+
+    // Where each video's rows, records, failures and angle source begin.
+    let mut starts: Vec<[usize; 4]> = Vec::new();
+    'videos: for job in jobs {
+        starts.push([out.rows.len(), out.records.len(), out.failures.len(), angle_sources.len()]);
+        let angles = match job.sidecar.clone().or_else(|| Some(sidecar::sidecar_path(&job.path)).filter(|p| p.exists()))
+        {
+            Some(p) => match sidecar::read(&p) {
+                Ok(rows) => {
+                    angle_sources.push((job.label.clone(), format!("sidecar {}", p.display())));
+                    Angles::Sidecar(rows.into_iter().map(|r| (r.frame, r)).collect())
+                }
+                Err(e) => {
+                    // A video whose angles are wrong is not scored: per-angle results would be.
+                    out.failures.push(e.to_string());
+                    out.rows.extend(failed_rows(&job.label, detectors, &e.to_string()));
+                    continue;
+                }
+            },
+            None => {
+                angle_sources.push((
+                    job.label.clone(),
+                    format!("no sidecar; {}° + 360° × t / {} s", opts.start_angle_deg, opts.rotation_period_s),
+                ));
+                Angles::Period { period_s: opts.rotation_period_s, start_deg: opts.start_angle_deg }
+            }
+        };
+        let reader = match VideoReader::open(&job.path) {
+            Ok(r) => r,
+            Err(e) => {
+                out.failures.push(e.to_string());
+                out.rows.extend(failed_rows(&job.label, detectors, &e.to_string()));
+                continue;
+            }
+        };
+        let info = reader.info().clone();
+        let picks = opts.frames.indices(info.declared_frames);
+        let mut status = "complete".to_string();
+        if let Some(p) = &picks {
+            if p.is_empty() {
+                let why = format!("{} declares no frame count, so frames cannot be spread over it", job.path.display());
+                out.failures.push(format!("{}: {why}", job.label));
+                out.rows.extend(failed_rows(&job.label, detectors, &why));
+                continue;
+            }
+            if let Frames::Even(n) = opts.frames {
+                if p.len() < n {
+                    status = format!("{n} frames asked, the video declares {}", info.declared_frames);
+                    out.failures.push(format!("{}: {status}", job.label));
+                }
+            }
+        }
+        // The decoder thread also prepares every detector's input, so this thread only runs models.
+        let inputs: Vec<InputConfig> = detectors.iter().map(|d| d.input().clone()).collect();
+        let make = move |f: Frame| inputs.iter().map(|c| Some(prepare(&f, c))).collect::<Vec<_>>();
+        let mut frames = match (opts.frames, picks) {
+            (Frames::Stride(n), _) => Prefetch::with(reader, move |i| i % n == 0, 4, make),
+            (Frames::Even(_), p) => {
+                let p = p.unwrap_or_default();
+                Prefetch::with(reader, move |i| p.binary_search(&i).is_ok(), 4, make)
+            }
+        };
+        progress.begin(&job.label, info.declared_frames as u64);
+        let mut failed_det: Vec<Option<String>> = vec![None; detectors.len()];
+        let mut decoded = 0usize;
+        let mut no_angle = 0usize;
+        let first_record = out.records.len();
+        let scored_before = out.timing.frames_scored;
+        loop {
+            if stop.load(Ordering::Relaxed) {
+                status = format!("interrupted after {decoded} frames");
+                out.interrupted = true;
+                break;
+            }
+            // Time spent waiting for the decoder thread (decoding itself overlaps inference).
+            let t0 = Instant::now();
+            let step = frames.next_step();
+            out.timing.decode_s += t0.elapsed().as_secs_f64();
+            let (idx, mut prepared) = match step {
+                Step::End => break,
+                Step::Error(e) => {
+                    status = format!("stopped: {e}");
+                    out.failures.push(e.to_string());
+                    break;
+                }
+                Step::Skipped => {
+                    decoded += 1;
+                    progress.advance(1);
+                    continue;
+                }
+                Step::Frame(i, f) => {
+                    decoded += 1;
+                    progress.advance(1);
+                    (i, f)
+                }
+            };
+            out.timing.frames_scored += 1;
+            let (time_s, angle_deg) = angles.at(idx, info.fps);
+            no_angle += usize::from(angle_deg.is_none());
+            let results = run_detectors(detectors, &mut prepared, &failed_det, &out.timing.detector_s, opts.parallel);
+            for (k, (det, result)) in detectors.iter().zip(results).enumerate() {
+                let Some((result, seconds)) = result else { continue };
+                out.timing.detector_s[k] += seconds;
+                let props = match result {
+                    Ok(p) => p,
+                    Err(e) => {
+                        out.failures.push(format!("{}: frame {idx}: {e}", job.label));
+                        failed_det[k] = Some(format!("stopped at frame {idx}: {e}"));
+                        continue;
+                    }
+                };
+                let best = props.best(det.target_classes());
+                let rec = FrameRecord {
+                    video: job.label.clone(),
+                    file: file_name(&job.path),
+                    frame: idx,
+                    time_s,
+                    angle_deg,
+                    detector: det.name().to_string(),
+                    detected: best.is_some_and(|b| pav_detect::detected(b.score, opts.threshold)),
+                    max_score: best.map(|b| b.score).unwrap_or(0.0),
+                    x1: best.map(|b| b.bbox[0]),
+                    y1: best.map(|b| b.bbox[1]),
+                    x2: best.map(|b| b.bbox[2]),
+                    y2: best.map(|b| b.bbox[3]),
+                };
+                csv.push(&rec)?;
+                out.records.push(rec);
+            }
+            if failed_det.iter().all(Option::is_some) {
+                break;
+            }
+        }
+        progress.end(None);
+        out.timing.frames_decoded += decoded;
+        if decoded == 0 && status == "complete" {
+            status = "no frames decoded".into();
+            out.failures.push(format!("{}: no frames could be decoded from {}", job.label, job.path.display()));
+        } else if status == "complete" && info.declared_frames > decoded + 1 {
+            // Containers estimate counts from duration; more than one frame short means a cut file.
+            status = format!("truncated: decoded {decoded} of {} declared frames", info.declared_frames);
+            out.failures.push(format!("{}: {status}", job.label));
+        }
+        if let Angles::Sidecar(rows) = &angles {
+            // Frames without a row, and rows for frames the video does not have, mean the
+            // sidecar and the video are not one recording (or one was cut short).
+            let beyond = if out.interrupted { 0 } else { rows.keys().filter(|&&f| f >= decoded).count() };
+            let scored = out.timing.frames_scored - scored_before;
+            let mut problems = Vec::new();
+            if no_angle > 0 {
+                problems.push(format!("{no_angle} of {scored} scored frames have no sidecar row"));
+            }
+            if beyond > 0 {
+                problems.push(format!("the sidecar has {beyond} rows for frames beyond the {decoded} decoded"));
+            }
+            if !problems.is_empty() {
+                let msg = format!("angles incomplete: {}", problems.join("; "));
+                out.failures.push(format!("{}: {msg}", job.label));
+                if status == "complete" {
+                    status = msg;
+                } else {
+                    status = format!("{status}; {msg}");
+                }
+            }
+        }
+        let recs = &out.records[first_record..];
+        for (k, det) in detectors.iter().enumerate() {
+            let name = det.name();
+            out.rows.push(SummaryRow {
+                video: job.label.clone(),
+                detector: name.to_string(),
+                classes: det.target_label(),
+                accuracy: Accuracy::of(recs.iter().filter(|r| r.detector == name)),
+                decoded_frames: decoded,
+                declared_frames: info.declared_frames,
+                videos: 1,
+                status: failed_det[k].clone().unwrap_or_else(|| status.clone()),
+            });
+        }
+        if out.interrupted {
+            break 'videos;
+        }
+    }
+    let ends = [out.rows.len(), out.records.len(), out.failures.len(), angle_sources.len()];
+    for (index, s) in starts.iter().enumerate() {
+        let e = starts.get(index + 1).unwrap_or(&ends);
+        out.videos.push(VideoPart {
+            index,
+            rows: out.rows[s[0]..e[0]].to_vec(),
+            records: e[1] - s[1],
+            failures: out.failures[s[2]..e[2]].to_vec(),
+            angle_source: angle_sources[s[3]..e[3]].first().cloned(),
+        });
+    }
+    out.rows = pool(std::mem::take(&mut out.rows));
+    let names: Vec<String> = detectors.iter().map(|d| d.name().to_string()).collect();
+    write_reports(&mut out, &settings(opts, angle_sources), opts, &names)?;
+    out.timing.total_s = t_run.elapsed().as_secs_f64();
+    Ok(out)
+}
+
+/// The report settings of a run with `opts`.
+pub(crate) fn settings(opts: &EvalOptions, angle_sources: Vec<(String, String)>) -> ReportSettings {
+    ReportSettings {
+        threshold: opts.threshold,
+        sampling: opts.frames.tag(),
+        sampling_text: opts.frames.to_string(),
+        angle_bins: opts.angle_bins,
+        angle_sources,
+    }
+}
+
+/// Writes `summary.csv`, `angles.csv`, `summary.md` and (unless turned off) the plots.
+pub(crate) fn write_reports(
+    out: &mut EvalOutcome,
+    s: &ReportSettings,
+    opts: &EvalOptions,
+    detectors: &[String],
+) -> Result<(), ReportError> {
+    let dir = &opts.out_dir;
+    let p = dir.join("summary.csv");
+    write_summary_csv(&p, &out.rows, s)?;
+    out.files.push(p);
+    let p = dir.join("angles.csv");
+    write_angles_csv(&p, &out.records, &out.rows, s.angle_bins)?;
+    out.files.push(p);
+    let p = dir.join("summary.md");
+    write_text(&p, &summary_markdown(&out.rows, &out.records, s))?;
+    out.files.push(p);
+    if !opts.plots {
+        return Ok(());
+    }
+    let names: Vec<&str> = detectors.iter().map(String::as_str).collect();
+    for v in unique(out.records.iter().map(|r| r.video.clone())) {
+        let p = dir.join(format!("polar_{}.png", file_safe(&v)));
+        polar_video(&p, &v, &names, &out.records, opts.threshold)?;
+        out.files.push(p);
+    }
+    if !out.rows.is_empty() {
+        let p = dir.join("accuracy.png");
+        accuracy_bars(&p, &out.rows, opts.threshold)?;
+        out.files.push(p);
+    }
+    Ok(())
+}
+
+/// One row per (label, detector), in first-seen order: the counts of videos sharing a label add
+/// up, and a cell is `complete` only when each of its videos is (otherwise each video's status).
+pub(crate) fn pool(rows: Vec<SummaryRow>) -> Vec<SummaryRow> {
+    let mut cells: Vec<(SummaryRow, Vec<String>)> = Vec::new();
+    for r in rows {
+        match cells.iter_mut().find(|(c, _)| c.video == r.video && c.detector == r.detector) {
+            Some((c, statuses)) => {
+                c.accuracy.detected += r.accuracy.detected;
+                c.accuracy.total += r.accuracy.total;
+                c.decoded_frames += r.decoded_frames;
+                c.declared_frames += r.declared_frames;
+                c.videos += r.videos;
+                statuses.push(r.status);
+            }
+            None => {
+                let s = vec![r.status.clone()];
+                cells.push((r, s));
+            }
+        }
+    }
+    cells
+        .into_iter()
+        .map(|(mut c, statuses)| {
+            if statuses.len() > 1 && statuses.iter().any(|s| s != "complete") {
+                let each: Vec<String> =
+                    statuses.iter().enumerate().map(|(i, s)| format!("video {}: {s}", i + 1)).collect();
+                c.status = each.join("; ");
+            }
+            c
+        })
+        .collect()
+}
+
+/// The file name of a video, for `frames.csv`.
+fn file_name(p: &Path) -> String {
+    p.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| p.display().to_string())
+}
+
+/// Makes a label usable as part of a file name.
+fn file_safe(s: &str) -> String {
+    s.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect()
+}
+
+/// The default label of a video: its file stem.
+pub fn default_label(p: &Path) -> String {
+    p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| p.display().to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn detectors_share_cores_side_by_side_unless_told_otherwise() {
+        assert_eq!(side_by_side(4, 2, 0, 0), (2, 1));
+        assert_eq!(side_by_side(1, 2, 0, 0), (1, 0));
+        assert_eq!(side_by_side(4, 1, 0, 0), (1, 0));
+        assert_eq!(side_by_side(3, 8, 0, 0), (3, 2));
+        // An explicit thread count keeps detectors one after another unless --parallel says so.
+        assert_eq!(side_by_side(4, 2, 0, 2), (1, 2));
+        assert_eq!(side_by_side(4, 2, 3, 0), (3, 1));
+        assert_eq!(side_by_side(2, 2, 5, 1), (2, 1));
+        assert_eq!(side_by_side(4, 2, 1, 0), (1, 0));
+    }
+}

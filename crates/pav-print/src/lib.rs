@@ -1,0 +1,15 @@
+//! The print channel: what a printer does to a texture (an ICC soft proof sampled into a
+//! differentiable 3D LUT).
+#![warn(missing_docs)]
+
+#[cfg(feature = "video")]
+pub mod calibrate;
+pub mod channel;
+pub mod chart;
+#[cfg(feature = "video")]
+pub mod colorchecker;
+pub mod fit;
+pub mod lut;
+#[cfg(feature = "video")]
+pub mod photo;
+pub mod proof;
