@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# Incremental rebuild time after touching one leaf file of the library (src/image/resize.rs), at a
-# base revision and at the working tree, alternating, in one target directory so that both reuse
-# the same dependency builds. Writes round,tree,seconds to stdout.
+# Incremental rebuild time of the release binaries after touching one leaf file of the library, at
+# a base revision and at the working tree, alternating, in one target directory so that both
+# reuse the same dependency builds. The leaves: image/resize.rs (the base layer, under everything)
+# and eval/report.rs (a job, under the binaries only), found at either layout (src/<module>/ in
+# one crate, crates/pav-<crate>/src/ in the workspace). Writes round,tree,leaf,seconds to stdout.
 # usage: docs/reports/scripts/rebuild_time.sh BASE_REV [ROUNDS]
 set -euo pipefail
 base=$1
@@ -11,17 +13,28 @@ export CARGO_TARGET_DIR=${CARGO_TARGET_DIR:-$repo/target}
 wt=$(mktemp -d)/base
 git -C "$repo" worktree add -f "$wt" "$base" >/dev/null 2>&1
 trap 'git -C "$repo" worktree remove --force "$wt"' EXIT
+# The leaf's file in a tree of either layout.
+leaf() {
+  local dir=$1 module=$2 file=$3
+  for p in "src/$module/$file" "crates/pav-core/src/$module/$file" "crates/pav-$module/src/$file"; do
+    [ -f "$dir/$p" ] && { echo "$dir/$p"; return; }
+  done
+  echo "no $module/$file in $dir" >&2
+  exit 1
+}
 (cd "$wt" && cargo build --release >/dev/null 2>&1)
 (cd "$repo" && cargo build --release >/dev/null 2>&1)
-echo "round,tree,seconds"
+echo "round,tree,leaf,seconds"
 for r in $(seq 1 "$rounds"); do
-  for tree in base working; do
-    dir=$wt
-    [ "$tree" = working ] && dir=$repo
-    touch "$dir/src/image/resize.rs"
-    s=$(date +%s.%N)
-    (cd "$dir" && cargo build --release >/dev/null 2>&1)
-    e=$(date +%s.%N)
-    echo "$r,$tree,$(echo "$e - $s" | bc)"
+  for l in image/resize.rs eval/report.rs; do
+    for tree in base working; do
+      dir=$wt
+      [ "$tree" = working ] && dir=$repo
+      touch "$(leaf "$dir" "${l%%/*}" "${l#*/}")"
+      s=$(date +%s.%N)
+      (cd "$dir" && cargo build --release >/dev/null 2>&1)
+      e=$(date +%s.%N)
+      echo "$r,$tree,$l,$(echo "$e - $s" | bc)"
+    done
   done
 done
