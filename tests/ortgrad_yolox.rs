@@ -77,22 +77,22 @@ fn gradient_matches_central_differences_along_directions() {
         assert!(grad.iter().all(|v| v.is_finite()));
         let plane = 416 * 416;
         // The whole image, and a 64×64 patch of all three channels over the car.
-        let dirs: Vec<Vec<f32>> = vec![
-            common::whole_image_direction(3 * plane),
-            (0..3 * plane)
-                .map(|i| {
-                    if (176..240).contains(&(i % plane / 416)) && (170..234).contains(&(i % 416)) {
-                        1.0
-                    } else {
-                        0.0
-                    }
-                })
-                .collect(),
-        ];
+        let dirs: Vec<Vec<f32>> =
+            vec![
+                common::whole_image_direction(3 * plane),
+                (0..3 * plane)
+                    .map(|i| {
+                        if (176..240).contains(&(i % plane / 416)) && (170..234).contains(&(i % 416)) {
+                            1.0
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect(),
+            ];
         // Across the whole image, the max-pools' kinks make the central difference's error first
-        // order in ε (measured: −2.716, −2.764, −2.838 e-4 at ε = 0.01, 0.03, 0.1 levels), so it is
-        // extrapolated to ε → 0 from two steps. The extrapolation is good to about a percent: on an
-        // AMD EPYC the graph gave −3.512e-4 against −3.496e-4 (0.4 %), so 2 % is allowed. On the
+        // order in ε, so it is extrapolated to ε → 0 from two steps. The extrapolation is good to
+        // about a percent: on an AMD EPYC the graph gave −3.512e-4 against −3.496e-4 (0.4 %), so 2 % is allowed. On the
         // patch the difference is flat from ε = 0.03 to 0.3 (−1.563 to −1.573 e-5 against the
         // graph's −1.561e-5); a single channel's 24×24 patch had a derivative 20× smaller, at
         // the level of f32 rounding, whose difference drifted from 3.9 to 7.5 e-7 with ε.
