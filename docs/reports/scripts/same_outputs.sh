@@ -29,7 +29,7 @@ normal() {
     */run.toml) echo "(run record)" ;;
     */loss.csv) python3 -c 'import csv,sys
 r=list(csv.reader(open(sys.argv[1])))
-keep=[i for i,h in enumerate(r[0]) if not any(k in h for k in ("ms","time","seconds","_s"))]
+keep=[i for i,h in enumerate(r[0]) if not h.endswith("_ms")]
 [print(",".join(row[i] for i in keep)) for row in r]' "$1" ;;
     */scores.json) python3 -c 'import json,sys
 d=json.load(open(sys.argv[1])); d.pop("seconds",None); print(json.dumps(d,sort_keys=True))' "$1" ;;
