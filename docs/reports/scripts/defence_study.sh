@@ -10,24 +10,11 @@
 set -euo pipefail
 out=$1; shift
 pav=${PAV:-target/release/pav}
-mkdir -p "$out/configs"
-cfgdir=$(cd "$out/configs" && pwd)
-repo=$(pwd)
+source "$(dirname "$0")/defence_configs.sh"
 common=(--folds 3 --random-seeds 1 --reference data:rauca-e2e/RAUCA_E2E.png)
 scoring=(-d configs/detectors/yolov3-tiny.toml -d configs/detectors/deimv2_atto_int8.toml -d configs/detectors/yolox_nano.toml
   --defence median:k=3 --defence bits:b=4 --defence jpeg:q=75 --defence cutout:n=2,s=60 --defence noise:sigma=8)
 clipped=(-d configs/defences/yolov3-tiny-clip.toml -d configs/defences/deimv2_atto_int8-clip.toml -d configs/defences/yolox_nano-clip.toml)
-white_boxes() { # defence-toml-or-empty yolov3-config deimv2-config
-  for d in "$2" "$repo/configs/detectors/yolov8n_int8.toml" "$3"; do
-    printf '\n[[white_box]]\ndetector = "%s"\nweight = 1.0\n' "$d"
-    case $d in *int8*) echo 'surrogate = true' ;; esac
-    [ -n "$1" ] && echo "defence = [$1]"
-  done
-}
-config() { # name seed white-box-lines...
-  { echo "extends = \"$repo/configs/studies/print-base.toml\""; printf '\n[optimizer]\nseed = %s\n' "$2"; echo "$3"; } > "$cfgdir/$1.toml"
-  echo "$cfgdir/$1.toml"
-}
 run() { # name config
   [ -f "$out/$1/crossval.csv" ] || "$pav" crossval --config "$2" "${common[@]}" "${scoring[@]}" -o "$out/$1"
   if [ ! -f "$out/$1-clipped/crossval.csv" ]; then
@@ -36,7 +23,6 @@ run() { # name config
   fi
 }
 for s in "$@"; do
-  run plain-s$s "$(config plain-s$s $s "$(white_boxes "" "$repo/configs/detectors/yolov3-tiny.toml" "$repo/configs/detectors/deimv2_atto_int8.toml")")"
-  run median-s$s "$(config median-s$s $s "$(white_boxes '{ kind = "median", k = 3 }' "$repo/configs/detectors/yolov3-tiny.toml" "$repo/configs/detectors/deimv2_atto_int8.toml")")"
-  run clip-s$s "$(config clip-s$s $s "$(white_boxes "" "$repo/configs/defences/yolov3-tiny-clip.toml" "$repo/configs/defences/deimv2_atto_int8-clip.toml")")"
+  defence_configs "$out" "$s"
+  for r in plain median clip; do run $r-s$s "$out/configs/$r-s$s.toml"; done
 done

@@ -15,23 +15,9 @@ mkdir -p "$out/rigs" "$out/paints"
 here=$(pwd)
 texture=${2:-$out/pav/texture.png}
 if [ ! -f "$texture" ]; then
-  cat > "$out/pav.toml" <<TOML
-extends = "$here/configs/studies/print-base.toml"
-[optimizer]
-seed = 0
-[[white_box]]
-detector = "$here/configs/detectors/yolov3-tiny.toml"
-weight = 1.0
-[[white_box]]
-detector = "$here/configs/detectors/yolov8n_int8.toml"
-weight = 1.0
-surrogate = true
-[[white_box]]
-detector = "$here/configs/detectors/deimv2_atto_int8.toml"
-weight = 1.0
-surrogate = true
-TOML
-  "$pav" optimize --config "$out/pav.toml" -o "$out/pav"
+  source "$(dirname "$0")/defence_configs.sh"
+  defence_configs "$out" 0
+  "$pav" optimize --config "$out/configs/plain-s0.toml" -o "$out/pav"
 fi
 paint=(paint --config configs/studies/print-base.toml)
 [ -f "$out/paints/random.png" ] || "$pav" "${paint[@]}" --random 0 -o "$out/paints/random.png"
