@@ -116,6 +116,8 @@ fn listing(outs: &[RawOutput]) -> String {
 /// One part's tensor for one level (or for every row), read by row and value.
 struct View<'a> {
     data: &'a [f32],
+    /// Its output's position among the decoded outputs.
+    output: usize,
     rows: usize,
     width: usize,
     arrange: Arrange,
@@ -126,10 +128,16 @@ struct View<'a> {
 impl View<'_> {
     #[inline]
     fn at(&self, r: usize, f: usize) -> f32 {
+        self.data[self.index(r, f)]
+    }
+
+    /// Where value `f` of row `r` sits in the output's data.
+    #[inline]
+    fn index(&self, r: usize, f: usize) -> usize {
         match self.arrange {
-            Arrange::Rows => self.data[r * self.width + f],
-            Arrange::Columns => self.data[f * self.rows + r],
-            Arrange::Planes => self.data[((r / self.plane) * self.width + f) * self.plane + r % self.plane],
+            Arrange::Rows => r * self.width + f,
+            Arrange::Columns => f * self.rows + r,
+            Arrange::Planes => ((r / self.plane) * self.width + f) * self.plane + r % self.plane,
         }
     }
 
@@ -220,7 +228,8 @@ fn locate<'a>(
                 listing(outs)
             )));
         };
-        Ok(View { data: &o.data, rows: r, width: w, arrange: p.arrange, plane: gh * gw })
+        let output = outs.iter().position(|x| std::ptr::eq(x, o)).unwrap_or(0);
+        Ok(View { data: &o.data, output, rows: r, width: w, arrange: p.arrange, plane: gh * gw })
     };
     let pick = |rows: Option<usize>, level: Option<usize>| -> Result<View<'a>, LayoutError> {
         let fit: Vec<&RawOutput> = outs.iter().filter(|o| fits(o, rows).is_some()).collect();
@@ -318,6 +327,239 @@ fn level_view<'v, 'o>(views: &'v [View<'o>], l: usize, start: usize) -> (&'v Vie
     }
 }
 
+/// Row `lr`'s label where the part has labels (`Some(None)` without): `None` for the rows an
+/// export pads to a fixed count with class −1, which are skipped.
+fn row_label(lv: Option<(&View, usize)>, lr: usize, column: usize, classes: usize) -> Option<Option<usize>> {
+    match lv {
+        Some((v, o)) => {
+            let label = v.at(o + lr, column);
+            (label >= 0.0 && (label as usize) < classes).then_some(Some(label as usize))
+        }
+        None => Some(None),
+    }
+}
+
+/// Where a row's box is anchored: its cell, the grid's step, its anchor and the cell's point.
+struct Anchor {
+    gx: f32,
+    gy: f32,
+    sx: f32,
+    sy: f32,
+    aw: f32,
+    ah: f32,
+    cx0: f32,
+    cy0: f32,
+}
+
+impl Anchor {
+    /// Row `lr` of level `g`.
+    fn of(d: &Description, g: &Grid, lr: usize) -> Self {
+        let (cells, na) = (g.gw * g.gh, g.anchors());
+        let (a, cell) = match d.order {
+            CellOrder::AnchorCell => (lr / cells, lr % cells),
+            CellOrder::CellAnchor => (lr % na, lr / na),
+        };
+        let (gx, gy) = ((cell % g.gw) as f32, (cell / g.gw) as f32);
+        let [aw, ah] = g.anchors.get(a).copied().unwrap_or([g.sx, g.sy]);
+        let (cx0, cy0) = match d.centre {
+            Centre::Cell => ((gx + 0.5) * g.sx, (gy + 0.5) * g.sy),
+            Centre::Pixel => (gx * g.sx + (g.sx - 1.0) / 2.0, gy * g.sy + (g.sy - 1.0) / 2.0),
+        };
+        Anchor { gx, gy, sx: g.sx, sy: g.sy, aw, ah, cx0, cy0 }
+    }
+}
+
+/// What a box reads, as (output, index in its data, ∂[x1, y1, x2, y2] of the frame box).
+pub type BoxTerm = (usize, usize, [f32; 4]);
+
+/// How a description's boxes are read.
+struct BoxReader {
+    enc: Encoding,
+    cols: [usize; 4],
+    column: usize,
+    bins: usize,
+    var: [f32; 2],
+    norm: [f32; 2],
+    /// The input's size, when boxes are clipped to it.
+    clip: Option<[f32; 2]>,
+    to_frame: InputMap,
+}
+
+/// `cx, cy, w, h` as corners, with the corners' derivatives by the four values when each of
+/// `dc` is the derivative of `cx, cy, w, h` by the one value it reads.
+fn corners(c: [f32; 4], dc: [f32; 4]) -> (BBox, [[f32; 4]; 4]) {
+    let [cx, cy, w, h] = c;
+    let b = [cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0];
+    let [a, e, f, g] = dc;
+    (b, [[a, 0.0, a, 0.0], [0.0, e, 0.0, e], [-f / 2.0, 0.0, f / 2.0, 0.0], [0.0, -g / 2.0, 0.0, g / 2.0]])
+}
+
+/// Corners read one value each, scaled by `d`.
+fn diagonal(b: BBox, d: [f32; 4]) -> (BBox, [[f32; 4]; 4]) {
+    let mut j = [[0f32; 4]; 4];
+    (0..4).for_each(|k| j[k][k] = d[k]);
+    (b, j)
+}
+
+impl BoxReader {
+    fn new(d: &Description, input_w: usize, input_h: usize, map: &InputMap) -> Self {
+        let b = &d.boxes;
+        let (w, h) = (input_w as f32, input_h as f32);
+        BoxReader {
+            enc: b.encoding.unwrap_or(Encoding::Xyxy),
+            cols: b.coords.unwrap_or([b.column, b.column + 1, b.column + 2, b.column + 3]),
+            column: b.column,
+            bins: b.bins.unwrap_or(0),
+            var: b.variances.unwrap_or([1.0, 1.0]),
+            norm: if b.normalized { [w, h] } else { [1.0, 1.0] },
+            clip: b.clip.then_some([w, h]),
+            // Boxes the graph mapped back itself are only clipped to the frame.
+            to_frame: match b.frame {
+                BoxFrame::Input => *map,
+                BoxFrame::Image => InputMap { scale_x: 1.0, scale_y: 1.0, pad_x: 0.0, pad_y: 0.0, ..*map },
+            },
+        }
+    }
+
+    /// Row `r` of `v`'s box in frame pixels; with `jac`, every value it reads is pushed with the
+    /// box's derivative by it.
+    fn read(&self, v: &View, r: usize, a: &Anchor, jac: Option<&mut Vec<BoxTerm>>) -> BBox {
+        let val = |k: usize| v.at(r, self.cols[k]);
+        let [nx, ny] = self.norm;
+        let [var_c, var_s] = self.var;
+        let (bx, dv) = match self.enc {
+            Encoding::Xyxy => diagonal([val(0) * nx, val(1) * ny, val(2) * nx, val(3) * ny], [nx, ny, nx, ny]),
+            Encoding::Cxcywh => corners([val(0) * nx, val(1) * ny, val(2) * nx, val(3) * ny], [nx, ny, nx, ny]),
+            Encoding::Grid => {
+                let (w, h) = (val(2).exp() * a.aw, val(3).exp() * a.ah);
+                corners([(val(0) + a.gx) * a.sx, (val(1) + a.gy) * a.sy, w, h], [a.sx, a.sy, w, h])
+            }
+            Encoding::Darknet => {
+                let (s0, s1) = (sigmoid(val(0)), sigmoid(val(1)));
+                let (w, h) = (val(2).exp() * a.aw, val(3).exp() * a.ah);
+                let d = [s0 * (1.0 - s0) * a.sx, s1 * (1.0 - s1) * a.sy, w, h];
+                corners([(s0 + a.gx) * a.sx, (s1 + a.gy) * a.sy, w, h], d)
+            }
+            Encoding::Yolov5 => {
+                let s = [0, 1, 2, 3].map(|k| sigmoid(val(k)));
+                let ds = s.map(|s| s * (1.0 - s));
+                let c = [
+                    (s[0] * 2.0 - 0.5 + a.gx) * a.sx,
+                    (s[1] * 2.0 - 0.5 + a.gy) * a.sy,
+                    (s[2] * 2.0).powi(2) * a.aw,
+                    (s[3] * 2.0).powi(2) * a.ah,
+                ];
+                // d(2σ)²/dv = 8σ·σ'.
+                let d = [2.0 * ds[0] * a.sx, 2.0 * ds[1] * a.sy, 8.0 * s[2] * ds[2] * a.aw, 8.0 * s[3] * ds[3] * a.ah];
+                corners(c, d)
+            }
+            Encoding::Ltrb => diagonal(
+                [a.cx0 - val(0) * a.sx, a.cy0 - val(1) * a.sy, a.cx0 + val(2) * a.sx, a.cy0 + val(3) * a.sy],
+                [-a.sx, -a.sy, a.sx, a.sy],
+            ),
+            Encoding::LtrbBins => return self.read_bins(v, r, a, jac),
+            Encoding::Prior => {
+                let (w, h) = (a.aw * (val(2) * var_s).exp(), a.ah * (val(3) * var_s).exp());
+                let c = [a.cx0 + val(0) * var_c * a.aw, a.cy0 + val(1) * var_c * a.ah, w, h];
+                corners(c, [var_c * a.aw, var_c * a.ah, w * var_s, h * var_s])
+            }
+        };
+        let (b, keep) = self.finish(bx);
+        if let Some(jac) = jac {
+            for (k, d) in dv.iter().enumerate() {
+                jac.push((v.output, v.index(r, self.cols[k]), [0, 1, 2, 3].map(|j| d[j] * keep[j])));
+            }
+        }
+        b
+    }
+
+    /// A GFL box: each side's distance the expectation of a softmax over `bins` values.
+    fn read_bins(&self, v: &View, r: usize, a: &Anchor, mut jac: Option<&mut Vec<BoxTerm>>) -> BBox {
+        let bins = self.bins;
+        let mut dist = [0f32; 4];
+        // Per side: the softmax and its expectation, for the derivative step·p_k·(k − E).
+        let mut soft: Vec<(Vec<f32>, f32)> = Vec::new();
+        for (side, out) in dist.iter_mut().enumerate() {
+            let at = |k: usize| v.at(r, self.column + side * bins + k);
+            let m = (0..bins).map(at).fold(f32::NEG_INFINITY, f32::max);
+            let e: Vec<f32> = (0..bins).map(|k| (at(k) - m).exp()).collect();
+            let z: f32 = e.iter().sum();
+            let step = if side % 2 == 0 { a.sx } else { a.sy };
+            let mean = e.iter().enumerate().map(|(k, v)| k as f32 * v).sum::<f32>() / z;
+            *out = mean * step;
+            if jac.is_some() {
+                soft.push((e.iter().map(|e| e / z).collect(), mean));
+            }
+        }
+        let (b, keep) = self.finish([a.cx0 - dist[0], a.cy0 - dist[1], a.cx0 + dist[2], a.cy0 + dist[3]]);
+        if let Some(jac) = jac.as_mut() {
+            for (side, (p, mean)) in soft.iter().enumerate() {
+                let step = if side % 2 == 0 { a.sx } else { a.sy };
+                let sign = if side < 2 { -1.0 } else { 1.0 };
+                for (k, p) in p.iter().enumerate() {
+                    let mut d = [0f32; 4];
+                    d[side] = sign * step * p * (k as f32 - mean) * keep[side];
+                    jac.push((v.output, v.index(r, self.column + side * bins + k), d));
+                }
+            }
+        }
+        b
+    }
+
+    /// The box clipped and mapped to the frame, and each corner's derivative through both (0
+    /// where a corner was clamped).
+    fn finish(&self, mut bx: BBox) -> (BBox, [f32; 4]) {
+        let mut keep = [1f32; 4];
+        if let Some([w, h]) = self.clip {
+            for (k, c) in bx.iter_mut().enumerate() {
+                let top = if k % 2 == 0 { w } else { h };
+                if !(0.0..=top).contains(c) {
+                    keep[k] = 0.0;
+                }
+                *c = c.clamp(0.0, top);
+            }
+        }
+        let (b, d) = self.to_frame.to_frame_with_grad(bx);
+        (b, [0, 1, 2, 3].map(|k| keep[k] * d[k]))
+    }
+}
+
+/// Each box of [`decode`] (in its order) with its derivative by every raw value it is decoded
+/// from: the exact backward of the boxes, for losses that move them.
+pub fn box_jacobians(
+    layout: &OutputLayout,
+    outs: &[RawOutput],
+    input_w: usize,
+    input_h: usize,
+    num_classes: usize,
+    map: &InputMap,
+) -> Result<Vec<(BBox, Vec<BoxTerm>)>, LayoutError> {
+    let d = layout.describe(num_classes);
+    let grids = grids(&d, outs, input_w, input_h, num_classes)?;
+    let boxes = locate(&d, Role::Boxes, outs, &grids, num_classes)?;
+    let labels = d.labels.as_ref().map(|_| locate(&d, Role::Labels, outs, &grids, num_classes)).transpose()?;
+    let reader = BoxReader::new(&d, input_w, input_h, map);
+    let label_col = d.labels.as_ref().map_or(0, |p| p.column);
+    let total = if grids.is_empty() { boxes[0].rows } else { grids.iter().map(Grid::rows).sum() };
+    let one = [Grid { gw: total, gh: 1, sx: 1.0, sy: 1.0, anchors: Vec::new() }];
+    let levels: &[Grid] = if grids.is_empty() { &one } else { &grids };
+    let (mut out, mut start) = (Vec::new(), 0);
+    for (l, g) in levels.iter().enumerate() {
+        let (bv, bo) = level_view(&boxes, l, start);
+        let lv = labels.as_deref().map(|v| level_view(v, l, start));
+        for lr in 0..g.rows() {
+            if row_label(lv, lr, label_col, num_classes).is_none() {
+                continue;
+            }
+            let mut terms = Vec::new();
+            let b = reader.read(bv, bo + lr, &Anchor::of(&d, g, lr), Some(&mut terms));
+            out.push((b, terms));
+        }
+        start += g.rows();
+    }
+    Ok(out)
+}
+
 /// Decodes `outs` under a [`Description`].
 pub fn decode_described(
     d: &Description,
@@ -345,17 +587,7 @@ pub fn decode_described(
             )));
         }
     }
-    let b = &d.boxes;
-    let enc = b.encoding.unwrap_or(Encoding::Xyxy);
-    let cols = b.coords.unwrap_or([b.column, b.column + 1, b.column + 2, b.column + 3]);
-    let bins = b.bins.unwrap_or(0);
-    let [var_c, var_s] = b.variances.unwrap_or([1.0, 1.0]);
-    let (nx, ny) = if b.normalized { (input_w as f32, input_h as f32) } else { (1.0, 1.0) };
-    // Boxes the graph mapped back itself are only clipped to the frame.
-    let to_frame = match b.frame {
-        BoxFrame::Input => *map,
-        BoxFrame::Image => InputMap { scale_x: 1.0, scale_y: 1.0, pad_x: 0.0, pad_y: 0.0, ..*map },
-    };
+    let reader = BoxReader::new(d, input_w, input_h, map);
     let s = &d.scores;
     let width = d.count(Role::Scores, classes);
     let mut p = Proposals::with_capacity(classes, total);
@@ -369,71 +601,9 @@ pub fn decode_described(
         let ((bv, bo), (sv, so)) = (level_view(&boxes, l, start), level_view(&scores, l, start));
         let ov = obj.as_deref().map(|v| level_view(v, l, start));
         let lv = labels.as_deref().map(|v| level_view(v, l, start));
-        let (cells, na) = (g.gw * g.gh, g.anchors());
         for lr in 0..g.rows() {
-            let label = match lv {
-                Some((v, o)) => {
-                    let label = v.at(o + lr, label_col);
-                    // Exports pad to a fixed row count with class −1.
-                    if label < 0.0 || label as usize >= classes {
-                        continue;
-                    }
-                    Some(label as usize)
-                }
-                None => None,
-            };
-            let (a, cell) = match d.order {
-                CellOrder::AnchorCell => (lr / cells, lr % cells),
-                CellOrder::CellAnchor => (lr % na, lr / na),
-            };
-            let (gx, gy) = ((cell % g.gw) as f32, (cell / g.gw) as f32);
-            let [aw, ah] = g.anchors.get(a).copied().unwrap_or([g.sx, g.sy]);
-            let (cx0, cy0) = match d.centre {
-                Centre::Cell => ((gx + 0.5) * g.sx, (gy + 0.5) * g.sy),
-                Centre::Pixel => (gx * g.sx + (g.sx - 1.0) / 2.0, gy * g.sy + (g.sy - 1.0) / 2.0),
-            };
-            let br = bo + lr;
-            let v = |k: usize| bv.at(br, cols[k]);
-            let corners = |cx: f32, cy: f32, w: f32, h: f32| [cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0];
-            let mut bx = match enc {
-                Encoding::Xyxy => [v(0) * nx, v(1) * ny, v(2) * nx, v(3) * ny],
-                Encoding::Cxcywh => corners(v(0) * nx, v(1) * ny, v(2) * nx, v(3) * ny),
-                Encoding::Grid => corners((v(0) + gx) * g.sx, (v(1) + gy) * g.sy, v(2).exp() * aw, v(3).exp() * ah),
-                Encoding::Darknet => {
-                    corners((sigmoid(v(0)) + gx) * g.sx, (sigmoid(v(1)) + gy) * g.sy, v(2).exp() * aw, v(3).exp() * ah)
-                }
-                Encoding::Yolov5 => corners(
-                    (sigmoid(v(0)) * 2.0 - 0.5 + gx) * g.sx,
-                    (sigmoid(v(1)) * 2.0 - 0.5 + gy) * g.sy,
-                    (sigmoid(v(2)) * 2.0).powi(2) * aw,
-                    (sigmoid(v(3)) * 2.0).powi(2) * ah,
-                ),
-                Encoding::Ltrb => [cx0 - v(0) * g.sx, cy0 - v(1) * g.sy, cx0 + v(2) * g.sx, cy0 + v(3) * g.sy],
-                Encoding::LtrbBins => {
-                    let mut dist = [0f32; 4];
-                    for (side, out) in dist.iter_mut().enumerate() {
-                        let at = |k: usize| bv.at(br, b.column + side * bins + k);
-                        let m = (0..bins).map(at).fold(f32::NEG_INFINITY, f32::max);
-                        let e: Vec<f32> = (0..bins).map(|k| (at(k) - m).exp()).collect();
-                        let z: f32 = e.iter().sum();
-                        let step = if side % 2 == 0 { g.sx } else { g.sy };
-                        *out = e.iter().enumerate().map(|(k, v)| k as f32 * v).sum::<f32>() / z * step;
-                    }
-                    [cx0 - dist[0], cy0 - dist[1], cx0 + dist[2], cy0 + dist[3]]
-                }
-                Encoding::Prior => corners(
-                    cx0 + v(0) * var_c * aw,
-                    cy0 + v(1) * var_c * ah,
-                    aw * (v(2) * var_s).exp(),
-                    ah * (v(3) * var_s).exp(),
-                ),
-            };
-            if b.clip {
-                for (k, c) in bx.iter_mut().enumerate() {
-                    *c = c.clamp(0.0, if k % 2 == 0 { input_w } else { input_h } as f32);
-                }
-            }
-            p.boxes.push(to_frame.to_frame(bx));
+            let Some(label) = row_label(lv, lr, label_col, classes) else { continue };
+            p.boxes.push(reader.read(bv, bo + lr, &Anchor::of(d, g, lr), None));
             let sr = so + lr;
             if let Some(label) = label {
                 let mut row = vec![0f32; classes];
@@ -731,6 +901,104 @@ mod tests {
         let l = described("[boxes]\noutput = 'det'\nencoding = 'xyxy'\n[scores]\n[labels]\noutput = 'cls'\n");
         let e = decode(&l, &outs, 32, 16, 2, &ID).unwrap_err().to_string();
         assert!(e.contains("`cls`, `conf` all fit") && e.contains("name one"), "{e}");
+    }
+
+    /// Every value from a seeded stream in [−1.5, 1.5).
+    fn values(n: usize, seed: u64) -> Vec<f32> {
+        let mut x = seed;
+        (0..n)
+            .map(|_| {
+                x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                ((x >> 40) as f32 / (1u64 << 24) as f32) * 3.0 - 1.5
+            })
+            .collect()
+    }
+
+    /// The boxes' Jacobians against central differences of the decoder, and their boxes against
+    /// the decoder's, for every box encoding, through a scaled and padded map to the frame.
+    #[test]
+    fn box_jacobians_match_central_differences_for_every_encoding() {
+        let map = InputMap { scale_x: 2.0, scale_y: 1.5, pad_x: 3.0, pad_y: 0.0, frame_w: 1e4, frame_h: 1e4 };
+        let out = |name: &str, shape: Vec<usize>, seed| {
+            let n = shape.iter().product();
+            RawOutput { name: name.into(), shape, data: values(n, seed) }
+        };
+        let darknet = OutputLayout::Darknet {
+            heads: vec![HeadConfig { output: "h".into(), anchors: vec![[40.0, 30.0], [12.0, 20.0]] }],
+        };
+        let planes = |enc: &str| {
+            described(&format!("[[levels]]\nanchors = [[40, 30], [12, 20]]\n[boxes]\noutput = ['h']\narrange = 'planes'\nper_level = true\nencoding = '{enc}'\n[objectness]\noutput = ['h']\narrange = 'planes'\nper_level = true\ncolumn = 4\nactivation = 'sigmoid'\n[scores]\noutput = ['h']\narrange = 'planes'\nper_level = true\ncolumn = 5\nactivation = 'sigmoid'\n"))
+        };
+        let prior = described("order = 'cell-anchor'\n[[levels]]\nstride = 16\nanchors = [[10, 10], [20, 10]]\n[boxes]\noutput = ['b']\nwidth = 4\nencoding = 'prior'\ncoords = [1, 0, 3, 2]\nvariances = [0.1, 0.2]\n[scores]\noutput = ['s']\nwidth = 3\nactivation = 'softmax'\nbackground = 0\n");
+        let cases: Vec<(&str, OutputLayout, Vec<RawOutput>, usize, usize)> = vec![
+            ("darknet", darknet, vec![out("h", vec![1, 14, 3, 3], 1)], 96, 2),
+            ("yolov5", planes("yolov5"), vec![out("h", vec![1, 14, 3, 3], 2)], 96, 2),
+            (
+                "grid (yolox)",
+                OutputLayout::Yolox { output: None, strides: vec![4, 8] },
+                vec![out("o", vec![1, 20, 7], 3)],
+                16,
+                2,
+            ),
+            (
+                "ltrb bins (gfl)",
+                OutputLayout::Gfl { strides: vec![4], bins: 4 },
+                vec![out("r", vec![1, 4, 16], 4), out("c", vec![1, 4, 2], 5)],
+                8,
+                2,
+            ),
+            (
+                "cxcywh (ultralytics)",
+                OutputLayout::Ultralytics { output: None },
+                vec![out("o", vec![1, 6, 5], 6)],
+                32,
+                2,
+            ),
+            ("prior (ssd)", prior, vec![out("s", vec![1, 8, 3], 7), out("b", vec![1, 8, 4], 8)], 32, 2),
+            (
+                "ltrb",
+                described("[[levels]]\nstride = 16\n[boxes]\nencoding = 'ltrb'\n[scores]\ncolumn = 4\n"),
+                vec![out("o", vec![1, 4, 6], 9)],
+                32,
+                2,
+            ),
+        ];
+        for (what, layout, outs, side, classes) in cases {
+            let jac = box_jacobians(&layout, &outs, side, side, classes, &map).unwrap();
+            let boxes = decode(&layout, &outs, side, side, classes, &map).unwrap().boxes;
+            assert_eq!(jac.iter().map(|j| j.0).collect::<Vec<_>>(), boxes, "{what}: the same boxes as decode");
+            let mut checked = 0;
+            for (i, (_, terms)) in jac.iter().enumerate() {
+                for &(o, idx, d) in terms {
+                    let h = 1e-2f32;
+                    let at = |delta: f32| {
+                        let mut moved = outs.clone();
+                        moved[o].data[idx] += delta;
+                        decode(&layout, &moved, side, side, classes, &map).unwrap().boxes[i]
+                    };
+                    let (up, down) = (at(h), at(-h));
+                    for k in 0..4 {
+                        // A corner the step clamps to the frame has no central difference.
+                        if [up[k], down[k]].iter().any(|&c| c == 0.0 || c == 1e4) {
+                            continue;
+                        }
+                        let fd = (up[k] - down[k]) / (2.0 * h);
+                        assert!(
+                            (fd - d[k]).abs() <= 2e-2 * (1.0 + d[k].abs()),
+                            "{what}: box {i} corner {k} by value {idx}: {} vs {fd}",
+                            d[k]
+                        );
+                    }
+                    checked += 1;
+                }
+            }
+            assert!(checked >= 4 * jac.len(), "{what}: {checked} values for {} boxes", jac.len());
+            // Not vacuous: the boxes move with their values.
+            assert!(
+                jac.iter().flat_map(|j| &j.1).filter(|t| t.2.iter().any(|v| v.abs() > 0.1)).count() > jac.len(),
+                "{what}"
+            );
+        }
     }
 
     #[test]

@@ -35,6 +35,23 @@ impl InputMap {
         let fy = |y: f32| ((y - self.pad_y) / self.scale_y).clamp(0.0, self.frame_h);
         [fx(b[0]), fy(b[1]), fx(b[2]), fy(b[3])]
     }
+
+    /// [`InputMap::to_frame`] and each corner's derivative through it (0 where it was clamped).
+    pub fn to_frame_with_grad(&self, b: BBox) -> (BBox, [f32; 4]) {
+        let d = |k: usize| {
+            let (pad, scale, top) = if k % 2 == 0 {
+                (self.pad_x, self.scale_x, self.frame_w)
+            } else {
+                (self.pad_y, self.scale_y, self.frame_h)
+            };
+            if (0.0..=top).contains(&((b[k] - pad) / scale)) {
+                1.0 / scale
+            } else {
+                0.0
+            }
+        };
+        (self.to_frame(b), [d(0), d(1), d(2), d(3)])
+    }
 }
 
 /// Builds the NCHW float input (batch 1) for `frame` and the map back to frame pixels.
