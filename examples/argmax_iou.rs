@@ -24,6 +24,7 @@ fn main() {
             reduce: Reduce::LogMax,
             proposals: Proposals::ArgMax,
             iou: true,
+            box_gradient: false,
         };
         let wb = WhiteBox::with_options(
             &d,

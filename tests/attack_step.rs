@@ -35,6 +35,7 @@ fn setup_defended(size: usize, detector: &str, defence: &[Defence]) -> (Optimize
         reduce: Reduce::Mean,
         proposals: Proposals::ArgMax,
         iou: false,
+        box_gradient: false,
     };
     let wb = WhiteBox::load(&d, loss, size).unwrap();
     (cfg, s, wb)

@@ -46,6 +46,7 @@ fn deimv2_trains_as_a_named_surrogate_and_descent_hides_the_car() {
         reduce: Reduce::Mean,
         proposals: Proposals::ArgMax,
         iou: false,
+        box_gradient: false,
     };
     let e = WhiteBox::load(&cfg, loss.clone(), 416).err().expect("refused").to_string();
     assert!(e.contains("surrogate = true"), "{e}");

@@ -90,6 +90,7 @@ fn the_int8_model_trains_only_as_a_named_surrogate() {
         reduce: Reduce::Mean,
         proposals: Proposals::ArgMax,
         iou: false,
+        box_gradient: false,
     };
     let e = WhiteBox::load(&config(), loss.clone(), 416).err().expect("refused").to_string();
     assert!(e.contains("surrogate = true"), "{e}");

@@ -76,6 +76,7 @@ pub fn time_step(
             reduce: if iou { Reduce::LogMax } else { Reduce::Mean },
             proposals: Proposals::ArgMax,
             iou,
+            box_gradient: false,
         };
         let o = WhiteBoxOptions { composite: size, input: Some(size), threads, surrogate };
         let wb = WhiteBox::with_options(detector, loss, o)?;

@@ -157,6 +157,10 @@ pub struct LossConfig {
     /// a background car does not count; for the score reductions only.
     #[serde(default)]
     pub iou: bool,
+    /// Differentiate that weight: each step also moves the boxes off the car (their IoU with it
+    /// down), through the detector's box outputs; by default the weight is held constant.
+    #[serde(default)]
+    pub box_gradient: bool,
     /// L2's set under `"mean"`: `"arg_max"` (the paper, the default) or `"scored"` (every
     /// prediction whose car score reaches `box_threshold`, as the metrics count).
     #[serde(default)]
@@ -444,6 +448,9 @@ impl OptimizeConfig {
                     .into(),
             );
         }
+        if l.box_gradient && !l.iou {
+            return Err("loss.box_gradient differentiates the IoU weight of loss.iou; set iou = true with it".into());
+        }
         if !(0.0..=1.0).contains(&l.box_threshold) {
             return Err(format!("loss.box_threshold must be in [0, 1], got {}", l.box_threshold));
         }
@@ -727,6 +734,14 @@ mod tests {
         assert!(variant("reduce = \"mean\"", "reduce = \"log_max\"\niou = true").unwrap().loss.iou);
         let e = variant("reduce = \"mean\"", "reduce = \"mean\"\niou = true").unwrap_err().to_string();
         assert!(e.contains("loss.iou"), "{e}");
+        assert!(
+            variant("reduce = \"mean\"", "reduce = \"log_max\"\niou = true\nbox_gradient = true")
+                .unwrap()
+                .loss
+                .box_gradient
+        );
+        let e = variant("reduce = \"mean\"", "reduce = \"log_max\"\nbox_gradient = true").unwrap_err().to_string();
+        assert!(e.contains("loss.box_gradient") && e.contains("iou = true"), "{e}");
         let c = variant("init = 0.5", "init = \"peer.png\"").unwrap();
         assert_eq!(c.mesh.init, Init::File(dir.path().join("peer.png")));
         assert_eq!(variant("init = 0.5", "init = \"random\"").unwrap().mesh.init, Init::Named(InitName::Random));

@@ -25,10 +25,12 @@
 //! score over all predictions, reported as L2 (L1 is 0). Without a weight a background car that
 //! outscores the target holds the maximum and the step pushes nothing the texture can change;
 //! [`Predictions::weigh`] multiplies each prediction's detection score by its box's IoU with the
-//! car's box first, as RAUCA-E2E does (`loss.iou`). The weight is held constant: the gradient
-//! goes through the scores, not the boxes (the box branches of the YOLOv8n and DEIMv2 graphs are
-//! computed without a gradient), so a step lowers the car's scores and does not move its boxes
-//! off the car. Under the score reductions (top-k, softmax, log-max) the weight enters L2's
+//! car's box first, as RAUCA-E2E does (`loss.iou`). By default the weight is held constant: the
+//! gradient goes through the scores, not the boxes, so a step lowers the car's scores and does
+//! not move its boxes off the car. With `box_gradient` the weight is differentiated too:
+//! [`DetectionLoss::terms_and_boxes`] also gives the loss's gradient with respect to each box
+//! (the IoU's exact derivative, [`iou_and_grad`]), which a white box carries back through its
+//! box outputs. Under the score reductions (top-k, softmax, log-max) the weight enters L2's
 //! scores; the reported `max_score` stays the unweighted best score.
 //!
 //! [`Proposals::Scored`] changes the Mean's proposals to the set the digital metrics count: every
@@ -45,6 +47,36 @@ use pav_detect::nms::iou;
 pub fn sigmoid(x: f32) -> (f32, f32) {
     let t = (0.5 * x).tanh();
     (0.5 + 0.5 * t, 0.25 * (1.0 - t * t))
+}
+
+/// The IoU of the xyxy boxes `a` and `b` (as [`iou`]) and its derivative with respect to `a`'s
+/// corners. Where a corner of the overlap is shared by both boxes, the derivative is the one
+/// that moves `a`'s side.
+pub fn iou_and_grad(a: &[f32; 4], b: &[f32; 4]) -> (f32, [f32; 4]) {
+    let v = iou(a, b);
+    let (iw, ih) = (a[2].min(b[2]) - a[0].max(b[0]), a[3].min(b[3]) - a[1].max(b[1]));
+    let (aw, ah) = (a[2] - a[0], a[3] - a[1]);
+    let inter = iw.max(0.0) * ih.max(0.0);
+    let area = |r: &[f32; 4]| (r[2] - r[0]).max(0.0) * (r[3] - r[1]).max(0.0);
+    let union = area(a) + area(b) - inter;
+    if union <= 0.0 {
+        return (v, [0.0; 4]);
+    }
+    // ∂inter: a side of a inside b moves the overlap's side.
+    let overlap = iw > 0.0 && ih > 0.0;
+    let d_inter = if overlap {
+        [
+            if a[0] >= b[0] { -ih } else { 0.0 },
+            if a[1] >= b[1] { -iw } else { 0.0 },
+            if a[2] <= b[2] { ih } else { 0.0 },
+            if a[3] <= b[3] { iw } else { 0.0 },
+        ]
+    } else {
+        [0.0; 4]
+    };
+    let d_area = if aw > 0.0 && ah > 0.0 { [-ah, -aw, ah, aw] } else { [0.0; 4] };
+    // IoU = inter / (area_a + area_b − inter).
+    (v, [0, 1, 2, 3].map(|k| (d_inter[k] * union - inter * (d_area[k] - d_inter[k])) / (union * union)))
 }
 
 /// One batch-1 darknet head map `[A·(5+C), H, W]`, flattened, with its `(H, W)`.
@@ -92,6 +124,8 @@ pub struct DetectionLoss {
     pub proposals: Proposals,
     /// Whether a white box weights scores by IoU with the car's box ([`Predictions::weigh`]).
     pub iou: bool,
+    /// Whether that weight is differentiated with respect to the boxes (else held constant).
+    pub box_gradient: bool,
 }
 
 /// L1 and L2 with the set sizes and the strongest target detection, for logs.
@@ -144,6 +178,8 @@ pub struct Predictions {
     objectness: bool,
     /// Per prediction, the constant its detection score is weighted by in the loss (none: 1).
     weight: Option<Vec<f32>>,
+    /// Per prediction, the weight's derivative with respect to its box (xyxy).
+    weight_grad: Vec<[f32; 4]>,
 }
 
 impl Predictions {
@@ -236,7 +272,16 @@ impl Predictions {
 
     /// No predictions yet, for heads of `classes` classes read as `raw`.
     fn empty(classes: usize, raw: Raw, objectness: bool) -> Self {
-        Predictions { classes, raw, obj: vec![], cls: vec![], at: vec![], objectness, weight: None }
+        Predictions {
+            classes,
+            raw,
+            obj: vec![],
+            cls: vec![],
+            at: vec![],
+            objectness,
+            weight: None,
+            weight_grad: vec![],
+        }
     }
 
     /// Prediction `i`'s most likely class among the non-empty `targets` (ties to the first) and
@@ -287,8 +332,12 @@ impl Predictions {
         if boxes.len() != self.len() {
             return Err(HeadShapeError(format!("{} boxes for {} predictions", boxes.len(), self.len())));
         }
-        let w = boxes.iter().map(|b| if b.iter().all(|v| v.is_finite()) { iou(b, &car) } else { 0.0 }).collect();
+        let (w, g) = boxes
+            .iter()
+            .map(|b| if b.iter().all(|v| v.is_finite()) { iou_and_grad(b, &car) } else { (0.0, [0.0; 4]) })
+            .unzip();
         self.weight = Some(w);
+        self.weight_grad = g;
         Ok(())
     }
 
@@ -371,6 +420,10 @@ fn reduce(v: &[f32], how: Reduce) -> (f32, Vec<f32>) {
     }
 }
 
+/// The gradient of the loss with respect to the boxes of weighted predictions: (prediction,
+/// ∂loss/∂[x1, y1, x2, y2]).
+pub type BoxGrads = Vec<(usize, [f32; 4])>;
+
 impl DetectionLoss {
     /// The terms for `p` (read from `raw`), and the gradient of `L1 + beta·L2` with respect to each
     /// raw output.
@@ -380,6 +433,17 @@ impl DetectionLoss {
         raw: &[&[f32]],
         beta: f32,
     ) -> Result<(LossTerms, Vec<Vec<f32>>), HeadShapeError> {
+        self.terms_and_boxes(p, raw, beta).map(|(t, g, _)| (t, g))
+    }
+
+    /// As [`DetectionLoss::terms`], with the gradient with respect to the boxes that weighted
+    /// `p` ([`Predictions::weigh`]; empty when nothing weighted it or `box_gradient` is off).
+    pub fn terms_and_boxes(
+        &self,
+        p: &Predictions,
+        raw: &[&[f32]],
+        beta: f32,
+    ) -> Result<(LossTerms, Vec<Vec<f32>>, BoxGrads), HeadShapeError> {
         let c = p.classes;
         let targets: Vec<usize> = self.target.iter().copied().filter(|&k| k < c).collect();
         if targets.is_empty() {
@@ -409,6 +473,8 @@ impl DetectionLoss {
         }
         let mut dobj = vec![0f32; n];
         let mut dcls = Vec::new();
+        // ∂loss/∂weight of the weighted scores read.
+        let mut dweight: Vec<(usize, f32)> = Vec::new();
         let (l1, l2) = match self.reduce {
             Reduce::Mean => {
                 let (l1, w1) = reduce(&boxes.iter().map(|&i| p.obj[i]).collect::<Vec<_>>(), Reduce::Mean);
@@ -428,6 +494,7 @@ impl DetectionLoss {
                         let (_, d_obj, d_car) = p.weighted(i, tk[i].1);
                         dobj[i] += beta * slope * d_obj;
                         dcls.push((i, tk[i].0, beta * slope * d_car));
+                        dweight.push((i, beta * slope * p.score(i, tk[i].1).0));
                         (0.0, -(1.0 - s).ln())
                     }
                     _ => (0.0, 0.0),
@@ -443,6 +510,7 @@ impl DetectionLoss {
                         let (_, d_obj, d_car) = p.weighted(i, tk[i].1);
                         dobj[i] += beta * w * d_obj;
                         dcls.push((i, tk[i].0, beta * w * d_car));
+                        dweight.push((i, beta * w * p.score(i, tk[i].1).0));
                     }
                 }
                 (l1, l2)
@@ -450,7 +518,12 @@ impl DetectionLoss {
         };
         let grads = p.backprop(raw, &dobj, &dcls);
         let terms = LossTerms { l1, l2, boxes: boxes.len(), proposals: proposals.len(), max_score };
-        Ok((terms, grads))
+        let box_grads = if self.box_gradient && p.weight.is_some() {
+            dweight.into_iter().map(|(i, d)| (i, p.weight_grad[i].map(|g| d * g))).collect()
+        } else {
+            Vec::new()
+        };
+        Ok((terms, grads, box_grads))
     }
 }
 
@@ -473,7 +546,14 @@ mod tests {
     }
 
     fn loss(reduce: Reduce) -> DetectionLoss {
-        DetectionLoss { box_threshold: 0.5, target: vec![2], reduce, proposals: Proposals::ArgMax, iou: false }
+        DetectionLoss {
+            box_threshold: 0.5,
+            target: vec![2],
+            reduce,
+            proposals: Proposals::ArgMax,
+            iou: false,
+            box_gradient: false,
+        }
     }
 
     /// Each reduction, and the mean over the metrics' set, for the gradient checks.
@@ -748,5 +828,84 @@ mod tests {
         let (t, g) = l.terms(&p, &[&logits], 1.0).unwrap();
         assert!(t.l2 == 0.0 && g[0].iter().all(|&x| x == 0.0), "{t:?}");
         assert!(p.weigh(&boxes[..3], car).is_err());
+    }
+
+    /// The IoU's derivative by each corner against central differences (f64), for boxes that
+    /// overlap in every arrangement (inside, across each side, around), and zero where they do not.
+    #[test]
+    fn iou_gradient_matches_central_differences() {
+        let b = [10.0, 20.0, 50.0, 40.0];
+        let cases = [
+            [15.0, 25.0, 45.0, 35.0], // inside
+            [0.0, 22.0, 30.0, 38.0],  // across the left side
+            [30.0, 30.0, 60.0, 55.0], // across the bottom-right corner
+            [5.0, 12.0, 58.0, 47.0],  // around
+            [60.0, 0.0, 70.0, 10.0],  // apart
+        ];
+        for a in cases {
+            let (v, g) = iou_and_grad(&a, &b);
+            assert_eq!(v, iou(&a, &b));
+            for k in 0..4 {
+                let at = |d: f32| {
+                    let mut m = a;
+                    m[k] += d;
+                    iou(&m, &b) as f64
+                };
+                let fd = (at(0.01) - at(-0.01)) / 0.02;
+                assert!((fd - g[k] as f64).abs() < 1e-4, "{a:?} corner {k}: {} vs {fd}", g[k]);
+            }
+            if v == 0.0 {
+                assert_eq!(g, [0.0; 4]);
+            } else {
+                assert!(g.iter().any(|x| x.abs() > 1e-3), "{a:?}: {g:?}");
+            }
+        }
+    }
+
+    /// With `box_gradient`, the weighted log-max and softmax give the loss's gradient by each
+    /// box: against central differences of the loss with the weights recomputed from the moved
+    /// box; without it, none.
+    #[test]
+    fn box_gradients_of_the_weighted_loss_match_central_differences() {
+        let logits: Vec<f32> = vec![0.3, -2.0, 1.4, 0.9, -1.1, 0.2, -0.6, 0.4, 0.1, -3.0, -2.5, -2.9];
+        let car = [10.0, 10.0, 50.0, 30.0];
+        let boxes = [[60.0, 0.0, 90.0, 20.0], [0.0, 0.0, 5.0, 5.0], [30.0, 12.0, 70.0, 31.0], [12.0, 9.0, 49.0, 40.0]];
+        for reduce in [Reduce::LogMax, Reduce::Softmax(0.1)] {
+            let l = DetectionLoss { iou: true, box_gradient: true, ..loss(reduce) };
+            let total = |b: &[[f32; 4]]| {
+                let mut p = Predictions::detr(&logits, 3).unwrap();
+                p.weigh(b, car).unwrap();
+                let t = l.terms(&p, &[&logits], 2.0).unwrap().0;
+                t.l1 as f64 + 2.0 * t.l2 as f64
+            };
+            let mut p = Predictions::detr(&logits, 3).unwrap();
+            p.weigh(&boxes, car).unwrap();
+            let (_, _, db) = l.terms_and_boxes(&p, &[&logits], 2.0).unwrap();
+            assert!(!db.is_empty(), "{reduce:?}");
+            let mut checked = 0;
+            for i in 0..4 {
+                let want = db.iter().filter(|(j, _)| *j == i).fold([0f32; 4], |mut a, (_, d)| {
+                    (0..4).for_each(|k| a[k] += d[k]);
+                    a
+                });
+                for k in 0..4 {
+                    let at = |d: f32| {
+                        let mut b = boxes;
+                        b[i][k] += d;
+                        total(&b)
+                    };
+                    let fd = (at(0.01) - at(-0.01)) / 0.02;
+                    assert!(
+                        (fd - want[k] as f64).abs() < 1e-3 * (1.0 + fd.abs()),
+                        "{reduce:?} box {i} corner {k}: {} vs {fd}",
+                        want[k]
+                    );
+                    checked += usize::from(fd.abs() > 1e-4);
+                }
+            }
+            assert!(checked >= 4, "{reduce:?}: only {checked} corners move the loss");
+            let held = DetectionLoss { box_gradient: false, ..l.clone() };
+            assert!(held.terms_and_boxes(&p, &[&logits], 2.0).unwrap().2.is_empty());
+        }
     }
 }

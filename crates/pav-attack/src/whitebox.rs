@@ -16,9 +16,10 @@ use super::defended::{self, Tape};
 use super::loss::{DetectionLoss, HeadShapeError, Predictions};
 use pav_core::image::resize::Resampler;
 use pav_detect::config::{ChannelOrder, DetectorConfig, ExtraInput, ExtraValue, OutputLayout};
-use pav_detect::decode::{decode, LayoutError, RawOutput};
+use pav_detect::decode::{box_jacobians, decode, BoxTerm, LayoutError, RawOutput};
 use pav_detect::defence::Defence;
 use pav_detect::preprocess::InputMap;
+use pav_detect::BBox;
 use pav_detect::DetectError;
 use pav_onnx::autodiff::{differentiate_first, AutodiffError, Kernels};
 use pav_onnx::fold::fold_shapes;
@@ -70,6 +71,9 @@ pub struct WhiteBox {
     head_sizes: Vec<(usize, usize)>,
     /// The differentiated outputs' names and shapes (what the box decoder reads).
     out_shapes: Vec<(String, Vec<usize>)>,
+    /// How many of the outputs, from the first, hold the scores the loss reads; the box outputs
+    /// follow them (differentiated under `loss.box_gradient`, else forward only).
+    scored: usize,
     /// The config's output layout.
     layout: OutputLayout,
     loss: DetectionLoss,
@@ -275,7 +279,8 @@ impl WhiteBox {
         }
         // A clipped detector is trained through its clipping: the rewrite is differentiable.
         pav_detect::defence::clip_graph(&mut model, &cfg.model_defence)?;
-        // The box outputs `loss.iou` reads come last and are computed forward only.
+        // The box outputs `loss.iou` reads come last, computed forward only unless the loss
+        // differentiates its weight.
         let mut forward_only = 0;
         if matches!(cfg.output, OutputLayout::Ultralytics { .. }) {
             model = class_branch(model, loss.iou).map_err(&unsupported)?;
@@ -310,6 +315,10 @@ impl WhiteBox {
             if x.dims.len() == 4 && x.dims[2..].iter().any(|d| matches!(d, Dim::Fixed(v) if *v != side as i64)) {
                 return Err(unsupported(format!("the graph's input is fixed at {:?}, not {side}²", x.dims)));
             }
+        }
+        let scored = model.outputs.len() - forward_only;
+        if loss.box_gradient {
+            forward_only = 0;
         }
         let seeded = model.outputs.len() - forward_only;
         let d = differentiate_first(&model, &[1, 3, side as i64, side as i64], Kernels::Fused, seeded)?;
@@ -354,6 +363,7 @@ impl WhiteBox {
             heads,
             head_sizes,
             out_shapes,
+            scored,
             layout: cfg.output.clone(),
             loss,
             input: side,
@@ -413,71 +423,112 @@ impl WhiteBox {
     }
 
     /// Each prediction's box in composite pixels (xyxy), in the order [`Predictions`] reads them:
-    /// decoded as evaluate decodes darknet and YOLOX outputs, read from the forward-only box
-    /// output for Ultralytics (cx, cy, w, h in input pixels) and DETR (the same as input shares).
-    fn boxes(&self, outs: &[Vec<f32>]) -> Result<Vec<[f32; 4]>, WhiteBoxError> {
+    /// decoded as evaluate decodes darknet, YOLOX and GFL outputs, read from the box output for
+    /// Ultralytics (cx, cy, w, h in input pixels), DETR (the same as input shares) and a graph cut
+    /// before its NMS (corners in input pixels). With `grad`, each box comes with its derivative
+    /// by every output value it reads (an empty list without).
+    fn boxes(&self, outs: &[Vec<f32>], grad: bool) -> Result<Vec<(BBox, Vec<BoxTerm>)>, WhiteBoxError> {
         let k = self.input as f32 / self.composite as f32;
         let c = self.composite as f32;
         let map = InputMap { scale_x: k, scale_y: k, pad_x: 0.0, pad_y: 0.0, frame_w: c, frame_h: c };
-        let centred = |v: &[f32], unit: f32| {
-            let (cx, cy, w, h) = (v[0] * unit, v[1] * unit, v[2] * unit, v[3] * unit);
-            map.to_frame([cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0])
-        };
         let aux = || {
-            outs.get(self.out_shapes.len())
+            outs.get(self.scored)
                 .ok_or_else(|| LayoutError("no box output: the white box was loaded without loss.iou".into()))
         };
+        // A box of four values of the box output at `idx`, as centre and size or as corners, in
+        // `unit` input pixels.
+        let linear = |b: &[f32], idx: [usize; 4], unit: f32, centred: bool| {
+            let v = idx.map(|j| b[j] * unit);
+            let (bx, dv) = if centred {
+                let [cx, cy, w, h] = v;
+                let d = [[1.0, 0.0, 1.0, 0.0], [0.0, 1.0, 0.0, 1.0], [-0.5, 0.0, 0.5, 0.0], [0.0, -0.5, 0.0, 0.5]];
+                ([cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0], d)
+            } else {
+                (v, [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+            };
+            let (bx, keep) = map.to_frame_with_grad(bx);
+            let terms = match grad {
+                true => {
+                    (0..4).map(|j| (self.scored, idx[j], [0, 1, 2, 3].map(|q| unit * dv[j][q] * keep[q]))).collect()
+                }
+                false => Vec::new(),
+            };
+            (bx, terms)
+        };
         // The differentiated outputs as evaluate's decoder reads them.
-        let seeded = || {
-            self.out_shapes.iter().zip(outs).map(|((name, shape), data)| RawOutput {
-                name: name.clone(),
-                shape: shape.clone(),
-                data: data.clone(),
-            })
+        let raw = |n: usize| -> Vec<RawOutput> {
+            self.out_shapes[..n]
+                .iter()
+                .zip(outs)
+                .map(|((name, shape), data)| RawOutput { name: name.clone(), shape: shape.clone(), data: data.clone() })
+                .collect()
+        };
+        let decoded = |raw: &[RawOutput], classes: usize| -> Result<Vec<(BBox, Vec<BoxTerm>)>, LayoutError> {
+            if grad {
+                return box_jacobians(&self.layout, raw, self.input, self.input, classes, &map);
+            }
+            let boxes = decode(&self.layout, raw, self.input, self.input, classes, &map)?.boxes;
+            Ok(boxes.into_iter().map(|b| (b, Vec::new())).collect())
         };
         Ok(match &self.heads {
-            Heads::Darknet { classes, .. } | Heads::Yolox { classes } => {
-                decode(&self.layout, &seeded().collect::<Vec<_>>(), self.input, self.input, *classes, &map)?.boxes
-            }
+            Heads::Darknet { classes, .. } | Heads::Yolox { classes } => decoded(&raw(self.scored), *classes)?,
             Heads::Ultralytics { .. } => {
                 let b = aux()?;
                 let n = b.len() / 4;
-                (0..n).map(|i| centred(&[b[i], b[n + i], b[2 * n + i], b[3 * n + i]], 1.0)).collect()
+                (0..n).map(|i| linear(b, [i, n + i, 2 * n + i, 3 * n + i], 1.0, true)).collect()
             }
-            Heads::Detr { .. } => aux()?.chunks_exact(4).map(|v| centred(v, self.input as f32)).collect(),
-            Heads::BeforeNms { .. } => aux()?.chunks_exact(4).map(|v| map.to_frame([v[0], v[1], v[2], v[3]])).collect(),
+            Heads::Detr { .. } => {
+                let b = aux()?;
+                (0..b.len() / 4).map(|q| linear(b, [0, 1, 2, 3].map(|j| 4 * q + j), self.input as f32, true)).collect()
+            }
+            Heads::BeforeNms { .. } => {
+                let b = aux()?;
+                (0..b.len() / 4).map(|i| linear(b, [0, 1, 2, 3].map(|j| 4 * i + j), 1.0, false)).collect()
+            }
             Heads::Gfl { classes, bins } => {
                 // The class maps and, after them, the box maps, level by level: decoded as
-                // evaluate decodes them (matched by shape).
-                let levels = self.out_shapes.len();
+                // evaluate decodes them (matched by shape); a term's output is its place in `outs`.
+                let levels = self.scored;
                 aux()?;
-                let raw: Vec<RawOutput> = seeded()
-                    .chain(self.out_shapes.iter().zip(&outs[levels..]).map(|((name, shape), data)| RawOutput {
+                let mut all = raw(levels);
+                all.extend(self.out_shapes[..levels].iter().zip(&outs[levels..]).map(|((name, shape), data)| {
+                    RawOutput {
                         name: format!("{name} boxes"),
                         shape: vec![1, shape[shape.len() - 2], 4 * bins],
                         data: data.clone(),
-                    }))
-                    .collect();
-                decode(&self.layout, &raw, self.input, self.input, *classes, &map)?.boxes
+                    }
+                }));
+                decoded(&all, *classes)?
             }
         })
     }
 
     /// The loss terms of the outputs and their gradients, each score weighted by its box's IoU
-    /// with `car` (composite pixels, xyxy) when the loss says so.
+    /// with `car` (composite pixels, xyxy) when the loss says so, that weight differentiated
+    /// through the box outputs under `loss.box_gradient`.
     fn score(
         &self,
         outs: &[Vec<f32>],
         beta: f32,
         car: Option<[f32; 4]>,
     ) -> Result<(DetectorLoss, Vec<Vec<f32>>), WhiteBoxError> {
-        let seeded = &outs[..self.out_shapes.len()];
-        let mut p = self.read(seeded)?;
-        if let (true, Some(car)) = (self.loss.iou, car) {
-            p.weigh(&self.boxes(outs)?, car)?;
+        let mut p = self.read(&outs[..self.scored])?;
+        let boxes = match (self.loss.iou, car) {
+            (true, Some(car)) => {
+                let boxes = self.boxes(outs, self.loss.box_gradient)?;
+                p.weigh(&boxes.iter().map(|b| b.0).collect::<Vec<_>>(), car)?;
+                boxes
+            }
+            _ => Vec::new(),
+        };
+        let raw: Vec<&[f32]> = outs[..self.out_shapes.len()].iter().map(|v| v.as_slice()).collect();
+        let (terms, mut grads, box_grads) = self.loss.terms_and_boxes(&p, &raw, beta)?;
+        for (i, d) in box_grads {
+            for &(o, idx, db) in &boxes[i].1 {
+                grads[o][idx] += (0..4).map(|k| d[k] * db[k]).sum::<f32>();
+            }
         }
-        let raw: Vec<&[f32]> = seeded.iter().map(|v| v.as_slice()).collect();
-        Ok(self.loss.terms(&p, &raw, beta)?)
+        Ok((terms, grads))
     }
 
     /// The differentiated outputs read as predictions.
@@ -500,8 +551,8 @@ impl WhiteBox {
     /// Ultralytics and DETR).
     pub fn predictions(&self, img: &[f32], size: usize) -> Result<Vec<([f32; 4], f32)>, WhiteBoxError> {
         let (outs, ..) = self.outputs(&mut self.session(), img, size)?;
-        let scores = self.read(&outs[..self.out_shapes.len()])?.target_scores(&self.loss.target);
-        Ok(self.boxes(&outs)?.into_iter().zip(scores).collect())
+        let scores = self.read(&outs[..self.scored])?.target_scores(&self.loss.target);
+        Ok(self.boxes(&outs, false)?.into_iter().map(|b| b.0).zip(scores).collect())
     }
 
     fn outputs(
@@ -571,6 +622,7 @@ impl Ensemble {
                     reduce: cfg.loss.reduce,
                     proposals: cfg.loss.proposals,
                     iou: cfg.loss.iou,
+                    box_gradient: cfg.loss.box_gradient,
                 };
                 let o = WhiteBoxOptions { composite: size, input: None, threads: 0, surrogate: e.surrogate };
                 Ok((WhiteBox::with_options(&d, loss, o)?, e.weight))
