@@ -20,24 +20,32 @@ fn check(detector: &str, surrogate: bool) {
     check_config(&common::detector_config(detector), surrogate)
 }
 
-fn check_config(config: &std::path::Path, surrogate: bool) {
-    let detector = config.file_stem().unwrap().to_string_lossy().into_owned();
+/// The detector's name, two of FCA's training photos as views, and its config.
+fn setup(config: &std::path::Path) -> (String, Setup, DetectorConfig) {
     common::real_data();
     let mut cfg = OptimizeConfig::load(&common::repo().join("configs/optimize/paper.toml")).unwrap();
     cfg.views.train.truncate(2);
     cfg.views.test.clear();
     let s = Setup::load(&cfg, Some(416)).unwrap();
-    let d = DetectorConfig::load(config).unwrap();
+    (config.file_stem().unwrap().to_string_lossy().into_owned(), s, DetectorConfig::load(config).unwrap())
+}
+
+/// The detector as a white box under the IoU-weighted log-max.
+fn white_box(d: &DetectorConfig, surrogate: bool, box_gradient: bool) -> WhiteBox {
     let loss = DetectionLoss {
         box_threshold: 0.05,
         target: d.target_classes.clone(),
         reduce: Reduce::LogMax,
         proposals: Proposals::ArgMax,
         iou: true,
-        box_gradient: false,
+        box_gradient,
     };
-    let o = WhiteBoxOptions { composite: 416, input: None, threads: 2, surrogate };
-    let wb = WhiteBox::with_options(&d, loss, o).unwrap();
+    WhiteBox::with_options(d, loss, WhiteBoxOptions { composite: 416, input: None, threads: 2, surrogate }).unwrap()
+}
+
+fn check_config(config: &std::path::Path, surrogate: bool) {
+    let (detector, s, d) = setup(config);
+    let wb = white_box(&d, surrogate, false);
     let mut det = OnnxDetector::new(d.clone(), 1).unwrap();
     for v in &s.train {
         let car = v.car_box.expect("the car is in view");
@@ -103,26 +111,8 @@ fn picodet_cut_before_its_nms_scores_and_weighs_the_car() {
 /// of the gradient that the boxes add (the moving gradient minus the held one), central
 /// differences of the loss follow the moving gradient and not the held one.
 fn check_box_gradient(config: &std::path::Path, surrogate: bool) {
-    let detector = config.file_stem().unwrap().to_string_lossy().into_owned();
-    common::real_data();
-    let mut cfg = OptimizeConfig::load(&common::repo().join("configs/optimize/paper.toml")).unwrap();
-    cfg.views.train.truncate(2);
-    cfg.views.test.clear();
-    let s = Setup::load(&cfg, Some(416)).unwrap();
-    let d = DetectorConfig::load(config).unwrap();
-    let white_box = |box_gradient: bool| {
-        let loss = DetectionLoss {
-            box_threshold: 0.05,
-            target: d.target_classes.clone(),
-            reduce: Reduce::LogMax,
-            proposals: Proposals::ArgMax,
-            iou: true,
-            box_gradient,
-        };
-        WhiteBox::with_options(&d, loss, WhiteBoxOptions { composite: 416, input: None, threads: 2, surrogate })
-            .unwrap()
-    };
-    let (moving, held) = (white_box(true), white_box(false));
+    let (detector, s, d) = setup(config);
+    let (moving, held) = (white_box(&d, surrogate, true), white_box(&d, surrogate, false));
     let v = &s.train[1];
     let car = v.car_box.expect("the car is in view");
     let gm = moving.loss_and_grad(&v.photo, v.size, 1.0, Some(car)).unwrap();
