@@ -26,7 +26,8 @@ pub struct StepTiming {
     pub step_forward_ms: f64,
     /// Of which the backward part.
     pub step_backward_ms: f64,
-    /// The loss: `mean` (the paper's) or `log_max+iou` (RAUCA-E2E's, boxes read every step).
+    /// The loss: `mean` (the paper's), `log_max+iou` (RAUCA-E2E's, boxes read every step) or
+    /// `log_max+iou+box` (that weight differentiated through the boxes).
     pub loss: String,
 }
 
@@ -57,6 +58,8 @@ pub struct StepBench {
     /// RAUCA-E2E's loss with the IoU weight (the box outputs read every step) instead of the
     /// paper's means.
     pub iou: bool,
+    /// With `iou`, differentiate the weight through the boxes (`loss.box_gradient`).
+    pub box_gradient: bool,
 }
 
 /// Times the white-box step of `detector` with its network at each of `sizes` as `b` says; each
@@ -67,7 +70,8 @@ pub fn time_step(
     b: StepBench,
     progress: &dyn Progress,
 ) -> Result<Vec<StepTiming>, WhiteBoxError> {
-    let StepBench { threads, repeats, surrogate, iou } = b;
+    let StepBench { threads, repeats, surrogate, iou, box_gradient } = b;
+    let box_gradient = iou && box_gradient;
     let mut rows = Vec::new();
     for &size in sizes {
         let loss = DetectionLoss {
@@ -76,7 +80,7 @@ pub fn time_step(
             reduce: if iou { Reduce::LogMax } else { Reduce::Mean },
             proposals: Proposals::ArgMax,
             iou,
-            box_gradient: false,
+            box_gradient,
         };
         let o = WhiteBoxOptions { composite: size, input: Some(size), threads, surrogate };
         let wb = WhiteBox::with_options(detector, loss, o)?;
@@ -107,7 +111,12 @@ pub fn time_step(
             forward_backward_ms: median(step),
             step_forward_ms: median(sf),
             step_backward_ms: median(sb),
-            loss: if iou { "log_max+iou" } else { "mean" }.into(),
+            loss: match (iou, box_gradient) {
+                (false, _) => "mean",
+                (true, false) => "log_max+iou",
+                (true, true) => "log_max+iou+box",
+            }
+            .into(),
         };
         progress.note(&format!(
             "{size}²: forward {:.1} ms, forward + backward {:.1} ms ({:.1} + {:.1})",

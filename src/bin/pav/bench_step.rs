@@ -28,6 +28,9 @@ pub struct Args {
     /// beside the paper's means.
     #[arg(long)]
     iou: bool,
+    /// Also time that loss with its weight differentiated through the boxes (`loss.box_gradient`).
+    #[arg(long)]
+    box_gradient: bool,
     /// Output CSV.
     #[arg(long, short = 'o', default_value = "bench/step.csv")]
     out: PathBuf,
@@ -38,8 +41,11 @@ pub fn run(a: &Args) -> Result<()> {
     let mut rows = Vec::new();
     // Size by size, the two losses one after the other, so that a change of load hits both.
     for &size in &a.sizes {
-        for iou in if a.iou { vec![false, true] } else { vec![false] } {
-            let b = StepBench { threads: a.threads, repeats: a.repeats, surrogate: a.surrogate, iou };
+        let mut losses = vec![(false, false)];
+        losses.extend(a.iou.then_some((true, false)));
+        losses.extend(a.box_gradient.then_some((true, true)));
+        for (iou, box_gradient) in losses {
+            let b = StepBench { threads: a.threads, repeats: a.repeats, surrogate: a.surrogate, iou, box_gradient };
             rows.extend(time_step(&cfg, &[size], b, &Bar::default())?);
         }
     }
