@@ -49,49 +49,51 @@ def paired(a, da, b, db):
 
 
 data = {name: collect(cond, tex) for name, cond, tex in TEXTURES}
-seeds = sorted({k[1] for k in data["pav"]})
-print(f"seeds {seeds}; held-out photos per seed: {len({k[2] for k in data['pav']})}\n")
-for d in DET:
-    print(f"\n### {d}: mean best car score / photos with the car found\n")
-    print("| defence | " + " | ".join(t for t, _, _ in TEXTURES) + " |")
-    print("|---|" + "---:|" * len(TEXTURES))
-    for label, suffix in DEFENCES:
+# The photo tables, where defence_study.sh ran (defence_turntable.sh alone writes none).
+if data["pav"]:
+    seeds = sorted({k[1] for k in data["pav"]})
+    print(f"seeds {seeds}; held-out photos per seed: {len({k[2] for k in data['pav']})}\n")
+    for d in DET:
+        print(f"\n### {d}: mean best car score / photos with the car found\n")
+        print("| defence | " + " | ".join(t for t, _, _ in TEXTURES) + " |")
+        print("|---|" + "---:|" * len(TEXTURES))
+        for label, suffix in DEFENCES:
+            cells = []
+            for t, _, _ in TEXTURES:
+                v = [s for k, s in data[t].items() if k[0] == d + suffix]
+                cells.append(f"{statistics.mean(v):.3f} / {100 * sum(x >= 0.5 for x in v) / len(v):.0f} %" if v else "–")
+            print(f"| {label} | " + " | ".join(cells) + " |")
+
+    print("\n### Paired differences of the mean best car score, pairs = (seed, held-out photo)\n")
+    print("Clean cost: the original paint behind the defence − without it (negative: the defence loses the car). "
+          "Effect: pav's texture behind the defence − without it (positive: the defence finds the car again). "
+          "Adapted: the texture trained through the defence − pav's, both scored behind it (negative: adapting wins it back).\n")
+    print("| defence | detector | clean cost | effect on pav | effect on RAUCA-E2E | adapted (median) | adapted (clipping) |")
+    print("|---|---|---:|---:|---:|---:|---:|")
+    for label, suffix in DEFENCES[1:]:
+        for d in DET:
+            dd = d + suffix
+            print(f"| {label} | {d} | {paired(data['original'], dd, data['original'], d)} | "
+                  f"{paired(data['pav'], dd, data['pav'], d)} | {paired(data['RAUCA-E2E'], dd, data['RAUCA-E2E'], d)} | "
+                  f"{paired(data['pav through median'], dd, data['pav'], dd) if suffix == '+median3' else '–'} | "
+                  f"{paired(data['pav through clipping'], dd, data['pav'], dd) if suffix == '+clip2' else '–'} |")
+
+    print("\n### Feature squeezing as an attack detector (Xu et al.)\n")
+    print("A photo is flagged when bit depth 4 or a 3×3 median moves its best car score by more than the threshold "
+          "that flags 5 % of legitimate photos (original paint and random blocks).\n")
+    print("| detector | threshold | " + " | ".join(f"{t} flagged" for t, _, _ in TEXTURES) + " |")
+    print("|---|---:|" + "---:|" * len(TEXTURES))
+    for d in DET:
+        def squeeze(t):
+            return [max(abs(data[t][(d, s, v)] - data[t][(d + q, s, v)]) for q in ("+bits4", "+median3"))
+                    for (dk, s, v) in data[t] if dk == d and all((d + q, s, v) in data[t] for q in ("+bits4", "+median3"))]
+        legit = sorted(squeeze("original") + squeeze("random"))
+        thr = legit[min(len(legit) - 1, int(0.95 * len(legit)))]
         cells = []
         for t, _, _ in TEXTURES:
-            v = [s for k, s in data[t].items() if k[0] == d + suffix]
-            cells.append(f"{statistics.mean(v):.3f} / {100 * sum(x >= 0.5 for x in v) / len(v):.0f} %" if v else "–")
-        print(f"| {label} | " + " | ".join(cells) + " |")
-
-print("\n### Paired differences of the mean best car score, pairs = (seed, held-out photo)\n")
-print("Clean cost: the original paint behind the defence − without it (negative: the defence loses the car). "
-      "Effect: pav's texture behind the defence − without it (positive: the defence finds the car again). "
-      "Adapted: the texture trained through the defence − pav's, both scored behind it (negative: adapting wins it back).\n")
-print("| defence | detector | clean cost | effect on pav | effect on RAUCA-E2E | adapted (median) | adapted (clipping) |")
-print("|---|---|---:|---:|---:|---:|---:|")
-for label, suffix in DEFENCES[1:]:
-    for d in DET:
-        dd = d + suffix
-        print(f"| {label} | {d} | {paired(data['original'], dd, data['original'], d)} | "
-              f"{paired(data['pav'], dd, data['pav'], d)} | {paired(data['RAUCA-E2E'], dd, data['RAUCA-E2E'], d)} | "
-              f"{paired(data['pav through median'], dd, data['pav'], dd) if suffix == '+median3' else '–'} | "
-              f"{paired(data['pav through clipping'], dd, data['pav'], dd) if suffix == '+clip2' else '–'} |")
-
-print("\n### Feature squeezing as an attack detector (Xu et al.)\n")
-print("A photo is flagged when bit depth 4 or a 3×3 median moves its best car score by more than the threshold "
-      "that flags 5 % of legitimate photos (original paint and random blocks).\n")
-print("| detector | threshold | " + " | ".join(f"{t} flagged" for t, _, _ in TEXTURES) + " |")
-print("|---|---:|" + "---:|" * len(TEXTURES))
-for d in DET:
-    def squeeze(t):
-        return [max(abs(data[t][(d, s, v)] - data[t][(d + q, s, v)]) for q in ("+bits4", "+median3"))
-                for (dk, s, v) in data[t] if dk == d and all((d + q, s, v) in data[t] for q in ("+bits4", "+median3"))]
-    legit = sorted(squeeze("original") + squeeze("random"))
-    thr = legit[min(len(legit) - 1, int(0.95 * len(legit)))]
-    cells = []
-    for t, _, _ in TEXTURES:
-        f = squeeze(t)
-        cells.append(f"{100 * sum(x > thr for x in f) / len(f):.0f} % of {len(f)}" if f else "–")
-    print(f"| {d} | {thr:.3f} | " + " | ".join(cells) + " |")
+            f = squeeze(t)
+            cells.append(f"{100 * sum(x > thr for x in f) / len(f):.0f} % of {len(f)}" if f else "–")
+        print(f"| {d} | {thr:.3f} | " + " | ".join(cells) + " |")
 
 # The simulated turntable (defence_turntable.sh): A_physical per detector and defence, one column per paint.
 rows = {}
