@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Times `pav-rig evaluate` against the plain Python loop a user would write instead
 # (scripts/python_loop.py: OpenCV + onnxruntime), as whole processes on the same video, in
-# alternating runs in one sitting. Writes bench/vs_python.csv (tool, detector, run, wall_s,
+# alternating runs in one sitting. Writes bench/vs_python.csv (or $CSV; tool, detector, run, wall_s,
 # frames) and prints pav's wall time over the loop's per detector.
 #   scripts/bench_vs_python.sh [VIDEO] [RUNS]
 # VIDEO defaults to the CARLA fixture looped to 810 frames. The loop runs in .venv-bench
@@ -20,7 +20,7 @@ fi
 cargo build --release --bin pav-rig -q
 YOLOX=$(target/release/pav data path models-yolox/yolox_nano.onnx)
 TINY=.deps/models/yolov3-tiny/yolov3-tiny.onnx
-CSV=bench/vs_python.csv
+CSV=${CSV:-bench/vs_python.csv}
 echo "tool,detector,run,wall_s,frames" > "$CSV"
 now() { date +%s%N; }
 secs() { printf "%d.%03d" $((($2 - $1) / 1000000000)) $(((($2 - $1) / 1000000) % 1000)); }
