@@ -447,11 +447,10 @@ impl WhiteBox {
                 (v, [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
             };
             let (bx, keep) = map.to_frame_with_grad(bx);
-            let terms = match grad {
-                true => {
-                    (0..4).map(|j| (self.scored, idx[j], [0, 1, 2, 3].map(|q| unit * dv[j][q] * keep[q]))).collect()
-                }
-                false => Vec::new(),
+            let terms = if grad {
+                (0..4).map(|j| (self.scored, idx[j], [0, 1, 2, 3].map(|q| unit * dv[j][q] * keep[q]))).collect()
+            } else {
+                Vec::new()
             };
             (bx, terms)
         };

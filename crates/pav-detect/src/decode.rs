@@ -327,18 +327,6 @@ fn level_view<'v, 'o>(views: &'v [View<'o>], l: usize, start: usize) -> (&'v Vie
     }
 }
 
-/// Row `lr`'s label where the part has labels (`Some(None)` without): `None` for the rows an
-/// export pads to a fixed count with class −1, which are skipped.
-fn row_label(lv: Option<(&View, usize)>, lr: usize, column: usize, classes: usize) -> Option<Option<usize>> {
-    match lv {
-        Some((v, o)) => {
-            let label = v.at(o + lr, column);
-            (label >= 0.0 && (label as usize) < classes).then_some(Some(label as usize))
-        }
-        None => Some(None),
-    }
-}
-
 /// Where a row's box is anchored: its cell, the grid's step, its anchor and the cell's point.
 struct Anchor {
     gx: f32,
@@ -474,7 +462,7 @@ impl BoxReader {
     }
 
     /// A GFL box: each side's distance the expectation of a softmax over `bins` values.
-    fn read_bins(&self, v: &View, r: usize, a: &Anchor, mut jac: Option<&mut Vec<BoxTerm>>) -> BBox {
+    fn read_bins(&self, v: &View, r: usize, a: &Anchor, jac: Option<&mut Vec<BoxTerm>>) -> BBox {
         let bins = self.bins;
         let mut dist = [0f32; 4];
         // Per side: the softmax and its expectation, for the derivative step·p_k·(k − E).
@@ -492,7 +480,7 @@ impl BoxReader {
             }
         }
         let (b, keep) = self.finish([a.cx0 - dist[0], a.cy0 - dist[1], a.cx0 + dist[2], a.cy0 + dist[3]]);
-        if let Some(jac) = jac.as_mut() {
+        if let Some(jac) = jac {
             for (side, (p, mean)) in soft.iter().enumerate() {
                 let step = if side % 2 == 0 { a.sx } else { a.sy };
                 let sign = if side < 2 { -1.0 } else { 1.0 };
@@ -534,30 +522,9 @@ pub fn box_jacobians(
     num_classes: usize,
     map: &InputMap,
 ) -> Result<Vec<(BBox, Vec<BoxTerm>)>, LayoutError> {
-    let d = layout.describe(num_classes);
-    let grids = grids(&d, outs, input_w, input_h, num_classes)?;
-    let boxes = locate(&d, Role::Boxes, outs, &grids, num_classes)?;
-    let labels = d.labels.as_ref().map(|_| locate(&d, Role::Labels, outs, &grids, num_classes)).transpose()?;
-    let reader = BoxReader::new(&d, input_w, input_h, map);
-    let label_col = d.labels.as_ref().map_or(0, |p| p.column);
-    let total = if grids.is_empty() { boxes[0].rows } else { grids.iter().map(Grid::rows).sum() };
-    let one = [Grid { gw: total, gh: 1, sx: 1.0, sy: 1.0, anchors: Vec::new() }];
-    let levels: &[Grid] = if grids.is_empty() { &one } else { &grids };
-    let (mut out, mut start) = (Vec::new(), 0);
-    for (l, g) in levels.iter().enumerate() {
-        let (bv, bo) = level_view(&boxes, l, start);
-        let lv = labels.as_deref().map(|v| level_view(v, l, start));
-        for lr in 0..g.rows() {
-            if row_label(lv, lr, label_col, num_classes).is_none() {
-                continue;
-            }
-            let mut terms = Vec::new();
-            let b = reader.read(bv, bo + lr, &Anchor::of(&d, g, lr), Some(&mut terms));
-            out.push((b, terms));
-        }
-        start += g.rows();
-    }
-    Ok(out)
+    let mut terms = Vec::new();
+    let p = decode_rows(&layout.describe(num_classes), outs, input_w, input_h, num_classes, map, Some(&mut terms))?;
+    Ok(p.boxes.into_iter().zip(terms).collect())
 }
 
 /// Decodes `outs` under a [`Description`].
@@ -568,6 +535,20 @@ pub fn decode_described(
     input_h: usize,
     classes: usize,
     map: &InputMap,
+) -> Result<Proposals, LayoutError> {
+    decode_rows(d, outs, input_w, input_h, classes, map, None)
+}
+
+/// [`decode_described`], and with `jac` each box's derivatives by the values it reads, one list
+/// per box.
+fn decode_rows(
+    d: &Description,
+    outs: &[RawOutput],
+    input_w: usize,
+    input_h: usize,
+    classes: usize,
+    map: &InputMap,
+    mut jac: Option<&mut Vec<Vec<BoxTerm>>>,
 ) -> Result<Proposals, LayoutError> {
     let grids = grids(d, outs, input_w, input_h, classes)?;
     let boxes = locate(d, Role::Boxes, outs, &grids, classes)?;
@@ -602,8 +583,22 @@ pub fn decode_described(
         let ov = obj.as_deref().map(|v| level_view(v, l, start));
         let lv = labels.as_deref().map(|v| level_view(v, l, start));
         for lr in 0..g.rows() {
-            let Some(label) = row_label(lv, lr, label_col, classes) else { continue };
-            p.boxes.push(reader.read(bv, bo + lr, &Anchor::of(d, g, lr), None));
+            let label = match lv {
+                Some((v, o)) => {
+                    let label = v.at(o + lr, label_col);
+                    // Exports pad to a fixed row count with class −1.
+                    if label < 0.0 || label as usize >= classes {
+                        continue;
+                    }
+                    Some(label as usize)
+                }
+                None => None,
+            };
+            let terms = jac.as_deref_mut().map(|j| {
+                j.push(Vec::new());
+                j.last_mut().expect("just pushed")
+            });
+            p.boxes.push(reader.read(bv, bo + lr, &Anchor::of(d, g, lr), terms));
             let sr = so + lr;
             if let Some(label) = label {
                 let mut row = vec![0f32; classes];
