@@ -9,9 +9,7 @@
 set -euo pipefail
 out=$1
 source "$(dirname "$0")/lever_screen.sh"
-mkdir -p "$out/configs"
-cat > "$out/configs/box-gradient.toml" <<TOML
-extends = "$(realpath $base)"
+variant "$out" box-gradient <<TOML
 
 [loss]
 box_gradient = true

@@ -8,9 +8,7 @@
 set -euo pipefail
 out=$1
 source "$(dirname "$0")/lever_screen.sh"
-mkdir -p "$out/configs"
-cat > "$out/configs/longer.toml" <<TOML
-extends = "$(realpath $base)"
+variant "$out" longer <<TOML
 
 [optimizer]
 epochs = 6

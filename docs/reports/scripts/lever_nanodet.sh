@@ -8,9 +8,7 @@ set -euo pipefail
 out=$1
 source "$(dirname "$0")/lever_screen.sh"
 d=$(realpath configs/detectors)
-mkdir -p "$out/configs"
-cat > "$out/configs/nanodet.toml" <<TOML
-extends = "$(realpath $base)"
+variant "$out" nanodet <<TOML
 white_box = [
   { detector = "$d/yolov3-tiny.toml" },
   { detector = "$d/yolov8n_int8.toml", surrogate = true },

@@ -6,6 +6,12 @@
 pav=${PAV:-target/release/pav}
 base=configs/studies/print-base.toml
 
+# `variant OUT NAME < BODY`: the config OUT/configs/NAME.toml, the base recipe extended by BODY.
+variant() {
+  mkdir -p "$1/configs"
+  { echo "extends = \"$(realpath $base)\""; cat; } > "$1/configs/$2.toml"
+}
+
 screen() {
   local out=$1 name=$2 label=$3
   local common=(--folds 3 --random-seeds 1 --reference data:rauca-e2e/RAUCA_E2E.png -d configs/detectors -d configs/detectors-wide)

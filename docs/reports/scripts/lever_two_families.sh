@@ -10,9 +10,7 @@ out=$1
 source "$(dirname "$0")/lever_screen.sh"
 d=$(realpath configs/detectors)
 w=$(realpath configs/detectors-wide)
-mkdir -p "$out/configs"
-cat > "$out/configs/two-families.toml" <<TOML
-extends = "$(realpath $base)"
+variant "$out" two-families <<TOML
 white_box = [
   { detector = "$d/yolov3-tiny.toml" },
   { detector = "$d/yolov8n_int8.toml", surrogate = true },
