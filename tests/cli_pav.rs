@@ -170,6 +170,63 @@ fn eval_digital_resamples_a_texture_of_another_size() {
     assert!(common::output_text(&o).contains("rauca-e2e against each other texture"), "{}", common::output_text(&o));
 }
 
+/// `eval-digital -t DIR` on the folder of a `pav optimize --seeds` run: its seeds pool into one
+/// row, and it is paired with each other texture per (seed, view); a folder without seeds is a
+/// clear error.
+#[cfg(feature = "optimize")]
+#[test]
+fn eval_digital_pools_a_seeded_runs_folder() {
+    let shared = common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("pooled");
+    for (seed, png) in [(0, "rauca-e2e/RAUCA_E2E.png"), (1, "pav-camou/image.png")] {
+        std::fs::create_dir_all(run.join(format!("seed{seed}"))).unwrap();
+        std::fs::copy(shared.join(png), run.join(format!("seed{seed}/texture.png"))).unwrap();
+    }
+    std::fs::create_dir_all(run.join("not-a-seed")).unwrap();
+    let out_dir = tmp.path().join("out");
+    let o = eval_digital_yolov3_tiny()
+        .args(["-t", "data:rauca-e2e/RAUCA_E2E.png", "-t"])
+        .arg(&run)
+        .arg("-o")
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    let out = common::output_text(&o);
+    assert!(o.status.success(), "{out}");
+    assert!(out.contains("pooled against each other texture, held-out views: mean difference of the best car score [95 % paired-bootstrap interval over (seed, view) pairs of its 2 seeds"), "{out}");
+    let views = std::fs::read_to_string(out_dir.join("digital_views.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = views.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    // fold,role,view,texture,seed,detector,score
+    let held = |tex: &str, seed: &str| -> Vec<f64> {
+        rows.iter()
+            .filter(|r| r[1] == "held-out" && r[3] == tex && r[4] == seed)
+            .map(|r| r[6].parse().unwrap())
+            .collect()
+    };
+    // Seed 0 is RAUCA-E2E's texture: the same scores as the file given on its own.
+    assert_eq!(held("pooled", "0"), held("rauca-e2e", "0"), "{views}");
+    let (s0, s1, orig) = (held("pooled", "0"), held("pooled", "1"), held("original", "0"));
+    assert_eq!([s0.len(), s1.len(), orig.len()], [5; 3], "{views}");
+    assert_ne!(s0, s1, "two different textures score alike: {views}");
+    // One row of 2 × 11 images, and pairs over the 2 × 5 (seed, held-out view) pairs.
+    let csv = std::fs::read_to_string(out_dir.join("digital.csv")).unwrap();
+    let all = csv.lines().find(|l| l.contains(",pooled,all,")).unwrap_or_else(|| panic!("{csv}"));
+    assert_eq!(all.split(',').nth(4), Some("22"), "{csv}");
+    let paired = std::fs::read_to_string(out_dir.join("digital_paired.csv")).unwrap();
+    let line = paired.lines().find(|l| l.starts_with("pooled,yolov3-tiny,true,original,")).unwrap();
+    assert!(line.ends_with(",10"), "{line}");
+    let d: f64 = s0.iter().chain(&s1).zip(orig.iter().chain(&orig)).map(|(m, o)| m - o).sum::<f64>() / 10.0;
+    let mean: f64 = line.split(',').nth(4).unwrap().parse().unwrap();
+    assert!((mean - d).abs() < 1e-5, "{line}: recomputed {d}");
+
+    let empty = tmp.path().join("empty");
+    std::fs::create_dir_all(empty.join("seed0")).unwrap();
+    let o = eval_digital_yolov3_tiny().arg("-t").arg(&empty).arg("-o").arg(tmp.path().join("o2")).output().unwrap();
+    let msg = common::output_text(&o);
+    assert!(!o.status.success() && msg.contains("a folder without seed<N>/texture.png in it"), "{msg}");
+}
+
 /// Ctrl-C during `pav optimize` saves the state and exits non-zero, so a following command in
 /// `pav optimize && …` does not go on with a partial texture (resuming is tested in attack_optimize).
 #[cfg(all(feature = "optimize", unix))]

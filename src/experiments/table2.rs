@@ -217,8 +217,38 @@ pub fn texture_name(t: &Path) -> String {
         .unwrap_or_else(|| t.display().to_string())
 }
 
+/// A texture argument of `pav eval-digital` as its name and its (seed, PNG) runs: a PNG is one
+/// run (seed 0) named by [`texture_name`]; a folder of a `pav optimize --seeds` run is its
+/// `seed<N>/texture.png` files, pooled under the folder's name like a random kind's seeds.
+pub fn texture_seeds(t: &Path) -> Result<(String, Vec<(u64, PathBuf)>), ExperimentError> {
+    if !t.is_dir() {
+        return Ok((texture_name(t), vec![(0, t.to_path_buf())]));
+    }
+    let entries = std::fs::read_dir(t).map_err(|source| ExperimentError::Io { path: t.into(), source })?;
+    let mut runs = Vec::new();
+    for e in entries {
+        let e = e.map_err(|source| ExperimentError::Io { path: t.into(), source })?;
+        let name = e.file_name().to_string_lossy().into_owned();
+        let seed = name.strip_prefix("seed").and_then(|n| n.parse::<u64>().ok());
+        let png = e.path().join("texture.png");
+        if let (Some(seed), true) = (seed, png.is_file()) {
+            runs.push((seed, png));
+        }
+    }
+    if runs.is_empty() {
+        return Err(ExperimentError::Invalid(format!(
+            "{}: a folder without seed<N>/texture.png in it; give a texture PNG or the folder of a `pav optimize --seeds` run",
+            t.display()
+        )));
+    }
+    runs.sort();
+    let name = t.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| t.display().to_string());
+    Ok((name, runs))
+}
+
 /// `pav eval-digital`: the original paint, `random_seeds` random textures of each kind and each
-/// texture file in `textures` (named by its folder) on the views of `config`; writes
+/// texture of `textures` (a PNG named by its folder, or a `--seeds` run's folder with its seeds
+/// pooled, [`texture_seeds`]) on the views of `config`; writes
 /// `digital.csv`, every view's scores (`digital_views.csv`), each file's paired comparisons on
 /// held-out views (`digital_paired.csv`) and `digital.md` into `out`, and returns the Markdown.
 #[allow(clippy::too_many_arguments)]
@@ -246,15 +276,19 @@ pub fn eval_digital(
     // config's white boxes; any other texture for this config's.
     let config_wb = cfg.white_box_names()?;
     let mut own_wb: HashMap<String, Vec<String>> = HashMap::new();
+    let mut seeds_of = HashMap::new();
     for t in textures {
-        let tex = setup.load_texture(t)?;
-        let name = texture_name(t);
-        let recorded = t.parent().and_then(crate::provenance::recorded_config);
-        if let Some(wb) = recorded.and_then(|c| OptimizeConfig::load(&c).ok()?.white_box_names().ok()) {
-            own_wb.insert(name.clone(), wb);
+        let (name, runs) = texture_seeds(t)?;
+        for (seed, file) in &runs {
+            let tex = setup.load_texture(file)?;
+            let recorded = file.parent().and_then(crate::provenance::recorded_config);
+            if let Some(wb) = recorded.and_then(|c| OptimizeConfig::load(&c).ok()?.white_box_names().ok()) {
+                own_wb.insert(name.clone(), wb);
+            }
+            conditions.push(Condition { name: name.clone(), seed: *seed, texture: Some(tex) });
         }
-        mine.push(name.clone());
-        conditions.push(Condition { name, seed: 0, texture: Some(tex) });
+        seeds_of.insert(name.clone(), runs.len());
+        mine.push(name);
     }
     let mut defences = scoring.defences.clone();
     if squeeze.is_some() {
@@ -290,8 +324,12 @@ pub fn eval_digital(
     for m in &mine {
         let p: Vec<Paired> = pairs.iter().filter(|p| &p.texture == m).cloned().collect();
         if !p.is_empty() {
+            let pairs_are = match seeds_of.get(m).copied().unwrap_or(1) {
+                1 => "views".to_string(),
+                k => format!("(seed, view) pairs of its {k} seeds"),
+            };
             md.push_str(&format!(
-                "\n## {m} against each other texture, held-out views: mean difference of the best car score [95 % paired-bootstrap interval over views; random kinds: each view's mean over {} seeds]\n\n{}",
+                "\n## {m} against each other texture, held-out views: mean difference of the best car score [95 % paired-bootstrap interval over {pairs_are}; random kinds: each view's mean over {} seeds]\n\n{}",
                 random_seeds.max(1),
                 markdown_paired(&p)
             ));

@@ -11,7 +11,9 @@ pub struct Args {
     /// Optimization config (mesh, views, scene lighting).
     #[arg(long, default_value = "configs/optimize/paper.toml")]
     config: PathBuf,
-    /// Texture PNGs to evaluate (named by their folder); `data:NAME` for a manifest entry.
+    /// Texture PNGs to evaluate (named by their folder); `data:NAME` for a manifest entry; or the
+    /// folder of a `pav optimize --seeds` run, its seeds pooled into one row and paired per
+    /// (seed, view).
     #[arg(long = "texture", short = 't', value_parser = pav::data::arg_path)]
     textures: Vec<PathBuf>,
     /// Random textures of each kind (blocks, the paper's 32×32), pooled per row and per view.
