@@ -242,7 +242,7 @@ fn the_optimizer_trains_on_rendered_views() {
     let s = Setup::load(&cfg, None).unwrap();
     assert_eq!(s.pbr.len(), 3, "every rendered pose shows the region");
     assert_eq!(s.training_views().len(), 4);
-    assert!(s.pbr.iter().all(|v| v.name.starts_with("pbr:city_")));
+    assert!(s.pbr.iter().all(|v| v.name().starts_with("pbr:city_")));
     let wb = Ensemble::load(&cfg, cfg.views.size).unwrap();
     let out = tmp.path().join("run");
     let ro = RunOptions {
@@ -258,6 +258,30 @@ fn the_optimizer_trains_on_rendered_views() {
             .unwrap();
     assert!(matches!(o.finish, Finish::Done));
     assert_eq!(o.log.len(), 4, "one step per training view, rendered ones included");
+    // Streamed (`views.stream`): only the rendered views' files are held, each view is rebuilt
+    // when stepped on, and the run is the same bit for bit.
+    let mut streamed = cfg.clone();
+    streamed.views.stream = true;
+    let ss = Setup::load(&streamed, None).unwrap();
+    assert!(ss.pbr.iter().all(|v| matches!(v, pav::attack::setup::PbrView::Stored(_))));
+    assert_eq!(ss.region_views_shares(), s.region_views_shares());
+    let (held, kept) = (s.training_bytes(), ss.training_bytes());
+    eprintln!("training views hold {held} bytes, streamed {kept}");
+    assert!(kept < held / 2, "{kept} of {held}");
+    let ro2 = RunOptions { out: tmp.path().join("run-streamed"), ..ro.clone() };
+    let o2 = optimize_texture(
+        &path,
+        &streamed,
+        &ss,
+        &wb,
+        &ro2,
+        &pav::progress::Silent,
+        &std::sync::atomic::AtomicBool::new(false),
+    )
+    .unwrap();
+    assert!(o2.texture == o.texture, "a streamed run trains another texture");
+    let losses = |o: &pav::attack::optimize::Outcome| o.log.iter().map(|r| r.total).collect::<Vec<_>>();
+    assert_eq!(losses(&o2), losses(&o));
     // A car without photos: rendered views only, the same folder held out as `pbr_test`.
     cfg.views.train.clear();
     cfg.views.pbr_test = vec![dir.clone()];
@@ -318,13 +342,26 @@ fn rendered_views_whose_car_goes_unseen_are_dropped() {
     let mut s = Setup::load(&cfg, None).unwrap();
     assert_eq!(s.pbr.len(), 2);
     let wb = Ensemble::load(&cfg, cfg.views.size).unwrap();
-    let scores: Vec<f32> = s.pbr.iter().map(|v| wb.first().loss(&v.photo, v.size).unwrap().max_score).collect();
+    let scores: Vec<f32> = s
+        .pbr
+        .iter()
+        .map(|v| {
+            let v = s.view(v.as_ref()).unwrap();
+            wb.first().loss(&v.photo, v.size).unwrap().max_score
+        })
+        .collect();
     eprintln!("car scores as rendered: {scores:?}");
     let k = s.keep_detected_pbr(&wb, 0.5).unwrap();
     assert_eq!((k.kept, k.total), (1, 2), "{k}");
     assert_eq!(k.seen_by, vec![("yolov3-tiny".to_string(), 1)]);
     assert_eq!(s.pbr.len(), 1);
-    assert!(s.pbr[0].name.contains("_d5.00_"), "{}", s.pbr[0].name);
+    assert!(s.pbr[0].name().contains("_d5.00_"), "{}", s.pbr[0].name());
+    // Streamed views are filtered alike.
+    cfg.views.stream = true;
+    let mut ss = Setup::load(&cfg, None).unwrap();
+    assert_eq!(ss.keep_detected_pbr(&wb, 0.5).unwrap(), k);
+    assert_eq!(ss.pbr[0].name(), s.pbr[0].name());
+    cfg.views.stream = false;
     assert_eq!(s.train.len(), 1, "photos are kept whatever they score");
     // A threshold outside (0, 1) is refused by the config's check.
     cfg.views.pbr_min_score = Some(1.5);
@@ -675,7 +712,11 @@ fn plates_put_the_rendered_car_on_the_photos_ground() {
         cfg.views.pbr = vec![bare.clone()];
         let s = Setup::load(&cfg, None).unwrap();
         let names = |s: &Setup| {
-            s.training_views().iter().filter(|v| v.name.starts_with("pbr:")).map(|v| v.name.clone()).collect::<Vec<_>>()
+            s.training_views()
+                .iter()
+                .filter(|v| v.name().starts_with("pbr:"))
+                .map(|v| v.name().to_string())
+                .collect::<Vec<_>>()
         };
         assert_eq!(names(&s), ["pbr:city_data12501_t+0", "pbr:city_data12501_t+40"]);
         assert_eq!((s.pbr.len(), s.plates_held_out()), (4, 2));

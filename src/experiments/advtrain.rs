@@ -455,9 +455,10 @@ pub fn adv_train(
     for c in &train {
         for v in &train_views {
             progress.advance(1);
+            let v = setup.view(*v)?;
             let Some(b) = v.car_box else { continue };
             let (x, map) =
-                prepare(&composite(v, c.texture.as_deref(), &setup), input).map_err(|e| refuse(e.to_string()))?;
+                prepare(&composite(&v, c.texture.as_deref(), &setup), input).map_err(|e| refuse(e.to_string()))?;
             let outs = features.infer(x, &map)?;
             let feats = level_features(&outs, &levels).map_err(refuse)?;
             let ib = [

@@ -29,6 +29,9 @@ pub enum ExperimentError {
     /// The optimization.
     #[error(transparent)]
     Optimize(Box<crate::attack::optimize::OptimizeError>),
+    /// Filtering the rendered views (`views.pbr_min_score`).
+    #[error(transparent)]
+    Keep(#[from] crate::attack::setup::KeepError),
     /// The printable sheet.
     #[error(transparent)]
     Sheet(#[from] crate::attack::export::SheetError),

@@ -101,6 +101,11 @@ pub struct ViewsConfig {
     /// photos (their box is the silhouette's), never trained on. For a car without photos.
     #[serde(default)]
     pub pbr_test: Vec<PathBuf>,
+    /// Hold only the files of the `pbr` views and rebuild each view when it is stepped on (a
+    /// few milliseconds), instead of holding every built view in memory (a few MB each at 416²):
+    /// for view sets larger than memory. The texture is the same either way.
+    #[serde(default)]
+    pub stream: bool,
 }
 
 /// One white-box detector of the ensemble.

@@ -62,6 +62,9 @@ pub struct StepLog {
     pub adjoint_ms: f64,
     /// Smoothness loss and Adam step, ms.
     pub optimizer_ms: f64,
+    /// Rebuilding the view from its files (`views.stream`), ms; 0 for a view held in memory.
+    #[serde(default)]
+    pub view_ms: f64,
     /// Each white-box detector's own terms (`loss_detectors.csv`), those that took part.
     #[serde(skip)]
     pub per_detector: Vec<DetectorStep>,
@@ -310,6 +313,7 @@ pub fn step(
         backward_ms: g.backward_ms,
         adjoint_ms,
         optimizer_ms,
+        view_ms: 0.0,
         per_detector,
     })
 }
@@ -450,10 +454,12 @@ pub fn optimize_texture(
         if k == 0 {
             order = epoch_order(n as usize, cfg.optimizer.seed, epoch);
         }
-        let view = views[order[k]];
+        let t = Instant::now();
+        let view = setup.view(views[order[k]])?;
+        let view_ms = t.elapsed().as_secs_f64() * 1e3;
         grad.fill(0.0);
-        let mut rec = step(setup, wb, cfg, view, &tex, &mut rng, &mut grad)?;
-        (rec.step, rec.epoch) = (s, epoch);
+        let mut rec = step(setup, wb, cfg, &view, &tex, &mut rng, &mut grad)?;
+        (rec.step, rec.epoch, rec.view_ms) = (s, epoch, view_ms);
         rec.per_detector.iter_mut().for_each(|d| d.step = s);
         let finite = rec.total.is_finite() && setup.region_values.iter().all(|&i| grad[i as usize].is_finite());
         if finite {

@@ -19,6 +19,7 @@ use pav_render::bake::{bake, BakeError, Plate, Shot, BAKE_SIZE};
 use pav_render::mask::MaskError;
 use pav_render::shade::{vertex_normals, Lights};
 use pav_scene::Scene;
+use std::borrow::Cow;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -111,8 +112,9 @@ pub struct Setup {
     pub train: Vec<View>,
     /// Synthetic training views (`views.turns`): trained on, never scored.
     pub synthetic: Vec<View>,
-    /// Rendered training views (`views.pbr`, Blender Cycles): trained on, never scored.
-    pub pbr: Vec<View>,
+    /// Rendered training views (`views.pbr`, Blender Cycles): trained on, never scored; with
+    /// `views.stream` only their files are held, and each is rebuilt when stepped on.
+    pub pbr: Vec<PbrView>,
     /// Held-out views.
     pub test: Vec<View>,
     /// Ground-truth car boxes by view name, in view pixels.
@@ -129,6 +131,78 @@ pub struct Setup {
     /// The photos behind `train` and `test` by view name, for synthetic views of any subset.
     samples: Arc<HashMap<String, CarlaSample>>,
     maker: ViewMaker,
+}
+
+/// A rendered view as its files: what rebuilds its [`View`] (`views.stream`), and the texels it
+/// reads, kept for [`Setup::region_views_shares`].
+#[derive(Clone, Debug)]
+pub struct StoredView {
+    /// The view's name (`pbr:` and the manifest's name).
+    pub name: String,
+    /// The rendered image.
+    image: PathBuf,
+    /// Its camera, in the mesh's normalized frame.
+    camera: Camera,
+    /// [`View::texels_read`] of the built view.
+    texels: Vec<u32>,
+}
+
+/// A rendered training view: built and held in memory, or only its files (`views.stream`).
+#[derive(Clone, Debug)]
+pub enum PbrView {
+    /// Built once at set-up.
+    Built(View),
+    /// Rebuilt from its files at each use.
+    Stored(StoredView),
+}
+
+impl PbrView {
+    /// The view's name.
+    pub fn name(&self) -> &str {
+        match self {
+            PbrView::Built(v) => &v.name,
+            PbrView::Stored(s) => &s.name,
+        }
+    }
+
+    /// The view as [`Setup::training_views`] lists it.
+    pub fn as_ref(&self) -> ViewRef<'_> {
+        match self {
+            PbrView::Built(v) => ViewRef::Built(v),
+            PbrView::Stored(s) => ViewRef::Stored(s),
+        }
+    }
+}
+
+/// A training view as listed: built, or to be rebuilt from its files by [`Setup::view`].
+#[derive(Clone, Copy, Debug)]
+pub enum ViewRef<'a> {
+    /// A view held in memory.
+    Built(&'a View),
+    /// A rendered view held as its files.
+    Stored(&'a StoredView),
+}
+
+impl ViewRef<'_> {
+    /// The view's name.
+    pub fn name(&self) -> &str {
+        match self {
+            ViewRef::Built(v) => &v.name,
+            ViewRef::Stored(s) => &s.name,
+        }
+    }
+}
+
+/// Why [`Setup::keep_detected_pbr`] failed.
+#[cfg(feature = "optimize")]
+#[derive(Debug, thiserror::Error)]
+pub enum KeepError {
+    /// Rebuilding a stored view.
+    #[error(transparent)]
+    View(Box<SetupError>),
+    /// A white box.
+    #[error(transparent)]
+    WhiteBox(#[from] WhiteBoxError),
 }
 
 /// What [`Setup::keep_detected_pbr`] kept.
@@ -185,6 +259,25 @@ impl ViewMaker {
     ) -> Result<View, MaskError> {
         View::new(name, mesh, &self.normals, cam, photo, self.size, region, (ts, ts), self.lights.as_ref())
     }
+
+    /// The view of a rendered image file seen from `cam`.
+    fn rendered(
+        &self,
+        name: &str,
+        mesh: &Mesh,
+        image: &Path,
+        cam: &Camera,
+        region: &[f32],
+        ts: usize,
+    ) -> Result<View, SetupError> {
+        let img = Rgb::load(image)?;
+        let photo = Frame {
+            width: img.width,
+            height: img.height,
+            bgr: img.rgb.chunks(3).flat_map(|c| [to_u8(c[2]), to_u8(c[1]), to_u8(c[0])]).collect(),
+        };
+        self.view(name, mesh, cam, &photo, region, ts).map_err(|source| SetupError::Mask { view: name.into(), source })
+    }
 }
 
 /// Nearest-neighbour resampling of a region mask to `size × size` texels.
@@ -219,9 +312,12 @@ fn read_boxes(path: &Path) -> Result<HashMap<String, BBox>, SetupError> {
 
 /// The views of the rendered folders `dirs` (`views.pbr` or `views.pbr_test`), after checking
 /// each was rendered from this config's mesh in the normalization its camera convention uses
-/// (the cameras are in that frame). Views that do not show the region are left out. With
-/// `boxes`, each kept view's car box (its silhouette's, in view pixels) goes in there.
-fn pbr_views(
+/// (the cameras are in that frame), each passed through `keep` as it is built (so that a caller
+/// holding only its files never holds every view at once). Views that do not show the region
+/// are left out. With `boxes`, each kept view's car box (its silhouette's, in view pixels) goes
+/// in there.
+#[allow(clippy::too_many_arguments)]
+fn pbr_views<T>(
     cfg: &OptimizeConfig,
     dirs: &[PathBuf],
     maker: &ViewMaker,
@@ -229,7 +325,8 @@ fn pbr_views(
     region: &[f32],
     mut boxes: Option<&mut HashMap<String, BBox>>,
     plates: &mut HashMap<String, String>,
-) -> Result<Vec<View>, SetupError> {
+    keep: impl Fn(View, StoredView) -> T,
+) -> Result<Vec<T>, SetupError> {
     let mut out = Vec::new();
     let normalize = match cfg.mesh.camera {
         CameraConvention::Fca => "bbox",
@@ -252,16 +349,9 @@ fn pbr_views(
             )));
         }
         for r in rows {
-            let img = Rgb::load(&dir.join(&r.image))?;
-            let photo = Frame {
-                width: img.width,
-                height: img.height,
-                bgr: img.rgb.chunks(3).flat_map(|c| [to_u8(c[2]), to_u8(c[1]), to_u8(c[0])]).collect(),
-            };
             let name = format!("pbr:{}", r.name);
-            let v = maker
-                .view(&name, mesh, &r.camera(), &photo, region, cfg.mesh.texture_size)
-                .map_err(|source| SetupError::Mask { view: name.clone(), source })?;
+            let (image, camera) = (dir.join(&r.image), r.camera());
+            let v = maker.rendered(&name, mesh, &image, &camera, region, cfg.mesh.texture_size)?;
             // A pose that hides the region teaches nothing, and no texture can change its score.
             if v.active.is_empty() {
                 continue;
@@ -276,7 +366,8 @@ fn pbr_views(
                     b.insert(name.clone(), bb);
                 }
             }
-            out.push(v);
+            let texels = v.texels_read();
+            out.push(keep(v, StoredView { name, image, camera, texels }));
         }
     }
     Ok(out)
@@ -388,8 +479,11 @@ impl Setup {
         let train = views(&cfg.views.train)?;
         let mut test = views(&cfg.views.test)?;
         let mut plates = HashMap::new();
-        let pbr = pbr_views(cfg, &cfg.views.pbr, &maker, &mesh, &region, None, &mut plates)?;
-        test.extend(pbr_views(cfg, &cfg.views.pbr_test, &maker, &mesh, &region, Some(&mut boxes), &mut plates)?);
+        let stream = cfg.views.stream;
+        let held = |v, s| if stream { PbrView::Stored(s) } else { PbrView::Built(v) };
+        let pbr = pbr_views(cfg, &cfg.views.pbr, &maker, &mesh, &region, None, &mut plates, held)?;
+        let built = |v, _| v;
+        test.extend(pbr_views(cfg, &cfg.views.pbr_test, &maker, &mesh, &region, Some(&mut boxes), &mut plates, built)?);
         let print = cfg.print.as_ref().map(PrintChannel::open).transpose()?;
         Ok(Setup {
             mesh,
@@ -465,8 +559,33 @@ impl Setup {
     /// The views an optimization steps through: the photos, the synthetic views, the rendered
     /// views, less those laid over a held-out photo's background (its street and camera must
     /// not be trained on).
-    pub fn training_views(&self) -> Vec<&View> {
-        self.train.iter().chain(&self.synthetic).chain(self.pbr.iter().filter(|v| !self.over_held_out(v))).collect()
+    pub fn training_views(&self) -> Vec<ViewRef<'_>> {
+        let pbr = self.pbr.iter().filter(|v| !self.over_held_out(v.name())).map(PbrView::as_ref);
+        self.train.iter().chain(&self.synthetic).map(ViewRef::Built).chain(pbr).collect()
+    }
+
+    /// The view `v` lists: itself, or rebuilt from its files (the same view, bit for bit, as
+    /// the one built at set-up).
+    pub fn view<'a>(&self, v: ViewRef<'a>) -> Result<Cow<'a, View>, SetupError> {
+        match v {
+            ViewRef::Built(v) => Ok(Cow::Borrowed(v)),
+            ViewRef::Stored(s) => {
+                let v = self.maker.rendered(&s.name, &self.mesh, &s.image, &s.camera, &self.region, self.tex_size)?;
+                Ok(Cow::Owned(v))
+            }
+        }
+    }
+
+    /// Bytes the training views hold in memory (a stored view: its files' names and texel list).
+    pub fn training_bytes(&self) -> usize {
+        let stored = |s: &StoredView| s.name.len() + s.image.as_os_str().len() + s.texels.len() * 4;
+        self.training_views()
+            .iter()
+            .map(|v| match v {
+                ViewRef::Built(v) => v.heap_bytes(),
+                ViewRef::Stored(s) => stored(s),
+            })
+            .sum()
     }
 
     /// Rendered views over photos' background plates (folders written by `pav views render`
@@ -474,8 +593,8 @@ impl Setup {
     /// silhouette's) goes into [`Setup::boxes`] and its photo into [`Setup::plates`]. A view
     /// without a plate is refused: it belongs to no photo's fold.
     pub fn rendered_over_plates(&mut self, cfg: &OptimizeConfig, dirs: &[PathBuf]) -> Result<Vec<View>, SetupError> {
-        let views =
-            pbr_views(cfg, dirs, &self.maker, &self.mesh, &self.region, Some(&mut self.boxes), &mut self.plates)?;
+        let (maker, mesh, region) = (&self.maker, &self.mesh, &self.region);
+        let views = pbr_views(cfg, dirs, maker, mesh, region, Some(&mut self.boxes), &mut self.plates, |v, _| v)?;
         if let Some(v) = views.iter().find(|v| !self.plates.contains_key(&v.name)) {
             return Err(SetupError::Views(format!(
                 "{}: not laid over a photo's plate; only views rendered with [plates] can be held out with their photo",
@@ -492,11 +611,11 @@ impl Setup {
 
     /// Rendered training views left out because they lie over a held-out photo's background.
     pub fn plates_held_out(&self) -> usize {
-        self.pbr.iter().filter(|v| self.over_held_out(v)).count()
+        self.pbr.iter().filter(|v| self.over_held_out(v.name())).count()
     }
 
-    fn over_held_out(&self, v: &View) -> bool {
-        self.plates.get(&v.name).is_some_and(|p| self.test.iter().any(|t| t.name == *p))
+    fn over_held_out(&self, name: &str) -> bool {
+        self.plates.get(name).is_some_and(|p| self.test.iter().any(|t| t.name == *p))
     }
 
     /// Shares of the optimizable texels that 0, 1 and 2 or more training views read: a texel
@@ -504,7 +623,11 @@ impl Setup {
     pub fn region_views_shares(&self) -> [f64; 3] {
         let mut count = vec![0u32; self.tex_size * self.tex_size];
         for v in self.training_views() {
-            for t in v.texels_read() {
+            let texels = match v {
+                ViewRef::Built(v) => Cow::Owned(v.texels_read()),
+                ViewRef::Stored(s) => Cow::Borrowed(&s.texels),
+            };
+            for &t in texels.iter() {
                 count[t as usize] += 1;
             }
         }
@@ -519,11 +642,16 @@ impl Setup {
     /// Drops the rendered views in which no white box of `wb` finds a car at `min_score` as they
     /// were rendered (`views.pbr_min_score`); the photos are kept whatever they score.
     #[cfg(feature = "optimize")]
-    pub fn keep_detected_pbr(&mut self, wb: &Ensemble, min_score: f32) -> Result<PbrKept, WhiteBoxError> {
+    pub fn keep_detected_pbr(
+        &mut self,
+        wb: &Ensemble,
+        min_score: f32,
+    ) -> Result<PbrKept, KeepError> {
         let total = self.pbr.len();
         let mut seen_by = vec![0usize; wb.members.len()];
         let mut kept = Vec::with_capacity(total);
-        for v in self.pbr.drain(..) {
+        for p in std::mem::take(&mut self.pbr) {
+            let v = self.view(p.as_ref()).map_err(|e| KeepError::View(Box::new(e)))?;
             let mut any = false;
             for (k, (m, _)) in wb.members.iter().enumerate() {
                 if pav_detect::detected(m.loss(&v.photo, v.size)?.max_score, min_score) {
@@ -531,8 +659,9 @@ impl Setup {
                     any = true;
                 }
             }
+            drop(v);
             if any {
-                kept.push(v);
+                kept.push(p);
             }
         }
         self.pbr = kept;

@@ -154,6 +154,19 @@ impl View {
         t
     }
 
+    /// Bytes the view holds on the heap: the photo, the textured pixels, their texture lookup and
+    /// shading.
+    pub fn heap_bytes(&self) -> usize {
+        let shade =
+            self.shade.as_ref().map_or(0, |s| (s.mul.len() + s.add.len() + s.pixels.as_ref().map_or(0, Vec::len)) * 4);
+        self.name.len()
+            + self.photo.len() * 4
+            + self.active.len() * 4
+            + self.gather.pixels.len() * 4
+            + self.gather.taps.len() * std::mem::size_of::<[(u32, f32); 4]>()
+            + shade
+    }
+
     /// Share of the image that shows the texture (P = 1).
     pub fn textured_share(&self) -> f32 {
         self.active.len() as f32 / (self.size * self.size) as f32

@@ -89,6 +89,16 @@ pub fn run(a: &Args) -> Result<()> {
     if let Some(k) = &p.pbr_kept {
         eprintln!("views.pbr: {k}");
     }
+    let (bytes, n) = (s.training_bytes() as f64 / 1048576.0, s.training_views().len().max(1) as f64);
+    eprintln!(
+        "training views hold {bytes:.0} MiB ({:.2} MiB per view){}",
+        bytes / n,
+        if p.cfg.views.stream {
+            "; rendered views are rebuilt from their files at each step (views.stream)"
+        } else {
+            ""
+        }
+    );
     let held_out = s.plates_held_out();
     if held_out > 0 {
         eprintln!("views.pbr: {held_out} views over held-out photos' backgrounds left out of training");
