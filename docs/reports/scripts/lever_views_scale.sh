@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
 # The "views at scale" lever on the proxy of the attack study (docs/reports/transfer.md): the
 # recommended recipe, trained beside the e-tron over FCA's plates under 3 light maps (297 views,
-# configs/views/etron-plates-wide.toml), against the same recipe under all 8 light maps Blender
-# ships (792 views, configs/views/etron-plates-lights.toml); 3-fold crossval at seed 0 each,
+# configs/views/etron-plates-wide.toml), against the same recipe under 6 light maps (594 views,
+# configs/views/etron-plates-lights.toml); 3-fold crossval at seed 0 each,
 # scored by the main and the wide detector sets (YOLOX-Nano, NanoDet-m and PP-PicoDet-XS held
 # out). Renders what is missing first: the 297 views (about 30 min on two cores), then the other
-# 495 (about 50 min), resuming from the first folder.
+# 297 (about 30 min), resuming from the first folder.
 # usage: docs/reports/scripts/lever_views_scale.sh OUT   (from the repository root)
 set -euo pipefail
 out=$1
@@ -21,4 +21,4 @@ variant "$out" lights <<TOML
 pbr = ["$(realpath $lights)"]
 render = ["$(realpath configs/views/etron-plates-lights.toml)"]
 TOML
-screen "$out" lights "8 light maps"
+screen "$out" lights "6 light maps"
