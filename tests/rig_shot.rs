@@ -410,3 +410,102 @@ fn compare_finds_how_far_a_capture_s_zero_is_from_the_simulation_s() {
         common::output_text(&o)
     );
 }
+
+/// `pav-rig paired`: the original paint and RAUCA-E2E's texture filmed by the rasterizer on the
+/// same shots of the phone rig, scored, then paired frame by frame; the difference is the mean
+/// of the per-frame differences in frames.csv, and a label filmed on other shots is refused.
+#[test]
+fn paired_compares_two_paints_frame_by_frame() {
+    let shared = common::shared_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let path = small_rig(tmp.path(), "phone-etron.toml", 320, 12);
+    let film = |name: &str, texture: Option<&std::path::Path>| {
+        let out = tmp.path().join(name);
+        let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_pav"));
+        c.args(["views", "turntable", "--rasterizer", "--rig"]).arg(&path).arg("-o").arg(&out);
+        if let Some(t) = texture {
+            c.arg("--texture").arg(t);
+        }
+        let o = c.output().unwrap();
+        assert!(o.status.success(), "{}", common::output_text(&o));
+        let mut v: Vec<_> = std::fs::read_dir(out.join("videos"))
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|e| e == "mp4"))
+            .collect();
+        v.sort();
+        v
+    };
+    let (original, rauca) = (film("original", None), film("rauca", Some(&shared.join("rauca-e2e/RAUCA_E2E.png"))));
+    assert_eq!(original.len(), rauca.len());
+    let eval = tmp.path().join("eval");
+    let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"));
+    c.arg("evaluate").args(&original).args(&rauca);
+    for l in original.iter().map(|_| "original").chain(rauca.iter().map(|_| "rauca")) {
+        c.args(["--label", l]);
+    }
+    let o = c
+        .args(["--no-plots", "-d"])
+        .arg(common::repo().join("configs/detectors/yolov3-tiny.toml"))
+        .arg("-o")
+        .arg(&eval)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", common::output_text(&o));
+    let out = tmp.path().join("paired");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+        .arg("paired")
+        .arg(&eval)
+        .args(["--against", "original", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let said = common::output_text(&o);
+    assert!(o.status.success(), "{said}");
+    eprintln!("{said}");
+    // Recomputed from frames.csv: each RAUCA-E2E frame against the original's frame of the same
+    // shot (the videos' names are the shots') and index.
+    let frames = pav::eval::compare::read_frames(&eval.join("frames.csv")).unwrap();
+    let name = |f: &str| std::path::Path::new(f).file_name().unwrap().to_string_lossy().into_owned();
+    let score = |label: &str, file: &str, frame: usize| {
+        frames
+            .iter()
+            .find(|r| r.video == label && name(&r.file) == file && r.frame == frame)
+            .map(|r| r.max_score as f64)
+    };
+    let d: Vec<f64> = frames
+        .iter()
+        .filter(|r| r.video == "rauca")
+        .map(|r| r.max_score as f64 - score("original", &name(&r.file), r.frame).unwrap())
+        .collect();
+    assert_eq!(d.len(), 12 * original.len());
+    let mean = d.iter().sum::<f64>() / d.len() as f64;
+    let csv = std::fs::read_to_string(out.join("paired.csv")).unwrap();
+    let row: Vec<&str> = csv.lines().nth(1).unwrap().split(',').collect();
+    // label,against,detector,frames,detected,detected_against,score,score_against,diff,lo,hi
+    assert_eq!(&row[..4], ["rauca", "original", "yolov3-tiny", &d.len().to_string()], "{csv}");
+    let diff: f64 = row[8].parse().unwrap();
+    assert!((diff - mean).abs() < 1e-6, "{diff} against {mean}");
+    assert!(row[9].parse::<f64>().unwrap() <= diff && diff <= row[10].parse::<f64>().unwrap(), "{csv}");
+    // Two shots against one: refused, named.
+    let one = tmp.path().join("eval1");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+        .arg("evaluate")
+        .args([&original[0], &rauca[0], &rauca[1]])
+        .args(["--label", "original", "--label", "rauca", "--label", "rauca", "--no-plots", "-d"])
+        .arg(common::repo().join("configs/detectors/yolov3-tiny.toml"))
+        .arg("-o")
+        .arg(&one)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", common::output_text(&o));
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+        .arg("paired")
+        .arg(&one)
+        .args(["--against", "original", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let said = common::output_text(&o);
+    assert!(!o.status.success() && said.contains("`rauca` has 2 videos and `original` 1"), "{said}");
+}

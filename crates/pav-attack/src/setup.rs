@@ -642,11 +642,7 @@ impl Setup {
     /// Drops the rendered views in which no white box of `wb` finds a car at `min_score` as they
     /// were rendered (`views.pbr_min_score`); the photos are kept whatever they score.
     #[cfg(feature = "optimize")]
-    pub fn keep_detected_pbr(
-        &mut self,
-        wb: &Ensemble,
-        min_score: f32,
-    ) -> Result<PbrKept, KeepError> {
+    pub fn keep_detected_pbr(&mut self, wb: &Ensemble, min_score: f32) -> Result<PbrKept, KeepError> {
         let total = self.pbr.len();
         let mut seen_by = vec![0usize; wb.members.len()];
         let mut kept = Vec::with_capacity(total);

@@ -10,6 +10,7 @@ pub mod compare;
 pub mod digital;
 #[cfg(feature = "eval")]
 pub mod merge;
+pub mod paired;
 pub mod physical;
 #[cfg(feature = "eval")]
 pub mod report;

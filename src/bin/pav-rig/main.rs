@@ -10,6 +10,7 @@ mod capture;
 mod compare;
 mod evaluate;
 mod model;
+mod paired;
 mod port;
 mod simulate;
 mod turntable;
@@ -48,6 +49,9 @@ enum Cmd {
     /// A real capture beside its simulation: A_physical of both and per-angle car scores, the
     /// angle offset between the two tables found from the scores.
     Compare(compare::Args),
+    /// Paints filmed on the same shots, frame by frame: per detector, the mean difference of the
+    /// best car score against a reference label, with its paired interval.
+    Paired(paired::Args),
 }
 
 fn main() -> Result<()> {
@@ -60,5 +64,6 @@ fn main() -> Result<()> {
         Cmd::Simulate(a) => simulate::run(a),
         Cmd::Capture(a) => capture::run(a),
         Cmd::Compare(a) => compare::run(a),
+        Cmd::Paired(a) => paired::run(a),
     }
 }
