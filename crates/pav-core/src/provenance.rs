@@ -155,8 +155,14 @@ pub fn tool_version(program: &str, args: &[&str]) -> Option<String> {
 }
 
 fn git_state() -> (String, bool) {
-    let dir = env!("CARGO_MANIFEST_DIR");
-    let git = |args: &[&str]| {
+    git_state_in(Path::new("."))
+}
+
+/// The commit and dirty state of the pav checkout a command runs in (`cwd`), else of the one
+/// this crate was built in. The build's own path alone is not enough: a build folder shared by
+/// several checkouts keeps this crate as first compiled in any of them, that one's path baked in.
+fn git_state_in(cwd: &Path) -> (String, bool) {
+    let git = |dir: &Path, args: &[&str]| {
         std::process::Command::new("git")
             .arg("-C")
             .arg(dir)
@@ -166,8 +172,12 @@ fn git_state() -> (String, bool) {
             .filter(|o| o.status.success())
             .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
     };
-    match git(&["rev-parse", "HEAD"]) {
-        Some(c) => (c, git(&["status", "--porcelain", "--untracked-files=no"]).is_some_and(|s| !s.is_empty())),
+    let here = git(cwd, &["rev-parse", "--show-toplevel"])
+        .map(PathBuf::from)
+        .filter(|top| top.join("crates/pav-core/Cargo.toml").is_file());
+    let dir = here.unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")));
+    match git(&dir, &["rev-parse", "HEAD"]) {
+        Some(c) => (c, git(&dir, &["status", "--porcelain", "--untracked-files=no"]).is_some_and(|s| !s.is_empty())),
         None => ("unknown".into(), false),
     }
 }
@@ -248,5 +258,45 @@ mod tests {
         assert_eq!(v["settings"]["seed"].as_str(), Some("7"));
         assert_eq!(v["result"]["angle_bound_deg"].as_str(), Some("0.12"));
         assert_eq!(v["git_commit"].as_str().unwrap().len(), 40, "built inside the repository");
+    }
+
+    /// A repository with one commit of `files`, and that commit.
+    fn repo(dir: &Path, files: &[&str]) -> String {
+        let git = |args: &[&str]| {
+            let o = std::process::Command::new("git")
+                .arg("-C")
+                .arg(dir)
+                .args(["-c", "user.name=t", "-c", "user.email=t@t"])
+                .args(args)
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+            String::from_utf8_lossy(&o.stdout).trim().to_string()
+        };
+        git(&["init", "-q"]);
+        for f in files {
+            std::fs::create_dir_all(dir.join(f).parent().unwrap()).unwrap();
+            std::fs::write(dir.join(f), "[package]\n").unwrap();
+        }
+        git(&["add", "."]);
+        git(&["commit", "-q", "-m", "one"]);
+        git(&["rev-parse", "HEAD"])
+    }
+
+    #[test]
+    fn the_commit_is_the_pav_checkout_the_command_runs_in() {
+        let own = git_state_in(Path::new(env!("CARGO_MANIFEST_DIR")));
+        // Another pav checkout (it has crates/pav-core): its commit, and its dirty state.
+        let tmp = tempfile::tempdir().unwrap();
+        let head = repo(tmp.path(), &["crates/pav-core/Cargo.toml"]);
+        assert_ne!(head, own.0);
+        assert_eq!(git_state_in(tmp.path()), (head.clone(), false));
+        assert_eq!(git_state_in(&tmp.path().join("crates")), (head.clone(), false), "from a subfolder");
+        std::fs::write(tmp.path().join("crates/pav-core/Cargo.toml"), "[workspace]\n").unwrap();
+        assert_eq!(git_state_in(tmp.path()), (head, true));
+        // A repository that is not pav: the checkout this crate was built in.
+        let other = tempfile::tempdir().unwrap();
+        repo(other.path(), &["README"]);
+        assert_eq!(git_state_in(other.path()).0, own.0);
     }
 }
