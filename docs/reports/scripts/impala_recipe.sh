@@ -16,7 +16,7 @@ mkdir -p "$out"
   --base data:pav-camou/half.png -o out/impala_paint.png
 "$pav" views render configs/views/impala-train.toml --texture out/impala_paint.png -o out/views_impala_train
 "$pav" views render configs/views/impala-test.toml --texture out/impala_paint.png -o out/views_impala_test
-[ -f "$out/seed3/texture.png" ] || "$pav" optimize --config configs/studies/impala-recipe.toml --seeds 0,1,2,3 -o "$out"
+[ -f "$out/seed3/texture.png" ] || "$pav" optimize --config configs/studies/impala-recipe.toml --seeds 0,1,2,3 --resume -o "$out"
 t=(); for s in 0 1 2 3; do t+=(-t "$out/seed$s/texture.png"); done
 "$pav" eval-digital --config configs/optimize/impala-half.toml "${t[@]}" --random-seeds 3 -o "$out/digital"
 "$pav" eval-digital --config configs/optimize/impala-half.toml -t "$out" --random-seeds 3 -o "$out/pooled"
