@@ -325,7 +325,7 @@ fn pbr_views<T>(
     region: &[f32],
     mut boxes: Option<&mut HashMap<String, BBox>>,
     plates: &mut HashMap<String, String>,
-    keep: impl Fn(View, StoredView) -> T,
+    keep: impl Fn(View, (PathBuf, Camera)) -> T,
 ) -> Result<Vec<T>, SetupError> {
     let mut out = Vec::new();
     let normalize = match cfg.mesh.camera {
@@ -366,8 +366,7 @@ fn pbr_views<T>(
                     b.insert(name.clone(), bb);
                 }
             }
-            let texels = v.texels_read();
-            out.push(keep(v, StoredView { name, image, camera, texels }));
+            out.push(keep(v, (image, camera)));
         }
     }
     Ok(out)
@@ -480,7 +479,14 @@ impl Setup {
         let mut test = views(&cfg.views.test)?;
         let mut plates = HashMap::new();
         let stream = cfg.views.stream;
-        let held = |v, s| if stream { PbrView::Stored(s) } else { PbrView::Built(v) };
+        // Only a stored view needs its texel list: a built one reads it off its lookup.
+        let held = |v: View, (image, camera)| {
+            if stream {
+                PbrView::Stored(StoredView { texels: v.texels_read(), name: v.name, image, camera })
+            } else {
+                PbrView::Built(v)
+            }
+        };
         let pbr = pbr_views(cfg, &cfg.views.pbr, &maker, &mesh, &region, None, &mut plates, held)?;
         let built = |v, _| v;
         test.extend(pbr_views(cfg, &cfg.views.pbr_test, &maker, &mesh, &region, Some(&mut boxes), &mut plates, built)?);
