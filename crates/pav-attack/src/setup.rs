@@ -270,7 +270,8 @@ impl ViewMaker {
         region: &[f32],
         ts: usize,
     ) -> Result<View, SetupError> {
-        let img = Rgb::load(image)?;
+        // A rig's landscape render holds the centre rows of the square the camera sees.
+        let img = Rgb::load(image)?.into_square(true);
         let photo = Frame {
             width: img.width,
             height: img.height,
@@ -361,7 +362,7 @@ fn pbr_views<T>(
                 plates.insert(name.clone(), stem.unwrap_or_default());
             }
             if let Some(b) = boxes.as_deref_mut() {
-                let mask = Rgb::load(&dir.join(&r.mask))?;
+                let mask = Rgb::load(&dir.join(&r.mask))?.into_square(false);
                 if let Some(bb) = silhouette_box(&mask, v.size) {
                     b.insert(name.clone(), bb);
                 }

@@ -127,10 +127,7 @@ pub fn write_videos(dir: &Path, period_s: f64) -> Result<Vec<TurntableVideo>, Vi
                         ));
                     }
                     // Rendered as the frame's rows alone: back into the square the optics see.
-                    let mut square = vec![0.0f32; side * side * 3];
-                    let y0 = (side - img.height) / 2;
-                    square[3 * side * y0..3 * side * (y0 + img.height)].copy_from_slice(&img.rgb);
-                    img.rgb = square;
+                    img = img.into_square(false);
                     apply_optics(rig, shot, mesh, cam, &mut img.rgb, side);
                     let mut f = cut(&img.rgb, side, shot.size);
                     apply_noise(rig, &mut f, noise_seed(r.azimuth_deg, r.elevation_deg));

@@ -90,6 +90,28 @@ impl Rgb {
     pub fn white_mask(&self) -> Vec<f32> {
         self.rgb.chunks(3).map(|c| if c.iter().all(|v| *v == 1.0) { 1.0 } else { 0.0 }).collect()
     }
+
+    /// The centre rows of a square of side `width` put back in place, as a rig's landscape
+    /// render keeps them; the rows above and below repeat the nearest edge row (`edge`) or are
+    /// black. An image that is already square comes back as it is.
+    pub fn into_square(self, edge: bool) -> Rgb {
+        let (side, h) = (self.width, self.height);
+        if h >= side || h == 0 {
+            return self;
+        }
+        let row = 3 * side;
+        let y0 = (side - h) / 2;
+        let mut rgb = vec![0.0f32; row * side];
+        rgb[row * y0..row * (y0 + h)].copy_from_slice(&self.rgb);
+        if edge {
+            let (first, last) = (self.rgb[..row].to_vec(), self.rgb[row * (h - 1)..].to_vec());
+            for y in (0..y0).chain(y0 + h..side) {
+                let src = if y < y0 { &first } else { &last };
+                rgb[row * y..row * (y + 1)].copy_from_slice(src);
+            }
+        }
+        Rgb { width: side, height: side, rgb }
+    }
 }
 
 /// Reads an RGBA image as straight (not premultiplied) RGB and alpha, both in [0, 1], as
@@ -255,6 +277,22 @@ mod tests {
         assert_eq!(s[(2 * 4 + 2) * 3], 0);
         let img: Vec<f32> = (0..4 * 2 * 3).map(|i| (i / 3) as f32).collect();
         assert_eq!(halve(&img, 4, 2), vec![2.5, 2.5, 2.5, 4.5, 4.5, 4.5]);
+    }
+
+    #[test]
+    fn landscape_rows_go_back_to_the_centre_of_their_square() {
+        // Four pixels wide, two rows (values 1 and 2): rows 1 and 2 of a 4 × 4 square.
+        let rgb: Vec<f32> = [1.0f32, 2.0].iter().flat_map(|v| std::iter::repeat(*v).take(12)).collect();
+        let img = Rgb { width: 4, height: 2, rgb };
+        let row = |im: &Rgb, y: usize| im.rgb[12 * y..12 * (y + 1)].to_vec();
+        let black = img.clone().into_square(false);
+        assert_eq!((black.width, black.height), (4, 4));
+        assert_eq!([row(&black, 0)[0], row(&black, 1)[0], row(&black, 2)[0], row(&black, 3)[0]], [0.0, 1.0, 2.0, 0.0]);
+        let edge = img.into_square(true);
+        assert_eq!([row(&edge, 0)[0], row(&edge, 1)[0], row(&edge, 2)[0], row(&edge, 3)[0]], [1.0, 1.0, 2.0, 2.0]);
+        // A square image is left alone.
+        let sq = Rgb { width: 1, height: 1, rgb: vec![0.5; 3] };
+        assert_eq!(sq.clone().into_square(true), sq);
     }
 
     #[test]
