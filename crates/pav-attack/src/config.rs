@@ -519,6 +519,8 @@ pub struct MissingViews {
     pub dir: PathBuf,
     /// Its views config, when `views.render` names it.
     pub config: Option<PathBuf>,
+    /// Whether that config is a rig config (rendered by `pav views turntable --rig`).
+    pub rig: bool,
 }
 
 impl std::fmt::Display for MissingViews {
@@ -528,7 +530,8 @@ impl std::fmt::Display for MissingViews {
         match &self.config {
             Some(c) => write!(
                 f,
-                "{key} {dir} has not been rendered yet: run `pav views render {} -o {dir}` first",
+                "{key} {dir} has not been rendered yet: run `pav views {} {} -o {dir}` first",
+                if self.rig { "turntable --rig" } else { "render" },
                 pav_core::provenance::tidy(c).display()
             ),
             None => write!(
@@ -557,7 +560,12 @@ impl OptimizeConfig {
         let test = self.views.pbr_test.iter().map(|d| ("views.pbr_test", d, None));
         pbr.chain(test)
             .filter(|(_, d, _)| !rendered(d))
-            .map(|(key, d, c)| MissingViews { key, dir: d.clone(), config: c.cloned() })
+            .map(|(key, d, c)| MissingViews {
+                key,
+                dir: d.clone(),
+                config: c.cloned(),
+                rig: c.is_some_and(|c| pav_scene::rig::is_rig_config(c)),
+            })
             .collect()
     }
 }
@@ -671,6 +679,10 @@ mod tests {
         let text = m[0].to_string();
         assert!(text.contains("pav views render") && text.contains("etron-plates-wide.toml"), "{text}");
         assert!(text.contains("not-rendered"), "{text}");
+        // Rig views are rendered by the turntable command.
+        c2.views.render = vec![repo().join("configs/rig/train-etron-near.toml")];
+        let text = c2.missing_views()[0].to_string();
+        assert!(text.contains("pav views turntable --rig") && text.contains("train-etron-near.toml"), "{text}");
         // A folder with a view set is not missing.
         std::fs::create_dir(dir.path().join("not-rendered")).unwrap();
         std::fs::write(dir.path().join("not-rendered/views.toml"), "").unwrap();

@@ -286,6 +286,22 @@ pub struct RigConfig {
 /// The keys of a rig config that hold paths (rewritten when another config extends it).
 const PATH_KEYS: &[&[&str]] = &[&["mesh", "obj"], &["mesh", "texture"], &["room", "environment"]];
 
+/// Whether the config at `path`, over the configs it extends, is a rig config (it places a
+/// camera: `[placement]`) rather than a views config.
+pub fn is_rig_config(path: &Path) -> bool {
+    pav_core::extends::read_merged(path, &[], &[]).is_ok_and(|(t, _)| t.contains_key("placement"))
+}
+
+/// The views config at `path`, or the turntable views of the rig config there: what
+/// `pav views render` and `pav views turntable --rig` draw.
+pub fn load_views_config(path: &Path) -> Result<ViewsConfig, ViewsError> {
+    if is_rig_config(path) {
+        RigConfig::load(path)?.views_config().map(|(cfg, _)| cfg)
+    } else {
+        ViewsConfig::load(path)
+    }
+}
+
 /// The rig's geometry in the normalized mesh's units, derived once the mesh is known.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Shot {

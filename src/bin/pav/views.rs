@@ -68,11 +68,12 @@ pub struct TurntableArgs {
     shard: ShardArgs,
 }
 
-/// Renders the views config at `config` into `out` (resuming), as `pav views render` does.
+/// Renders the views config (or the rig config's turntable views) at `config` into `out`
+/// (resuming), as `pav views render` does.
 #[cfg(feature = "optimize")]
 pub fn render_config(config: &std::path::Path, out: &std::path::Path) -> Result<()> {
     let whole = ShardArgs { shard: None, merge: false };
-    render(&ViewsConfig::load(config)?, config, out, &whole).map(|_| ())
+    render(&pav::scene::rig::load_views_config(config)?, config, out, &whole).map(|_| ())
 }
 
 /// Renders `cfg` into `out` with provenance, printing the summary: the whole set, one shard of
