@@ -815,3 +815,42 @@ fn plates_are_scored_with_their_photos_fold(mut cfg: pav::attack::config::Optimi
     let want = of("optimized").iter().zip(of("random")).map(|(a, b)| a - b).sum::<f64>() / 2.0;
     assert!(d.views == 2 && (d.mean - want).abs() < 1e-6, "{d:?} vs {want}");
 }
+
+/// A rig's turntable renders are training views like any other (`views.pbr`): each keeps only
+/// the centre rows of the square its camera sees, and set-up puts them back in place, so that
+/// the car Blender drew and the car pav's rasterizer lays the texture on coincide. Stretching
+/// the rows over the square instead would move the silhouette's top and bottom by tens of pixels.
+#[cfg(feature = "optimize")]
+#[test]
+fn a_rigs_landscape_renders_train_where_the_rasterizer_puts_the_car() {
+    use pav::attack::config::OptimizeConfig;
+    use pav::attack::setup::Setup;
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(common::repo().join("configs/rig/train-etron-near.toml")).unwrap();
+    let small = text.replace("width = 416", "width = 160").replace("frames = 36", "frames = 2");
+    assert_ne!(small, text);
+    let rig = tmp.path().join("rig.toml");
+    // Extended by path: the copy lives elsewhere, so its base is named absolutely.
+    let base = common::repo().join("configs/rig/phone-etron.toml");
+    std::fs::write(&rig, small.replace("\"phone-etron.toml\"", &format!("{:?}", base.display().to_string()))).unwrap();
+    let dir = tmp.path().join("rig");
+    run_ok(pav().args(["views", "turntable", "--rig"]).arg(&rig).arg("-o").arg(&dir));
+    let mut cfg = OptimizeConfig::load(&common::repo().join("configs/studies/print-base.toml")).unwrap();
+    cfg.views.train = cfg.views.train[..1].to_vec();
+    cfg.views.test.clear();
+    cfg.views.pbr_test = vec![dir.clone()];
+    let s = Setup::load(&cfg, None).unwrap();
+    assert_eq!(s.test.len(), 4, "two elevations, two angles");
+    for v in &s.test {
+        let b = s.boxes.get(&v.name).unwrap_or_else(|| panic!("no box for {}", v.name));
+        let r = v.car_box.unwrap_or_else(|| panic!("no car in {}", v.name));
+        let worst = (0..4).map(|i| (b[i] - r[i]).abs()).fold(0.0, f32::max);
+        eprintln!("{}: Blender's silhouette {b:?}, the rasterizer's {r:?}", v.name);
+        // A render pixel is 2.6 view pixels here.
+        assert!(worst < 6.0, "{}: Blender's silhouette {b:?} against the rasterizer's {r:?}", v.name);
+        // Above and below the rendered rows the view shows the backdrop, not black.
+        let top = &v.photo[..3 * v.size];
+        assert!(top.iter().all(|c| *c > 0.3), "{}: the rows outside the render are dark", v.name);
+    }
+}
