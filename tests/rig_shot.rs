@@ -9,6 +9,16 @@ use pav::scene::camera_effects::{apply_noise, circle_of_confusion_px, codec_kbps
 use pav::scene::rig::{CameraEffect, RigConfig};
 use pav::scene::turntable::CarScene;
 
+/// The `pav` binary under test.
+fn pav() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_pav"))
+}
+
+/// The `pav-rig` binary under test.
+fn pav_rig() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+}
+
 fn rig(name: &str) -> RigConfig {
     common::shared_data();
     RigConfig::load(&common::repo().join("configs/rig").join(name)).unwrap_or_else(|e| panic!("{name}: {e}"))
@@ -230,13 +240,8 @@ fn the_rasterizer_films_the_rigs_frames_at_the_views_angles() {
     let tmp = tempfile::tempdir().unwrap();
     let path = small_rig(tmp.path(), "webcam.toml", 256, 4);
     let out = tmp.path().join("tt");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav"))
-        .args(["views", "turntable", "--rasterizer", "--rig"])
-        .arg(&path)
-        .arg("-o")
-        .arg(&out)
-        .output()
-        .unwrap();
+    let o =
+        pav().args(["views", "turntable", "--rasterizer", "--rig"]).arg(&path).arg("-o").arg(&out).output().unwrap();
     let said = common::output_text(&o);
     assert!(o.status.success(), "{said}");
     let r = RigConfig::load(&path).unwrap();
@@ -281,7 +286,7 @@ fn a_capture_names_its_rig_and_its_simulated_camera_films_the_rigs_model() {
     let tmp = tempfile::tempdir().unwrap();
     let path = small_rig(tmp.path(), "webcam.toml", 256, 22);
     let video = tmp.path().join("cap.mp4");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+    let o = pav_rig()
         .args(["capture", "--port", "sim", "--time-scale", "8", "--camera", "sim", "--rig"])
         .arg(&path)
         .args(["--width", "256", "--height", "144", "--fps", "10", "-o"])
@@ -311,7 +316,7 @@ fn a_capture_names_its_rig_and_its_simulated_camera_films_the_rigs_model() {
     eprintln!("mean |Δ| per byte: at the sidecar angle ≤ {worst:.2}, 45° off ≥ {closest_off:.2}");
     assert!(at.len() >= 10 && worst < closest_off, "at {at:?}\noff {off:?}");
     // --texture without a model to paint is refused.
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+    let o = pav_rig()
         .args(["capture", "--port", "sim", "--camera", "gst-test", "--rig"])
         .arg(&path)
         .arg("--texture")
@@ -329,19 +334,14 @@ fn compare_finds_how_far_a_capture_s_zero_is_from_the_simulation_s() {
     let tmp = tempfile::tempdir().unwrap();
     let path = small_rig(tmp.path(), "phone-etron.toml", 320, 36);
     let sim = tmp.path().join("sim");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav"))
-        .args(["views", "turntable", "--rasterizer", "--rig"])
-        .arg(&path)
-        .arg("-o")
-        .arg(&sim)
-        .output()
-        .unwrap();
+    let o =
+        pav().args(["views", "turntable", "--rasterizer", "--rig"]).arg(&path).arg("-o").arg(&sim).output().unwrap();
     assert!(o.status.success(), "{}", common::output_text(&o));
     // The "real" capture: the live simulated camera at the table's own angles (other frames
     // than the simulation's), from the rig's first camera position, its sidecar then written as
     // a table that homed 40° before the simulation's zero.
     let real = tmp.path().join("real.mp4");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+    let o = pav_rig()
         .args(["capture", "--port", "sim", "--time-scale", "4", "--camera", "sim", "--rig"])
         .arg(&path)
         .args(["--width", "320", "--height", "180", "--fps", "10", "-o"])
@@ -365,7 +365,7 @@ fn compare_finds_how_far_a_capture_s_zero_is_from_the_simulation_s() {
         .find(|p| p.to_string_lossy().ends_with("_e0.mp4"))
         .unwrap();
     let eval = tmp.path().join("eval");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+    let o = pav_rig()
         .arg("evaluate")
         .args([&real, &level])
         .args(["--label", "real", "--label", "sim", "--no-plots", "-d"])
@@ -376,7 +376,7 @@ fn compare_finds_how_far_a_capture_s_zero_is_from_the_simulation_s() {
         .unwrap();
     assert!(o.status.success(), "{}", common::output_text(&o));
     let out = tmp.path().join("cmp");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+    let o = pav_rig()
         .arg("compare")
         .arg(&eval)
         .args(["--real", "real", "--sim", "sim", "--sectors", "36", "-o"])
@@ -397,13 +397,8 @@ fn compare_finds_how_far_a_capture_s_zero_is_from_the_simulation_s() {
     assert!(err.abs() <= 10.0, "found {offset}°, put in 40°");
     assert!(std::fs::read_to_string(out.join("compare.csv")).unwrap().lines().count() == 1 + 4 * 36);
     // A label that was not scored is named with the ones that were.
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
-        .arg("compare")
-        .arg(&eval)
-        .args(["--real", "nope", "--sim", "sim", "-o"])
-        .arg(&out)
-        .output()
-        .unwrap();
+    let o =
+        pav_rig().arg("compare").arg(&eval).args(["--real", "nope", "--sim", "sim", "-o"]).arg(&out).output().unwrap();
     assert!(
         !o.status.success() && common::output_text(&o).contains("labels here: real, sim"),
         "{}",
@@ -421,7 +416,7 @@ fn paired_compares_two_paints_frame_by_frame() {
     let path = small_rig(tmp.path(), "phone-etron.toml", 320, 12);
     let film = |name: &str, texture: Option<&std::path::Path>| {
         let out = tmp.path().join(name);
-        let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_pav"));
+        let mut c = pav();
         c.args(["views", "turntable", "--rasterizer", "--rig"]).arg(&path).arg("-o").arg(&out);
         if let Some(t) = texture {
             c.arg("--texture").arg(t);
@@ -439,7 +434,7 @@ fn paired_compares_two_paints_frame_by_frame() {
     let (original, rauca) = (film("original", None), film("rauca", Some(&shared.join("rauca-e2e/RAUCA_E2E.png"))));
     assert_eq!(original.len(), rauca.len());
     let eval = tmp.path().join("eval");
-    let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"));
+    let mut c = pav_rig();
     c.arg("evaluate").args(&original).args(&rauca);
     for l in original.iter().map(|_| "original").chain(rauca.iter().map(|_| "rauca")) {
         c.args(["--label", l]);
@@ -453,13 +448,7 @@ fn paired_compares_two_paints_frame_by_frame() {
         .unwrap();
     assert!(o.status.success(), "{}", common::output_text(&o));
     let out = tmp.path().join("paired");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
-        .arg("paired")
-        .arg(&eval)
-        .args(["--against", "original", "-o"])
-        .arg(&out)
-        .output()
-        .unwrap();
+    let o = pav_rig().arg("paired").arg(&eval).args(["--against", "original", "-o"]).arg(&out).output().unwrap();
     let said = common::output_text(&o);
     assert!(o.status.success(), "{said}");
     eprintln!("{said}");
@@ -489,7 +478,7 @@ fn paired_compares_two_paints_frame_by_frame() {
     assert!(row[9].parse::<f64>().unwrap() <= diff && diff <= row[10].parse::<f64>().unwrap(), "{csv}");
     // Two shots against one: refused, named.
     let one = tmp.path().join("eval1");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
+    let o = pav_rig()
         .arg("evaluate")
         .args([&original[0], &rauca[0], &rauca[1]])
         .args(["--label", "original", "--label", "rauca", "--label", "rauca", "--no-plots", "-d"])
@@ -499,13 +488,7 @@ fn paired_compares_two_paints_frame_by_frame() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", common::output_text(&o));
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
-        .arg("paired")
-        .arg(&one)
-        .args(["--against", "original", "-o"])
-        .arg(&out)
-        .output()
-        .unwrap();
+    let o = pav_rig().arg("paired").arg(&one).args(["--against", "original", "-o"]).arg(&out).output().unwrap();
     let said = common::output_text(&o);
     assert!(!o.status.success() && said.contains("`rauca` has 2 videos and `original` 1"), "{said}");
 }
