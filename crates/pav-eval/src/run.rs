@@ -309,7 +309,8 @@ pub fn evaluate(
 
     // Where each video's rows, records, failures and angle source begin.
     let mut starts: Vec<[usize; 4]> = Vec::new();
-    'videos: for job in jobs {
+    let names = file_names(jobs);
+    'videos: for (job, file) in jobs.iter().zip(&names) {
         starts.push([out.rows.len(), out.records.len(), out.failures.len(), angle_sources.len()]);
         let angles = match job.sidecar.clone().or_else(|| Some(sidecar::sidecar_path(&job.path)).filter(|p| p.exists()))
         {
@@ -420,7 +421,7 @@ pub fn evaluate(
                 let best = props.best(det.target_classes());
                 let rec = FrameRecord {
                     video: job.label.clone(),
-                    file: file_name(&job.path),
+                    file: file.clone(),
                     frame: idx,
                     time_s,
                     angle_deg,
@@ -590,6 +591,23 @@ fn file_name(p: &Path) -> String {
     p.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| p.display().to_string())
 }
 
+/// The name each job's frames carry in `frames.csv`: the video's file name, or the path as given
+/// where another video of the same label has that file name, so that the frames of two videos
+/// (two seeds' films of one shot) stay apart when they are paired or grouped by video.
+fn file_names(jobs: &[VideoJob]) -> Vec<String> {
+    jobs.iter()
+        .map(|j| {
+            let name = file_name(&j.path);
+            let clash = jobs.iter().any(|o| o.label == j.label && o.path != j.path && file_name(&o.path) == name);
+            if clash {
+                j.path.display().to_string()
+            } else {
+                name
+            }
+        })
+        .collect()
+}
+
 /// Makes a label usable as part of a file name.
 fn file_safe(s: &str) -> String {
     s.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect()
@@ -603,6 +621,18 @@ pub fn default_label(p: &Path) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn two_videos_of_one_label_with_one_file_name_keep_their_paths() {
+        let job = |path: &str, label: &str| VideoJob { path: path.into(), label: label.into(), sidecar: None };
+        let jobs = [
+            job("film/s0/videos/e0.mp4", "pav"),
+            job("film/s1/videos/e0.mp4", "pav"),
+            job("film/s0/videos/e20.mp4", "pav"),
+            job("film/rauca/videos/e0.mp4", "rauca"),
+        ];
+        assert_eq!(file_names(&jobs), ["film/s0/videos/e0.mp4", "film/s1/videos/e0.mp4", "e20.mp4", "e0.mp4"]);
+    }
 
     #[test]
     fn detectors_share_cores_side_by_side_unless_told_otherwise() {
