@@ -282,7 +282,7 @@ mod tests {
     #[test]
     fn landscape_rows_go_back_to_the_centre_of_their_square() {
         // Four pixels wide, two rows (values 1 and 2): rows 1 and 2 of a 4 × 4 square.
-        let rgb: Vec<f32> = [1.0f32, 2.0].iter().flat_map(|v| std::iter::repeat(*v).take(12)).collect();
+        let rgb: Vec<f32> = [1.0f32, 2.0].iter().flat_map(|v| std::iter::repeat_n(*v, 12)).collect();
         let img = Rgb { width: 4, height: 2, rgb };
         let row = |im: &Rgb, y: usize| im.rgb[12 * y..12 * (y + 1)].to_vec();
         let black = img.clone().into_square(false);
