@@ -827,13 +827,7 @@ fn a_rigs_landscape_renders_train_where_the_rasterizer_puts_the_car() {
     use pav::attack::setup::Setup;
     common::real_data();
     let tmp = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(common::repo().join("configs/rig/train-etron-near.toml")).unwrap();
-    let small = text.replace("width = 416", "width = 160").replace("frames = 36", "frames = 2");
-    assert_ne!(small, text);
-    let rig = tmp.path().join("rig.toml");
-    // Extended by path: the copy lives elsewhere, so its base is named absolutely.
-    let base = common::repo().join("configs/rig/phone-etron.toml");
-    std::fs::write(&rig, small.replace("\"phone-etron.toml\"", &format!("{:?}", base.display().to_string()))).unwrap();
+    let rig = common::small_rig(tmp.path(), "train-etron-near.toml", 160, 2);
     let dir = tmp.path().join("rig");
     run_ok(pav().args(["views", "turntable", "--rig"]).arg(&rig).arg("-o").arg(&dir));
     let mut cfg = OptimizeConfig::load(&common::repo().join("configs/studies/print-base.toml")).unwrap();

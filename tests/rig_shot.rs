@@ -225,20 +225,11 @@ fn each_camera_effect_is_off_unless_listed() {
     }
 }
 
-/// A shipped rig made small: `width` pixels wide, `frames` a turn (a config that extends it).
-fn small_rig(dir: &std::path::Path, name: &str, width: usize, frames: usize) -> std::path::PathBuf {
-    let shipped = common::repo().join("configs/rig").join(name);
-    let path = dir.join(name);
-    let text = format!("extends = {:?}\n[render]\nwidth = {width}\nframes = {frames}\n", shipped.display().to_string());
-    std::fs::write(&path, text).unwrap();
-    path
-}
-
 #[test]
 fn the_rasterizer_films_the_rigs_frames_at_the_views_angles() {
     common::shared_data();
     let tmp = tempfile::tempdir().unwrap();
-    let path = small_rig(tmp.path(), "webcam.toml", 256, 4);
+    let path = common::small_rig(tmp.path(), "webcam.toml", 256, 4);
     let out = tmp.path().join("tt");
     let o =
         pav().args(["views", "turntable", "--rasterizer", "--rig"]).arg(&path).arg("-o").arg(&out).output().unwrap();
@@ -284,7 +275,7 @@ fn the_rasterizer_films_the_rigs_frames_at_the_views_angles() {
 fn a_capture_names_its_rig_and_its_simulated_camera_films_the_rigs_model() {
     common::shared_data();
     let tmp = tempfile::tempdir().unwrap();
-    let path = small_rig(tmp.path(), "webcam.toml", 256, 22);
+    let path = common::small_rig(tmp.path(), "webcam.toml", 256, 22);
     let video = tmp.path().join("cap.mp4");
     let o = pav_rig()
         .args(["capture", "--port", "sim", "--time-scale", "8", "--camera", "sim", "--rig"])
@@ -332,7 +323,7 @@ fn a_capture_names_its_rig_and_its_simulated_camera_films_the_rigs_model() {
 fn compare_finds_how_far_a_capture_s_zero_is_from_the_simulation_s() {
     common::shared_data();
     let tmp = tempfile::tempdir().unwrap();
-    let path = small_rig(tmp.path(), "phone-etron.toml", 320, 36);
+    let path = common::small_rig(tmp.path(), "phone-etron.toml", 320, 36);
     let sim = tmp.path().join("sim");
     let o =
         pav().args(["views", "turntable", "--rasterizer", "--rig"]).arg(&path).arg("-o").arg(&sim).output().unwrap();
@@ -413,7 +404,7 @@ fn compare_finds_how_far_a_capture_s_zero_is_from_the_simulation_s() {
 fn paired_compares_two_paints_frame_by_frame() {
     let shared = common::shared_data();
     let tmp = tempfile::tempdir().unwrap();
-    let path = small_rig(tmp.path(), "phone-etron.toml", 320, 12);
+    let path = common::small_rig(tmp.path(), "phone-etron.toml", 320, 12);
     let film = |name: &str, texture: Option<&std::path::Path>| {
         let out = tmp.path().join(name);
         let mut c = pav();

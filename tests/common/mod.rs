@@ -188,3 +188,13 @@ pub fn two_folds(
     };
     (opts, pav::detect::load::load_detectors(&[detector_config("yolov3-tiny")], &[], &[], 1).unwrap())
 }
+
+/// A shipped rig made small: `width` pixels wide, `frames` a turn (a config in `dir` that
+/// extends `configs/rig/NAME`).
+pub fn small_rig(dir: &Path, name: &str, width: usize, frames: usize) -> PathBuf {
+    let shipped = repo().join("configs/rig").join(name);
+    let path = dir.join(name);
+    let text = format!("extends = {:?}\n[render]\nwidth = {width}\nframes = {frames}\n", shipped.display().to_string());
+    std::fs::write(&path, text).unwrap();
+    path
+}
