@@ -2,7 +2,8 @@
 # The "views of the model on the rig" lever (docs/reports/transfer.md): the recipe of the rig
 # comparison (configs/studies/print-base.toml, trained on its six training photos and their
 # turns) against the same recipe with Blender views of the 1:20 model on a turntable added as
-# training views (configs/rig/train-etron-near.toml and -far.toml: 144 views at 0.4 and 0.65 m,
+# training views (configs/studies/rig-views.toml, rendered from configs/rig/train-etron-near.toml
+# and -far.toml into out/views_rig_near and out/views_rig_far: 144 views at 0.4 and 0.65 m,
 # 10° and 30°, the studio and courtyard maps), at the seeds SEEDS (default 0). Every texture is
 # painted, filmed on the test shot (configs/rig/phone-etron.toml: 0.5 m, 0° and 20°, the
 # interior map, 44 frames a turn), beside the original paint and RAUCA-E2E's texture, scored by
@@ -22,8 +23,7 @@ mkdir -p "$out/configs" "$out/paint"
 printf 'extends = "%s/configs/rig/phone-etron.toml"\n\n[render]\nframes = 44\n' "$here" > "$out/rig.toml"
 for s in $seeds; do
   printf 'extends = "%s/configs/studies/print-base.toml"\n\n[optimizer]\nseed = %s\n' "$here" "$s" > "$out/configs/plain-s$s.toml"
-  printf 'extends = "%s/configs/studies/print-base.toml"\n\n[views]\npbr = ["%s", "%s"]\n\n[optimizer]\nseed = %s\n' \
-    "$here" "$(realpath $near)" "$(realpath $far)" "$s" > "$out/configs/rig-s$s.toml"
+  printf 'extends = "%s/configs/studies/rig-views.toml"\n\n[optimizer]\nseed = %s\n' "$here" "$s" > "$out/configs/rig-s$s.toml"
   for c in plain rig; do
     [ -f "$out/$c-s$s/texture.png" ] || "$pav" optimize --config "$out/configs/$c-s$s.toml" -o "$out/$c-s$s"
     [ -f "$out/paint/$c-s$s.png" ] || "$pav" paint --config configs/studies/print-base.toml --texture "$out/$c-s$s/texture.png" -o "$out/paint/$c-s$s.png"
