@@ -2,16 +2,17 @@
 # Times `pav-rig evaluate` against the plain Python loop a user would write instead
 # (scripts/python_loop.py: OpenCV + onnxruntime), as whole processes on the same video, in
 # alternating runs in one sitting. Writes bench/vs_python.csv (or $CSV; tool, detector, run, wall_s,
-# frames) and prints pav's wall time over the loop's per detector.
+# frames) and prints pav's wall time over the loop's per detector. With BEFORE=1 it also times
+# `evaluate --lanes 1` (one frame at a time, ONNX Runtime's threads), tool `pav-lanes1`.
 #   scripts/bench_vs_python.sh [VIDEO] [RUNS]
-# VIDEO defaults to the CARLA fixture looped to 810 frames. The loop runs in .venv-bench
+# VIDEO defaults to the turntable fixture looped to 836 frames. The loop runs in .venv-bench
 # (onnxruntime and opencv-python-headless from PyPI, made on first use); without it the
 # benchmark says so and stops.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 RUNS=${2:-3}
-VIDEO=${1:-out/bench/loop810.mp4}
-scripts/loop_video.sh "$VIDEO" 18
+VIDEO=${1:-out/bench/turntable836.mp4}
+[ -n "${1:-}" ] || scripts/loop_video.sh "$VIDEO" 19 fixtures/turntable.mp4
 PY=.venv-bench/bin/python
 if [ ! -x "$PY" ]; then
   python3 -m venv .venv-bench && $PY -m pip install -q onnxruntime==1.31.1 opencv-python-headless numpy \
@@ -34,6 +35,12 @@ for run in $(seq 1 "$RUNS"); do
     t1=$(now)
     frames=$(($(wc -l < "out/bench/vs_python_$name/frames.csv") - 1))
     echo "pav,$name,$run,$(secs "$t0" "$t1"),$frames" >> "$CSV"
+    if [ "${BEFORE:-0}" = 1 ]; then
+      t0=$(now)
+      target/release/pav-rig evaluate "$VIDEO" -d "configs/detectors/$name.toml" --lanes 1 -o "out/bench/vs_python_$name" 2> /dev/null > /dev/null
+      t1=$(now)
+      echo "pav-lanes1,$name,$run,$(secs "$t0" "$t1"),$frames" >> "$CSV"
+    fi
   done
 done
 python3 - "$CSV" <<'PY'
@@ -42,6 +49,8 @@ t = collections.defaultdict(list)
 for r in csv.DictReader(open(sys.argv[1])):
     t[(r["detector"], r["tool"])].append(float(r["wall_s"]))
 for d in sorted({k[0] for k in t}):
-    p, q = min(t[(d, "pav")]), min(t[(d, "python")])
-    print(f"{d}: pav {p:.2f} s, python loop {q:.2f} s (fastest of {len(t[(d, 'pav')])}): pav / python = {p / q:.2f}")
+    q = min(t[(d, "python")])
+    for tool in sorted({k[1] for k in t if k[0] == d and k[1] != "python"}):
+        p = min(t[(d, tool)])
+        print(f"{d}: {tool} {p:.2f} s, python loop {q:.2f} s (fastest of {len(t[(d, tool)])}): {tool} / python = {p / q:.2f}")
 PY

@@ -1,11 +1,14 @@
 //! `evaluate` on the recorded CARLA fixture reproduces the per-frame truth exactly for two real
 //! detectors, with sidecar angles, stride, several videos, and partial results on bad input; the
-//! reports are the same whether detectors run one after another or side by side.
+//! reports are the same whether detectors run one after another or side by side, and whether
+//! frames are scored one at a time or several at once, a detector failing mid-video included.
 
 mod common;
 
+use pav::detect::config::InputConfig;
 use pav::detect::onnx::OnnxDetector;
-use pav::detect::{Detector, DetectorConfig};
+use pav::detect::preprocess::{prepare, InputMap};
+use pav::detect::{DetectError, Detector, DetectorConfig, Proposals};
 use pav::eval::physical::Accuracy;
 use pav::eval::run::{evaluate, EvalOptions, EvalOutcome, Frames, VideoJob};
 use std::collections::HashMap;
@@ -58,6 +61,7 @@ fn opts(out: &Path, frames: Frames) -> EvalOptions {
         out_dir: out.to_path_buf(),
         plots: true,
         parallel: 1,
+        lanes: 1,
     }
 }
 
@@ -226,21 +230,88 @@ fn even_sampling_picks_the_middle_of_equal_stretches_and_shared_labels_pool() {
 }
 
 #[test]
-fn detectors_side_by_side_write_the_same_reports() {
+fn detectors_side_by_side_and_frames_at_once_write_the_same_reports() {
     common::real_data();
     let tmp = tempfile::tempdir().unwrap();
     let jobs = [VideoJob { path: fixture(), label: "orbit".into(), sidecar: None }];
     let names = ["yolox_nano", "yolov8n_int8", "yolov3-tiny"];
     let mut reports = Vec::new();
-    for parallel in [1, 2, 3] {
-        let out = tmp.path().join(format!("p{parallel}"));
+    for (parallel, lanes) in [(1, 1), (2, 1), (3, 1), (1, 2), (2, 3), (1, 4)] {
+        let out = tmp.path().join(format!("p{parallel}l{lanes}"));
         let mut d = detectors(&names);
-        let o = EvalOptions { parallel, ..opts(&out, Frames::Stride(3)) };
+        let o = EvalOptions { parallel, lanes, ..opts(&out, Frames::Stride(3)) };
         let outcome = evaluate(&jobs, &mut d, &o, &pav::progress::Silent, &AtomicBool::new(false)).unwrap();
         assert!(outcome.failures.is_empty(), "{:?}", outcome.failures);
         assert_eq!(outcome.records.len(), 15 * names.len());
         let read = |f: &str| std::fs::read(out.join(f)).unwrap();
         reports.push((read("frames.csv"), read("summary.csv"), read("angles.csv")));
     }
-    assert!(reports.windows(2).all(|w| w[0] == w[1]), "frames, summary or angles differ between parallel settings");
+    assert!(reports.windows(2).all(|w| w[0] == w[1]), "frames, summary or angles differ between settings");
+}
+
+/// A real detector that fails on one frame, known by its prepared input, whichever copy or
+/// thread scores it.
+struct FailsOn {
+    inner: Box<dyn Detector>,
+    poison: Vec<f32>,
+}
+
+impl Detector for FailsOn {
+    fn name(&self) -> &str {
+        self.inner.name()
+    }
+    fn input(&self) -> &InputConfig {
+        self.inner.input()
+    }
+    fn propose_prepared(&mut self, input: Vec<f32>, map: InputMap) -> Result<Proposals, DetectError> {
+        if input == self.poison {
+            return Err(DetectError::Model { detector: self.name().into(), path: "-".into(), msg: "poisoned".into() });
+        }
+        self.inner.propose_prepared(input, map)
+    }
+    fn target_classes(&self) -> &[usize] {
+        self.inner.target_classes()
+    }
+    fn target_label(&self) -> String {
+        self.inner.target_label()
+    }
+    fn replica(&self) -> Result<Box<dyn Detector>, DetectError> {
+        Ok(Box::new(FailsOn { inner: self.inner.replica()?, poison: self.poison.clone() }))
+    }
+}
+
+#[test]
+fn a_detector_failing_mid_batch_stops_where_it_would_one_frame_at_a_time() {
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let jobs = [VideoJob { path: fixture(), label: "orbit".into(), sidecar: None }];
+    let mut reader = pav::video::VideoReader::open(&fixture()).unwrap();
+    let frame7 = (0..8).map(|_| reader.read().unwrap().unwrap().1).last().unwrap();
+    let failing = |alone: bool| {
+        let mut d = detectors(if alone { &["yolox_nano"][..] } else { &["yolox_nano", "yolov3-tiny"] });
+        let poison = prepare(&frame7, d[0].input()).unwrap().0;
+        let inner = d.remove(0);
+        d.insert(0, Box::new(FailsOn { inner, poison }));
+        d
+    };
+    for alone in [false, true] {
+        let mut reports = Vec::new();
+        // Frame 7 first, in the middle and last of a batch.
+        for lanes in [1, 2, 3, 4] {
+            let out = tmp.path().join(format!("a{alone}l{lanes}"));
+            let mut d = failing(alone);
+            let o = EvalOptions { lanes, ..opts(&out, Frames::Stride(1)) };
+            let outcome = evaluate(&jobs, &mut d, &o, &pav::progress::Silent, &AtomicBool::new(false)).unwrap();
+            let yolox: Vec<_> = outcome.records.iter().filter(|r| r.detector == "yolox_nano").collect();
+            assert_eq!(yolox.last().unwrap().frame, 6, "lanes {lanes}: scored past the failure");
+            assert_eq!(yolox.len(), 7);
+            assert!(outcome.failures.iter().any(|f| f.contains("frame 7") && f.contains("poisoned")));
+            if !alone {
+                assert_eq!(outcome.records.len(), 7 + 45, "lanes {lanes}: the other detector scores every frame");
+            }
+            let read = |f: &str| std::fs::read(out.join(f)).unwrap();
+            reports.push((read("frames.csv"), read("summary.csv"), outcome.failures));
+        }
+        assert!(reports.windows(2).all(|w| w[0] == w[1]), "alone {alone}: reports differ between lane counts");
+    }
 }

@@ -73,6 +73,9 @@ pub trait Detector: Send {
     fn target_classes(&self) -> &[usize];
     /// Those classes' names joined by `+`, for reports.
     fn target_label(&self) -> String;
+    /// A second, independent copy of this detector (its own runtime session), so that two
+    /// frames can be scored at once; evaluate makes one per extra frame in flight.
+    fn replica(&self) -> Result<Box<dyn Detector>, DetectError>;
 }
 
 /// Errors from building or running a detector.

@@ -30,6 +30,8 @@ pub struct OnnxDetector {
     extra: Vec<ExtraInput>,
     /// The config's output layout as a description, built once rather than per frame.
     layout: Description,
+    /// Intra-op threads asked for at load, so a replica gets the same.
+    threads: usize,
 }
 
 impl OnnxDetector {
@@ -77,7 +79,7 @@ impl OnnxDetector {
             return Err(model_err(format!("has inputs the config does not feed: {unfed:?}")));
         }
         let layout = cfg.output.describe(cfg.class_names.len());
-        let mut det = OnnxDetector { cfg, session, input_name, extra, layout };
+        let mut det = OnnxDetector { cfg, session, input_name, extra, layout, threads };
         det.check_layout()?;
         Ok(det)
     }
@@ -216,5 +218,9 @@ impl Detector for OnnxDetector {
     fn propose_prepared(&mut self, input: Vec<f32>, map: InputMap) -> Result<Proposals, DetectError> {
         let raw = self.infer(input, &map)?;
         self.decode(&raw, &map)
+    }
+
+    fn replica(&self) -> Result<Box<dyn Detector>, DetectError> {
+        Ok(Box::new(OnnxDetector::new(self.cfg.clone(), self.threads)?))
     }
 }

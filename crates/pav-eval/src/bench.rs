@@ -6,7 +6,7 @@
 
 use super::physical::Accuracy;
 use super::report::ReportError;
-use super::run::{evaluate, EvalOptions, VideoJob};
+use super::run::{evaluate, side_by_side, EvalOptions, Sharing, VideoJob};
 use pav_core::image::Frame;
 use pav_core::plot::{labelled_lines, LabelledLine, PlotError};
 use pav_core::progress::{Progress, Silent};
@@ -31,8 +31,10 @@ pub struct BenchOptions {
     pub strides: Vec<usize>,
     /// Second input size for models whose spatial input size is free.
     pub alt_size: Option<usize>,
-    /// ONNX Runtime intra-op threads (0 = default).
+    /// ONNX Runtime intra-op threads (0 = as evaluate chooses).
     pub threads: usize,
+    /// Frames scored at once (0 = as evaluate chooses).
+    pub lanes: usize,
     /// Timed repetitions; the fastest is kept.
     pub repeats: usize,
     /// Score threshold.
@@ -48,15 +50,18 @@ pub struct Throughput {
     pub detector: String,
     /// Input size `WxH`.
     pub input: String,
-    /// Intra-op threads requested (0 = runtime default).
+    /// Intra-op threads per model copy (0 = runtime default).
     pub threads: usize,
+    /// Frames scored at once, each by its own copy of the model; bare inference and the
+    /// detector alone are timed the same way, so the ratio compares like with like.
+    pub lanes: usize,
     /// Frames in the video.
     pub frames: usize,
     /// Video decode frames/s.
     pub decode_fps: f64,
     /// Preprocessing (resize, normalize) ms per frame.
     pub preprocess_ms: f64,
-    /// Bare `Session::run` ms per frame on prepared inputs.
+    /// Bare `Session::run` ms per frame on prepared inputs (wall time over all lanes).
     pub bare_infer_ms: f64,
     /// Bare inference frames/s.
     pub bare_infer_fps: f64,
@@ -138,6 +143,12 @@ fn best_of<T>(repeats: usize, mut f: impl FnMut() -> Result<T>) -> Result<(f64, 
     Ok(best.expect("at least one repeat"))
 }
 
+/// How one detector shares the cores in the benchmark: as `evaluate` would share them.
+fn sharing(opts: &BenchOptions) -> Sharing {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    side_by_side(1, cores, 0, opts.lanes, opts.threads)
+}
+
 fn decode_all(video: &Path) -> Result<Vec<Frame>> {
     let mut r = VideoReader::open(video)?;
     let mut frames = Vec::new();
@@ -150,7 +161,36 @@ fn decode_all(video: &Path) -> Result<Vec<Frame>> {
     Ok(frames)
 }
 
+/// Runs `work` on each lane's copy of a model with every `lanes`-th item (lane k takes items
+/// k, k + lanes, …), the lanes side by side.
+fn across_lanes<T: Send>(
+    dets: &mut [OnnxDetector],
+    items: Vec<T>,
+    work: impl Fn(&mut OnnxDetector, T) -> Result<()> + Sync,
+) -> Result<()> {
+    let lanes = dets.len().max(1);
+    let mut split: Vec<Vec<T>> = (0..lanes).map(|_| Vec::new()).collect();
+    for (i, x) in items.into_iter().enumerate() {
+        split[i % lanes].push(x);
+    }
+    if lanes == 1 {
+        return split.pop().unwrap_or_default().into_iter().try_for_each(|x| work(&mut dets[0], x));
+    }
+    std::thread::scope(|s| {
+        let handles: Vec<_> = dets
+            .iter_mut()
+            .zip(split)
+            .map(|(d, xs)| {
+                let work = &work;
+                s.spawn(move || xs.into_iter().try_for_each(|x| work(d, x)))
+            })
+            .collect();
+        handles.into_iter().try_for_each(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+    })
+}
+
 fn run_evaluate(opts: &BenchOptions, cfg: &DetectorConfig, stride: usize) -> Result<(f64, Accuracy, usize)> {
+    let sharing = sharing(opts);
     let tmp = std::env::temp_dir().join(format!("pav-bench-{}", std::process::id()));
     let eval_opts = EvalOptions {
         threshold: opts.threshold,
@@ -161,9 +201,10 @@ fn run_evaluate(opts: &BenchOptions, cfg: &DetectorConfig, stride: usize) -> Res
         out_dir: tmp.clone(),
         plots: false,
         parallel: 1,
+        lanes: sharing.lanes,
     };
     let job = VideoJob { path: opts.video.clone(), label: "bench".into(), sidecar: None };
-    let mut dets: Vec<Box<dyn Detector>> = vec![Box::new(OnnxDetector::new(cfg.clone(), opts.threads)?)];
+    let mut dets: Vec<Box<dyn Detector>> = vec![Box::new(OnnxDetector::new(cfg.clone(), sharing.threads)?)];
     let (secs, out) = best_of(opts.repeats, || {
         Ok(evaluate(std::slice::from_ref(&job), &mut dets, &eval_opts, &Silent, &AtomicBool::new(false))?)
     })?;
@@ -183,12 +224,17 @@ pub fn bench_evaluate(opts: &BenchOptions, progress: &dyn Progress) -> Result<(V
     progress.note(&format!("decode: {n} frames in {decode_s:.3} s ({:.0} fps)", n as f64 / decode_s));
     let mut thr = Vec::new();
     let mut trade = Vec::new();
+    let sharing = sharing(opts);
     for path in &opts.detectors {
         let cfg = DetectorConfig::load(path)?;
-        let mut det = OnnxDetector::new(cfg.clone(), opts.threads)?;
+        let mut dets = (0..sharing.lanes)
+            .map(|_| OnnxDetector::new(cfg.clone(), sharing.threads))
+            .collect::<std::result::Result<Vec<_>, _>>()?;
         let input = format!("{}x{}", cfg.input.width, cfg.input.height);
-        for f in frames.iter().take(2) {
-            det.propose(f)?; // warm-up: first runs allocate and pick kernels
+        for det in &mut dets {
+            for f in frames.iter().take(2) {
+                det.propose(f)?; // warm-up: first runs allocate and pick kernels
+            }
         }
         let (pre_s, inputs) = best_of(opts.repeats, || {
             frames
@@ -201,22 +247,24 @@ pub fn bench_evaluate(opts: &BenchOptions, progress: &dyn Progress) -> Result<(V
         for _ in 0..opts.repeats.max(1) {
             let batch = inputs.clone();
             let t = Instant::now();
-            for (x, map) in batch {
-                det.infer(x, &map)?;
-            }
+            across_lanes(&mut dets, batch, |d, (x, map)| {
+                d.infer(x, &map)?;
+                Ok(())
+            })?;
             bare_s = bare_s.min(t.elapsed().as_secs_f64());
         }
         let (det_s, _) = best_of(opts.repeats, || {
-            for f in &frames {
-                det.propose(f)?;
-            }
-            Ok(())
+            across_lanes(&mut dets, frames.iter().collect(), |d, f| {
+                d.propose(f)?;
+                Ok(())
+            })
         })?;
         let (eval_s, _, decoded) = run_evaluate(opts, &cfg, 1)?;
         let row = Throughput {
             detector: cfg.name.clone(),
             input: input.clone(),
-            threads: opts.threads,
+            threads: sharing.threads,
+            lanes: sharing.lanes,
             frames: n,
             decode_fps: n as f64 / decode_s,
             preprocess_ms: 1e3 * pre_s / n as f64,
@@ -237,7 +285,7 @@ pub fn bench_evaluate(opts: &BenchOptions, progress: &dyn Progress) -> Result<(V
         thr.push(row);
         let mut sizes = vec![cfg.clone()];
         if let Some(s) = opts.alt_size.filter(|&s| s != cfg.input.width || s != cfg.input.height) {
-            if det.accepts_any_size() {
+            if dets[0].accepts_any_size() {
                 let mut c = cfg.clone();
                 (c.input.width, c.input.height) = (s, s);
                 sizes.push(c);

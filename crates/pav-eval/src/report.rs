@@ -43,6 +43,9 @@ pub enum ReportError {
         /// Why.
         why: String,
     },
+    /// A detector could not be copied to score frames at once.
+    #[error(transparent)]
+    Detector(#[from] pav_detect::DetectError),
     /// A chart could not be drawn.
     #[cfg(feature = "plot")]
     #[error(transparent)]

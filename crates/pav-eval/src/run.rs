@@ -94,6 +94,9 @@ pub struct EvalOptions {
     /// Threads that run the detectors side by side on each frame (1: one after another).
     /// Records and reports come out in the same order either way.
     pub parallel: usize,
+    /// Frames scored at once, each by its own copy of every detector (1: one frame at a time).
+    /// Records and reports come out in the same order either way.
+    pub lanes: usize,
 }
 
 /// Wall-clock split of a run, for benchmarks.
@@ -201,20 +204,43 @@ fn failed_rows(label: &str, detectors: &[Box<dyn Detector>], why: &str) -> Vec<S
         .collect()
 }
 
-/// How `detectors` detectors share `cores` cores: (detector groups run side by side, ONNX Runtime
-/// intra-op threads per detector). `parallel` and `threads` as asked, 0 = choose: with several
-/// detectors and cores and no thread count asked, one group per core, one thread each.
-pub fn side_by_side(detectors: usize, cores: usize, parallel: usize, threads: usize) -> (usize, usize) {
-    let groups = match parallel {
+/// How detectors share the cores: `parallel` detector groups side by side on each frame, `lanes`
+/// frames at once, `threads` ONNX Runtime intra-op threads per detector copy.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Sharing {
+    /// Detector groups run side by side on a frame.
+    pub parallel: usize,
+    /// Frames scored at once.
+    pub lanes: usize,
+    /// Intra-op threads per detector copy (0: ONNX Runtime's default).
+    pub threads: usize,
+}
+
+/// Most frames in flight chosen without being asked: each costs a copy of every model, and
+/// one decoder thread prepares them all.
+const AUTO_LANES: usize = 4;
+
+/// How `detectors` detectors share `cores` cores; `parallel`, `lanes` and `threads` as asked,
+/// 0 = choose. With nothing asked, several detectors run side by side, one group per core, and
+/// cores left over score further frames at once; every copy then gets one thread each, since
+/// two single-threaded runs on two frames outpace one run on two threads on these small models.
+pub fn side_by_side(detectors: usize, cores: usize, parallel: usize, lanes: usize, threads: usize) -> Sharing {
+    let chosen = threads == 0 && parallel == 0 && lanes == 0;
+    let parallel = match parallel {
         0 if threads == 0 && detectors > 1 && cores > 1 => detectors.min(cores),
         0 => 1,
         p => p.min(detectors.max(1)),
     };
+    let lanes = match lanes {
+        0 if chosen && cores > parallel => (cores / parallel).clamp(1, AUTO_LANES),
+        0 => 1,
+        l => l,
+    };
     let threads = match threads {
-        0 if groups > 1 => (cores / groups).max(1),
+        0 if parallel * lanes > 1 => (cores / (parallel * lanes)).max(1),
         t => t,
     };
-    (groups, threads)
+    Sharing { parallel, lanes, threads }
 }
 
 /// One detector's proposals for a frame and the seconds they took; `None` for a detector that
@@ -225,17 +251,18 @@ type Scored = Option<(Result<Proposals, DetectError>, f64)>;
 /// detector that failed earlier.
 type Prepared = Option<Result<(Vec<f32>, InputMap), DefenceError>>;
 
-/// Every detector not yet failed on its prepared input, on `parallel` threads side by side;
-/// results in the detectors' order. Each thread takes the next detector not yet taken, in the
-/// order of `cost` (seconds so far, largest first), so that the slowest model starts first and
-/// the others fill the remaining threads around it.
-fn run_detectors(
-    detectors: &mut [Box<dyn Detector>],
-    prepared: &mut [Prepared],
+/// Every detector not yet failed on each frame of a batch (frame k by `lanes[k]`, that lane's
+/// copies of the detectors), on `workers` threads; results per frame, in the detectors' order.
+/// Each thread takes the next (frame, detector) not yet taken, in the order of `cost` (seconds so
+/// far, largest first), so that the slowest model starts first and the others fill the
+/// remaining threads around it.
+fn run_batch(
+    lanes: &mut [&mut [Box<dyn Detector>]],
+    batch: Vec<Vec<Prepared>>,
     failed: &[Option<String>],
     cost: &[f64],
-    parallel: usize,
-) -> Vec<Scored> {
+    workers: usize,
+) -> Vec<Vec<Scored>> {
     let one = |det: &mut Box<dyn Detector>, input: Prepared| -> Scored {
         let (input, map) = match input? {
             Ok(x) => x,
@@ -245,21 +272,26 @@ fn run_detectors(
         let r = det.propose_prepared(input, map);
         Some((r, t.elapsed().as_secs_f64()))
     };
-    let inputs: Vec<Prepared> = prepared
-        .iter_mut()
-        .zip(failed)
-        .map(|(p, f)| if f.is_some() { None } else { Some(p.take().expect("one input per detector")) })
-        .collect();
-    let n = detectors.len();
-    let threads = parallel.clamp(1, n.max(1));
-    if threads == 1 {
-        return detectors.iter_mut().zip(inputs).map(|(d, x)| one(d, x)).collect();
+    let n = failed.len();
+    let mut work = Vec::new();
+    for (k, (lane, mut prepared)) in lanes.iter_mut().zip(batch).enumerate() {
+        for (d, ((det, p), f)) in lane.iter_mut().zip(prepared.iter_mut()).zip(failed).enumerate() {
+            let input = if f.is_some() { None } else { Some(p.take().expect("one input per detector")) };
+            work.push((k, d, det, input));
+        }
     }
-    let mut work: Vec<_> = detectors.iter_mut().zip(inputs).enumerate().map(|(k, (d, x))| (k, d, x)).collect();
-    // Popped from the end: the costliest first, ties in the detectors' order.
-    work.sort_by(|a, b| cost[a.0].total_cmp(&cost[b.0]).then(b.0.cmp(&a.0)));
+    let frames = work.len() / n.max(1);
+    let mut results: Vec<Vec<Scored>> = (0..frames).map(|_| (0..n).map(|_| None).collect()).collect();
+    let threads = workers.clamp(1, work.len().max(1));
+    if threads == 1 {
+        for (k, d, det, x) in work {
+            results[k][d] = one(det, x);
+        }
+        return results;
+    }
+    // Popped from the end: the costliest first, ties in the frames' then the detectors' order.
+    work.sort_by(|a, b| cost[a.1].total_cmp(&cost[b.1]).then((b.0, b.1).cmp(&(a.0, a.1))));
     let queue = std::sync::Mutex::new(work);
-    let mut results: Vec<Scored> = (0..n).map(|_| None).collect();
     std::thread::scope(|s| {
         let handles: Vec<_> = (0..threads)
             .map(|_| {
@@ -267,8 +299,8 @@ fn run_detectors(
                     let mut done = Vec::new();
                     loop {
                         let next = queue.lock().unwrap_or_else(|e| e.into_inner()).pop();
-                        let Some((k, d, x)) = next else { break };
-                        done.push((k, one(d, x)));
+                        let Some((k, d, det, x)) = next else { break };
+                        done.push((k, d, one(det, x)));
                     }
                     done
                 })
@@ -276,8 +308,8 @@ fn run_detectors(
             .collect();
         for h in handles {
             // A detector that panicked is a bug, not a frame to skip: let it surface.
-            for (k, r) in h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)) {
-                results[k] = r;
+            for (k, d, r) in h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)) {
+                results[k][d] = r;
             }
         }
     });
@@ -297,6 +329,11 @@ pub fn evaluate(
 ) -> Result<EvalOutcome, ReportError> {
     opts.check()?;
     let t_run = Instant::now();
+    let lanes = opts.lanes.max(1);
+    // Lane 0 is the caller's detectors; each further lane scores its frames with copies.
+    let mut copies = (1..lanes)
+        .map(|_| detectors.iter().map(|d| d.replica()).collect::<Result<Vec<_>, _>>())
+        .collect::<Result<Vec<_>, _>>()?;
     std::fs::create_dir_all(&opts.out_dir).map_err(|e| super::report::io_err(&opts.out_dir, e))?;
     let frames_path = opts.out_dir.join("frames.csv");
     let mut csv = FrameCsv::create(&frames_path)?;
@@ -362,11 +399,12 @@ pub fn evaluate(
         // The decoder thread also prepares every detector's input, so this thread only runs models.
         let inputs: Vec<InputConfig> = detectors.iter().map(|d| d.input().clone()).collect();
         let make = move |f: Frame| inputs.iter().map(|c| Some(prepare(&f, c))).collect::<Vec<_>>();
+        let depth = (2 * lanes).max(4);
         let mut frames = match (opts.frames, picks) {
-            (Frames::Stride(n), _) => Prefetch::with(reader, move |i| i % n == 0, 4, make),
+            (Frames::Stride(n), _) => Prefetch::with(reader, move |i| i % n == 0, depth, make),
             (Frames::Even(_), p) => {
                 let p = p.unwrap_or_default();
-                Prefetch::with(reader, move |i| p.binary_search(&i).is_ok(), 4, make)
+                Prefetch::with(reader, move |i| p.binary_search(&i).is_ok(), depth, make)
             }
         };
         progress.begin(&job.label, info.declared_frames as u64);
@@ -381,63 +419,91 @@ pub fn evaluate(
                 out.interrupted = true;
                 break;
             }
-            // Time spent waiting for the decoder thread (decoding itself overlaps inference).
+            // Up to `lanes` frames, and the time spent waiting for the decoder thread for them
+            // (decoding itself overlaps inference).
             let t0 = Instant::now();
-            let step = frames.next_step();
+            let mut batch = Vec::with_capacity(lanes);
+            let mut last = None;
+            while batch.len() < lanes {
+                match frames.next_step() {
+                    Step::Skipped => {
+                        decoded += 1;
+                        progress.advance(1);
+                    }
+                    Step::Frame(i, f) => {
+                        decoded += 1;
+                        progress.advance(1);
+                        batch.push((i, decoded, f));
+                    }
+                    end => {
+                        last = Some(end);
+                        break;
+                    }
+                }
+            }
             out.timing.decode_s += t0.elapsed().as_secs_f64();
-            let (idx, mut prepared) = match step {
-                Step::End => break,
-                Step::Error(e) => {
+            let (idxs, prepared): (Vec<(usize, usize)>, Vec<Vec<Prepared>>) =
+                batch.into_iter().map(|(i, d, f)| ((i, d), f)).unzip();
+            let mut lane_dets: Vec<&mut [Box<dyn Detector>]> = std::iter::once(&mut *detectors)
+                .chain(copies.iter_mut().map(|c| c.as_mut_slice()))
+                .take(idxs.len())
+                .collect();
+            let workers = opts.parallel.max(1) * idxs.len();
+            let results = run_batch(&mut lane_dets, prepared, &failed_det, &out.timing.detector_s, workers);
+            let mut through = decoded;
+            for ((idx, decoded_here), results) in idxs.into_iter().zip(results) {
+                if failed_det.iter().all(Option::is_some) {
+                    break;
+                }
+                through = decoded_here;
+                out.timing.frames_scored += 1;
+                let (time_s, angle_deg) = angles.at(idx, info.fps);
+                no_angle += usize::from(angle_deg.is_none());
+                for (k, (det, result)) in detectors.iter().zip(results).enumerate() {
+                    // A detector that failed on an earlier frame of this batch scored the later
+                    // ones too; as one frame at a time, they are not kept.
+                    let Some((result, seconds)) = result.filter(|_| failed_det[k].is_none()) else { continue };
+                    out.timing.detector_s[k] += seconds;
+                    let props = match result {
+                        Ok(p) => p,
+                        Err(e) => {
+                            out.failures.push(format!("{}: frame {idx}: {e}", job.label));
+                            failed_det[k] = Some(format!("stopped at frame {idx}: {e}"));
+                            continue;
+                        }
+                    };
+                    let best = props.best(det.target_classes());
+                    let rec = FrameRecord {
+                        video: job.label.clone(),
+                        file: file.clone(),
+                        frame: idx,
+                        time_s,
+                        angle_deg,
+                        detector: det.name().to_string(),
+                        detected: best.is_some_and(|b| pav_detect::detected(b.score, opts.threshold)),
+                        max_score: best.map(|b| b.score).unwrap_or(0.0),
+                        x1: best.map(|b| b.bbox[0]),
+                        y1: best.map(|b| b.bbox[1]),
+                        x2: best.map(|b| b.bbox[2]),
+                        y2: best.map(|b| b.bbox[3]),
+                    };
+                    csv.push(&rec)?;
+                    out.records.push(rec);
+                }
+            }
+            match last {
+                Some(Step::Error(e)) => {
                     status = format!("stopped: {e}");
                     out.failures.push(e.to_string());
                     break;
                 }
-                Step::Skipped => {
-                    decoded += 1;
-                    progress.advance(1);
-                    continue;
+                Some(_) => break,
+                None if failed_det.iter().all(Option::is_some) => {
+                    // One frame at a time stops decoding at the frame where the last one failed.
+                    decoded = through;
+                    break;
                 }
-                Step::Frame(i, f) => {
-                    decoded += 1;
-                    progress.advance(1);
-                    (i, f)
-                }
-            };
-            out.timing.frames_scored += 1;
-            let (time_s, angle_deg) = angles.at(idx, info.fps);
-            no_angle += usize::from(angle_deg.is_none());
-            let results = run_detectors(detectors, &mut prepared, &failed_det, &out.timing.detector_s, opts.parallel);
-            for (k, (det, result)) in detectors.iter().zip(results).enumerate() {
-                let Some((result, seconds)) = result else { continue };
-                out.timing.detector_s[k] += seconds;
-                let props = match result {
-                    Ok(p) => p,
-                    Err(e) => {
-                        out.failures.push(format!("{}: frame {idx}: {e}", job.label));
-                        failed_det[k] = Some(format!("stopped at frame {idx}: {e}"));
-                        continue;
-                    }
-                };
-                let best = props.best(det.target_classes());
-                let rec = FrameRecord {
-                    video: job.label.clone(),
-                    file: file.clone(),
-                    frame: idx,
-                    time_s,
-                    angle_deg,
-                    detector: det.name().to_string(),
-                    detected: best.is_some_and(|b| pav_detect::detected(b.score, opts.threshold)),
-                    max_score: best.map(|b| b.score).unwrap_or(0.0),
-                    x1: best.map(|b| b.bbox[0]),
-                    y1: best.map(|b| b.bbox[1]),
-                    x2: best.map(|b| b.bbox[2]),
-                    y2: best.map(|b| b.bbox[3]),
-                };
-                csv.push(&rec)?;
-                out.records.push(rec);
-            }
-            if failed_det.iter().all(Option::is_some) {
-                break;
+                None => {}
             }
         }
         progress.end(None);
@@ -636,14 +702,22 @@ mod tests {
 
     #[test]
     fn detectors_share_cores_side_by_side_unless_told_otherwise() {
-        assert_eq!(side_by_side(4, 2, 0, 0), (2, 1));
-        assert_eq!(side_by_side(1, 2, 0, 0), (1, 0));
-        assert_eq!(side_by_side(4, 1, 0, 0), (1, 0));
-        assert_eq!(side_by_side(3, 8, 0, 0), (3, 2));
-        // An explicit thread count keeps detectors one after another unless --parallel says so.
-        assert_eq!(side_by_side(4, 2, 0, 2), (1, 2));
-        assert_eq!(side_by_side(4, 2, 3, 0), (3, 1));
-        assert_eq!(side_by_side(2, 2, 5, 1), (2, 1));
-        assert_eq!(side_by_side(4, 2, 1, 0), (1, 0));
+        let sh = |parallel, lanes, threads| Sharing { parallel, lanes, threads };
+        assert_eq!(side_by_side(4, 2, 0, 0, 0), sh(2, 1, 1));
+        assert_eq!(side_by_side(4, 1, 0, 0, 0), sh(1, 1, 0));
+        assert_eq!(side_by_side(3, 8, 0, 0, 0), sh(3, 2, 1));
+        // Cores the detectors leave free score further frames, one thread per copy.
+        assert_eq!(side_by_side(1, 2, 0, 0, 0), sh(1, 2, 1));
+        assert_eq!(side_by_side(1, 16, 0, 0, 0), sh(1, 4, 4));
+        assert_eq!(side_by_side(2, 2, 0, 0, 0), sh(2, 1, 1));
+        // An explicit thread count keeps detectors one after another and frames one at a time
+        // unless --parallel or --lanes says so.
+        assert_eq!(side_by_side(4, 2, 0, 0, 2), sh(1, 1, 2));
+        assert_eq!(side_by_side(1, 2, 0, 0, 2), sh(1, 1, 2));
+        assert_eq!(side_by_side(4, 2, 3, 0, 0), sh(3, 1, 1));
+        assert_eq!(side_by_side(2, 2, 5, 0, 1), sh(2, 1, 1));
+        assert_eq!(side_by_side(4, 2, 1, 0, 0), sh(1, 1, 0));
+        assert_eq!(side_by_side(1, 2, 0, 3, 0), sh(1, 3, 1));
+        assert_eq!(side_by_side(1, 2, 0, 1, 0), sh(1, 1, 0));
     }
 }

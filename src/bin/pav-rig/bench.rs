@@ -20,9 +20,12 @@ pub struct Args {
     /// Second input size, for models that accept any input size (0: none).
     #[arg(long, default_value_t = 320)]
     alt_size: usize,
-    /// ONNX Runtime intra-op threads (0 = runtime default).
+    /// ONNX Runtime intra-op threads per model copy (0: as evaluate chooses).
     #[arg(long, default_value_t = 0)]
     threads: usize,
+    /// Frames scored at once, each by its own copy of the model (0: as evaluate chooses).
+    #[arg(long, default_value_t = 0)]
+    lanes: usize,
     /// Timed repetitions; the fastest is kept.
     #[arg(long, default_value_t = 3)]
     repeats: usize,
@@ -45,6 +48,7 @@ pub fn run(b: &Args) -> Result<()> {
         strides: b.strides.clone(),
         alt_size: Some(b.alt_size).filter(|&s| s > 0),
         threads: b.threads,
+        lanes: b.lanes,
         repeats: b.repeats,
         threshold: b.threshold,
         out_dir: b.out.clone(),

@@ -5,7 +5,7 @@ use crate::port::parse_seconds;
 use anyhow::{bail, Context, Result};
 use pav::detect::load::load_detectors;
 use pav::eval::report::summary_table;
-use pav::eval::run::{default_label, evaluate, EvalOptions, Frames, VideoJob};
+use pav::eval::run::{default_label, evaluate, EvalOptions, Frames, Sharing, VideoJob};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -48,14 +48,18 @@ pub struct Args {
     /// Output directory for CSV, Markdown and PNG reports.
     #[arg(long, short = 'o', default_value = "out/evaluate")]
     out: PathBuf,
-    /// ONNX Runtime intra-op threads per detector (0: one per core, or one each when detectors
-    /// run side by side).
+    /// ONNX Runtime intra-op threads per detector (0: one each when detectors or frames run side
+    /// by side, else ONNX Runtime's default of one per core).
     #[arg(long, default_value_t = 0)]
     threads: usize,
     /// Detectors run side by side on each frame, each on a thread (0: one per core when there
     /// are several detectors and --threads is not given; 1: one after another).
     #[arg(long, default_value_t = 0)]
     parallel: usize,
+    /// Frames scored at once, each with its own copy of every model (0: the cores the detectors
+    /// leave free, at most 4, when neither --threads nor --parallel is given; 1: one at a time).
+    #[arg(long, default_value_t = 0)]
+    lanes: usize,
     /// Also score each detector behind this input defence, named `DETECTOR+LABEL`: `median:k=3`,
     /// `bits:b=5`, `jpeg:q=75`, `cutout:n=2,s=40`, `noise:sigma=8`; `+` chains them. Repeat for
     /// several; the undefended detectors stay, so each defence's clean cost shows beside it.
@@ -130,7 +134,7 @@ pub fn run(a: &Args) -> Result<()> {
     }
     let defence_labels = pav::detect::defence::chains_label(&chains);
     let count = pav::detect::load::expand_configs(&a.detectors)?.len() * (1 + chains.len());
-    let (parallel, threads) = pav::eval::run::side_by_side(count, cores, a.parallel, a.threads);
+    let sharing = pav::eval::run::side_by_side(count, cores, a.parallel, a.lanes, a.threads);
     let opts = EvalOptions {
         threshold: a.threshold,
         frames,
@@ -139,12 +143,13 @@ pub fn run(a: &Args) -> Result<()> {
         angle_bins: a.angle_bins as usize,
         out_dir: a.out.clone(),
         plots: !a.no_plots,
-        parallel,
+        parallel: sharing.parallel,
+        lanes: sharing.lanes,
     };
     opts.check()?;
     // A merge scores nothing; the others load their detectors before anything is written.
     let mut detectors =
-        if a.shard.merge { Vec::new() } else { load_detectors(&a.detectors, &a.classes, &chains, threads)? };
+        if a.shard.merge { Vec::new() } else { load_detectors(&a.detectors, &a.classes, &chains, sharing.threads)? };
     let sidecars: Vec<PathBuf> =
         jobs.iter().map(|j| j.sidecar.clone().unwrap_or_else(|| pav::sidecar::sidecar_path(&j.path))).collect();
     let record = pav::provenance::Run::start()
@@ -173,11 +178,7 @@ pub fn run(a: &Args) -> Result<()> {
         "scoring {} video(s) with {} detector(s){}; threshold {}, classes {}, {}",
         jobs.len(),
         detectors.len(),
-        match (parallel, threads) {
-            (1, 0) => String::new(),
-            (1, t) => format!(" ({t} thread(s) each)"),
-            (p, t) => format!(" ({p} side by side, {t} thread(s) each)"),
-        },
+        sharing_text(sharing),
         a.threshold,
         detectors.iter().map(|d| format!("{}={}", d.name(), d.target_label())).collect::<Vec<_>>().join(", "),
         frames
@@ -190,6 +191,25 @@ pub fn run(a: &Args) -> Result<()> {
         squeeze_report(a, &out, &opts.out_dir)?;
     }
     report(&out, a.threshold)
+}
+
+/// How the detectors share the cores, for the run's first line.
+fn sharing_text(s: Sharing) -> String {
+    let mut parts = Vec::new();
+    if s.parallel > 1 {
+        parts.push(format!("{} side by side", s.parallel));
+    }
+    if s.lanes > 1 {
+        parts.push(format!("{} frames at once", s.lanes));
+    }
+    if s.threads > 0 {
+        parts.push(format!("{} thread(s) each", s.threads));
+    }
+    if parts.is_empty() {
+        String::new()
+    } else {
+        format!(" ({})", parts.join(", "))
+    }
 }
 
 /// Checks `--squeeze`'s options against the videos' labels.
