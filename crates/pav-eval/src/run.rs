@@ -702,22 +702,27 @@ mod tests {
 
     #[test]
     fn detectors_share_cores_side_by_side_unless_told_otherwise() {
-        let sh = |parallel, lanes, threads| Sharing { parallel, lanes, threads };
-        assert_eq!(side_by_side(4, 2, 0, 0, 0), sh(2, 1, 1));
-        assert_eq!(side_by_side(4, 1, 0, 0, 0), sh(1, 1, 0));
-        assert_eq!(side_by_side(3, 8, 0, 0, 0), sh(3, 2, 1));
-        // Cores the detectors leave free score further frames, one thread per copy.
-        assert_eq!(side_by_side(1, 2, 0, 0, 0), sh(1, 2, 1));
-        assert_eq!(side_by_side(1, 16, 0, 0, 0), sh(1, 4, 4));
-        assert_eq!(side_by_side(2, 2, 0, 0, 0), sh(2, 1, 1));
-        // An explicit thread count keeps detectors one after another and frames one at a time
-        // unless --parallel or --lanes says so.
-        assert_eq!(side_by_side(4, 2, 0, 0, 2), sh(1, 1, 2));
-        assert_eq!(side_by_side(1, 2, 0, 0, 2), sh(1, 1, 2));
-        assert_eq!(side_by_side(4, 2, 3, 0, 0), sh(3, 1, 1));
-        assert_eq!(side_by_side(2, 2, 5, 0, 1), sh(2, 1, 1));
-        assert_eq!(side_by_side(4, 2, 1, 0, 0), sh(1, 1, 0));
-        assert_eq!(side_by_side(1, 2, 0, 3, 0), sh(1, 3, 1));
-        assert_eq!(side_by_side(1, 2, 0, 1, 0), sh(1, 1, 0));
+        // (detectors, cores, --parallel, --lanes, --threads) → (parallel, lanes, threads).
+        let cases = [
+            ((4, 2, 0, 0, 0), (2, 1, 1)),
+            ((4, 1, 0, 0, 0), (1, 1, 0)),
+            ((3, 8, 0, 0, 0), (3, 2, 1)),
+            // Cores the detectors leave free score further frames, one thread per copy.
+            ((1, 2, 0, 0, 0), (1, 2, 1)),
+            ((1, 16, 0, 0, 0), (1, 4, 4)),
+            ((2, 2, 0, 0, 0), (2, 1, 1)),
+            // An explicit thread count keeps detectors one after another and frames one at a
+            // time unless --parallel or --lanes says so.
+            ((4, 2, 0, 0, 2), (1, 1, 2)),
+            ((1, 2, 0, 0, 2), (1, 1, 2)),
+            ((4, 2, 3, 0, 0), (3, 1, 1)),
+            ((2, 2, 5, 0, 1), (2, 1, 1)),
+            ((4, 2, 1, 0, 0), (1, 1, 0)),
+            ((1, 2, 0, 3, 0), (1, 3, 1)),
+            ((1, 2, 0, 1, 0), (1, 1, 0)),
+        ];
+        for ((d, c, p, l, t), (parallel, lanes, threads)) in cases {
+            assert_eq!(side_by_side(d, c, p, l, t), Sharing { parallel, lanes, threads }, "{:?}", (d, c, p, l, t));
+        }
     }
 }
