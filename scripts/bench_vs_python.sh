@@ -25,22 +25,22 @@ CSV=${CSV:-bench/vs_python.csv}
 echo "tool,detector,run,wall_s,frames" > "$CSV"
 now() { date +%s%N; }
 secs() { printf "%d.%03d" $((($2 - $1) / 1000000000)) $(((($2 - $1) / 1000000) % 1000)); }
+# Each tool as NAME:OPTIONS of `pav-rig evaluate`.
+tools=("pav:")
+[ "${BEFORE:-0}" != 1 ] || tools+=("pav-lanes1:--lanes 1")
 for run in $(seq 1 "$RUNS"); do
   for det in yolox_nano:yolox:$YOLOX yolov3-tiny:darknet:$TINY; do
     IFS=: read -r name layout model <<< "$det"
     t0=$(now); out=$($PY scripts/python_loop.py "$layout" "$model" "$VIDEO"); t1=$(now)
     echo "python,$name,$run,$(secs "$t0" "$t1"),${out%% *}" >> "$CSV"
-    t0=$(now)
-    target/release/pav-rig evaluate "$VIDEO" -d "configs/detectors/$name.toml" -o "out/bench/vs_python_$name" 2> /dev/null > /dev/null
-    t1=$(now)
-    frames=$(($(wc -l < "out/bench/vs_python_$name/frames.csv") - 1))
-    echo "pav,$name,$run,$(secs "$t0" "$t1"),$frames" >> "$CSV"
-    if [ "${BEFORE:-0}" = 1 ]; then
+    for tool in "${tools[@]}"; do
       t0=$(now)
-      target/release/pav-rig evaluate "$VIDEO" -d "configs/detectors/$name.toml" --lanes 1 -o "out/bench/vs_python_$name" 2> /dev/null > /dev/null
+      # shellcheck disable=SC2086  # the tool's options split into words
+      target/release/pav-rig evaluate "$VIDEO" -d "configs/detectors/$name.toml" ${tool#*:} -o "out/bench/vs_python_$name" 2> /dev/null > /dev/null
       t1=$(now)
-      echo "pav-lanes1,$name,$run,$(secs "$t0" "$t1"),$frames" >> "$CSV"
-    fi
+      frames=$(($(wc -l < "out/bench/vs_python_$name/frames.csv") - 1))
+      echo "${tool%%:*},$name,$run,$(secs "$t0" "$t1"),$frames" >> "$CSV"
+    done
   done
 done
 python3 - "$CSV" <<'PY'
