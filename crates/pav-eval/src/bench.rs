@@ -189,8 +189,12 @@ fn across_lanes<T: Send>(
     })
 }
 
-fn run_evaluate(opts: &BenchOptions, cfg: &DetectorConfig, stride: usize) -> Result<(f64, Accuracy, usize)> {
-    let sharing = sharing(opts);
+fn run_evaluate(
+    opts: &BenchOptions,
+    sharing: Sharing,
+    cfg: &DetectorConfig,
+    stride: usize,
+) -> Result<(f64, Accuracy, usize)> {
     let tmp = std::env::temp_dir().join(format!("pav-bench-{}", std::process::id()));
     let eval_opts = EvalOptions {
         threshold: opts.threshold,
@@ -259,7 +263,7 @@ pub fn bench_evaluate(opts: &BenchOptions, progress: &dyn Progress) -> Result<(V
                 Ok(())
             })
         })?;
-        let (eval_s, _, decoded) = run_evaluate(opts, &cfg, 1)?;
+        let (eval_s, _, decoded) = run_evaluate(opts, sharing, &cfg, 1)?;
         let row = Throughput {
             detector: cfg.name.clone(),
             input: input.clone(),
@@ -295,7 +299,7 @@ pub fn bench_evaluate(opts: &BenchOptions, progress: &dyn Progress) -> Result<(V
         }
         for c in &sizes {
             for &stride in &opts.strides {
-                let (secs, acc, decoded) = run_evaluate(opts, c, stride)?;
+                let (secs, acc, decoded) = run_evaluate(opts, sharing, c, stride)?;
                 let t = Tradeoff {
                     detector: c.name.clone(),
                     input: format!("{}x{}", c.input.width, c.input.height),

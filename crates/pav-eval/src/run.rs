@@ -273,6 +273,7 @@ fn run_batch(
         Some((r, t.elapsed().as_secs_f64()))
     };
     let n = failed.len();
+    let mut results: Vec<Vec<Scored>> = (0..lanes.len()).map(|_| (0..n).map(|_| None).collect()).collect();
     let mut work = Vec::new();
     for (k, (lane, mut prepared)) in lanes.iter_mut().zip(batch).enumerate() {
         for (d, ((det, p), f)) in lane.iter_mut().zip(prepared.iter_mut()).zip(failed).enumerate() {
@@ -280,8 +281,6 @@ fn run_batch(
             work.push((k, d, det, input));
         }
     }
-    let frames = work.len() / n.max(1);
-    let mut results: Vec<Vec<Scored>> = (0..frames).map(|_| (0..n).map(|_| None).collect()).collect();
     let threads = workers.clamp(1, work.len().max(1));
     if threads == 1 {
         for (k, d, det, x) in work {
