@@ -10,9 +10,9 @@
 # (configs/studies/rig-views.toml, rendered from configs/rig/train-etron-near.toml and -far.toml
 # into out/views_rig_near and out/views_rig_far: 144 views at 0.4 and 0.65 m, 10° and 30°, the
 # studio and courtyard maps). EVAL names the scoring folder; the paired comparisons go to
-# paired-LABEL (with EVAL=eval-X: paired-X-LABEL). Resumes: finished textures, paints and films
-# are kept.
-# usage: [SEEDS="0 1 2 3"] [VARIANTS="A=CONFIG B=CONFIG"] [AGAINST="rauca A"] [EVAL=eval]
+# paired-LABEL (with EVAL=eval-X: paired-X-LABEL). RIGVIEWS names the rig view sets to render
+# first (default "near far"). Resumes: finished textures, paints, films and views are kept.
+# usage: [SEEDS="0 1 2 3"] [VARIANTS="A=CONFIG B=CONFIG"] [AGAINST="rauca A"] [EVAL=eval] [RIGVIEWS="near far"]
 #        docs/reports/scripts/lever_rig_views.sh OUT   (from the repository root)
 set -euo pipefail
 out=$1
@@ -23,9 +23,11 @@ seeds=${SEEDS:-0}
 variants=${VARIANTS:-plain=configs/studies/print-base.toml rig=configs/studies/rig-views.toml}
 against=${AGAINST:-rauca plain}
 eval_dir=${EVAL:-eval}
-near=out/views_rig_near far=out/views_rig_far
-"$pav" views turntable --rig configs/rig/train-etron-near.toml -o $near > /dev/null
-"$pav" views turntable --rig configs/rig/train-etron-far.toml -o $far > /dev/null
+# The rig views the variants train on: configs/rig/train-etron-NAME.toml into out/views_rig_NAME
+# (NAME with - as _), for each NAME of RIGVIEWS.
+for n in ${RIGVIEWS:-near far}; do
+  "$pav" views turntable --rig "configs/rig/train-etron-$n.toml" -o "out/views_rig_${n//-/_}" > /dev/null
+done
 mkdir -p "$out/configs" "$out/paint"
 printf 'extends = "%s/configs/rig/phone-etron.toml"\n\n[render]\nframes = 44\n' "$here" > "$out/rig.toml"
 for s in $seeds; do
