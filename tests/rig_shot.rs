@@ -101,6 +101,52 @@ fn a_camera_height_is_metres_above_the_table_top() {
     assert!((length - 0.245).abs() < 1e-5, "{length}");
 }
 
+/// Rows and columns of a square G-buffer the model covers: (first row, last row, first column,
+/// last column).
+fn covered_box(g: &GBuffer) -> (usize, usize, usize, usize) {
+    let hit: Vec<(usize, usize)> =
+        (0..g.size * g.size).filter(|&i| g.face[i] != EMPTY).map(|i| (i / g.size, i % g.size)).collect();
+    assert!(!hit.is_empty(), "the model is out of sight");
+    let rows = hit.iter().map(|h| h.0);
+    let cols = hit.iter().map(|h| h.1);
+    (rows.clone().min().unwrap(), rows.max().unwrap(), cols.clone().min().unwrap(), cols.max().unwrap())
+}
+
+#[test]
+fn every_shipped_rig_keeps_the_whole_model_in_its_frame() {
+    common::shared_data();
+    let mut n = 0;
+    for e in std::fs::read_dir(common::repo().join("configs/rig")).unwrap() {
+        let p = e.unwrap().path();
+        let name = p.file_name().unwrap().to_string_lossy().to_string();
+        let r = rig(&name);
+        r.check().unwrap_or_else(|e| panic!("{name}: {e}"));
+        let (cfg, mesh) = r.views_config().unwrap_or_else(|e| panic!("{name}: {e}"));
+        let shot = r.shot(&mesh);
+        assert_eq!(cfg.views().len(), r.render.frames * shot.poses.len(), "{name}");
+        // The square render is cut to the frame: the model must lie inside that band at every
+        // camera height and table angle, or the training and test views would crop the car.
+        let side = 160;
+        let (w, h) = shot.size;
+        let band = side * w.min(h) / w.max(h);
+        let (lo, hi) = ((side - band) / 2, (side + band) / 2);
+        for k in 0..shot.poses.len() {
+            for a in (0..360).step_by(30) {
+                let g = GBuffer::render(&mesh, &RigConfig::camera(&shot, k, a as f32), side);
+                let (r0, r1, c0, c1) = covered_box(&g);
+                let inside = if w >= h {
+                    r0 > lo && r1 < hi - 1 && c0 > 0 && c1 < side - 1
+                } else {
+                    c0 > lo && c1 < hi - 1 && r0 > 0 && r1 < side - 1
+                };
+                assert!(inside, "{name}: camera {k} at {a}°: rows {r0}–{r1}, columns {c0}–{c1}, frame band {lo}–{hi}");
+            }
+        }
+        n += 1;
+    }
+    assert!(n >= 8, "{n} rigs");
+}
+
 /// One change to a rig config.
 type Change = Box<dyn Fn(&mut RigConfig)>;
 
