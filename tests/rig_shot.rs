@@ -24,10 +24,15 @@ fn rig(name: &str) -> RigConfig {
     RigConfig::load(&common::repo().join("configs/rig").join(name)).unwrap_or_else(|e| panic!("{name}: {e}"))
 }
 
-/// Columns of a `side`-wide G-buffer the model covers: (first, last).
-fn covered_columns(g: &GBuffer) -> (usize, usize) {
-    let cols: Vec<usize> = (0..g.size).filter(|&x| (0..g.size).any(|y| g.face[y * g.size + x] != EMPTY)).collect();
-    (cols[0], *cols.last().unwrap())
+/// Rows and columns of a square G-buffer the model covers: (first row, last row, first column,
+/// last column).
+fn covered_box(g: &GBuffer) -> (usize, usize, usize, usize) {
+    let hit: Vec<(usize, usize)> =
+        (0..g.size * g.size).filter(|&i| g.face[i] != EMPTY).map(|i| (i / g.size, i % g.size)).collect();
+    assert!(!hit.is_empty(), "the model is out of sight");
+    let rows = hit.iter().map(|h| h.0);
+    let cols = hit.iter().map(|h| h.1);
+    (rows.clone().min().unwrap(), rows.max().unwrap(), cols.clone().min().unwrap(), cols.max().unwrap())
 }
 
 /// The model's extent across a `width`-pixel frame by the pinhole formula alone: its vertices
@@ -62,7 +67,7 @@ fn the_model_spans_the_pixels_a_pinhole_camera_predicts() {
         at.placement.distance_m = d;
         let shot = at.shot(&mesh);
         let g = GBuffer::render(&mesh, &RigConfig::camera(&shot, 0, 0.0), 640);
-        let (a, b) = covered_columns(&g);
+        let (_, _, a, b) = covered_box(&g);
         let measured = (b - a + 1) as f64;
         let predicted = pinhole_extent_px(&mesh, &r, d, 640);
         eprintln!("at {d} m: {measured} px, predicted {predicted:.1}");
@@ -101,17 +106,6 @@ fn a_camera_height_is_metres_above_the_table_top() {
     assert!((length - 0.245).abs() < 1e-5, "{length}");
 }
 
-/// Rows and columns of a square G-buffer the model covers: (first row, last row, first column,
-/// last column).
-fn covered_box(g: &GBuffer) -> (usize, usize, usize, usize) {
-    let hit: Vec<(usize, usize)> =
-        (0..g.size * g.size).filter(|&i| g.face[i] != EMPTY).map(|i| (i / g.size, i % g.size)).collect();
-    assert!(!hit.is_empty(), "the model is out of sight");
-    let rows = hit.iter().map(|h| h.0);
-    let cols = hit.iter().map(|h| h.1);
-    (rows.clone().min().unwrap(), rows.max().unwrap(), cols.clone().min().unwrap(), cols.max().unwrap())
-}
-
 #[test]
 fn every_shipped_rig_keeps_the_whole_model_in_its_frame() {
     common::shared_data();
@@ -128,18 +122,15 @@ fn every_shipped_rig_keeps_the_whole_model_in_its_frame() {
         // camera height and table angle, or the training and test views would crop the car.
         let side = 160;
         let (w, h) = shot.size;
-        let band = side * w.min(h) / w.max(h);
-        let (lo, hi) = ((side - band) / 2, (side + band) / 2);
+        // The frame's first and last row (column) in the square render, cut about its centre.
+        let cut = |n: usize| ((side - side * n / w.max(h)) / 2, (side + side * n / w.max(h)) / 2 - 1);
+        let ((top, bottom), (left, right)) = (cut(h), cut(w));
         for k in 0..shot.poses.len() {
             for a in (0..360).step_by(30) {
                 let g = GBuffer::render(&mesh, &RigConfig::camera(&shot, k, a as f32), side);
                 let (r0, r1, c0, c1) = covered_box(&g);
-                let inside = if w >= h {
-                    r0 > lo && r1 < hi - 1 && c0 > 0 && c1 < side - 1
-                } else {
-                    c0 > lo && c1 < hi - 1 && r0 > 0 && r1 < side - 1
-                };
-                assert!(inside, "{name}: camera {k} at {a}°: rows {r0}–{r1}, columns {c0}–{c1}, frame band {lo}–{hi}");
+                let inside = r0 > top && r1 < bottom && c0 > left && c1 < right;
+                assert!(inside, "{name}: camera {k} at {a}°: rows {r0}–{r1}, columns {c0}–{c1}, frame rows {top}–{bottom}, columns {left}–{right}");
             }
         }
         n += 1;
