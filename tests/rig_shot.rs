@@ -333,16 +333,20 @@ fn a_capture_names_its_rig_and_its_simulated_camera_films_the_rigs_model() {
     let diff = |a: &[u8], b: &[u8]| {
         a.iter().zip(b).map(|(x, y)| (f64::from(*x) - f64::from(*y)).abs()).sum::<f64>() / a.len() as f64
     };
-    let (mut at, mut off) = (Vec::new(), Vec::new());
+    // Each frame is closer to the model drawn at its sidecar angle than at 5° either side (the
+    // capture claims 0.5°). The camera's noise is drawn afresh at every angle, so every
+    // comparison carries the same noise floor and only the model's pose can tell them apart.
+    let mut frames = Vec::new();
     while let Some((i, f)) = reader.read().unwrap() {
         let a = rows[i].angle_deg as f32;
-        at.push(diff(&f.bgr, &scene.frame(a, 256, 144).bgr));
-        off.push(diff(&f.bgr, &scene.frame(a + 45.0, 256, 144).bgr));
+        let at = diff(&f.bgr, &scene.frame(a, 256, 144).bgr);
+        let near = [a - 5.0, a + 5.0].map(|b| diff(&f.bgr, &scene.frame(b, 256, 144).bgr));
+        frames.push((a, at, near[0].min(near[1])));
     }
-    let worst = at.iter().cloned().fold(0.0, f64::max);
-    let closest_off = off.iter().cloned().fold(f64::INFINITY, f64::min);
-    eprintln!("mean |Δ| per byte: at the sidecar angle ≤ {worst:.2}, 45° off ≥ {closest_off:.2}");
-    assert!(at.len() >= 10 && worst < closest_off, "at {at:?}\noff {off:?}");
+    eprintln!("(angle, mean |Δ| per byte at it, at 5° off): {frames:.2?}");
+    // The simulated camera draws each frame when it is due, so a busy machine films fewer of
+    // them (4 or 5 of 35 with sixteen busy threads on two cores): a few suffice to tell the angles.
+    assert!(frames.len() >= 3 && frames.iter().all(|f| f.1 < f.2), "{frames:?}");
     // --texture without a model to paint is refused.
     let o = pav_rig()
         .args(["capture", "--port", "sim", "--camera", "gst-test", "--rig"])
