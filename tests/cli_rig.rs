@@ -229,8 +229,7 @@ fn the_simulated_car_is_filmed_at_the_angles_its_sidecar_states() {
     assert!(rows.len() >= 10, "{} frames", rows.len());
     let views = pav::scene::views::ViewsConfig::load(&cfg).unwrap();
     let car = pav::scene::turntable::CarScene::new(&views, None, Some(20.0)).unwrap();
-    let diff =
-        |a: &[u8], b: &[u8]| a.iter().zip(b).map(|(x, y)| (*x as f64 - *y as f64).abs()).sum::<f64>() / a.len() as f64;
+    let diff = common::mean_abs_diff;
     // Each recorded frame is the car drawn at its sidecar angle, not 20° off it. H.264's 4:2:0
     // colour and compression leave about 3 per byte even at the right angle (measured 2.7–2.8);
     // at distance 5 the car fills less of the frame, so 20° off adds about 2 (measured 4.8–5.9).

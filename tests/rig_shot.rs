@@ -293,9 +293,7 @@ fn the_rasterizer_films_the_rigs_frames_at_the_views_angles() {
     // quarter turn on (about 14).
     let scene = CarScene::from_rig(&r, None, 0).unwrap();
     let mut reader = pav::video::VideoReader::open(&videos[0]).unwrap();
-    let diff = |a: &[u8], b: &[u8]| {
-        a.iter().zip(b).map(|(x, y)| (f64::from(*x) - f64::from(*y)).abs()).sum::<f64>() / a.len() as f64
-    };
+    let diff = common::mean_abs_diff;
     while let Some((i, f)) = reader.read().unwrap() {
         assert_eq!((f.width, f.height), (256, 144));
         let a = rows[i].angle_deg as f32;
@@ -330,9 +328,7 @@ fn a_capture_names_its_rig_and_its_simulated_camera_films_the_rigs_model() {
     let scene = CarScene::from_rig(&r, None, 0).unwrap();
     let rows = pav::sidecar::read(&pav::sidecar::sidecar_path(&video)).unwrap();
     let mut reader = pav::video::VideoReader::open(&video).unwrap();
-    let diff = |a: &[u8], b: &[u8]| {
-        a.iter().zip(b).map(|(x, y)| (f64::from(*x) - f64::from(*y)).abs()).sum::<f64>() / a.len() as f64
-    };
+    let diff = common::mean_abs_diff;
     // Each frame is closer to the model drawn at its sidecar angle than at 5° either side (the
     // capture claims 0.5°). The camera's noise is drawn afresh at every angle, so every
     // comparison carries the same noise floor and only the model's pose can tell them apart.

@@ -109,6 +109,13 @@ pub fn decoded_frames(video: &Path) -> Result<usize, pav::video::VideoError> {
     Ok(n)
 }
 
+/// Mean absolute difference per byte of two images of one size: how far a decoded frame is from
+/// the one it should be.
+pub fn mean_abs_diff(a: &[u8], b: &[u8]) -> f64 {
+    assert_eq!(a.len(), b.len(), "images of different sizes");
+    a.iter().zip(b).map(|(x, y)| (f64::from(*x) - f64::from(*y)).abs()).sum::<f64>() / a.len() as f64
+}
+
 /// Reads a `run.toml` and checks what every record holds: pav's version and commit, the command
 /// line, the host. Returns it for the caller's own checks.
 pub fn run_record(path: &Path) -> toml::Value {
