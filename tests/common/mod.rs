@@ -116,6 +116,20 @@ pub fn mean_abs_diff(a: &[u8], b: &[u8]) -> f64 {
     a.iter().zip(b).map(|(x, y)| (f64::from(*x) - f64::from(*y)).abs()).sum::<f64>() / a.len() as f64
 }
 
+/// Waits until a running capture's angle sidecar holds `rows` rows (it is flushed row by row):
+/// progress to act on that does not depend on how busy the machine is. Panics after `limit`.
+pub fn wait_for_sidecar_rows(sidecar: &Path, rows: usize, limit: std::time::Duration) {
+    let start = std::time::Instant::now();
+    loop {
+        let have = std::fs::read_to_string(sidecar).map_or(0, |t| t.lines().count().saturating_sub(1));
+        if have >= rows {
+            return;
+        }
+        assert!(start.elapsed() < limit, "{} holds {have} rows after {limit:?}, waited for {rows}", sidecar.display());
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
 /// Reads a `run.toml` and checks what every record holds: pav's version and commit, the command
 /// line, the host. Returns it for the caller's own checks.
 pub fn run_record(path: &Path) -> toml::Value {
