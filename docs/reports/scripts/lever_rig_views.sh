@@ -11,9 +11,13 @@
 # into out/views_rig_near and out/views_rig_far: 144 views at 0.4 and 0.65 m, 10° and 30°, the
 # studio and courtyard maps). EVAL names the scoring folder; the paired comparisons go to
 # paired-LABEL (with EVAL=eval-X: paired-X-LABEL). RIGVIEWS names the rig view sets to render
-# first (default "near far"). Resumes: finished textures, paints, films and views are kept.
+# first (default "near far"). PRINT=1 sticks every texture on as printed (`pav paint --print`:
+# Ghostscript's CMYK profile, relative colorimetric), RAUCA-E2E's included; the original paint
+# is not printed. TEXTURES names the folder that holds (or gets) the optimized textures
+# (default OUT), so that one set of textures can be filmed both ways. Resumes: finished
+# textures, paints, films and views are kept.
 # usage: [SEEDS="0 1 2 3"] [VARIANTS="A=CONFIG B=CONFIG"] [AGAINST="rauca A"] [EVAL=eval] [RIGVIEWS="near far"]
-#        docs/reports/scripts/lever_rig_views.sh OUT   (from the repository root)
+#        [PRINT=1] [TEXTURES=DIR] docs/reports/scripts/lever_rig_views.sh OUT   (from the repository root)
 set -euo pipefail
 out=$1
 pav=${PAV:-target/release/pav}
@@ -23,6 +27,8 @@ seeds=${SEEDS:-0}
 variants=${VARIANTS:-plain=configs/studies/print-base.toml rig=configs/studies/rig-views.toml}
 against=${AGAINST:-rauca plain}
 eval_dir=${EVAL:-eval}
+textures=${TEXTURES:-$out}
+print=(); [ -z "${PRINT:-}" ] || print=(--print)
 # The rig views the variants train on: configs/rig/train-etron-NAME.toml into out/views_rig_NAME
 # (NAME with - as _), for each NAME of RIGVIEWS.
 for n in ${RIGVIEWS:-near far}; do
@@ -35,12 +41,12 @@ for s in $seeds; do
     c=${v%%=*} cfg=${v#*=}
     case $cfg in /*) ;; *) cfg="$here/$cfg" ;; esac
     printf 'extends = "%s"\n\n[optimizer]\nseed = %s\n' "$cfg" "$s" > "$out/configs/$c-s$s.toml"
-    [ -f "$out/$c-s$s/texture.png" ] || "$pav" optimize --config "$out/configs/$c-s$s.toml" -o "$out/$c-s$s"
-    [ -f "$out/paint/$c-s$s.png" ] || "$pav" paint --config configs/studies/print-base.toml --texture "$out/$c-s$s/texture.png" -o "$out/paint/$c-s$s.png"
+    [ -f "$textures/$c-s$s/texture.png" ] || "$pav" optimize --config "$out/configs/$c-s$s.toml" -o "$textures/$c-s$s"
+    [ -f "$out/paint/$c-s$s.png" ] || "$pav" paint --config configs/studies/print-base.toml --texture "$textures/$c-s$s/texture.png" "${print[@]}" -o "$out/paint/$c-s$s.png"
     "$pav" views turntable --rig "$out/rig.toml" --texture "$out/paint/$c-s$s.png" -o "$out/film/$c-s$s" > /dev/null
   done
 done
-[ -f "$out/paint/rauca.png" ] || "$pav" paint --config configs/studies/print-base.toml --texture data:rauca-e2e/RAUCA_E2E.png -o "$out/paint/rauca.png"
+[ -f "$out/paint/rauca.png" ] || "$pav" paint --config configs/studies/print-base.toml --texture data:rauca-e2e/RAUCA_E2E.png "${print[@]}" -o "$out/paint/rauca.png"
 "$pav" views turntable --rig "$out/rig.toml" --texture "$out/paint/rauca.png" -o "$out/film/rauca" > /dev/null
 "$pav" views turntable --rig "$out/rig.toml" -o "$out/film/original" > /dev/null
 # The two fixed paints once per seed, as links, so that each of their frames pairs with the
