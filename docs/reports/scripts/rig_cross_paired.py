@@ -1,11 +1,12 @@
 #!/usr/bin/env python3
-"""A label of one `pav-rig evaluate` run against a label of another, frame by frame: pairs are
-(detector, seed, shot, frame), the seed read from each video's path (`…-s<K>/…` or `…/seed<K>/…`)
-and the shot from its file name, so the two runs must have filmed the same shots at the same
-seeds (for example one set of textures filmed on screen and as printed). Prints per detector the
-mean best car score of both, the mean difference A − B with its 95 % paired-bootstrap interval
-(10,000 resamples of the pairs, seed 0) and the per-seed means. SEEDS (comma-separated) keeps
-only those seeds: a fixed paint is linked once per seed, so its own comparison takes one.
+"""A label of one `pav-rig evaluate` run against a label of the same or another run, frame by
+frame: the per-seed spread of a comparison within one run, or one set of textures filmed two
+ways. Pairs are (detector, seed, shot, frame), the seed read from each video's path (`…-s<K>/…`
+or `…/seed<K>/…`) and the shot from its file name, so two runs must have filmed the same shots
+at the same seeds. Prints per detector the mean best car score of both, the mean difference
+A − B with its 95 % paired-bootstrap interval (10,000 resamples of the pairs, seed 0) and the
+per-seed means. SEEDS (comma-separated) keeps only those seeds: a fixed paint is linked once per
+seed, so its own comparison takes one.
 usage: rig_cross_paired.py A/frames.csv LABEL_A B/frames.csv LABEL_B [SEEDS]"""
 import csv
 import random
