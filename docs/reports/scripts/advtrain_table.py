@@ -4,15 +4,10 @@ trained against the tuned head (adaptive: beside the three white boxes; alone: a
 against the control trained against the plain YOLOX-Nano, each pair a (seed, held-out photo),
 scored by the plain and by the tuned head. usage: advtrain_table.py OUT (advtrain_study.sh's)."""
 import csv
-import random
 import re
 import sys
 
-
-def bootstrap(d, n=10000, seed=0):
-    rng = random.Random(seed)
-    means = sorted(sum(rng.choice(d) for _ in d) / len(d) for _ in range(n))
-    return sum(d) / len(d), means[int(0.025 * n)], means[int(0.975 * n) - 1]
+from paired_stats import bootstrap
 
 
 out = sys.argv[1]

@@ -9,10 +9,11 @@ per-seed means. SEEDS (comma-separated) keeps only those seeds: a fixed paint is
 seed, so its own comparison takes one.
 usage: rig_cross_paired.py A/frames.csv LABEL_A B/frames.csv LABEL_B [SEEDS]"""
 import csv
-import random
 import re
 import sys
 from collections import defaultdict
+
+from paired_stats import bootstrap
 
 seed_re = re.compile(r"(?:-s|/seed)(\d+)/")
 
@@ -38,16 +39,15 @@ for key, s in a.items():
         pairs[key[0]].append((key[1], s, b[key]))
 if not pairs:
     sys.exit("no frame pairs: the two runs share no (detector, seed, shot, frame)")
-rng = random.Random(0)
 print(f"| detector | pairs | {a_label} (A) | {b_label} (B) | A − B [95 %] | per seed |")
 print("|---|---:|---:|---:|---:|---|")
 for det, ps in pairs.items():
     d = [x - y for _, x, y in ps]
     n = len(d)
-    boots = sorted(sum(d[rng.randrange(n)] for _ in range(n)) / n for _ in range(10_000))
+    mean, lo, hi = bootstrap(d)
     per = defaultdict(list)
     for seed, x, y in ps:
         per[seed].append(x - y)
     seeds = ", ".join(f"s{k} {sum(v) / len(v):+.3f}" for k, v in sorted(per.items()))
     print(f"| {det} | {n} | {sum(x for _, x, _ in ps) / n:.3f} | {sum(y for _, _, y in ps) / n:.3f} "
-          f"| {sum(d) / n:+.3f} [{boots[249]:+.3f}, {boots[9749]:+.3f}] | {seeds} |")
+          f"| {mean:+.3f} [{lo:+.3f}, {hi:+.3f}] | {seeds} |")
