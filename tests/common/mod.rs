@@ -121,7 +121,8 @@ pub fn mean_abs_diff(a: &[u8], b: &[u8]) -> f64 {
 pub fn wait_for_sidecar_rows(sidecar: &Path, rows: usize, limit: std::time::Duration) {
     let start = std::time::Instant::now();
     loop {
-        let have = std::fs::read_to_string(sidecar).map_or(0, |t| t.lines().count().saturating_sub(1));
+        // A row still being written fails to parse: count none until it is whole.
+        let have = pav::sidecar::read(sidecar).map_or(0, |rows| rows.len());
         if have >= rows {
             return;
         }
