@@ -133,11 +133,17 @@ fn the_ci_config_renders_resumes_and_shards() {
     let _ = child.wait();
     let before = manifest_names(&manifest).len();
     assert!((2..6).contains(&before), "{before} views before the kill");
+    // Until it is rerun, the folder is marked unfinished and no consumer takes it for the set.
+    assert!(full.join(pav::scene::views::UNFINISHED).exists());
+    let e = pav::scene::views::read_view_set(&full).unwrap_err().to_string();
+    assert!(e.contains("has not finished"), "{e}");
     let out = run_ok(pav().args(["views", "render"]).arg(&cfg).arg("-o").arg(&full));
     assert!(out.contains(&format!("6 views: {} rendered now, {before} from an earlier run", 6 - before)), "{out}");
     let names = manifest_names(&manifest);
     assert_eq!(names.len(), 6, "{names:?}");
     assert_eq!(names.iter().collect::<std::collections::HashSet<_>>().len(), 6, "{names:?}");
+    assert!(!full.join(pav::scene::views::UNFINISHED).exists());
+    assert_eq!(pav::scene::views::read_view_set(&full).unwrap().1.len(), 6);
     assert!(full.join("contact.png").exists());
     let run = common::run_record(&full.join("run.toml"));
     assert!(run["tools"]["blender"].as_str().unwrap().starts_with("Blender 3."), "{run}");

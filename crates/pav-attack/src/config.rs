@@ -530,13 +530,13 @@ impl std::fmt::Display for MissingViews {
         match &self.config {
             Some(c) => write!(
                 f,
-                "{key} {dir} has not been rendered yet: run `pav views {} {} -o {dir}` first",
+                "{key} {dir} has not been rendered yet, or not to the end: run `pav views {} {} -o {dir}` first",
                 if self.rig { "turntable --rig" } else { "render" },
                 pav_core::provenance::tidy(c).display()
             ),
             None => write!(
                 f,
-                "{key} {dir} has not been rendered yet: render it with `pav views render VIEWS.toml -o {dir}` (views.render can name the config)"
+                "{key} {dir} has not been rendered yet, or not to the end: render it with `pav views render VIEWS.toml -o {dir}` (views.render can name the config)"
             ),
         }
     }
@@ -555,7 +555,7 @@ impl OptimizeConfig {
 
     /// The `views.pbr` and `views.pbr_test` folders that hold no rendered view set yet.
     pub fn missing_views(&self) -> Vec<MissingViews> {
-        let rendered = |d: &Path| d.join("views.toml").is_file();
+        let rendered = |d: &Path| d.join("views.toml").is_file() && !d.join(pav_scene::views::UNFINISHED).exists();
         let pbr = self.views.pbr.iter().enumerate().map(|(i, d)| ("views.pbr", d, self.views.render.get(i)));
         let test = self.views.pbr_test.iter().map(|d| ("views.pbr_test", d, None));
         pbr.chain(test)
@@ -686,6 +686,13 @@ mod tests {
         // A folder with a view set is not missing.
         std::fs::create_dir(dir.path().join("not-rendered")).unwrap();
         std::fs::write(dir.path().join("not-rendered/views.toml"), "").unwrap();
+        assert!(c2.missing_views().is_empty());
+        // One whose render was stopped still is, and so says the message.
+        let unfinished = dir.path().join("not-rendered").join(pav_scene::views::UNFINISHED);
+        std::fs::write(&unfinished, "").unwrap();
+        let text = c2.missing_views()[0].to_string();
+        assert!(text.contains("not to the end") && text.contains("not-rendered"), "{text}");
+        std::fs::remove_file(&unfinished).unwrap();
         assert!(c2.missing_views().is_empty());
     }
 

@@ -641,8 +641,21 @@ impl ViewSetInfo {
     }
 }
 
-/// A rendered view folder: its metadata and the manifest's rows.
+/// The file a render keeps in its folder until every view it covers is written: a folder that
+/// holds it is still being rendered, or its render was stopped, and lacks views.
+pub const UNFINISHED: &str = "unfinished";
+
+/// A rendered view folder: its metadata and the manifest's rows. Refuses a folder whose render
+/// has not finished, since training on part of a view set would pass without a word.
 pub fn read_view_set(dir: &Path) -> Result<(ViewSetInfo, Vec<ViewRecord>), ViewsError> {
+    if dir.join(UNFINISHED).exists() {
+        return Err(ViewsError::Config {
+            path: dir.into(),
+            msg: "its render has not finished: rerun the `pav views` command that made it, which \
+                  renders only the views still missing"
+                .into(),
+        });
+    }
     let info_path = dir.join("views.toml");
     let text = std::fs::read_to_string(&info_path).map_err(io(&info_path))?;
     let info: ViewSetInfo =
@@ -777,6 +790,12 @@ pub fn render_views(
         Some(s) => all.iter().enumerate().filter(|(i, _)| s.picks(*i)).map(|(_, v)| v).collect(),
         None => all.iter().collect(),
     };
+    let unfinished = dir.join(UNFINISHED);
+    std::fs::write(
+        &unfinished,
+        "a render into this folder has not finished; rerun it to render the views still missing\n",
+    )
+    .map_err(io(&unfinished))?;
     let manifest = manifest_path(dir);
     let done = rendered(&manifest, dir)?;
     if std::fs::metadata(&manifest).map_or(true, |m| m.len() == 0) {
@@ -897,6 +916,7 @@ pub fn render_views(
             }
         }
     }
+    std::fs::remove_file(&unfinished).map_err(io(&unfinished))?;
     progress.end(None);
     Ok(RenderSummary { total, resumed, rendered: rendered_now, manifest })
 }
@@ -1051,6 +1071,19 @@ mod tests {
         assert_eq!(text.lines().next(), Some(MANIFEST_HEADER));
         let rows = read_manifest(&manifest).unwrap();
         assert_eq!((rows.len(), rows[0].plate.as_str(), rows[0].seconds), (1, "", 1.5));
+    }
+
+    #[test]
+    fn a_view_set_whose_render_did_not_finish_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("views.toml"), "obj = \"m.obj\"\nnormalize = \"bbox\"\nup = \"+y\"\n").unwrap();
+        let row = "v1,city,views/v1.png,views/v1_mask.png,2.2,15,0,0,1,2,0,0,0,0,1,0,60,64,4,1.5,";
+        std::fs::write(manifest_path(dir.path()), format!("{MANIFEST_HEADER}\n{row}\n")).unwrap();
+        assert_eq!(read_view_set(dir.path()).unwrap().1.len(), 1);
+        // A stopped render leaves its marker: the one view written is not the set.
+        std::fs::write(dir.path().join(UNFINISHED), "").unwrap();
+        let e = read_view_set(dir.path()).unwrap_err().to_string();
+        assert!(e.contains("has not finished") && e.contains("rerun"), "{e}");
     }
 
     #[test]
