@@ -555,11 +555,10 @@ impl OptimizeConfig {
 
     /// The `views.pbr` and `views.pbr_test` folders that hold no rendered view set yet.
     pub fn missing_views(&self) -> Vec<MissingViews> {
-        let rendered = |d: &Path| d.join("views.toml").is_file() && !d.join(pav_scene::views::UNFINISHED).exists();
         let pbr = self.views.pbr.iter().enumerate().map(|(i, d)| ("views.pbr", d, self.views.render.get(i)));
         let test = self.views.pbr_test.iter().map(|d| ("views.pbr_test", d, None));
         pbr.chain(test)
-            .filter(|(_, d, _)| !rendered(d))
+            .filter(|(_, d, _)| !pav_scene::views::is_rendered(d))
             .map(|(key, d, c)| MissingViews {
                 key,
                 dir: d.clone(),

@@ -645,6 +645,11 @@ impl ViewSetInfo {
 /// holds it is still being rendered, or its render was stopped, and lacks views.
 pub const UNFINISHED: &str = "unfinished";
 
+/// Whether `dir` holds a view set whose render finished (what `views.pbr` may name).
+pub fn is_rendered(dir: &Path) -> bool {
+    dir.join("views.toml").is_file() && !dir.join(UNFINISHED).exists()
+}
+
 /// A rendered view folder: its metadata and the manifest's rows. Refuses a folder whose render
 /// has not finished, since training on part of a view set would pass without a word.
 pub fn read_view_set(dir: &Path) -> Result<(ViewSetInfo, Vec<ViewRecord>), ViewsError> {
