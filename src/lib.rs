@@ -1,14 +1,15 @@
 //! pav: physical adversarial camouflage for vehicles (PAV-Camou) and the rig that scores it.
 //!
 //! The workspace's crates are the library's layers; a crate only depends on crates of the layers
-//! below it, and no job depends on another (`tests/layers.rs` checks the manifests):
+//! below it, and no job depends on another (`tests/it/layers.rs` checks the manifests):
 //!
 //! | layer | crates (modules of this crate) |
 //! |---|---|
 //! | 0 base | `pav-core`: [`cluster`], [`colour`], [`data`], [`extends`], [`provenance`], [`image`], [`video`], [`geometry`], [`rng`], [`shard`], [`sidecar`], [`step`], [`table`], [`plot`], [`progress`]; `pav-onnx` (ONNX graphs and their gradients, no pav dependency) |
 //! | 1 method blocks | `pav-print` ([`print`]), `pav-render` ([`render`]), `pav-scene` ([`scene`]), `pav-dataset` ([`dataset`]), `pav-detect` ([`detect`]) |
 //! | 2 jobs | `pav-attack` ([`attack`], the optimizer), `pav-eval` ([`eval`], scoring), `pav-rig` ([`rig`], turntable and capture) |
-//! | 3 experiments | this crate: [`experiments`], what combines the optimizer and scoring, and the binaries |
+//! | 3 studies | `pav-studies` ([`studies`]): the paper's tables and the studies, which combine the optimizer and scoring |
+//! | 4 binaries | this crate: `pav` and `pav-rig`, clap and printing, one file per command |
 //!
 //! This crate re-exports each lower crate under its module name, so `pav::detect` is
 //! `pav_detect` and `pav::image` is `pav_core::image`.
@@ -36,4 +37,4 @@ pub use pav_rig as rig;
 pub use pav_scene as scene;
 
 #[cfg(feature = "optimize")]
-pub mod experiments;
+pub use pav_studies as studies;

@@ -26,7 +26,7 @@ enum Step {
 
 /// Applies the input defences of `chain` to `x`, three planes of `side × side` values in [0, 1]
 /// (R, G, B), in order; model-side defences are skipped (the graph carries them).
-pub fn forward(chain: &[Defence], x: &mut [f32], side: usize) -> Result<Tape, DefenceError> {
+fn forward(chain: &[Defence], x: &mut [f32], side: usize) -> Result<Tape, DefenceError> {
     forward_drawn(chain, x, side, None)
 }
 
@@ -73,7 +73,7 @@ fn forward_drawn(chain: &[Defence], x: &mut [f32], side: usize, draw: Option<u64
 }
 
 /// The gradient with respect to the chain's input from the gradient `g` of its output.
-pub fn backward(tape: &Tape, g: &mut Vec<f32>) {
+fn backward(tape: &Tape, g: &mut Vec<f32>) {
     for step in tape.0.iter().rev() {
         match step {
             Step::Straight => {}

@@ -17,6 +17,7 @@ use super::view::View;
 use super::whitebox::{Ensemble, EnsembleGrad};
 use pav_core::progress::Progress;
 use pav_core::rng::Rng;
+use pav_core::step::{StageTime, Step};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -50,7 +51,7 @@ pub struct StepLog {
     pub max_score: f32,
     /// Whether the step was skipped (non-finite loss or gradient).
     pub skipped: bool,
-    /// Texture → composite (gather + shading), ms.
+    /// Texture → composite (the print channel, gather and shading), ms.
     pub render_ms: f64,
     /// EoT (and the zoom, when the scene lists it), ms.
     pub eot_ms: f64,
@@ -68,6 +69,29 @@ pub struct StepLog {
     /// Each white-box detector's own terms (`loss_detectors.csv`), those that took part.
     #[serde(skip)]
     pub per_detector: Vec<DetectorStep>,
+    /// Each stage of the chain from the texture to the white boxes' input, timed
+    /// (`loss_stages.csv`).
+    #[serde(skip)]
+    pub stages: Vec<StageStep>,
+}
+
+/// One stage's time at one step (a row of `loss_stages.csv`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StageStep {
+    /// Global step.
+    pub step: u64,
+    /// The stage (`print`, `render`, `eot`, `zoom`).
+    pub stage: String,
+    /// Its forward pass, ms.
+    pub forward_ms: f64,
+    /// Its adjoint, ms.
+    pub adjoint_ms: f64,
+}
+
+impl StageStep {
+    fn of(step: u64, t: &StageTime) -> Self {
+        StageStep { step, stage: t.stage.into(), forward_ms: t.forward_ms, adjoint_ms: t.adjoint_ms }
+    }
 }
 
 /// One white-box detector's terms at one step (a row of `loss_detectors.csv`).
@@ -161,6 +185,9 @@ pub enum OptimizeError {
     /// The initial texture's file.
     #[error(transparent)]
     Init(#[from] pav_core::image::ImageError),
+    /// A stage of the chain from the texture to the white boxes' input.
+    #[error(transparent)]
+    Chain(#[from] pav_core::step::ChainError),
     /// The config's `optimizer.levels` do not fit its texture size.
     #[error(transparent)]
     Pyramid(#[from] super::pyramid::PyramidError),
@@ -255,26 +282,15 @@ pub fn step(
     grad: &mut [f32],
 ) -> Result<StepLog, OptimizeError> {
     let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
-    let t = Instant::now();
-    let printed = setup.print.as_ref().map(|p| p.printed(tex));
-    let mut img = view.render_plain(printed.as_deref().unwrap_or(tex));
-    let render_ms = ms(t);
-    let t = Instant::now();
-    let tape = view.effects(&mut img, &setup.scene, rng);
-    let eot_ms = ms(t);
+    let chain = setup.chain(view);
+    let (img, mut tape) = chain.forward(tex, rng)?;
     let drawn = draw_members(wb.members.len(), cfg.optimizer.white_boxes_per_step, rng);
-    let car = view.car_box.map(|b| tape.zoom.as_ref().map_or(b, |z| z.map_box(b, view.size)));
+    let car = chain.map_box(&tape, None);
     let EnsembleGrad { sum: g, per_detector } = wb.loss_and_grad_of(&drawn, &img, view.size, cfg.loss.beta, car)?;
+    chain.adjoint_timed(&mut tape, &g.grad, grad);
     let t = Instant::now();
-    // Through the print channel the render's adjoint lands on the printed texture first.
-    let mut grad_printed = setup.print.as_ref().map(|_| vec![0f32; grad.len()]);
-    let into = grad_printed.as_deref_mut().unwrap_or(grad);
-    view.adjoint(&tape, &g.grad, into);
-    let gamut = match (&setup.print, &grad_printed) {
-        (Some(p), Some(gp)) => p.backward(tex, gp, &setup.region_texels, grad),
-        _ => 0.0,
-    };
-    let adjoint_ms = ms(t);
+    let gamut = setup.print.as_ref().map_or(0.0, |p| p.gamut(tex, &setup.region_texels, grad));
+    let adjoint_ms = tape.adjoint_ms() + ms(t);
     let t = Instant::now();
     let ls = smoothness(tex, setup.tex_size, setup.tex_size, cfg.loss.smoothness, cfg.loss.gamma, grad);
     let optimizer_ms = ms(t);
@@ -307,14 +323,15 @@ pub fn step(
         proposals: d.proposals,
         max_score: d.max_score,
         skipped: false,
-        render_ms,
-        eot_ms,
+        render_ms: tape.forward_ms(&["print", "render"]),
+        eot_ms: tape.forward_ms(&["eot", "zoom"]),
         forward_ms: g.forward_ms,
         backward_ms: g.backward_ms,
         adjoint_ms,
         optimizer_ms,
         view_ms: 0.0,
         per_detector,
+        stages: tape.times.iter().map(|s| StageStep::of(0, s)).collect(),
     })
 }
 
@@ -330,24 +347,33 @@ fn write_rows<T: Serialize>(path: &Path, rows: impl Iterator<Item = T>) -> Resul
     std::fs::rename(&tmp, path).map_err(|source| OptimizeError::Io { path: path.into(), source })
 }
 
-/// `loss.csv` and `loss_detectors.csv` in `dir`.
+/// `loss.csv`, `loss_detectors.csv` and `loss_stages.csv` in `dir`.
 fn write_log(dir: &Path, log: &[StepLog]) -> Result<(), OptimizeError> {
     write_rows(&dir.join("loss.csv"), log.iter())?;
-    write_rows(&dir.join("loss_detectors.csv"), log.iter().flat_map(|s| s.per_detector.iter()))
+    write_rows(&dir.join("loss_detectors.csv"), log.iter().flat_map(|s| s.per_detector.iter()))?;
+    write_rows(&dir.join("loss_stages.csv"), log.iter().flat_map(|s| s.stages.iter()))
 }
 
 /// The records of the steps before `upto` from `dir`'s logs (for a resumed run).
 fn read_log(dir: &Path, upto: u64) -> Vec<StepLog> {
     let Ok(mut r) = csv::Reader::from_path(dir.join("loss.csv")) else { return Vec::new() };
     let mut log: Vec<StepLog> = r.deserialize::<StepLog>().filter_map(Result::ok).filter(|s| s.step < upto).collect();
-    if let Ok(mut r) = csv::Reader::from_path(dir.join("loss_detectors.csv")) {
-        for d in r.deserialize::<DetectorStep>().filter_map(Result::ok) {
-            if let Some(s) = log.iter_mut().find(|s| s.step == d.step) {
-                s.per_detector.push(d);
-            }
+    for d in read_rows::<DetectorStep>(&dir.join("loss_detectors.csv")) {
+        if let Some(s) = log.iter_mut().find(|s| s.step == d.step) {
+            s.per_detector.push(d);
+        }
+    }
+    for d in read_rows::<StageStep>(&dir.join("loss_stages.csv")) {
+        if let Some(s) = log.iter_mut().find(|s| s.step == d.step) {
+            s.stages.push(d);
         }
     }
     log
+}
+
+/// The rows of a log beside `loss.csv` that read (none when the file is missing).
+fn read_rows<T: serde::de::DeserializeOwned>(path: &Path) -> Vec<T> {
+    csv::Reader::from_path(path).map(|mut r| r.deserialize().filter_map(Result::ok).collect()).unwrap_or_default()
 }
 
 /// Runs (or resumes) the optimization of `cfg` (loaded from `cfg_path`) on `setup`; `progress`
@@ -461,6 +487,7 @@ pub fn optimize_texture(
         let mut rec = step(setup, wb, cfg, &view, &tex, &mut rng, &mut grad)?;
         (rec.step, rec.epoch, rec.view_ms) = (s, epoch, view_ms);
         rec.per_detector.iter_mut().for_each(|d| d.step = s);
+        rec.stages.iter_mut().for_each(|d| d.step = s);
         let finite = rec.total.is_finite() && setup.region_values.iter().all(|&i| grad[i as usize].is_finite());
         if finite {
             let t = Instant::now();

@@ -12,9 +12,10 @@ use pav_core::geometry::parts::select_faces;
 use pav_core::geometry::uv::faces_mask;
 use pav_core::image::resize::{resize, Interpolation};
 use pav_core::image::{to_u8, Frame, ImageError, Rgb};
+use pav_core::step::Chain;
 use pav_dataset::fca::CarlaSample;
 use pav_detect::BBox;
-use pav_print::channel::{region_texels, PrintChannel};
+use pav_print::channel::{region_texels, PrintChannel, Printing};
 use pav_render::bake::{bake, BakeError, Plate, Shot, BAKE_SIZE};
 use pav_render::mask::MaskError;
 use pav_render::shade::{vertex_normals, Lights};
@@ -123,7 +124,7 @@ pub struct Setup {
     pub plates: HashMap<String, String>,
     /// The `[print]` table's channel: the white boxes see the texture through it in training.
     pub print: Option<PrintChannel>,
-    /// The channel scores see textures through (`experiments`): the `[print]` table's unless a
+    /// The channel scores see textures through (the studies): the `[print]` table's unless a
     /// command names another.
     pub print_scored: Option<PrintChannel>,
     /// The optimizable texels (the region's, as texel indices), for the print channel's adjoint.
@@ -381,6 +382,17 @@ fn silhouette_box(mask: &Rgb, size: usize) -> Option<BBox> {
     Some([x0 as f32 * sx, y0 as f32 * sy, x1 as f32 * sx, y1 as f32 * sy])
 }
 
+/// The config's region at a texture's size, for a texture read from a file; `None` when the
+/// texture is not square (every texel counts).
+pub fn region_at(cfg: &OptimizeConfig, width: usize, height: usize) -> Result<Option<Vec<f32>>, SetupError> {
+    if width != height {
+        return Ok(None);
+    }
+    let mut c = cfg.clone();
+    c.mesh.texture_size = width;
+    Ok(Some(mesh_and_region(&c)?.1))
+}
+
 /// The config's mesh in its camera convention's frame, and its optimizable region at the
 /// texture size: the white texels of `mesh.region` on the faces of `mesh.parts` (1 or 0 per texel).
 pub fn mesh_and_region(cfg: &OptimizeConfig) -> Result<(Mesh, Vec<f32>), SetupError> {
@@ -569,6 +581,18 @@ impl Setup {
     pub fn training_views(&self) -> Vec<ViewRef<'_>> {
         let pbr = self.pbr.iter().filter(|v| !self.over_held_out(v.name())).map(PbrView::as_ref);
         self.train.iter().chain(&self.synthetic).map(ViewRef::Built).chain(pbr).collect()
+    }
+
+    /// What the white boxes see of the texture on `view`, as one chain of steps: the print
+    /// channel when the config has a `[print]` table (the gradient passing back to the region's
+    /// texels only), then the view's render, composite and the scene's effects.
+    pub fn chain<'a>(&'a self, view: &'a View) -> Chain<'a> {
+        let mut c = Chain::new();
+        if let Some(p) = &self.print {
+            let texels = self.tex_size * self.tex_size;
+            c.push("print", Printing { channel: p, texels, region: Some(&self.region_texels) });
+        }
+        c.and(view.chain(&self.scene))
     }
 
     /// The view `v` lists: itself, or rebuilt from its files (the same view, bit for bit, as

@@ -9,13 +9,13 @@ use pav_core::geometry::mesh::Mesh;
 use pav_core::image::resize::{resize, Interpolation};
 use pav_core::image::Frame;
 use pav_core::rng::Rng;
-use pav_core::step::Step;
+use pav_core::step::{Chain, Step};
 use pav_render::mask::{dual_render_mask, MaskError};
 use pav_render::raster::GBuffer;
 use pav_render::shade::{Lights, Shading};
 use pav_render::texture::Gather;
-use pav_scene::eot::{self, EotTape};
-use pav_scene::zoom::{self, ZoomTape};
+use pav_scene::eot::{self, Eot};
+use pav_scene::zoom::{self, Zoom};
 use pav_scene::Scene;
 
 /// A view ready for rendering.
@@ -39,15 +39,6 @@ pub struct View {
     gather: Gather,
     /// The shading at the active pixels, when the scene is lit.
     shade: Option<Shading>,
-}
-
-/// What [`View::adjoint`] needs from one pass of the scene's effects.
-#[derive(Clone, Debug)]
-pub struct ViewTape {
-    /// The EoT's gains.
-    pub eot: EotTape,
-    /// The zoom drawn, if the scene has one.
-    pub zoom: Option<ZoomTape>,
 }
 
 impl View {
@@ -107,43 +98,16 @@ impl View {
         img
     }
 
-    /// The scene's effects on a composite from [`View::render_plain`], in place: EoT at the
-    /// textured pixels, then the zoom; the tape for [`View::adjoint`].
-    pub fn effects(&self, img: &mut [f32], scene: &Scene, rng: &mut Rng) -> ViewTape {
-        let eot = eot::apply(scene, img, 3, &self.active, rng);
-        let zoom = zoom::apply(scene, img, self.size, rng);
-        ViewTape { eot, zoom }
-    }
-
-    /// What the detectors see for texture `tex`: the composite through the scene's effects.
-    pub fn forward(&self, tex: &[f32], scene: &Scene, rng: &mut Rng) -> (Vec<f32>, ViewTape) {
-        let mut img = self.render_plain(tex);
-        let tape = self.effects(&mut img, scene, rng);
-        (img, tape)
-    }
-
-    /// Accumulates `∂L/∂texture` into `grad_tex` from `∂L/∂image` of the image
-    /// [`View::forward`] gave.
-    pub fn adjoint(&self, tape: &ViewTape, grad_img: &[f32], grad_tex: &mut [f32]) {
-        match &tape.zoom {
-            Some(z) => self.backward(&tape.eot, &zoom::backward(z, grad_img, self.size), grad_tex),
-            None => self.backward(&tape.eot, grad_img, grad_tex),
+    /// What the detectors see for a texture, as a chain of steps: the render and composite,
+    /// then the scene's EoT at the textured pixels, then its zoom when it lists one.
+    pub fn chain<'a>(&'a self, scene: &'a Scene) -> Chain<'a> {
+        let mut c = Chain::new()
+            .then("render", Composite { view: self })
+            .then("eot", Eot { scene, active: &self.active, pixels: self.size * self.size });
+        if zoom::range(scene).is_some() {
+            c.push("zoom", Zoom { scene, size: self.size });
         }
-    }
-
-    /// Accumulates `∂L/∂texture` into `grad_tex` from `∂L/∂image` (interleaved RGB) of the
-    /// composite before the zoom.
-    fn backward(&self, tape: &EotTape, grad_img: &[f32], grad_tex: &mut [f32]) {
-        let mut g = vec![0f32; grad_img.len()];
-        for p in &self.active {
-            let i = *p as usize * 3;
-            g[i..i + 3].copy_from_slice(&grad_img[i..i + 3]);
-        }
-        eot::backward(tape, &mut g, 3, &self.active);
-        if let Some(s) = &self.shade {
-            s.adjoint(&mut g, 3);
-        }
-        self.gather.adjoint(&g, 3, grad_tex);
+        c
     }
 
     /// The texels this view reads (a bilinear tap with non-zero weight), each once, ascending.
@@ -173,16 +137,15 @@ impl View {
     }
 }
 
-/// A view's whole chain under a scene, as a step from the texture to what the detectors see.
-pub struct Rendered<'a> {
+/// A view's render and composite, as a step from the texture to the composite before the
+/// scene's effects: linear in the texture, read at the textured pixels only.
+pub struct Composite<'a> {
     /// The view.
     pub view: &'a View,
-    /// The scene whose effects are drawn.
-    pub scene: &'a Scene,
 }
 
-impl Step for Rendered<'_> {
-    type Tape = ViewTape;
+impl Step for Composite<'_> {
+    type Tape = ();
     type Error = std::convert::Infallible;
 
     fn input_len(&self) -> usize {
@@ -194,11 +157,24 @@ impl Step for Rendered<'_> {
         self.view.size * self.view.size * 3
     }
 
-    fn forward(&self, x: &[f32], rng: &mut Rng) -> Result<(Vec<f32>, ViewTape), Self::Error> {
-        Ok(self.view.forward(x, self.scene, rng))
+    fn forward(&self, x: &[f32], _: &mut Rng) -> Result<(Vec<f32>, ()), Self::Error> {
+        Ok((self.view.render_plain(x), ()))
     }
 
-    fn adjoint(&self, tape: &ViewTape, gy: &[f32], gx: &mut [f32]) {
-        self.view.adjoint(tape, gy, gx);
+    fn adjoint(&self, _: &(), gy: &[f32], gx: &mut [f32]) {
+        // The photo does not depend on the texture: only the textured pixels carry a gradient.
+        let mut g = vec![0f32; gy.len()];
+        for p in &self.view.active {
+            let i = *p as usize * 3;
+            g[i..i + 3].copy_from_slice(&gy[i..i + 3]);
+        }
+        if let Some(s) = &self.view.shade {
+            s.adjoint(&mut g, 3);
+        }
+        self.view.gather.adjoint(&g, 3, gx);
+    }
+
+    fn map_box(&self, _: &(), _: Option<[f32; 4]>) -> Option<[f32; 4]> {
+        self.view.car_box
     }
 }

@@ -12,12 +12,14 @@
 //! score by its overlap with the car.
 
 use super::config::OptimizeConfig;
-use super::defended::{self, Tape};
+use super::defended::Defended;
 use super::loss::{DetectionLoss, HeadShapeError, Predictions};
 use pav_core::image::resize::Resampler;
+use pav_core::rng::Rng;
+use pav_core::step::{Chain, ChainTape, Step};
 use pav_detect::config::{ChannelOrder, DetectorConfig, ExtraInput, ExtraValue, OutputLayout};
 use pav_detect::decode::{box_jacobians, decode, BoxTerm, LayoutError, RawOutput};
-use pav_detect::defence::Defence;
+use pav_detect::defence::{Defence, DefenceError};
 use pav_detect::preprocess::InputMap;
 use pav_detect::BBox;
 use pav_detect::DetectError;
@@ -105,6 +107,16 @@ pub enum WhiteBoxError {
     /// A graph without a gradient.
     #[error("white-box detector: {0}")]
     Autodiff(#[from] AutodiffError),
+    /// A stage of the composite's way to the model input failed.
+    #[error("white-box detector {detector}: {stage}: {why}")]
+    Input {
+        /// The detector.
+        detector: String,
+        /// The stage.
+        stage: &'static str,
+        /// Why.
+        why: String,
+    },
     /// ONNX Runtime refused the graphs, or their shapes could not be folded.
     #[error("white-box detector: {0}")]
     Onnx(#[from] pav_onnx::OnnxError),
@@ -391,35 +403,36 @@ impl WhiteBox {
         self.session.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// The model input of the `size × size` composite `img`: resized, channels ordered and
-    /// normalized as the config says, behind its input defences (what their backward needs).
-    fn model_input(&self, img: &[f32], size: usize) -> Result<(Vec<f32>, Tape), WhiteBoxError> {
+    /// The composite to the model's input, as a chain of steps: resized to the input size,
+    /// behind the config's input defences (when it has any), channels ordered and normalized.
+    fn input_chain(&self) -> Chain<'_> {
+        let mut c = Chain::new().then("resize", &self.resample);
+        if self.defence.iter().any(Defence::on_input) {
+            c.push("defences", Defended { chain: &self.defence, side: self.input });
+        }
+        let n = Normalize { channel: self.channel, gain: self.gain, offset: self.offset, side: self.input };
+        c.then("normalize", n)
+    }
+
+    /// The model input of the `size × size` composite `img`, and what its adjoint needs.
+    fn model_input(&self, img: &[f32], size: usize) -> Result<(Vec<f32>, ChainTape), WhiteBoxError> {
         if size != self.composite || img.len() != size * size * 3 {
             return Err(WhiteBoxError::Size { got: img.len(), expected: self.composite });
         }
-        let mut rgb = self.resample.apply(img, 3);
-        let tape = defended::forward(&self.defence, &mut rgb, self.input)
-            .map_err(|source| DetectError::Defence { detector: self.name.clone(), source })?;
-        let plane = self.input * self.input;
-        let mut x = vec![0f32; 3 * plane];
-        for c in 0..3 {
-            let src = &rgb[self.channel[c] * plane..(self.channel[c] + 1) * plane];
-            let (g, o) = (self.gain[c], self.offset[c]);
-            x[c * plane..(c + 1) * plane].iter_mut().zip(src).for_each(|(d, &v)| *d = v * g + o);
-        }
-        Ok((x, tape))
+        // The defences draw from the image itself, so the chain's generator is never read.
+        self.input_chain().forward(img, &mut Rng::new(0)).map_err(|e| match e.source.downcast::<DefenceError>() {
+            Ok(source) => DetectError::Defence { detector: self.name.clone(), source: *source }.into(),
+            Err(source) => {
+                WhiteBoxError::Input { detector: self.name.clone(), stage: e.stage, why: source.to_string() }
+            }
+        })
     }
 
     /// The adjoint of [`WhiteBox::model_input`] (of its forward that left `tape`).
-    fn input_adjoint(&self, g: &[f32], tape: &Tape) -> Vec<f32> {
-        let plane = self.input * self.input;
-        let mut rgb = vec![0f32; 3 * plane];
-        for c in 0..3 {
-            let dst = &mut rgb[self.channel[c] * plane..(self.channel[c] + 1) * plane];
-            dst.iter_mut().zip(&g[c * plane..(c + 1) * plane]).for_each(|(d, &v)| *d += v * self.gain[c]);
-        }
-        defended::backward(tape, &mut rgb);
-        self.resample.adjoint(&rgb, 3)
+    fn input_adjoint(&self, g: &[f32], tape: &ChainTape) -> Vec<f32> {
+        let mut grad = vec![0f32; self.composite * self.composite * 3];
+        self.input_chain().adjoint(tape, g, &mut grad);
+        grad
     }
 
     /// Each prediction's box in composite pixels (xyxy), in the order [`Predictions`] reads them:
@@ -559,7 +572,7 @@ impl WhiteBox {
         s: &mut GradSession,
         img: &[f32],
         size: usize,
-    ) -> Result<(Vec<Vec<f32>>, Pass, Tape), WhiteBoxError> {
+    ) -> Result<(Vec<Vec<f32>>, Pass, ChainTape), WhiteBoxError> {
         let (x, tape) = self.model_input(img, size)?;
         let (outs, pass) = s.forward(x)?;
         Ok((outs, pass, tape))
@@ -683,5 +696,46 @@ impl Ensemble {
     /// The first member, which scores the per-view reports.
     pub fn first(&self) -> &WhiteBox {
         &self.members[0].0
+    }
+}
+
+/// The config's channel order and normalization, as a step on a planar model input of
+/// `side × side`: model channel c reads RGB channel `channel[c]` as `v·gain[c] + offset[c]`.
+struct Normalize {
+    channel: [usize; 3],
+    gain: [f32; 3],
+    offset: [f32; 3],
+    side: usize,
+}
+
+impl Step for Normalize {
+    type Tape = ();
+    type Error = std::convert::Infallible;
+
+    fn input_len(&self) -> usize {
+        3 * self.side * self.side
+    }
+
+    fn output_len(&self) -> usize {
+        3 * self.side * self.side
+    }
+
+    fn forward(&self, rgb: &[f32], _: &mut Rng) -> Result<(Vec<f32>, ()), Self::Error> {
+        let plane = self.side * self.side;
+        let mut x = vec![0f32; 3 * plane];
+        for c in 0..3 {
+            let src = &rgb[self.channel[c] * plane..(self.channel[c] + 1) * plane];
+            let (g, o) = (self.gain[c], self.offset[c]);
+            x[c * plane..(c + 1) * plane].iter_mut().zip(src).for_each(|(d, &v)| *d = v * g + o);
+        }
+        Ok((x, ()))
+    }
+
+    fn adjoint(&self, _: &(), gy: &[f32], gx: &mut [f32]) {
+        let plane = self.side * self.side;
+        for c in 0..3 {
+            let dst = &mut gx[self.channel[c] * plane..(self.channel[c] + 1) * plane];
+            dst.iter_mut().zip(&gy[c * plane..(c + 1) * plane]).for_each(|(d, &v)| *d += v * self.gain[c]);
+        }
     }
 }

@@ -1,4 +1,4 @@
-//! Digital-world metrics of the paper's Table 2 over a set of images with one car each.
+//! Digital-world metrics of the paper's Table II over a set of images with one car each.
 //!
 //! ASR = 1 − (images where some car detection scores above the threshold) / images, as the
 //! authors compute it. P@0.5 is the car class's average precision at IoU 0.5 (COCO's

@@ -1,5 +1,5 @@
 //! Evaluation reports: per-frame CSV (streamed), summary CSV/Markdown shaped like the paper's
-//! Table 4, and per-angle CSV.
+//! Table V, and per-angle CSV.
 
 use super::physical::{angle_bins, Accuracy, FrameRecord, Z95};
 use pav_core::table::unique;
@@ -192,7 +192,7 @@ pub(crate) fn write_angles_csv(
     w.flush().map_err(|e| io_err(path, e))
 }
 
-/// Renders the Markdown summary: settings, a Table-4-shaped matrix, details with 95 % CIs, angles.
+/// Renders the Markdown summary: settings, a Table-V-shaped matrix, details with 95 % CIs, angles.
 pub(crate) fn summary_markdown(rows: &[SummaryRow], records: &[FrameRecord], s: &ReportSettings) -> String {
     let mut md = String::new();
     let videos = unique(rows.iter().map(|r| &r.video));

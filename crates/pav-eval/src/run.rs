@@ -28,7 +28,7 @@ use std::time::Instant;
 pub struct VideoJob {
     /// Video file.
     pub path: PathBuf,
-    /// Label in reports (row of the Table-4 matrix).
+    /// Label in reports (row of the Table-V matrix).
     pub label: String,
     /// Angle sidecar; when `None`, `<video>.angles.csv` is used if it exists.
     pub sidecar: Option<PathBuf>,
@@ -216,6 +216,28 @@ pub struct Sharing {
     pub threads: usize,
 }
 
+impl Sharing {
+    /// How the detectors share the cores, in words for a run's first line (empty when they
+    /// run one after another on ONNX Runtime's default threads).
+    pub fn describe(&self) -> String {
+        let mut parts = Vec::new();
+        if self.parallel > 1 {
+            parts.push(format!("{} side by side", self.parallel));
+        }
+        if self.lanes > 1 {
+            parts.push(format!("{} frames at once", self.lanes));
+        }
+        if self.threads > 0 {
+            parts.push(format!("{} thread(s) each", self.threads));
+        }
+        if parts.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", parts.join(", "))
+        }
+    }
+}
+
 /// Most frames in flight chosen without being asked: each costs a copy of every model, and
 /// one decoder thread prepares them all.
 const AUTO_LANES: usize = 4;
@@ -328,9 +350,8 @@ pub fn evaluate(
 ) -> Result<EvalOutcome, ReportError> {
     opts.check()?;
     let t_run = Instant::now();
-    let lanes = opts.lanes.max(1);
     // Lane 0 is the caller's detectors; each further lane scores its frames with copies.
-    let mut copies = (1..lanes)
+    let mut copies = (1..opts.lanes.max(1))
         .map(|_| detectors.iter().map(|d| d.replica()).collect::<Result<Vec<_>, _>>())
         .collect::<Result<Vec<_>, _>>()?;
     std::fs::create_dir_all(&opts.out_dir).map_err(|e| super::report::io_err(&opts.out_dir, e))?;
@@ -342,235 +363,317 @@ pub fn evaluate(
     };
     out.files.push(frames_path);
     let mut angle_sources = Vec::new();
-
     // Where each video's rows, records, failures and angle source begin.
     let mut starts: Vec<[usize; 4]> = Vec::new();
-    let names = file_names(jobs);
-    'videos: for (job, file) in jobs.iter().zip(&names) {
+    for (job, file) in jobs.iter().zip(file_names(jobs)) {
         starts.push([out.rows.len(), out.records.len(), out.failures.len(), angle_sources.len()]);
-        let angles = match job.sidecar.clone().or_else(|| Some(sidecar::sidecar_path(&job.path)).filter(|p| p.exists()))
-        {
-            Some(p) => match sidecar::read(&p) {
-                Ok(rows) => {
-                    angle_sources.push((job.label.clone(), format!("sidecar {}", p.display())));
-                    Angles::Sidecar(rows.into_iter().map(|r| (r.frame, r)).collect())
-                }
-                Err(e) => {
-                    // A video whose angles are wrong is not scored: per-angle results would be.
-                    out.failures.push(e.to_string());
-                    out.rows.extend(failed_rows(&job.label, detectors, &e.to_string()));
-                    continue;
-                }
-            },
-            None => {
-                angle_sources.push((
-                    job.label.clone(),
-                    format!("no sidecar; {}° + 360° × t / {} s", opts.start_angle_deg, opts.rotation_period_s),
-                ));
-                Angles::Period { period_s: opts.rotation_period_s, start_deg: opts.start_angle_deg }
-            }
-        };
-        let reader = match VideoReader::open(&job.path) {
-            Ok(r) => r,
-            Err(e) => {
-                out.failures.push(e.to_string());
-                out.rows.extend(failed_rows(&job.label, detectors, &e.to_string()));
-                continue;
-            }
-        };
-        let info = reader.info().clone();
-        let picks = opts.frames.indices(info.declared_frames);
-        let mut status = "complete".to_string();
-        if let Some(p) = &picks {
-            if p.is_empty() {
-                let why = format!("{} declares no frame count, so frames cannot be spread over it", job.path.display());
-                out.failures.push(format!("{}: {why}", job.label));
+        let opened = video_angles(job, opts).and_then(|(angles, source)| {
+            angle_sources.push((job.label.clone(), source));
+            open_video(job, angles, detectors, opts)
+        });
+        let mut video = match opened {
+            Ok(v) => v,
+            Err((failure, why)) => {
+                out.failures.push(failure);
                 out.rows.extend(failed_rows(&job.label, detectors, &why));
                 continue;
             }
-            if let Frames::Even(n) = opts.frames {
-                if p.len() < n {
-                    status = format!("{n} frames asked, the video declares {}", info.declared_frames);
-                    out.failures.push(format!("{}: {status}", job.label));
-                }
-            }
-        }
-        // The decoder thread also prepares every detector's input, so this thread only runs models.
-        let inputs: Vec<InputConfig> = detectors.iter().map(|d| d.input().clone()).collect();
-        let make = move |f: Frame| inputs.iter().map(|c| Some(prepare(&f, c))).collect::<Vec<_>>();
-        let depth = (2 * lanes).max(4);
-        let mut frames = match (opts.frames, picks) {
-            (Frames::Stride(n), _) => Prefetch::with(reader, move |i| i % n == 0, depth, make),
-            (Frames::Even(_), p) => {
-                let p = p.unwrap_or_default();
-                Prefetch::with(reader, move |i| p.binary_search(&i).is_ok(), depth, make)
-            }
         };
-        progress.begin(&job.label, info.declared_frames as u64);
-        let mut failed_det: Vec<Option<String>> = vec![None; detectors.len()];
-        let mut decoded = 0usize;
-        let mut no_angle = 0usize;
-        let first_record = out.records.len();
-        let scored_before = out.timing.frames_scored;
-        loop {
-            if stop.load(Ordering::Relaxed) {
-                status = format!("interrupted after {decoded} frames");
-                out.interrupted = true;
-                break;
-            }
-            // Up to `lanes` frames, and the time spent waiting for the decoder thread for them
-            // (decoding itself overlaps inference).
-            let t0 = Instant::now();
-            let mut batch = Vec::with_capacity(lanes);
-            let mut last = None;
-            while batch.len() < lanes {
-                match frames.next_step() {
-                    Step::Skipped => {
-                        decoded += 1;
-                        progress.advance(1);
-                    }
-                    Step::Frame(i, f) => {
-                        decoded += 1;
-                        progress.advance(1);
-                        batch.push((i, decoded, f));
-                    }
-                    end => {
-                        last = Some(end);
-                        break;
-                    }
-                }
-            }
-            out.timing.decode_s += t0.elapsed().as_secs_f64();
-            let (idxs, prepared): (Vec<(usize, usize)>, Vec<Vec<Prepared>>) =
-                batch.into_iter().map(|(i, d, f)| ((i, d), f)).unzip();
-            let mut lane_dets: Vec<&mut [Box<dyn Detector>]> = std::iter::once(&mut *detectors)
-                .chain(copies.iter_mut().map(|c| c.as_mut_slice()))
-                .take(idxs.len())
-                .collect();
-            let workers = opts.parallel.max(1) * idxs.len();
-            let results = run_batch(&mut lane_dets, prepared, &failed_det, &out.timing.detector_s, workers);
-            let mut through = decoded;
-            for ((idx, decoded_here), results) in idxs.into_iter().zip(results) {
-                if failed_det.iter().all(Option::is_some) {
-                    break;
-                }
-                through = decoded_here;
-                out.timing.frames_scored += 1;
-                let (time_s, angle_deg) = angles.at(idx, info.fps);
-                no_angle += usize::from(angle_deg.is_none());
-                for (k, (det, result)) in detectors.iter().zip(results).enumerate() {
-                    // A detector that failed on an earlier frame of this batch scored the later
-                    // ones too; as one frame at a time, they are not kept.
-                    let Some((result, seconds)) = result.filter(|_| failed_det[k].is_none()) else { continue };
-                    out.timing.detector_s[k] += seconds;
-                    let props = match result {
-                        Ok(p) => p,
-                        Err(e) => {
-                            out.failures.push(format!("{}: frame {idx}: {e}", job.label));
-                            failed_det[k] = Some(format!("stopped at frame {idx}: {e}"));
-                            continue;
-                        }
-                    };
-                    let best = props.best(det.target_classes());
-                    let rec = FrameRecord {
-                        video: job.label.clone(),
-                        file: file.clone(),
-                        frame: idx,
-                        time_s,
-                        angle_deg,
-                        detector: det.name().to_string(),
-                        detected: best.is_some_and(|b| pav_detect::detected(b.score, opts.threshold)),
-                        max_score: best.map(|b| b.score).unwrap_or(0.0),
-                        x1: best.map(|b| b.bbox[0]),
-                        y1: best.map(|b| b.bbox[1]),
-                        x2: best.map(|b| b.bbox[2]),
-                        y2: best.map(|b| b.bbox[3]),
-                    };
-                    csv.push(&rec)?;
-                    out.records.push(rec);
-                }
-            }
-            match last {
-                Some(Step::Error(e)) => {
-                    status = format!("stopped: {e}");
-                    out.failures.push(e.to_string());
-                    break;
-                }
-                Some(_) => break,
-                None if failed_det.iter().all(Option::is_some) => {
-                    // One frame at a time stops decoding at the frame where the last one failed.
-                    decoded = through;
-                    break;
-                }
-                None => {}
-            }
+        if let Some(f) = video.shortfall.take() {
+            out.failures.push(f);
         }
-        progress.end(None);
-        out.timing.frames_decoded += decoded;
-        if decoded == 0 && status == "complete" {
-            status = "no frames decoded".into();
-            out.failures.push(format!("{}: no frames could be decoded from {}", job.label, job.path.display()));
-        } else if status == "complete" && info.declared_frames > decoded + 1 {
-            // Containers estimate counts from duration; more than one frame short means a cut file.
-            status = format!("truncated: decoded {decoded} of {} declared frames", info.declared_frames);
-            out.failures.push(format!("{}: {status}", job.label));
-        }
-        if let Angles::Sidecar(rows) = &angles {
-            // Frames without a row, and rows for frames the video does not have, mean the
-            // sidecar and the video are not one recording (or one was cut short).
-            let beyond = if out.interrupted { 0 } else { rows.keys().filter(|&&f| f >= decoded).count() };
-            let scored = out.timing.frames_scored - scored_before;
-            let mut problems = Vec::new();
-            if no_angle > 0 {
-                problems.push(format!("{no_angle} of {scored} scored frames have no sidecar row"));
-            }
-            if beyond > 0 {
-                problems.push(format!("the sidecar has {beyond} rows for frames beyond the {decoded} decoded"));
-            }
-            if !problems.is_empty() {
-                let msg = format!("angles incomplete: {}", problems.join("; "));
-                out.failures.push(format!("{}: {msg}", job.label));
-                if status == "complete" {
-                    status = msg;
-                } else {
-                    status = format!("{status}; {msg}");
-                }
-            }
-        }
-        let recs = &out.records[first_record..];
-        for (k, det) in detectors.iter().enumerate() {
-            let name = det.name();
-            out.rows.push(SummaryRow {
-                video: job.label.clone(),
-                detector: name.to_string(),
-                classes: det.target_label(),
-                accuracy: Accuracy::of(recs.iter().filter(|r| r.detector == name)),
-                decoded_frames: decoded,
-                declared_frames: info.declared_frames,
-                videos: 1,
-                status: failed_det[k].clone().unwrap_or_else(|| status.clone()),
-            });
-        }
+        let mut lanes: Vec<&mut [Box<dyn Detector>]> =
+            std::iter::once(&mut *detectors).chain(copies.iter_mut().map(|c| c.as_mut_slice())).collect();
+        let scored = score_video(&mut video, job, &file, &mut lanes, opts, progress, stop, &mut csv, &mut out)?;
+        close_video(&video, scored, job, detectors, &mut out);
         if out.interrupted {
-            break 'videos;
+            break;
         }
     }
-    let ends = [out.rows.len(), out.records.len(), out.failures.len(), angle_sources.len()];
-    for (index, s) in starts.iter().enumerate() {
-        let e = starts.get(index + 1).unwrap_or(&ends);
-        out.videos.push(VideoPart {
-            index,
-            rows: out.rows[s[0]..e[0]].to_vec(),
-            records: e[1] - s[1],
-            failures: out.failures[s[2]..e[2]].to_vec(),
-            angle_source: angle_sources[s[3]..e[3]].first().cloned(),
-        });
-    }
+    out.videos = video_parts(&out, &starts, &angle_sources);
     out.rows = pool(std::mem::take(&mut out.rows));
     let names: Vec<String> = detectors.iter().map(|d| d.name().to_string()).collect();
     write_reports(&mut out, &settings(opts, angle_sources), opts, &names)?;
     out.timing.total_s = t_run.elapsed().as_secs_f64();
     Ok(out)
+}
+
+/// A video opened for scoring: where its angles come from, its decoder (which also prepares
+/// every detector's input) and what is known before the first frame.
+struct OpenVideo {
+    angles: Angles,
+    info: pav_core::video::VideoInfo,
+    frames: Prefetch<Vec<Prepared>>,
+    /// The video's status so far: `complete` until something says otherwise.
+    status: String,
+    /// A failure known at opening (fewer frames than asked), to report once scoring starts.
+    shortfall: Option<String>,
+}
+
+/// The angles of `job`'s frames: its sidecar, else the turntable's period; with the source in
+/// words for the report; a sidecar that cannot be read fails as [`open_video`] does.
+fn video_angles(job: &VideoJob, opts: &EvalOptions) -> Result<(Angles, String), (String, String)> {
+    match job.sidecar.clone().or_else(|| Some(sidecar::sidecar_path(&job.path)).filter(|p| p.exists())) {
+        Some(p) => {
+            // A video whose angles are wrong is not scored: per-angle results would be.
+            let rows = sidecar::read(&p).map_err(|e| (e.to_string(), e.to_string()))?;
+            Ok((Angles::Sidecar(rows.into_iter().map(|r| (r.frame, r)).collect()), format!("sidecar {}", p.display())))
+        }
+        None => Ok((
+            Angles::Period { period_s: opts.rotation_period_s, start_deg: opts.start_angle_deg },
+            format!("no sidecar; {}° + 360° × t / {} s", opts.start_angle_deg, opts.rotation_period_s),
+        )),
+    }
+}
+
+/// Opens `job` for scoring, or says why it cannot be scored at all: (the run's failure line, the
+/// reason in its summary rows).
+fn open_video(
+    job: &VideoJob,
+    angles: Angles,
+    detectors: &[Box<dyn Detector>],
+    opts: &EvalOptions,
+) -> Result<OpenVideo, (String, String)> {
+    let reader = VideoReader::open(&job.path).map_err(|e| (e.to_string(), e.to_string()))?;
+    let info = reader.info().clone();
+    let picks = opts.frames.indices(info.declared_frames);
+    let mut status = "complete".to_string();
+    let mut shortfall = None;
+    if let Some(p) = &picks {
+        if p.is_empty() {
+            let why = format!("{} declares no frame count, so frames cannot be spread over it", job.path.display());
+            return Err((format!("{}: {why}", job.label), why));
+        }
+        if let Frames::Even(n) = opts.frames {
+            if p.len() < n {
+                status = format!("{n} frames asked, the video declares {}", info.declared_frames);
+                shortfall = Some(format!("{}: {status}", job.label));
+            }
+        }
+    }
+    // The decoder thread also prepares every detector's input, so this thread only runs models.
+    let inputs: Vec<InputConfig> = detectors.iter().map(|d| d.input().clone()).collect();
+    let make = move |f: Frame| inputs.iter().map(|c| Some(prepare(&f, c))).collect::<Vec<_>>();
+    let depth = (2 * opts.lanes.max(1)).max(4);
+    let frames = match (opts.frames, picks) {
+        (Frames::Stride(n), _) => Prefetch::with(reader, move |i| i % n == 0, depth, make),
+        (Frames::Even(_), p) => {
+            let p = p.unwrap_or_default();
+            Prefetch::with(reader, move |i| p.binary_search(&i).is_ok(), depth, make)
+        }
+    };
+    Ok(OpenVideo { angles, info, frames, status, shortfall })
+}
+
+/// What scoring one video found, for its summary rows.
+struct Scoring {
+    /// Frames decoded (skipped ones included).
+    decoded: usize,
+    /// Scored frames without an angle.
+    no_angle: usize,
+    /// Frames scored.
+    scored: usize,
+    /// Each detector's failure, which stopped it on this video.
+    failed: Vec<Option<String>>,
+    /// Its first record in the run's records.
+    first_record: usize,
+}
+
+/// Scores the frames of one opened video in batches of one frame per lane, flushing each record
+/// to `csv`; stops at the video's end, a decoder error, Ctrl-C, or when every detector failed.
+#[allow(clippy::too_many_arguments)]
+fn score_video(
+    video: &mut OpenVideo,
+    job: &VideoJob,
+    file: &str,
+    lanes: &mut [&mut [Box<dyn Detector>]],
+    opts: &EvalOptions,
+    progress: &dyn Progress,
+    stop: &AtomicBool,
+    csv: &mut FrameCsv,
+    out: &mut EvalOutcome,
+) -> Result<Scoring, ReportError> {
+    let n_det = lanes[0].len();
+    progress.begin(&job.label, video.info.declared_frames as u64);
+    let mut s =
+        Scoring { decoded: 0, no_angle: 0, scored: 0, failed: vec![None; n_det], first_record: out.records.len() };
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            video.status = format!("interrupted after {} frames", s.decoded);
+            out.interrupted = true;
+            break;
+        }
+        // Up to one frame per lane, and the time spent waiting for the decoder thread for them
+        // (decoding itself overlaps inference).
+        let t0 = Instant::now();
+        let mut batch = Vec::with_capacity(lanes.len());
+        let mut last = None;
+        while batch.len() < lanes.len() {
+            match video.frames.next_step() {
+                Step::Skipped => {
+                    s.decoded += 1;
+                    progress.advance(1);
+                }
+                Step::Frame(i, f) => {
+                    s.decoded += 1;
+                    progress.advance(1);
+                    batch.push((i, s.decoded, f));
+                }
+                end => {
+                    last = Some(end);
+                    break;
+                }
+            }
+        }
+        out.timing.decode_s += t0.elapsed().as_secs_f64();
+        let (idxs, prepared): (Vec<(usize, usize)>, Vec<Vec<Prepared>>) =
+            batch.into_iter().map(|(i, d, f)| ((i, d), f)).unzip();
+        let in_use = idxs.len();
+        let workers = opts.parallel.max(1) * in_use;
+        let results = run_batch(&mut lanes[..in_use], prepared, &s.failed, &out.timing.detector_s, workers);
+        let mut through = s.decoded;
+        for ((idx, decoded_here), results) in idxs.into_iter().zip(results) {
+            if s.failed.iter().all(Option::is_some) {
+                break;
+            }
+            through = decoded_here;
+            out.timing.frames_scored += 1;
+            s.scored += 1;
+            let (time_s, angle_deg) = video.angles.at(idx, video.info.fps);
+            s.no_angle += usize::from(angle_deg.is_none());
+            for (k, (det, result)) in lanes[0].iter().zip(results).enumerate() {
+                // A detector that failed on an earlier frame of this batch scored the later
+                // ones too; as one frame at a time, they are not kept.
+                let Some((result, seconds)) = result.filter(|_| s.failed[k].is_none()) else { continue };
+                out.timing.detector_s[k] += seconds;
+                let props = match result {
+                    Ok(p) => p,
+                    Err(e) => {
+                        out.failures.push(format!("{}: frame {idx}: {e}", job.label));
+                        s.failed[k] = Some(format!("stopped at frame {idx}: {e}"));
+                        continue;
+                    }
+                };
+                let rec = frame_record(job, file, idx, time_s, angle_deg, det.as_ref(), &props, opts.threshold);
+                csv.push(&rec)?;
+                out.records.push(rec);
+            }
+        }
+        match last {
+            Some(Step::Error(e)) => {
+                video.status = format!("stopped: {e}");
+                out.failures.push(e.to_string());
+                break;
+            }
+            Some(_) => break,
+            None if s.failed.iter().all(Option::is_some) => {
+                // One frame at a time stops decoding at the frame where the last one failed.
+                s.decoded = through;
+                break;
+            }
+            None => {}
+        }
+    }
+    progress.end(None);
+    out.timing.frames_decoded += s.decoded;
+    Ok(s)
+}
+
+/// One detector's record of one frame: its best target-class proposal.
+#[allow(clippy::too_many_arguments)]
+fn frame_record(
+    job: &VideoJob,
+    file: &str,
+    frame: usize,
+    time_s: f64,
+    angle_deg: Option<f64>,
+    det: &dyn Detector,
+    props: &Proposals,
+    threshold: f32,
+) -> FrameRecord {
+    let best = props.best(det.target_classes());
+    FrameRecord {
+        video: job.label.clone(),
+        file: file.to_string(),
+        frame,
+        time_s,
+        angle_deg,
+        detector: det.name().to_string(),
+        detected: best.is_some_and(|b| pav_detect::detected(b.score, threshold)),
+        max_score: best.map(|b| b.score).unwrap_or(0.0),
+        x1: best.map(|b| b.bbox[0]),
+        y1: best.map(|b| b.bbox[1]),
+        x2: best.map(|b| b.bbox[2]),
+        y2: best.map(|b| b.bbox[3]),
+    }
+}
+
+/// The video's final status (cut short, no frames, angles that do not match its frames) and its
+/// summary rows, one per detector.
+fn close_video(video: &OpenVideo, s: Scoring, job: &VideoJob, detectors: &[Box<dyn Detector>], out: &mut EvalOutcome) {
+    let (declared, decoded) = (video.info.declared_frames, s.decoded);
+    let mut status = video.status.clone();
+    if decoded == 0 && status == "complete" {
+        status = "no frames decoded".into();
+        out.failures.push(format!("{}: no frames could be decoded from {}", job.label, job.path.display()));
+    } else if status == "complete" && declared > decoded + 1 {
+        // Containers estimate counts from duration; more than one frame short means a cut file.
+        status = format!("truncated: decoded {decoded} of {declared} declared frames");
+        out.failures.push(format!("{}: {status}", job.label));
+    }
+    if let Angles::Sidecar(rows) = &video.angles {
+        // Frames without a row, and rows for frames the video does not have, mean the
+        // sidecar and the video are not one recording (or one was cut short).
+        let beyond = if out.interrupted { 0 } else { rows.keys().filter(|&&f| f >= decoded).count() };
+        let mut problems = Vec::new();
+        if s.no_angle > 0 {
+            problems.push(format!("{} of {} scored frames have no sidecar row", s.no_angle, s.scored));
+        }
+        if beyond > 0 {
+            problems.push(format!("the sidecar has {beyond} rows for frames beyond the {decoded} decoded"));
+        }
+        if !problems.is_empty() {
+            let msg = format!("angles incomplete: {}", problems.join("; "));
+            out.failures.push(format!("{}: {msg}", job.label));
+            status = if status == "complete" { msg } else { format!("{status}; {msg}") };
+        }
+    }
+    let recs = &out.records[s.first_record..];
+    let rows: Vec<SummaryRow> = detectors
+        .iter()
+        .zip(&s.failed)
+        .map(|(det, failed)| SummaryRow {
+            video: job.label.clone(),
+            detector: det.name().to_string(),
+            classes: det.target_label(),
+            accuracy: Accuracy::of(recs.iter().filter(|r| r.detector == det.name())),
+            decoded_frames: decoded,
+            declared_frames: declared,
+            videos: 1,
+            status: failed.clone().unwrap_or_else(|| status.clone()),
+        })
+        .collect();
+    out.rows.extend(rows);
+}
+
+/// What each video added to `out`, from where each one's rows, records, failures and angle
+/// source begin.
+fn video_parts(out: &EvalOutcome, starts: &[[usize; 4]], angle_sources: &[(String, String)]) -> Vec<VideoPart> {
+    let ends = [out.rows.len(), out.records.len(), out.failures.len(), angle_sources.len()];
+    starts
+        .iter()
+        .enumerate()
+        .map(|(index, s)| {
+            let e = starts.get(index + 1).unwrap_or(&ends);
+            VideoPart {
+                index,
+                rows: out.rows[s[0]..e[0]].to_vec(),
+                records: e[1] - s[1],
+                failures: out.failures[s[2]..e[2]].to_vec(),
+                angle_source: angle_sources[s[3]..e[3]].first().cloned(),
+            }
+        })
+        .collect()
 }
 
 /// The report settings of a run with `opts`.
@@ -676,6 +779,34 @@ fn file_names(jobs: &[VideoJob]) -> Vec<String> {
 /// Makes a label usable as part of a file name.
 fn file_safe(s: &str) -> String {
     s.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect()
+}
+
+/// The jobs for `videos`, labelled by `labels` (one per video, or none: each video's file stem)
+/// and with `sidecar` for a single video; refuses mismatched counts and two unlabelled videos
+/// that share a stem (pooling is asked for with labels, never by accident).
+pub fn video_jobs(videos: &[PathBuf], labels: &[String], sidecar: Option<&Path>) -> Result<Vec<VideoJob>, ReportError> {
+    let bad = |m: String| Err(ReportError::Options(m));
+    if !labels.is_empty() && labels.len() != videos.len() {
+        return bad(format!(
+            "{} labels given for {} videos: give one --label per video or none",
+            labels.len(),
+            videos.len()
+        ));
+    }
+    if sidecar.is_some() && videos.len() != 1 {
+        return bad("--sidecar applies to a single video; with several, put <name>.angles.csv beside each".into());
+    }
+    let mut out: Vec<VideoJob> = Vec::new();
+    for (i, v) in videos.iter().enumerate() {
+        let label = labels.get(i).cloned().unwrap_or_else(|| default_label(v));
+        if labels.is_empty() && out.iter().any(|j| j.label == label) {
+            return bad(format!(
+                "two videos share the label `{label}`: use --label to tell them apart (or the same --label to pool them)"
+            ));
+        }
+        out.push(VideoJob { path: v.clone(), label, sidecar: sidecar.map(Path::to_path_buf) });
+    }
+    Ok(out)
 }
 
 /// The default label of a video: its file stem.

@@ -4,8 +4,10 @@
 //! the legitimate items (the original paint) is flagged, as Xu et al. set theirs.
 
 use super::physical::FrameRecord;
+use super::report::ReportError;
 use pav_detect::defence::{chain_label, parse_chain, Defence};
 use std::collections::{BTreeMap, HashMap};
+use std::path::Path;
 
 /// The squeezers, as `--defence` specs: each detector is also scored behind each of them.
 pub const SQUEEZERS: [&str; 2] = ["bits:b=4", "median:k=3"];
@@ -167,6 +169,71 @@ pub fn flag<K>(gaps: &mut [Gap<K>], thresholds: &BTreeMap<String, f32>) -> Vec<S
         r.mean_gap /= r.items.max(1) as f64;
     }
     rows
+}
+
+/// How each detector's threshold on the squeezed score gap is set (`--squeeze-*`).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Thresholds {
+    /// One threshold for every detector.
+    Fixed(f32),
+    /// Per detector, the gap that flags `false_flags` of the frames of the videos labelled
+    /// `clean` (the original paint).
+    Clean {
+        /// Labels of the legitimate videos.
+        clean: Vec<String>,
+        /// Share of their frames flagged.
+        false_flags: f64,
+    },
+}
+
+impl Thresholds {
+    /// Refuses settings that cannot flag anything meaningful, or clean labels that no video has.
+    pub fn check(&self, labels: &[&str]) -> Result<(), ReportError> {
+        let bad = |s: String| Err(ReportError::Options(s));
+        match self {
+            Thresholds::Fixed(t) if !(0.0..=1.0).contains(t) => {
+                bad(format!("--squeeze-threshold {t} must be a score change in [0, 1]"))
+            }
+            Thresholds::Fixed(_) => Ok(()),
+            Thresholds::Clean { false_flags, .. } if !(0.0..1.0).contains(false_flags) => {
+                bad(format!("--squeeze-false-flags {false_flags} must be a share in [0, 1)"))
+            }
+            Thresholds::Clean { clean, .. } => match clean.iter().find(|l| !labels.contains(&l.as_str())) {
+                Some(l) => bad(format!("--squeeze-clean {l}: no video has that label (labels: {})", labels.join(", "))),
+                None => Ok(()),
+            },
+        }
+    }
+
+    /// The setting in words, for `run.toml` and the report.
+    pub fn setting(&self) -> String {
+        match self {
+            Thresholds::Fixed(t) => format!("threshold {t}"),
+            Thresholds::Clean { clean, false_flags } => {
+                format!("{false_flags} of the frames of {} flagged", clean.join(", "))
+            }
+        }
+    }
+}
+
+/// Feature squeezing on evaluate's frames: the per-frame gaps, each detector's threshold and the
+/// flagged shares per video label, written as `squeeze.csv` and `squeeze.md` in `dir`; returns
+/// the Markdown.
+pub fn write_report(records: &[FrameRecord], how: &Thresholds, dir: &Path) -> Result<String, ReportError> {
+    let mut gaps = frame_gaps(records, &labels());
+    let thresholds = match how {
+        Thresholds::Fixed(t) => gaps.iter().map(|g| (g.detector.clone(), *t)).collect(),
+        Thresholds::Clean { clean, false_flags } => thresholds(&gaps, clean, *false_flags),
+    };
+    let rows = flag(&mut gaps, &thresholds);
+    pav_core::table::write_csv(&dir.join("squeeze.csv"), &gaps.iter().map(frame_row).collect::<Vec<_>>())?;
+    let md = format!(
+        "# Feature squeezing as an attack detector\n\n{}\nPer-frame gaps: `squeeze.csv`.\n",
+        markdown(&rows, "frame", &how.setting())
+    );
+    let path = dir.join("squeeze.md");
+    std::fs::write(&path, &md).map_err(|source| ReportError::Io { path, source })?;
+    Ok(md)
 }
 
 /// The table as Markdown (without a title): a row per detector, a column per group (flagged

@@ -253,6 +253,34 @@ pub fn calibrate(
     Ok((cal, rows))
 }
 
+/// Calibrates from `paths` as [`calibrate`] does and writes the fitted map to `out`, with the
+/// per-patch CSV (`out` as .csv) and the report image (`out` as .png) beside it; returns the
+/// calibration and those two files.
+pub fn calibrate_to(
+    target: Target,
+    paths: &[PathBuf],
+    bound: f64,
+    force: bool,
+    out: &Path,
+) -> Result<(Calibration, [PathBuf; 2]), CalibrateError> {
+    let (cal, rows) = calibrate(target, paths, bound, force)?;
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| CalibrateError::Write { path: dir.into(), why: e.to_string() })?;
+    }
+    cal.save(out)?;
+    let csv = out.with_extension("csv");
+    pav_core::table::write_csv(&csv, &rows)
+        .map_err(|e| CalibrateError::Write { path: csv.clone(), why: e.to_string() })?;
+    let png = out.with_extension("png");
+    let r = cal.residual();
+    let title = format!(
+        "{}: {:?}, held-out dE2000 median {:.2}, p90 {:.2}, max {:.2} (swatches: intended | photo | fitted)",
+        cal.measures, r.model, r.median, r.p90, r.max
+    );
+    report_image(&png, &rows, &title)?;
+    Ok((cal, [csv, png]))
+}
+
 /// A report image: per patch, intended | photographed | fitted swatches and the ΔE2000, left-out
 /// patches crossed.
 pub fn report_image(path: &Path, rows: &[PatchRow], title: &str) -> Result<(), CalibrateError> {

@@ -9,7 +9,7 @@ use super::lut::Lut3;
 use super::proof::{ProofError, RenderingIntent, SoftProof, DEFAULT_PROFILE};
 use pav_core::colour::{delta_e2000_srgb, spread};
 use serde::Deserialize;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// `[print]` in an optimize config: the texture is seen by the detectors as this printer prints it.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
@@ -34,6 +34,29 @@ pub struct PrintConfig {
     /// pav's chart) replaces the profile.
     #[serde(default)]
     pub calibration: Option<PathBuf>,
+}
+
+impl PrintConfig {
+    /// This table with a command line's printer options over it, each one where given.
+    pub fn overridden(
+        mut self,
+        profile: Option<&Path>,
+        intent: Option<RenderingIntent>,
+        black_point_compensation: bool,
+        calibration: Option<&Path>,
+    ) -> Self {
+        if let Some(f) = profile {
+            self.profile = f.into();
+        }
+        if let Some(i) = intent {
+            self.intent = i;
+        }
+        self.black_point_compensation |= black_point_compensation;
+        if let Some(c) = calibration {
+            self.calibration = Some(c.into());
+        }
+        self
+    }
 }
 
 fn default_profile() -> PathBuf {
@@ -145,21 +168,18 @@ impl PrintChannel {
         out
     }
 
-    /// Adds into `grad` (∂L/∂texture) the pullback of `grad_printed` (∂L/∂printed) and the
-    /// gradient of the gamut term over `texels`, and returns the gamut term's value
-    /// (`gamut_weight ×` mean ΔE2000; 0 without weight).
-    pub fn backward(&self, tex: &[f32], grad_printed: &[f32], texels: &[u32], grad: &mut [f32]) -> f64 {
+    /// The gamut term over `texels` (`gamut_weight ×` their mean ΔE2000 as printed; 0 without
+    /// weight): a loss on the texture, whose gradient it adds into `grad`.
+    pub fn gamut(&self, tex: &[f32], texels: &[u32], grad: &mut [f32]) -> f64 {
         let per = if texels.is_empty() { 0.0 } else { self.gamut_weight / texels.len() as f32 };
-        let mut g4 = vec![0f32; tex.len() / 3 * 4];
-        for &t in texels {
-            let t = t as usize;
-            g4[4 * t..4 * t + 3].copy_from_slice(&grad_printed[3 * t..3 * t + 3]);
-            g4[4 * t + 3] = per;
-        }
-        self.lut.vjp(tex, &g4, grad, Some(texels));
         if per == 0.0 {
             return 0.0;
         }
+        let mut g4 = vec![0f32; tex.len() / 3 * 4];
+        for &t in texels {
+            g4[4 * t as usize + 3] = per;
+        }
+        self.lut.vjp(tex, &g4, grad, Some(texels));
         let mut v = [0f32; 4];
         let sum: f64 = texels
             .iter()
@@ -195,12 +215,14 @@ pub fn region_texels(region: &[f32]) -> Vec<u32> {
 }
 
 /// Printing an RGB texture of `texels` texels, as a step (the gamut term, a loss of its own, is
-/// in [`PrintChannel::backward`]).
+/// [`PrintChannel::gamut`]).
 pub struct Printing<'a> {
     /// The channel.
     pub channel: &'a PrintChannel,
     /// Texels in the texture.
     pub texels: usize,
+    /// The texels whose gradient passes back (the optimizable region); `None`: every texel.
+    pub region: Option<&'a [u32]>,
 }
 
 impl Step for Printing<'_> {
@@ -225,7 +247,7 @@ impl Step for Printing<'_> {
         for (g, o) in gy.chunks_exact(3).zip(g4.chunks_exact_mut(4)) {
             o[..3].copy_from_slice(g);
         }
-        self.channel.lut.vjp(tex, &g4, gx, None);
+        self.channel.lut.vjp(tex, &g4, gx, self.region);
     }
 }
 
@@ -267,8 +289,7 @@ mod tests {
         let tex: Vec<f32> = (0..3 * 64).map(|_| rng.uniform(0.05, 0.95)).collect();
         let texels: Vec<u32> = (0..64).filter(|i| i % 2 == 0).collect();
         let mut grad = vec![0f32; tex.len()];
-        let zero = vec![0f32; tex.len()];
-        let g = channel.backward(&tex, &zero, &texels, &mut grad);
+        let g = channel.gamut(&tex, &texels, &mut grad);
         let mut mask = vec![0f32; 64];
         texels.iter().for_each(|&t| mask[t as usize] = 1.0);
         let shift = channel.shift(&tex, Some(&mask));
@@ -287,7 +308,7 @@ mod tests {
         // A small step against the gradient lowers the term.
         let stepped: Vec<f32> = tex.iter().zip(&grad).map(|(t, g)| t - 1e-3 * g.signum()).collect();
         let mut scratch = vec![0f32; tex.len()];
-        let after = channel.backward(&stepped, &zero, &texels, &mut scratch);
+        let after = channel.gamut(&stepped, &texels, &mut scratch);
         assert!(after < g, "{after} ≥ {g}");
     }
 }

@@ -130,6 +130,10 @@ impl Step for Zoom<'_> {
             None => accumulate(gx, gy.iter().copied()),
         }
     }
+
+    fn map_box(&self, tape: &Option<ZoomTape>, car: Option<[f32; 4]>) -> Option<[f32; 4]> {
+        car.map(|b| tape.as_ref().map_or(b, |z| z.map_box(b, self.size)))
+    }
 }
 
 #[cfg(test)]

@@ -2,10 +2,11 @@
 
 use crate::common::{ctrl_c_flag, defence_chains, parse_defence, Bar, DefenceArg, ShardArgs};
 use crate::port::parse_seconds;
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use pav::detect::load::load_detectors;
 use pav::eval::report::summary_table;
-use pav::eval::run::{default_label, evaluate, EvalOptions, Frames, Sharing, VideoJob};
+use pav::eval::run::{evaluate, video_jobs, EvalOptions, EvalOutcome, Frames, VideoJob};
+use pav::eval::squeeze::Thresholds;
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -87,25 +88,6 @@ pub struct Args {
     shard: ShardArgs,
 }
 
-fn jobs(a: &Args) -> Result<Vec<VideoJob>> {
-    if !a.labels.is_empty() && a.labels.len() != a.videos.len() {
-        bail!("{} labels given for {} videos: give one --label per video or none", a.labels.len(), a.videos.len());
-    }
-    if a.sidecar.is_some() && a.videos.len() != 1 {
-        bail!("--sidecar applies to a single video; with several, put <name>.angles.csv beside each");
-    }
-    let mut out: Vec<VideoJob> = Vec::new();
-    for (i, v) in a.videos.iter().enumerate() {
-        let label = a.labels.get(i).cloned().unwrap_or_else(|| default_label(v));
-        if a.labels.is_empty() && out.iter().any(|j| j.label == label) {
-            // Pooling is asked for with --label; two files that merely share a stem are not pooled.
-            bail!("two videos share the label `{label}`: use --label to tell them apart (or the same --label to pool them)");
-        }
-        out.push(VideoJob { path: v.clone(), label, sidecar: a.sidecar.clone() });
-    }
-    Ok(out)
-}
-
 pub fn run(a: &Args) -> Result<()> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     if a.threads > cores {
@@ -121,13 +103,13 @@ pub fn run(a: &Args) -> Result<()> {
     if !a.start_angle.is_finite() {
         bail!("--start-angle {} must be a number of degrees", a.start_angle);
     }
-    let jobs = jobs(a)?;
+    let jobs = video_jobs(&a.videos, &a.labels, a.sidecar.as_deref())?;
     let stop = ctrl_c_flag()?;
     let frames = match a.sample {
         Some(n) => Frames::Even(n as usize),
         None => Frames::Stride(a.stride as usize),
     };
-    check_squeeze(a, &jobs)?;
+    let squeezing = squeeze(a, &jobs)?;
     let (mut chains, _) = defence_chains(&a.defences);
     if a.squeeze {
         pav::eval::squeeze::add_squeezers(&mut chains);
@@ -160,14 +142,14 @@ pub fn run(a: &Args) -> Result<()> {
         .setting("sampling", frames.tag())
         .setting("rotation_period_s", a.rotation_period)
         .setting("start_angle_deg", a.start_angle)
-        .setting("squeeze", squeeze_setting(a))
+        .setting("squeeze", squeezing.as_ref().map_or_else(|| "off".into(), Thresholds::setting))
         .tool("onnxruntime", pav_onnx::runtime::runtime_version())
         .tool("opencv", pav::video::opencv_version());
     let shards = a.shard.write_record(record, &a.out)?;
     if let Some(shards) = shards {
         let out = pav::eval::merge::merge(&shards, jobs.len(), &opts)?;
         eprintln!("joined {} shards of {} video(s)", shards.len(), jobs.len());
-        squeeze_report(a, &out, &opts.out_dir)?;
+        squeeze_report(squeezing.as_ref(), &out, &opts.out_dir)?;
         return report(&out, a.threshold);
     }
     // A shard scores its own videos into its folder; the merge puts them back in order.
@@ -178,7 +160,7 @@ pub fn run(a: &Args) -> Result<()> {
         "scoring {} video(s) with {} detector(s){}; threshold {}, classes {}, {}",
         jobs.len(),
         detectors.len(),
-        sharing_text(sharing),
+        sharing.describe(),
         a.threshold,
         detectors.iter().map(|d| format!("{}={}", d.name(), d.target_label())).collect::<Vec<_>>().join(", "),
         frames
@@ -188,87 +170,37 @@ pub fn run(a: &Args) -> Result<()> {
         let names: Vec<String> = detectors.iter().map(|d| d.name().to_string()).collect();
         pav::eval::merge::write_index(&opts.out_dir, &names, &out, &picked)?;
     } else if !out.interrupted {
-        squeeze_report(a, &out, &opts.out_dir)?;
+        squeeze_report(squeezing.as_ref(), &out, &opts.out_dir)?;
     }
     report(&out, a.threshold)
 }
 
-/// How the detectors share the cores, for the run's first line.
-fn sharing_text(s: Sharing) -> String {
-    let mut parts = Vec::new();
-    if s.parallel > 1 {
-        parts.push(format!("{} side by side", s.parallel));
-    }
-    if s.lanes > 1 {
-        parts.push(format!("{} frames at once", s.lanes));
-    }
-    if s.threads > 0 {
-        parts.push(format!("{} thread(s) each", s.threads));
-    }
-    if parts.is_empty() {
-        String::new()
-    } else {
-        format!(" ({})", parts.join(", "))
-    }
-}
-
-/// Checks `--squeeze`'s options against the videos' labels.
-fn check_squeeze(a: &Args, jobs: &[VideoJob]) -> Result<()> {
+/// `--squeeze`'s thresholds, checked against the videos' labels; `None` without `--squeeze`.
+fn squeeze(a: &Args, jobs: &[VideoJob]) -> Result<Option<Thresholds>> {
     if !a.squeeze {
-        return Ok(());
+        return Ok(None);
     }
-    if a.squeeze_clean.is_empty() && a.squeeze_threshold.is_none() {
-        bail!("--squeeze needs --squeeze-clean LABEL (legitimate videos that set each threshold) or --squeeze-threshold T");
-    }
-    if !(0.0..1.0).contains(&a.squeeze_false_flags) {
-        bail!("--squeeze-false-flags {} must be a share in [0, 1)", a.squeeze_false_flags);
-    }
-    if let Some(t) = a.squeeze_threshold.filter(|t| !(0.0..=1.0).contains(t)) {
-        bail!("--squeeze-threshold {t} must be a score change in [0, 1]");
-    }
-    for l in &a.squeeze_clean {
-        if !jobs.iter().any(|j| &j.label == l) {
-            let labels: Vec<&str> = jobs.iter().map(|j| j.label.as_str()).collect();
-            bail!("--squeeze-clean {l}: no video has that label (labels: {})", labels.join(", "));
-        }
-    }
-    Ok(())
-}
-
-fn squeeze_setting(a: &Args) -> String {
-    match (a.squeeze, a.squeeze_threshold) {
-        (false, _) => "off".into(),
-        (true, Some(t)) => format!("threshold {t}"),
-        (true, None) => format!("{} of the frames of {} flagged", a.squeeze_false_flags, a.squeeze_clean.join(", ")),
-    }
-}
-
-/// With --squeeze: the per-frame gaps, each detector's threshold and the flagged shares per video
-/// label, written as squeeze.csv and squeeze.md and printed.
-fn squeeze_report(a: &Args, out: &pav::eval::run::EvalOutcome, dir: &std::path::Path) -> Result<()> {
-    use pav::eval::squeeze;
-    if !a.squeeze {
-        return Ok(());
-    }
-    let mut gaps = squeeze::frame_gaps(&out.records, &squeeze::labels());
-    let thresholds = match a.squeeze_threshold {
-        Some(t) => gaps.iter().map(|g| (g.detector.clone(), t)).collect(),
-        None => squeeze::thresholds(&gaps, &a.squeeze_clean, a.squeeze_false_flags),
+    let how = match a.squeeze_threshold {
+        Some(t) => Thresholds::Fixed(t),
+        None if a.squeeze_clean.is_empty() => bail!(
+            "--squeeze needs --squeeze-clean LABEL (legitimate videos that set each threshold) or --squeeze-threshold T"
+        ),
+        None => Thresholds::Clean { clean: a.squeeze_clean.clone(), false_flags: a.squeeze_false_flags },
     };
-    let rows = squeeze::flag(&mut gaps, &thresholds);
-    pav::table::write_csv(&dir.join("squeeze.csv"), &gaps.iter().map(squeeze::frame_row).collect::<Vec<_>>())?;
-    let md = format!(
-        "# Feature squeezing as an attack detector\n\n{}\nPer-frame gaps: `squeeze.csv`.\n",
-        squeeze::markdown(&rows, "frame", &squeeze_setting(a))
-    );
-    std::fs::write(dir.join("squeeze.md"), &md)
-        .with_context(|| format!("writing {}", dir.join("squeeze.md").display()))?;
-    println!("{md}");
+    how.check(&jobs.iter().map(|j| j.label.as_str()).collect::<Vec<_>>())?;
+    Ok(Some(how))
+}
+
+/// With --squeeze: writes and prints the squeeze report.
+fn squeeze_report(how: Option<&Thresholds>, out: &EvalOutcome, dir: &std::path::Path) -> Result<()> {
+    if let Some(how) = how {
+        println!("{}", pav::eval::squeeze::write_report(&out.records, how, dir)?);
+    }
     Ok(())
 }
 
 /// Prints the summary and the files written; fails when the run was cut short or had problems.
-fn report(out: &pav::eval::run::EvalOutcome, threshold: f32) -> Result<()> {
+fn report(out: &EvalOutcome, threshold: f32) -> Result<()> {
     println!("{}", summary_table(&out.rows, threshold));
     for f in &out.files {
         eprintln!("wrote {}", f.display());

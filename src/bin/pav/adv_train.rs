@@ -2,7 +2,7 @@
 
 use crate::common::Bar;
 use anyhow::{Context, Result};
-use pav::experiments::advtrain::{adv_train, AdvTrainConfig};
+use pav::studies::advtrain::{adv_train, AdvTrainConfig};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -69,5 +69,5 @@ fn named_texture(s: &str) -> Result<(String, PathBuf), String> {
         _ => (None, s),
     };
     let path = pav::data::arg_path(path)?;
-    Ok((name.unwrap_or_else(|| pav::experiments::table2::texture_name(&path)), path))
+    Ok((name.unwrap_or_else(|| pav::studies::table2::texture_name(&path)), path))
 }

@@ -3,7 +3,7 @@
 use crate::common::{ctrl_c_flag, Bar, ShardArgs};
 use crate::Scoring;
 use anyhow::{Context, Result};
-use pav::experiments::crossval::{crossval_report, CrossvalJob, Cut};
+use pav::studies::crossval::{crossval_report, CrossvalJob, Cut};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -85,7 +85,7 @@ pub fn run(a: &Args) -> Result<()> {
         random_seeds: a.random_seeds,
         references: a.references.clone(),
         rendered: a.held_out_views.clone(),
-        curve: pav::experiments::curve::CurveOptions { every: a.curve_every, mean_from: a.curve_mean_from },
+        curve: pav::studies::curve::CurveOptions { every: a.curve_every, mean_from: a.curve_mean_from },
         seeds: a.seeds.clone(),
         cut: match (a.shard.shard, shards) {
             (Some(s), _) => Cut::Shard(s),

@@ -3,7 +3,7 @@
 use crate::common::Bar;
 use crate::Scoring;
 use anyhow::{Context, Result};
-use pav::experiments::table2::eval_digital;
+use pav::studies::table2::eval_digital;
 use std::path::PathBuf;
 
 #[derive(clap::Args)]

@@ -43,13 +43,13 @@ enum Cmd {
     /// white-box detectors; writes the texture, a printable sheet, loss curves, previews and scores.
     #[cfg(feature = "optimize")]
     Optimize(optimize::Args),
-    /// Digital evaluation in the shape of the paper's Table 2: ASR and P@0.5 of every detector on
+    /// Digital evaluation in the shape of the paper's Table II: ASR and P@0.5 of every detector on
     /// the views composited with the original paint, a random texture and each given texture.
     #[cfg(feature = "optimize")]
     EvalDigital(eval_digital::Args),
     /// k-fold cross-validation of the attack: every view is held out once, the texture is
     /// optimized on the rest, and the held-out views are scored by every detector against the
-    /// photo and several random textures (a Table 2 in which no texture has seen its test views).
+    /// photo and several random textures (a Table II in which no texture has seen its test views).
     #[cfg(feature = "optimize")]
     Crossval(crossval::Args),
     /// The paper's Table I from crossval runs: held-out car score and P@0.5 per texture and
@@ -127,7 +127,7 @@ impl Scoring {
     }
 
     /// The library's scoring options; `config` is the optimize config whose [print] table --print reads.
-    fn to_lib(&self, config: &std::path::Path) -> anyhow::Result<pav::experiments::Scoring> {
+    fn to_lib(&self, config: &std::path::Path) -> anyhow::Result<pav::studies::Scoring> {
         let print = if self.print || self.print_profile.is_some() {
             let mut p = pav::attack::config::OptimizeConfig::load(config)?.print.unwrap_or_default();
             if let Some(f) = &self.print_profile {
@@ -138,7 +138,7 @@ impl Scoring {
             None
         };
         let defences = common::defence_chains(&self.defences).0;
-        Ok(pav::experiments::Scoring { detectors: self.detectors.clone(), threshold: self.threshold, print, defences })
+        Ok(pav::studies::Scoring { detectors: self.detectors.clone(), threshold: self.threshold, print, defences })
     }
 }
 

@@ -5,7 +5,7 @@ use anyhow::{bail, Context, Result};
 use pav::attack::config::OptimizeConfig;
 use pav::attack::export::PrintSpec;
 use pav::attack::optimize::Finish;
-use pav::experiments::outputs::{optimize_and_report, OptimizeRun, Prepared};
+use pav::studies::outputs::{optimize_and_report, OptimizeRun, Prepared};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -170,7 +170,7 @@ pub fn run(a: &Args) -> Result<()> {
 }
 
 /// Prints a finished run's per-view scores, its sheet and print shift, and its files.
-fn print_report(r: &pav::experiments::outputs::OptimizeReport, p: &Prepared, a: &Args, out: &std::path::Path) {
+fn print_report(r: &pav::studies::outputs::OptimizeReport, p: &Prepared, a: &Args, out: &std::path::Path) {
     println!(
         "white-box {} car score per view (no EoT): original photo / initial texture / optimized",
         p.wb.first().name()

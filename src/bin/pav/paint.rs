@@ -55,7 +55,7 @@ pub fn run(a: &Args) -> Result<()> {
     if a.print {
         let p = a.printer.resolve(&cfg);
         let channel = pav::print::channel::PrintChannel::open(&p)?;
-        let region = crate::print::region_at(&cfg, texture.width, texture.height)?;
+        let region = pav::attack::setup::region_at(&cfg, texture.width, texture.height)?;
         println!(
             "as printed ({}): the region's {}",
             p.profile.display(),

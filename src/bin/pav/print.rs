@@ -3,10 +3,10 @@
 use anyhow::{Context, Result};
 use clap::Subcommand;
 use pav::attack::config::OptimizeConfig;
-use pav::attack::setup::mesh_and_region;
+use pav::attack::setup::region_at;
 use pav::image::{save_rgb, Rgb};
 #[cfg(feature = "video")]
-use pav::print::calibrate::{report_image, Target};
+use pav::print::calibrate::{calibrate_to, Target};
 use pav::print::channel::{PrintChannel, PrintConfig};
 #[cfg(feature = "video")]
 use pav::print::chart::{frequent_colours, Chart, ChartSpec};
@@ -35,18 +35,12 @@ pub struct PrinterArgs {
 impl PrinterArgs {
     /// The print settings for `cfg`: its `[print]` table (or the defaults) with these options applied.
     pub fn resolve(&self, cfg: &OptimizeConfig) -> PrintConfig {
-        let mut p = cfg.print.clone().unwrap_or_default();
-        if let Some(f) = &self.profile {
-            p.profile = f.clone();
-        }
-        if let Some(i) = self.intent {
-            p.intent = i;
-        }
-        p.black_point_compensation |= self.black_point_compensation;
-        if let Some(c) = &self.calibration {
-            p.calibration = Some(c.clone());
-        }
-        p
+        cfg.print.clone().unwrap_or_default().overridden(
+            self.profile.as_deref(),
+            self.intent,
+            self.black_point_compensation,
+            self.calibration.as_deref(),
+        )
     }
 }
 
@@ -188,11 +182,7 @@ fn calibrate(a: &CalibrateArgs) -> Result<()> {
         (None, true) => Target::ColorChecker { reference: &a.reference },
         (None, false) => anyhow::bail!("name the chart the photos show: --chart DIR (pav's) or --colorchecker"),
     };
-    let (cal, rows) = pav::print::calibrate::calibrate(target, &a.photos, a.max_delta_e, a.force)?;
-    if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
-    cal.save(&a.out)?;
+    let (cal, [csv, png]) = calibrate_to(target, &a.photos, a.max_delta_e, a.force, &a.out)?;
     let record = pav::provenance::Run::start()
         .inputs(a.photos.iter().map(|p| p.as_path()))
         .inputs(
@@ -209,15 +199,7 @@ fn calibrate(a: &CalibrateArgs) -> Result<()> {
         .tool("opencv", pav::video::opencv_version());
     let record_path = a.out.with_file_name(pav::provenance::FILE);
     record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
-    let csv = a.out.with_extension("csv");
-    pav::table::write_csv(&csv, &rows)?;
-    let png = a.out.with_extension("png");
     let r = cal.residual();
-    let title = format!(
-        "{}: {:?}, held-out dE2000 median {:.2}, p90 {:.2}, max {:.2} (swatches: intended | photo | fitted)",
-        cal.measures, r.model, r.median, r.p90, r.max
-    );
-    report_image(&png, &rows, &title)?;
     for h in &cal.held_out {
         println!(
             "  {:7} held-out ΔE2000 median {:.2}, p90 {:.2}, max {:.2}",
@@ -261,14 +243,4 @@ fn proof(config: &Path, texture: &Path, printer: &PrinterArgs, out: &Path) -> Re
         channel.shift(&tex.rgb, region.as_deref())
     );
     Ok(())
-}
-
-/// The config's region at a texture's size (None when the texture is not square: every texel counts).
-pub fn region_at(cfg: &OptimizeConfig, width: usize, height: usize) -> Result<Option<Vec<f32>>> {
-    if width != height {
-        return Ok(None);
-    }
-    let mut c = cfg.clone();
-    c.mesh.texture_size = width;
-    Ok(Some(mesh_and_region(&c)?.1))
 }

@@ -1,7 +1,7 @@
 //! `pav table1`.
 
 use anyhow::{bail, Result};
-use pav::experiments::table1::table1_report;
+use pav::studies::table1::table1_report;
 use std::path::PathBuf;
 
 #[derive(clap::Args)]

@@ -78,7 +78,7 @@ pub const FCA_ORIGIN_LIFT_M: f64 = 0.20;
 /// and up from the camera pitch and yaw, Z up, all taken into the vehicle's frame (rotated about
 /// Z by −vehicle yaw) and from CARLA's left-handed axes into the mesh's right-handed ones; a 90°
 /// field of view (neural_renderer `viewing_angle` 45). Measured against the FCA masks in
-/// `tests/render_fca.rs`.
+/// `tests/it/render_fca.rs`.
 ///
 /// FCA and RAUCA-E2E feed CARLA's offsets to neural_renderer as if they were right-handed and
 /// render with neural_renderer's mirrored image x: the two mirrors cancel in the silhouette, but

@@ -253,6 +253,11 @@ impl Step for Resampler {
     fn adjoint(&self, _: &(), gy: &[f32], gx: &mut [f32]) {
         accumulate(gx, Resampler::adjoint(self, gy, 3));
     }
+
+    fn map_box(&self, _: &(), car: Option<[f32; 4]>) -> Option<[f32; 4]> {
+        let k = self.dst as f32 / self.src as f32;
+        car.map(|b| b.map(|v| v * k))
+    }
 }
 
 #[cfg(test)]

@@ -1,0 +1,386 @@
+//! The documentation as a user reads it: every code fence in README.md and docs/ is closed, every
+//! `pav` / `pav-rig` command in a shell block names a real subcommand and real options, and the
+//! README's main job and quick start run as written and leave what they promise.
+
+use crate::common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// README.md and every Markdown file under docs/.
+fn doc_files() -> Vec<PathBuf> {
+    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                walk(&p, out);
+            } else if p.extension().is_some_and(|x| x == "md") {
+                out.push(p);
+            }
+        }
+    }
+    let mut v = vec![common::repo().join("README.md")];
+    walk(&common::repo().join("docs"), &mut v);
+    v.sort();
+    v
+}
+
+/// A fenced code block: its info string, its first line's number, its text.
+struct Block {
+    info: String,
+    line: usize,
+    text: String,
+}
+
+/// The fenced blocks of `md`; an unclosed fence is an error naming its line.
+fn blocks(md: &str) -> Result<Vec<Block>, String> {
+    let mut out = Vec::new();
+    let mut open: Option<(String, String, usize, String)> = None;
+    for (i, line) in md.lines().enumerate() {
+        let t = line.trim_start();
+        match &mut open {
+            None => {
+                if let Some(info) = t.strip_prefix("```") {
+                    let indent = line[..line.len() - t.len()].to_string();
+                    open = Some((info.trim().to_string(), indent, i + 1, String::new()));
+                }
+            }
+            Some((info, _, start, text)) => {
+                if t.trim_end() == "```" {
+                    out.push(Block { info: info.clone(), line: *start, text: std::mem::take(text) });
+                    open = None;
+                } else {
+                    text.push_str(line);
+                    text.push('\n');
+                }
+            }
+        }
+    }
+    match open {
+        Some((_, _, start, _)) => Err(format!("the fence opened on line {start} is never closed")),
+        None => Ok(out),
+    }
+}
+
+#[test]
+fn every_fence_in_the_docs_is_closed() {
+    let bad: Vec<String> = doc_files()
+        .iter()
+        .filter_map(|f| blocks(&std::fs::read_to_string(f).unwrap()).err().map(|e| format!("{}: {e}", f.display())))
+        .collect();
+    assert!(bad.is_empty(), "{}", bad.join("\n"));
+    // The check itself: a file with an odd fence fails it.
+    assert!(blocks("text\n```sh\npav data list\n").is_err());
+    assert_eq!(blocks("```sh\na\n```\n```toml\nb = 1\n```\n").unwrap().len(), 2);
+}
+
+/// One `pav`/`pav-rig` invocation found in a shell block: binary, the words after it, where.
+#[derive(Debug)]
+struct Invocation {
+    bin: &'static str,
+    words: Vec<String>,
+    at: String,
+}
+
+/// Splits a shell line into words, keeping quoted strings whole (quotes dropped).
+fn words(line: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut cur = String::new();
+    let mut quote = None;
+    let mut any = false;
+    for ch in line.chars() {
+        match (quote, ch) {
+            (None, '"' | '\'') => {
+                quote = Some(ch);
+                any = true;
+            }
+            (Some(q), c) if c == q => quote = None,
+            (None, c) if c.is_whitespace() => {
+                if any {
+                    out.push(std::mem::take(&mut cur));
+                }
+                any = false;
+            }
+            (_, c) => {
+                cur.push(c);
+                any = true;
+            }
+        }
+    }
+    if any {
+        out.push(cur);
+    }
+    out
+}
+
+/// Whether a word names the pav or pav-rig binary (bare, or a build's path).
+fn is_pav(x: &str) -> bool {
+    let name = x.rsplit('/').next().unwrap_or(x);
+    (name == "pav" || name == "pav-rig") && (x == name || x.contains("release/"))
+}
+
+/// The pav and pav-rig commands of every shell block of `md` (`file` names it in messages).
+fn invocations(file: &str, md: &str) -> Vec<Invocation> {
+    let mut out = Vec::new();
+    for b in blocks(md).unwrap_or_default() {
+        let lang = b.info.split_whitespace().next().unwrap_or("");
+        if !matches!(lang, "sh" | "bash" | "console") {
+            continue;
+        }
+        // Continuation lines joined, comments dropped.
+        let joined = b.text.replace("\\\n", " ");
+        for (k, line) in joined.lines().enumerate() {
+            let line = line.split(" #").next().unwrap_or("");
+            if line.trim_start().starts_with('#') {
+                continue;
+            }
+            for seg in line.split(['|', ';', '&', '(', ')', '$']) {
+                let w = words(seg);
+                let Some(pos) = w.iter().enumerate().position(|(i, x)| {
+                    // In command position: first, after variable assignments or a wrapper, or
+                    // as cargo's `--bin` (so `[ $n = pav ]` is no command).
+                    let placed =
+                        w[..i].iter().all(|p| p.contains('=') || matches!(p.as_str(), "time" | "nohup" | "exec"))
+                            || (i > 0 && w[i - 1] == "--bin");
+                    placed && is_pav(x)
+                }) else {
+                    continue;
+                };
+                let bin = if w[pos].ends_with("pav-rig") { "pav-rig" } else { "pav" };
+                let args = if pos > 0 && w[pos - 1] == "--bin" {
+                    // `cargo run --release --bin pav-rig -- evaluate …`; a `cargo build` runs nothing.
+                    match w.iter().position(|x| x == "--") {
+                        Some(dd) => w[dd + 1..].to_vec(),
+                        None => continue,
+                    }
+                } else {
+                    w[pos + 1..].to_vec()
+                };
+                let at = format!("{file}:{}", b.line + k);
+                // `pav cluster slurm … -- target/release/pav crossval …` wraps a second command.
+                match args.iter().position(|x| x == "--").filter(|&dd| args.get(dd + 1).is_some_and(|x| is_pav(x))) {
+                    Some(dd) => {
+                        let inner = if args[dd + 1].ends_with("pav-rig") { "pav-rig" } else { "pav" };
+                        out.push(Invocation { bin, words: args[..dd].to_vec(), at: at.clone() });
+                        out.push(Invocation { bin: inner, words: args[dd + 2..].to_vec(), at });
+                    }
+                    None => out.push(Invocation { bin, words: args, at }),
+                }
+            }
+        }
+    }
+    out
+}
+
+fn bin_path(bin: &str) -> &'static str {
+    if bin == "pav" {
+        env!("CARGO_BIN_EXE_pav")
+    } else {
+        env!("CARGO_BIN_EXE_pav-rig")
+    }
+}
+
+/// `--help` of `bin` with the subcommand path `sub`.
+fn help(bin: &str, sub: &[String]) -> String {
+    let o = Command::new(bin_path(bin)).args(sub).arg("--help").env("RUST_BACKTRACE", "0").output().unwrap();
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// The subcommands a help text lists.
+fn subcommands(help: &str) -> Vec<String> {
+    let Some(i) = help.find("Commands:\n") else { return Vec::new() };
+    help[i..]
+        .lines()
+        .skip(1)
+        .take_while(|l| l.starts_with("  "))
+        .filter_map(|l| l.split_whitespace().next().map(str::to_string))
+        .collect()
+}
+
+/// Why `inv` does not match the binaries' options, if it does not.
+fn check(inv: &Invocation, cache: &mut std::collections::HashMap<(String, Vec<String>), String>) -> Option<String> {
+    let mut sub: Vec<String> = Vec::new();
+    let mut get = |sub: &Vec<String>| {
+        cache.entry((inv.bin.to_string(), sub.clone())).or_insert_with(|| help(inv.bin, sub)).clone()
+    };
+    let mut text = get(&sub);
+    let mut rest = inv.words.as_slice();
+    loop {
+        let subs = subcommands(&text);
+        if subs.is_empty() {
+            break;
+        }
+        match rest.first() {
+            Some(w) if subs.contains(w) => {
+                sub.push(w.clone());
+                rest = &rest[1..];
+                text = get(&sub);
+            }
+            // An option of this level before the subcommand (`turntable --port P status`), and
+            // its value when the help shows one.
+            Some(w) if w.starts_with('-') && text.contains(&format!("{w} ")) => {
+                let takes_value = text.contains(&format!("{w} <"));
+                rest = &rest[if takes_value { 2 } else { 1 }.min(rest.len())..];
+            }
+            Some(w) if w.starts_with('-') && sub.is_empty() => break,
+            Some(w) => return Some(format!("{}: `{} {w}` is not a subcommand ({})", inv.at, inv.bin, subs.join(", "))),
+            None => return Some(format!("{}: `{}` needs a subcommand", inv.at, inv.bin)),
+        }
+    }
+    for w in rest {
+        let flag = w.split('=').next().unwrap_or(w);
+        let known = if flag.starts_with("--") && flag.len() > 2 {
+            text.contains(&format!("{flag} "))
+                || text.contains(&format!("{flag}\n"))
+                || text.contains(&format!("{flag},"))
+        } else if flag.len() == 2
+            && flag.starts_with('-')
+            && flag != "--"
+            && !flag[1..].starts_with(|c: char| c.is_ascii_digit())
+        {
+            text.contains(&format!("{flag},")) || text.contains(&format!("{flag} "))
+        } else {
+            true
+        };
+        if !known {
+            return Some(format!("{}: `{} {}` has no option {flag}", inv.at, inv.bin, sub.join(" ")));
+        }
+    }
+    None
+}
+
+#[test]
+fn every_documented_command_names_real_subcommands_and_options() {
+    let mut all = Vec::new();
+    for f in doc_files() {
+        let rel = f.strip_prefix(common::repo()).unwrap().display().to_string();
+        all.extend(invocations(&rel, &std::fs::read_to_string(&f).unwrap()));
+    }
+    // The README alone documents dozens; a parser that found none would check nothing.
+    assert!(all.len() > 40, "only {} commands found", all.len());
+    let mut cache = std::collections::HashMap::new();
+    let bad: Vec<String> = all.iter().filter_map(|i| check(i, &mut cache)).collect();
+    assert!(bad.is_empty(), "{} stale commands:\n{}", bad.len(), bad.join("\n"));
+    // The check itself: a made-up option and a made-up subcommand are caught.
+    let fake = invocations("x", "```sh\npav optimize --config c.toml --no-such-flag\npav-rig evalute v.mp4\n```\n");
+    assert_eq!(fake.len(), 2);
+    assert!(check(&fake[0], &mut cache).is_some_and(|e| e.contains("--no-such-flag")));
+    assert!(check(&fake[1], &mut cache).is_some_and(|e| e.contains("evalute")));
+}
+
+/// The README's shell blocks under `heading` that are meant to run (not `sh no-run`).
+fn runnable(readme: &str, heading: &str) -> String {
+    let start = readme.find(heading).unwrap_or_else(|| panic!("README has no `{heading}`"));
+    let end = readme[start + heading.len()..].find("\n## ").map_or(readme.len(), |e| start + heading.len() + e);
+    blocks(&readme[start..end])
+        .unwrap()
+        .into_iter()
+        .filter(|b| b.info == "sh")
+        .map(|b| b.text)
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// A scratch folder that looks like the repository to a user's relative paths.
+fn scratch() -> tempfile::TempDir {
+    let tmp = tempfile::tempdir().unwrap();
+    for d in ["configs", "fixtures", "data"] {
+        std::os::unix::fs::symlink(common::repo().join(d), tmp.path().join(d)).unwrap();
+    }
+    tmp
+}
+
+fn run_script(dir: &Path, script: &str) -> Output {
+    let bins = Path::new(env!("CARGO_BIN_EXE_pav")).parent().unwrap().to_path_buf();
+    let path = format!("{}:{}", bins.display(), std::env::var("PATH").unwrap_or_default());
+    Command::new("bash")
+        .args(["-euo", "pipefail", "-c", script])
+        .current_dir(dir)
+        .env("PATH", path)
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .unwrap()
+}
+
+/// summary.csv's rows as maps from column to value.
+fn summary(path: &Path) -> Vec<std::collections::HashMap<String, String>> {
+    let mut rd = csv::Reader::from_path(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let head = rd.headers().unwrap().clone();
+    rd.records()
+        .map(|r| head.iter().zip(r.unwrap().iter()).map(|(h, v)| (h.to_string(), v.to_string())).collect())
+        .collect()
+}
+
+const DETECTORS: [&str; 4] = ["deimv2_atto_int8", "yolov3-tiny", "yolov8n_int8", "yolox_nano"];
+
+/// Every detector has a row for `video` whose A_physical is a share.
+fn assert_scored(rows: &[std::collections::HashMap<String, String>], video: &str, ctx: &str) {
+    for d in DETECTORS {
+        let r = rows
+            .iter()
+            .find(|r| r.get("video").is_some_and(|v| v == video) && r.get("detector").is_some_and(|x| x == d))
+            .unwrap_or_else(|| panic!("no {video} row for {d}: {ctx}"));
+        let a: f64 = r["a_physical"].parse().unwrap_or_else(|_| panic!("{r:?}"));
+        assert!((0.0..=1.0).contains(&a), "{r:?}");
+        assert!(r["frames"].parse::<usize>().unwrap() > 0, "{r:?}");
+    }
+}
+
+/// The README's main job (the set-up command's second half) on the turntable fixture.
+#[test]
+fn the_main_job_scores_the_turntable_fixture() {
+    common::real_data();
+    let readme = std::fs::read_to_string(common::repo().join("README.md")).unwrap();
+    let line = readme
+        .lines()
+        .find(|l| l.starts_with("bash scripts/setup.sh && cargo run"))
+        .expect("the README's main-job command");
+    let job = line.split_once("-- ").unwrap().1;
+    let tmp = scratch();
+    let o = run_script(tmp.path(), &format!("pav-rig {job}"));
+    assert!(o.status.success(), "{}", common::output_text(&o));
+    let out = tmp.path().join("out/evaluate");
+    let video = Path::new(job.split_whitespace().nth(1).unwrap()).file_stem().unwrap().to_str().unwrap().to_string();
+    assert_scored(&summary(&out.join("summary.csv")), &video, &common::output_text(&o));
+    assert!(out.join(format!("polar_{video}.png")).is_file());
+}
+
+/// The quick start, block by block as the README has it, in a scratch folder.
+#[test]
+fn the_quick_start_runs_as_written() {
+    common::real_data();
+    let readme = std::fs::read_to_string(common::repo().join("README.md")).unwrap();
+    let script = runnable(&readme, "## Quick start");
+    assert!(script.contains("pav optimize") && script.contains("pav-rig evaluate"), "{script}");
+    let tmp = scratch();
+    let o = run_script(tmp.path(), &script);
+    assert!(o.status.success(), "{}", common::output_text(&o));
+    let out = tmp.path().join("out");
+    // What the README says each step leaves.
+    for f in ["paper/texture.png", "paper/texture_print.png", "paper/preview.png", "paper/loss.png", "paper/run.toml"] {
+        assert!(out.join(f).is_file(), "{f} missing: {}", common::output_text(&o));
+    }
+    assert!(out.join("digital/run.toml").is_file());
+    for v in ["original", "camo"] {
+        assert!(common::decoded_frames(&out.join(format!("sim/{v}.mp4"))).unwrap() > 20, "{v}");
+        assert!(out.join(format!("sim/{v}.angles.csv")).is_file());
+    }
+    let eval = out.join("sim/eval");
+    let rows = summary(&eval.join("summary.csv"));
+    assert_scored(&rows, "original", &common::output_text(&o));
+    assert_scored(&rows, "camouflaged", &common::output_text(&o));
+    for f in ["summary.md", "accuracy.png", "polar_original.png", "polar_camouflaged.png"] {
+        assert!(eval.join(f).is_file(), "{f} missing");
+    }
+    // The print step: the proof, a texture trained through the printer with its proof, both
+    // scored as printed, and the chart with its layout and colours.
+    for f in
+        ["paper/proof.png", "paper-printed/texture_proof.png", "chart/chart.png", "chart/chart.toml", "chart/chart.csv"]
+    {
+        assert!(out.join(f).is_file(), "{f} missing: {}", common::output_text(&o));
+    }
+    let digital = std::fs::read_to_string(out.join("digital-printed/digital.md")).unwrap();
+    assert!(digital.contains("paper-printed"), "{digital}");
+    let record = std::fs::read_to_string(out.join("digital-printed/run.toml")).unwrap();
+    assert!(record.contains("print = \"true\""), "{record}");
+}
