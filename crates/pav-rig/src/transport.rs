@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 #[derive(Debug, thiserror::Error)]
 pub enum LinkError {
     /// It could not be opened.
-    #[error("cannot open turntable port {path}: {source}")]
+    #[error("cannot open turntable port {path}: {source}{}", open_hint(source))]
     Open {
         /// What was opened.
         path: String,
@@ -22,6 +22,17 @@ pub enum LinkError {
     /// It went away (cable pulled, device reset, simulator unplugged).
     #[error("{0}")]
     Closed(String),
+}
+
+/// The fix for a port that cannot be opened, where the reason says what it is.
+fn open_hint(e: &std::io::Error) -> &'static str {
+    match e.kind() {
+        // Debian gives serial devices to the `dialout` group.
+        ErrorKind::PermissionDenied => {
+            " (your user may not open serial devices: `sudo usermod -aG dialout $USER`, then log in again)"
+        }
+        _ => "",
+    }
 }
 
 /// A line-oriented wire to the turntable. Deadlines and arrival stamps are instants of the
@@ -215,5 +226,17 @@ mod tests {
         assert_eq!(l.push(b"234\r\n@5 6\n"), vec!["ok N1*1234".to_string(), "@5 6".to_string()]);
         assert!(l.push(&[b'x'; 5000]).is_empty());
         assert_eq!(l.push(b"done\n"), vec!["done".to_string()]);
+    }
+
+    #[test]
+    fn a_port_the_user_may_not_open_names_the_dialout_group() {
+        let open =
+            |kind| LinkError::Open { path: "/dev/ttyACM0".into(), source: std::io::Error::from(kind) }.to_string();
+        assert!(
+            open(ErrorKind::PermissionDenied).contains("usermod -aG dialout"),
+            "{}",
+            open(ErrorKind::PermissionDenied)
+        );
+        assert!(!open(ErrorKind::NotFound).contains("dialout"));
     }
 }
