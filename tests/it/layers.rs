@@ -5,8 +5,9 @@
 //! from one module to another, no module re-exports another top-level module's items, and
 //! neither the top-level modules (pav-core's are the base layer's) nor the files form a cycle.
 
+use crate::common;
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 const LAYERS: [&[&str]; 4] = [
     &[
@@ -139,20 +140,9 @@ fn edges(crates: &[(Module, std::path::PathBuf)]) -> (Vec<Edge>, BTreeSet<Module
 
 /// The edges of one crate whose root is module `root`.
 fn crate_edges(root: &Module, src: &Path) -> (Vec<Edge>, BTreeSet<Module>) {
-    let mut files = Vec::new();
-    let mut stack = vec![src.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap().flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                if p != src.join("bin") {
-                    stack.push(p);
-                }
-            } else if p.extension().is_some_and(|x| x == "rs") {
-                files.push(p);
-            }
-        }
-    }
+    // The binaries are not modules of the library.
+    let files: Vec<PathBuf> =
+        common::files_with_extension(src, "rs").into_iter().filter(|f| !f.starts_with(src.join("bin"))).collect();
     let module_at =
         |f: &Path| -> Module { root.iter().cloned().chain(module_of(f.strip_prefix(src).unwrap())).collect() };
     let modules: BTreeSet<Module> = files.iter().map(|f| module_at(f)).collect();
@@ -416,24 +406,6 @@ fn each_rule_catches_its_breach() {
     assert_eq!(expand("crate::a::{b, c::{d, e as f}}"), ["crate::a::b", "crate::a::c::d", "crate::a::c::e as f"]);
 }
 
-/// The `.rs` files under `dir`, recursively.
-fn rust_files(dir: &Path) -> Vec<std::path::PathBuf> {
-    let mut out = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap().flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                stack.push(p);
-            } else if p.extension().is_some_and(|x| x == "rs") {
-                out.push(p);
-            }
-        }
-    }
-    out.sort();
-    out
-}
-
 /// `line` without its string and character literals and its `//` comment, so that only code's
 /// braces are left.
 fn code_of(line: &str) -> String {
@@ -531,7 +503,7 @@ fn src_holds_only_the_binaries_and_the_re_exports() {
 #[test]
 fn binaries_are_thin_and_library_functions_short() {
     let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let fat: Vec<String> = rust_files(&repo.join("src/bin"))
+    let fat: Vec<String> = common::files_with_extension(&repo.join("src/bin"), "rs")
         .iter()
         .map(|f| (f, std::fs::read_to_string(f).unwrap().lines().count()))
         .filter(|(_, n)| *n > 250)
@@ -541,7 +513,7 @@ fn binaries_are_thin_and_library_functions_short() {
     let mut long = Vec::new();
     let mut seen = 0;
     for e in std::fs::read_dir(repo.join("crates")).unwrap().flatten() {
-        for f in rust_files(&e.path().join("src")) {
+        for f in common::files_with_extension(&e.path().join("src"), "rs") {
             let text = std::fs::read_to_string(&f).unwrap();
             seen += long_functions(&text, 0).len();
             for (name, line, n) in long_functions(&text, 200) {

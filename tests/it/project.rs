@@ -9,18 +9,7 @@ use std::path::{Path, PathBuf};
 /// The Markdown files whose links are checked: the README and everything under docs/.
 fn markdown_files(root: &Path) -> Vec<PathBuf> {
     let mut out = vec![root.join("README.md")];
-    let mut stack = vec![root.join("docs")];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap().flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                stack.push(p);
-            } else if p.extension().is_some_and(|x| x == "md") {
-                out.push(p);
-            }
-        }
-    }
-    out.sort();
+    out.extend(common::files_with_extension(&root.join("docs"), "md"));
     out
 }
 

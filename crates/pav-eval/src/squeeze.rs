@@ -4,9 +4,11 @@
 //! the legitimate items (the original paint) is flagged, as Xu et al. set theirs.
 
 use super::physical::FrameRecord;
+#[cfg(feature = "eval")]
 use super::report::ReportError;
 use pav_detect::defence::{chain_label, parse_chain, Defence};
 use std::collections::{BTreeMap, HashMap};
+#[cfg(feature = "eval")]
 use std::path::Path;
 
 /// The squeezers, as `--defence` specs: each detector is also scored behind each of them.
@@ -172,6 +174,7 @@ pub fn flag<K>(gaps: &mut [Gap<K>], thresholds: &BTreeMap<String, f32>) -> Vec<S
 }
 
 /// How each detector's threshold on the squeezed score gap is set (`--squeeze-*`).
+#[cfg(feature = "eval")]
 #[derive(Clone, Debug, PartialEq)]
 pub enum Thresholds {
     /// One threshold for every detector.
@@ -186,6 +189,7 @@ pub enum Thresholds {
     },
 }
 
+#[cfg(feature = "eval")]
 impl Thresholds {
     /// Refuses settings that cannot flag anything meaningful, or clean labels that no video has.
     pub fn check(&self, labels: &[&str]) -> Result<(), ReportError> {
@@ -219,6 +223,7 @@ impl Thresholds {
 /// Feature squeezing on evaluate's frames: the per-frame gaps, each detector's threshold and the
 /// flagged shares per video label, written as `squeeze.csv` and `squeeze.md` in `dir`; returns
 /// the Markdown.
+#[cfg(feature = "eval")]
 pub fn write_report(records: &[FrameRecord], how: &Thresholds, dir: &Path) -> Result<String, ReportError> {
     let mut gaps = frame_gaps(records, &labels());
     let thresholds = match how {
