@@ -218,12 +218,13 @@ fn crossval_and_evaluate_run_as_slurm_arrays_and_merge_to_the_one_process_result
         "task 1 ran once more after the requeue:\n{logs}"
     );
     assert!(t.join("cv/seed1/crossval.csv").is_file(), "the merge job did not write the tables:\n{logs}");
-    // Timing aside (a fold's seconds, the optimizer's per-step times and its checkpoint), the
-    // merge is the one-process run.
+    // Timing aside (a fold's seconds, the optimizer's per-step and per-stage times and its
+    // checkpoint), the merge is the one-process run.
     let timing = |p: &Path| {
         let n = p.file_name().unwrap().to_str().unwrap();
         n.starts_with("shard-")
-            || ["run.toml", "loss.csv", "loss_detectors.csv", "checkpoint.bin", "scores.json"].contains(&n)
+            || ["run.toml", "loss.csv", "loss_detectors.csv", "loss_stages.csv", "checkpoint.bin", "scores.json"]
+                .contains(&n)
     };
     let header_aside = |p: &Path, b: Vec<u8>| {
         if p.ends_with("crossval.md") {
