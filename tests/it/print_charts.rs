@@ -1,5 +1,6 @@
 //! The print channel on real data, as a user runs it: the ColorChecker photos are read and fitted
-//! (camera alone; by their marker sheet, or by OpenCV's mcc without one), photos of other charts are refused with what they show, a chart is written
+//! (camera alone; by their marker sheet, or by OpenCV's mcc without one or when the markers do not
+//! frame the checker), photos of other charts are refused with what they show, a chart is written
 //! and read back, texture proofs match LittleCMS, and bad profiles and configs are clear errors.
 
 use crate::common;
@@ -63,9 +64,11 @@ fn colorchecker_photos_give_a_camera_fit_and_other_charts_are_named() {
     eprintln!("hand-held: {text}");
     let m = kept_median(&text);
     assert!(m > 0.5 && m < 3.5, "hand-held: held-out median {m}");
+    assert!(text.contains("found by OpenCV's mcc (the marker sheet: no ArUco marker found"), "{text}");
     // A photo with neither a sheet nor a checker.
     let (ok, text) = run(&["print", "calibrate", "--colorchecker", "data:charts/aruco/cv_gboriginal.png"]);
-    assert!(!ok && text.contains("finds no ColorChecker Classic either"), "{text}");
+    assert!(!ok && text.contains("no ColorChecker found, neither by its marker sheet ("), "{text}");
+    assert!(text.contains("nor by OpenCV's marker-less detector, mcc (it finds no ColorChecker Classic)"), "{text}");
     // Photos of other charts given as pav's.
     let chart = tmp.path().join("chart");
     let (ok, text) = run(&["print", "chart", "--dpi", "100", "-o", chart.to_str().unwrap()]);
@@ -79,6 +82,61 @@ fn colorchecker_photos_give_a_camera_fit_and_other_charts_are_named() {
     }
     let (ok, text) = run(&["print", "calibrate", "data:charts/aruco/cv_gboriginal.png"]);
     assert!(!ok && text.contains("--chart DIR"), "{text}");
+}
+
+/// `img` with the placement sheet's four markers (DICT_4X4_50, IDs 0–3) at the corners of the
+/// square of side `span` whose top-left corner is (x, y), each on a white quiet zone.
+fn with_sheet_markers(img: &mut opencv::core::Mat, x: i32, y: i32, span: i32) {
+    use opencv::core::{Mat, Rect, Scalar};
+    use opencv::prelude::*;
+    use opencv::{aruco, imgproc};
+    let dict = aruco::get_predefined_dictionary(aruco::PREDEFINED_DICTIONARY_NAME::DICT_4X4_50).unwrap();
+    let (side, zone) = (60, 12);
+    for (id, (dx, dy)) in [(0, (0, 0)), (1, (1, 0)), (2, (1, 1)), (3, (0, 1))] {
+        let (mx, my) = (x + dx * (span - side), y + dy * (span - side));
+        let quiet = Rect::new(mx - zone, my - zone, side + 2 * zone, side + 2 * zone);
+        imgproc::rectangle(img, quiet, Scalar::all(255.0), -1, imgproc::LINE_8, 0).unwrap();
+        let (mut m, mut bgr) = (Mat::default(), Mat::default());
+        aruco::draw_marker(&dict, id, side, &mut m, 1).unwrap();
+        imgproc::cvt_color_def(&m, &mut bgr, imgproc::COLOR_GRAY2BGR).unwrap();
+        let mut roi = Mat::roi_mut(img, Rect::new(mx, my, side, side)).unwrap();
+        bgr.copy_to(&mut roi).unwrap();
+    }
+}
+
+#[test]
+fn a_colorchecker_whose_markers_do_not_frame_it_is_found_without_them() {
+    use opencv::core::{Mat, Scalar, Vector, CV_8UC3};
+    use opencv::imgcodecs;
+    let shared = common::shared_data();
+    let tmp = tempfile::tempdir().unwrap();
+    // The hand-held checker with a marker sheet beside it, on the cloth to its lower right.
+    let src = shared.join("charts/colorchecker/pedrodiamel_img-colorchecker.jpg");
+    let mut img = imgcodecs::imread(src.to_str().unwrap(), imgcodecs::IMREAD_COLOR).unwrap();
+    with_sheet_markers(&mut img, 680, 480, 260);
+    let photo = tmp.path().join("beside.png");
+    imgcodecs::imwrite(photo.to_str().unwrap(), &img, &Vector::new()).unwrap();
+    let out = tmp.path().join("beside.toml");
+    let (ok, text) =
+        run(&["print", "calibrate", "--colorchecker", photo.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    assert!(ok, "{text}");
+    assert!(
+        text.contains("found by OpenCV's mcc (the marker sheet: no ColorChecker grid between the markers"),
+        "{text}"
+    );
+    let m = kept_median(&text);
+    assert!(m > 0.5 && m < 3.5, "held-out median {m}");
+    let cal = std::fs::read_to_string(&out).unwrap();
+    assert!(cal.contains("found by OpenCV's mcc"), "the calibration file records the path: {cal}");
+    // The same markers with no checker anywhere: refused, with both reasons.
+    let mut blank = Mat::new_rows_cols_with_default(600, 800, CV_8UC3, Scalar::all(128.0)).unwrap();
+    with_sheet_markers(&mut blank, 200, 150, 300);
+    let photo = tmp.path().join("markers-only.png");
+    imgcodecs::imwrite(photo.to_str().unwrap(), &blank, &Vector::new()).unwrap();
+    let (ok, text) = run(&["print", "calibrate", "--colorchecker", photo.to_str().unwrap()]);
+    assert!(!ok, "{text}");
+    assert!(text.contains("neither by its marker sheet (no ColorChecker grid between the markers"), "{text}");
+    assert!(text.contains("nor by OpenCV's marker-less detector, mcc (it finds no ColorChecker Classic)"), "{text}");
 }
 
 #[test]

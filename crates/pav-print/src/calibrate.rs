@@ -3,9 +3,7 @@
 //! file, a per-patch CSV and a report image of intended, photographed and fitted swatches.
 
 use super::chart::{Chart, ChartError};
-use super::colorchecker::{
-    pairs as checker_pairs, read_checker, read_checker_mcc, read_reference, reference_srgb, CheckerError,
-};
+use super::colorchecker::{find_checker, pairs as checker_pairs, read_reference, reference_srgb, CheckerError};
 use super::fit::{Calibration, FitError, Pair};
 use super::photo::{median, Photo, PhotoError};
 use opencv::core::{Mat, Point, Rect, Scalar, CV_8UC3};
@@ -150,6 +148,7 @@ pub fn calibrate(
     let mut per_patch: Vec<Merged> = Vec::new();
     let mut first_err: Option<CalibrateError> = None;
     let mut read = 0;
+    let mut found = Vec::new();
     let reference = match &target {
         Target::ColorChecker { reference } => Some(reference_srgb(&read_reference(reference)?)),
         Target::Chart(_) => None,
@@ -170,17 +169,8 @@ pub fn calibrate(
                     .collect()),
                 Target::ColorChecker { .. } => {
                     let rs = reference.as_ref().expect("read above");
-                    let reading = match read_checker(&photo, photo.path(), rs) {
-                        // Without a marker sheet, OpenCV's ColorChecker detector may still find it.
-                        Err(CheckerError::Photo(e)) if matches!(*e, PhotoError::NoMarkers { .. }) => {
-                            let found = read_checker_mcc(&photo).map_err(|err| CalibrateError::Write {
-                                path: photo.path().into(),
-                                why: err.to_string(),
-                            })?;
-                            found.ok_or_else(|| CheckerError::NoChecker { path: photo.path().into() })?
-                        }
-                        other => other?,
-                    };
+                    let (reading, by) = find_checker(&photo, photo.path(), rs)?;
+                    found.push(format!("{}: {by}", photo.path().display()));
                     Ok(checker_pairs(&reading, rs))
                 }
             });
@@ -229,7 +219,8 @@ pub fn calibrate(
         Target::Chart(_) => "printer+camera",
         Target::ColorChecker { .. } => "camera",
     };
-    let cal = Calibration::fit(measures, &pairs, bound, force, paths.to_vec())?;
+    let mut cal = Calibration::fit(measures, &pairs, bound, force, paths.to_vec())?;
+    cal.found = found;
     let rows = pairs
         .iter()
         .map(|p| {

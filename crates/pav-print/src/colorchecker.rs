@@ -27,13 +27,15 @@ pub enum CheckerError {
         /// Why.
         why: String,
     },
-    /// Neither a marker sheet nor a checker OpenCV's detector recognizes.
-    #[error(
-        "{path}: no ArUco marker sheet, and OpenCV's ColorChecker detector (mcc) finds no ColorChecker Classic either"
-    )]
-    NoChecker {
+    /// Neither the marker sheet nor OpenCV's marker-less detector found the checker.
+    #[error("{path}: no ColorChecker found, neither by its marker sheet ({markers}) nor by OpenCV's marker-less detector, mcc ({mcc})")]
+    Neither {
         /// The file.
         path: PathBuf,
+        /// Why the marker sheet did not give the checker.
+        markers: String,
+        /// Why mcc did not.
+        mcc: String,
     },
     /// No 4 × 6 grid between the markers.
     #[error("{path}: no ColorChecker grid between the markers ({why})")]
@@ -280,6 +282,51 @@ fn largest_component(mask: &[bool], w: usize, h: usize) -> Option<Vec<bool>> {
         }
     }
     (best.0 > 0).then(|| label.iter().map(|l| *l == best.1).collect())
+}
+
+/// Which way a ColorChecker was found in a photo.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FoundBy {
+    /// The four markers of its placement sheet.
+    Markers,
+    /// OpenCV's marker-less detector, after the marker sheet failed for the reason given.
+    Mcc {
+        /// Why the marker sheet did not give the checker.
+        markers: String,
+    },
+}
+
+impl std::fmt::Display for FoundBy {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            FoundBy::Markers => write!(f, "found by its marker sheet"),
+            FoundBy::Mcc { markers } => write!(f, "found by OpenCV's mcc (the marker sheet: {markers})"),
+        }
+    }
+}
+
+/// Finds and reads the checker in `photo`: by its marker sheet, and when that finds no checker
+/// (no markers, other markers, or markers that do not frame it), by OpenCV's marker-less detector;
+/// says which way it was found, or why neither found it.
+pub fn find_checker(
+    photo: &Photo,
+    path: &Path,
+    reference_srgb: &[[f64; 3]; 24],
+) -> Result<(CheckerReading, FoundBy), CheckerError> {
+    let markers = match read_checker(photo, path, reference_srgb) {
+        Ok(r) => return Ok((r, FoundBy::Markers)),
+        Err(CheckerError::Photo(e)) if matches!(*e, PhotoError::Load { .. }) => return Err(CheckerError::Photo(e)),
+        Err(e @ (CheckerError::Photo(_) | CheckerError::NoGrid { .. })) => e.to_string(),
+        Err(e) => return Err(e),
+    };
+    // The errors name the file; once is enough in the combined message.
+    let markers = markers.strip_prefix(&format!("{}: ", path.display())).unwrap_or(&markers).to_string();
+    let neither = |mcc: String| CheckerError::Neither { path: path.into(), markers: markers.clone(), mcc };
+    match read_checker_mcc(photo) {
+        Ok(Some(r)) => Ok((r, FoundBy::Mcc { markers: markers.clone() })),
+        Ok(None) => Err(neither("it finds no ColorChecker Classic".into())),
+        Err(e) => Err(neither(format!("it failed: {e}"))),
+    }
 }
 
 /// Finds the checker without a marker sheet, by OpenCV's `mcc` detector (which reports the

@@ -200,6 +200,10 @@ pub struct Calibration {
     pub unreadable: Vec<usize>,
     /// The photos read.
     pub photos: Vec<PathBuf>,
+    /// How the chart was found in each photo or frame read, where there is more than one way
+    /// (a ColorChecker: by its marker sheet, or by OpenCV's mcc and why the sheet failed).
+    #[serde(default)]
+    pub found: Vec<String>,
 }
 
 /// Why a fit was not kept.
@@ -313,6 +317,7 @@ impl Calibration {
             clipped,
             unreadable,
             photos,
+            found: Vec::new(),
         })
     }
 

@@ -209,6 +209,9 @@ fn calibrate(a: &CalibrateArgs) -> Result<()> {
             h.max
         );
     }
+    for how in pav::table::unique(cal.found.iter().cloned()) {
+        println!("  {how}");
+    }
     println!(
         "kept {:?} ({} map from {} patches; {} clipped and {} unreadable left out){}",
         r.model,
