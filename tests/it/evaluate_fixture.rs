@@ -272,6 +272,9 @@ impl Detector for FailsOn {
     fn target_classes(&self) -> &[usize] {
         self.inner.target_classes()
     }
+    fn nms_iou(&self) -> f32 {
+        self.inner.nms_iou()
+    }
     fn target_label(&self) -> String {
         self.inner.target_label()
     }

@@ -24,6 +24,8 @@ mod darknet_onnx;
 mod data_fetch;
 #[cfg(feature = "eval")]
 mod defences;
+#[cfg(feature = "optimize")]
+mod detector_config;
 mod detectors_reference;
 #[cfg(feature = "eval")]
 mod detectors_wide;

@@ -57,7 +57,7 @@ pub fn read_input(spec: &str) -> Result<Frame, CheckError> {
 /// Runs `det` on `frame`: detections from `min_score` after the config's NMS, and the target's best.
 pub fn check(det: &mut OnnxDetector, frame: &Frame, min_score: f32) -> Result<Checked, DetectError> {
     let props = det.propose(frame)?;
-    let mut detections = props.detections(min_score, det.config().nms_iou);
+    let mut detections = props.detections(min_score, det.nms_iou());
     detections.sort_by(|a, b| b.score.total_cmp(&a.score));
     Ok(Checked { best: props.best(det.target_classes()), detections })
 }

@@ -283,8 +283,9 @@ struct RawConfig {
     defence: Vec<Defence>,
 }
 
+/// The IoU above which two boxes of one class are one detection, unless a config says otherwise.
 fn nms_default() -> f32 {
-    0.45
+    0.5
 }
 
 /// Target classes that cannot be set.
@@ -320,7 +321,8 @@ pub struct DetectorConfig {
     pub class_names: Vec<String>,
     /// Indices of the target classes.
     pub target_classes: Vec<usize>,
-    /// IoU threshold for NMS.
+    /// IoU above which non-maximum suppression keeps only the higher-scored of two boxes of one
+    /// class; every path that turns proposals into detections reads it (`Detector::nms_iou`).
     pub nms_iou: f32,
     /// Defences rewritten into the model when it loads (feature norm clipping); the input
     /// transforms are in [`InputConfig::defence`].

@@ -71,6 +71,8 @@ pub trait Detector: Send {
     fn propose_prepared(&mut self, input: Vec<f32>, map: preprocess::InputMap) -> Result<Proposals, DetectError>;
     /// Class indices that count as the vehicle.
     fn target_classes(&self) -> &[usize];
+    /// The IoU of its config's non-maximum suppression (`nms_iou`).
+    fn nms_iou(&self) -> f32;
     /// Those classes' names joined by `+`, for reports.
     fn target_label(&self) -> String;
     /// A second, independent copy of this detector (its own runtime session), so that two

@@ -207,6 +207,10 @@ impl Detector for OnnxDetector {
         &self.cfg.target_classes
     }
 
+    fn nms_iou(&self) -> f32 {
+        self.cfg.nms_iou
+    }
+
     fn target_label(&self) -> String {
         self.cfg.target_names()
     }

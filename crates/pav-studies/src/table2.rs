@@ -18,8 +18,6 @@ use std::path::{Path, PathBuf};
 
 /// Lowest car score kept for P@0.5 (COCO evaluations keep low-scoring boxes for the PR curve).
 pub const AP_MIN_SCORE: f32 = 0.05;
-/// NMS IoU for the car detections.
-pub const NMS_IOU: f32 = 0.5;
 
 /// One cell of the table.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -75,7 +73,7 @@ pub fn detect_view(
     for det in detectors.iter_mut() {
         let p = det.propose(&f)?;
         let cars = p
-            .target_detections(det.target_classes(), AP_MIN_SCORE, NMS_IOU)
+            .target_detections(det.target_classes(), AP_MIN_SCORE, det.nms_iou())
             .into_iter()
             .map(|x| (x.score, x.bbox))
             .collect();
