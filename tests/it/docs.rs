@@ -4,26 +4,8 @@
 
 use crate::common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
-
-/// README.md and every Markdown file under docs/.
-fn doc_files() -> Vec<PathBuf> {
-    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
-        for e in std::fs::read_dir(dir).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                walk(&p, out);
-            } else if p.extension().is_some_and(|x| x == "md") {
-                out.push(p);
-            }
-        }
-    }
-    let mut v = vec![common::repo().join("README.md")];
-    walk(&common::repo().join("docs"), &mut v);
-    v.sort();
-    v
-}
 
 /// A fenced code block: its info string, its first line's number, its text.
 struct Block {
@@ -64,7 +46,7 @@ fn blocks(md: &str) -> Result<Vec<Block>, String> {
 
 #[test]
 fn every_fence_in_the_docs_is_closed() {
-    let bad: Vec<String> = doc_files()
+    let bad: Vec<String> = common::doc_files(&common::repo())
         .iter()
         .filter_map(|f| blocks(&std::fs::read_to_string(f).unwrap()).err().map(|e| format!("{}: {e}", f.display())))
         .collect();
@@ -252,7 +234,7 @@ fn check(inv: &Invocation, cache: &mut std::collections::HashMap<(String, Vec<St
 #[test]
 fn every_documented_command_names_real_subcommands_and_options() {
     let mut all = Vec::new();
-    for f in doc_files() {
+    for f in common::doc_files(&common::repo()) {
         let rel = f.strip_prefix(common::repo()).unwrap().display().to_string();
         all.extend(invocations(&rel, &std::fs::read_to_string(&f).unwrap()));
     }

@@ -6,25 +6,22 @@ use crate::common;
 use std::collections::{BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
-/// The Markdown files whose links are checked: the README and everything under docs/.
-fn markdown_files(root: &Path) -> Vec<PathBuf> {
-    let mut out = vec![root.join("README.md")];
-    out.extend(common::files_with_extension(&root.join("docs"), "md"));
-    out
+/// The lines of `md` outside fenced code blocks (the fences themselves left out).
+fn outside_fences(md: &str) -> impl Iterator<Item = &str> {
+    let mut fence = false;
+    md.lines().filter(move |line| {
+        if line.trim_start().starts_with("```") {
+            fence = !fence;
+            return false;
+        }
+        !fence
+    })
 }
 
 /// The lines of `md` outside fenced code blocks, with inline code spans blanked.
 fn prose(md: &str) -> Vec<String> {
-    let mut fence = false;
     let mut out = Vec::new();
-    for line in md.lines() {
-        if line.trim_start().starts_with("```") {
-            fence = !fence;
-            continue;
-        }
-        if fence {
-            continue;
-        }
+    for line in outside_fences(md) {
         // A span opens and closes with the same run of backticks.
         let (mut s, mut rest) = (String::new(), line);
         while let Some(i) = rest.find('`') {
@@ -76,14 +73,7 @@ fn slug(heading: &str) -> String {
 fn anchors(md: &str) -> BTreeSet<String> {
     let mut seen: HashMap<String, usize> = HashMap::new();
     let mut out = BTreeSet::new();
-    let mut fence = false;
-    for line in md.lines() {
-        if line.trim_start().starts_with("```") {
-            fence = !fence;
-        }
-        if fence {
-            continue;
-        }
+    for line in outside_fences(md) {
         if let Some(h) = line.strip_prefix('#') {
             let base = slug(h.trim_start_matches('#'));
             let n = seen.entry(base.clone()).or_insert(0);
@@ -122,7 +112,7 @@ fn links(md: &str) -> Vec<String> {
 fn check_links(root: &Path) -> (Vec<String>, BTreeSet<PathBuf>) {
     let (mut broken, mut reached) = (Vec::new(), BTreeSet::new());
     let mut cache: HashMap<PathBuf, BTreeSet<String>> = HashMap::new();
-    for file in markdown_files(root) {
+    for file in common::doc_files(root) {
         let md = std::fs::read_to_string(&file).unwrap();
         let rel = file.strip_prefix(root).unwrap().display().to_string();
         for target in links(&md) {
@@ -181,7 +171,7 @@ fn a_link_broken_on_purpose_is_caught() {
     // A copy of the documents and everything they link to checks clean before it is broken.
     let tmp = tempfile::tempdir().unwrap();
     let copy_root = tmp.path();
-    for f in markdown_files(&root).iter().chain(&reached) {
+    for f in common::doc_files(&root).iter().chain(&reached) {
         copy(f, &copy_root.join(f.strip_prefix(&root).unwrap()));
     }
     assert!(check_links(copy_root).0.is_empty(), "the copy should check clean: {:?}", check_links(copy_root).0);
