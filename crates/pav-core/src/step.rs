@@ -94,6 +94,7 @@ impl ChainTape {
 /// A step with its tape kept as `Any` and its error boxed, so that steps of different kinds
 /// form one chain.
 trait Link {
+    fn stage(&self) -> &'static str;
     fn input_len(&self) -> usize;
     fn output_len(&self) -> usize;
     fn forward(&self, x: &[f32], rng: &mut Rng) -> Result<(Vec<f32>, Box<dyn Any>), ChainError>;
@@ -120,6 +121,9 @@ where
     S::Tape: 'static,
     S::Error: Send + Sync + 'static,
 {
+    fn stage(&self) -> &'static str {
+        self.stage
+    }
     fn input_len(&self) -> usize {
         self.step.input_len()
     }
@@ -142,7 +146,7 @@ where
 /// stage's input to the last one's output, whose adjoint runs the stages' adjoints in reverse.
 #[derive(Default)]
 pub struct Chain<'a> {
-    links: Vec<(&'static str, Box<dyn Link + 'a>)>,
+    links: Vec<Box<dyn Link + 'a>>,
 }
 
 impl<'a> Chain<'a> {
@@ -167,26 +171,27 @@ impl<'a> Chain<'a> {
         S::Tape: 'static,
         S::Error: Send + Sync + 'static,
     {
-        if let Some((last, l)) = self.links.last() {
-            let (out, inp) = (l.output_len(), step.input_len());
-            assert_eq!(out, inp, "stage {stage} reads {inp} values, stage {last} writes {out}");
-        }
-        self.links.push((stage, Box::new(Named { stage, step })));
+        self.append(Box::new(Named { stage, step }));
     }
 
     /// This chain followed by the stages of `rest`.
     pub fn and(mut self, rest: Chain<'a>) -> Self {
-        if let (Some((last, l)), Some((first, f))) = (self.links.last(), rest.links.first()) {
-            let (out, inp) = (l.output_len(), f.input_len());
-            assert_eq!(out, inp, "stage {first} reads {inp} values, stage {last} writes {out}");
-        }
-        self.links.extend(rest.links);
+        rest.links.into_iter().for_each(|l| self.append(l));
         self
+    }
+
+    /// Appends `link`, which must read what the last stage writes.
+    fn append(&mut self, link: Box<dyn Link + 'a>) {
+        if let Some(last) = self.links.last() {
+            let (out, inp) = (last.output_len(), link.input_len());
+            assert_eq!(out, inp, "stage {} reads {inp} values, stage {} writes {out}", link.stage(), last.stage());
+        }
+        self.links.push(link);
     }
 
     /// The stages' names, in order.
     pub fn stages(&self) -> Vec<&'static str> {
-        self.links.iter().map(|l| l.0).collect()
+        self.links.iter().map(|l| l.stage()).collect()
     }
 }
 
@@ -195,24 +200,26 @@ impl Step for Chain<'_> {
     type Error = ChainError;
 
     fn input_len(&self) -> usize {
-        self.links.first().map_or(0, |l| l.1.input_len())
+        self.links.first().map_or(0, |l| l.input_len())
     }
 
     fn output_len(&self) -> usize {
-        self.links.last().map_or(0, |l| l.1.output_len())
+        self.links.last().map_or(0, |l| l.output_len())
     }
 
     fn forward(&self, x: &[f32], rng: &mut Rng) -> Result<(Vec<f32>, ChainTape), ChainError> {
         let mut tape = ChainTape { tapes: Vec::with_capacity(self.links.len()), times: Vec::new() };
-        let mut y = x.to_vec();
-        for (stage, link) in &self.links {
+        // The first stage reads `x` itself; each later one what the stage before it wrote.
+        let mut y: Option<Vec<f32>> = None;
+        for link in &self.links {
             let t = Instant::now();
-            let (next, tp) = link.forward(&y, rng)?;
-            tape.times.push(StageTime { stage, forward_ms: t.elapsed().as_secs_f64() * 1e3, adjoint_ms: 0.0 });
+            let (next, tp) = link.forward(y.as_deref().unwrap_or(x), rng)?;
+            let forward_ms = t.elapsed().as_secs_f64() * 1e3;
+            tape.times.push(StageTime { stage: link.stage(), forward_ms, adjoint_ms: 0.0 });
             tape.tapes.push(tp);
-            y = next;
+            y = Some(next);
         }
-        Ok((y, tape))
+        Ok((y.unwrap_or_else(|| x.to_vec()), tape))
     }
 
     fn adjoint(&self, tape: &ChainTape, gy: &[f32], gx: &mut [f32]) {
@@ -220,7 +227,7 @@ impl Step for Chain<'_> {
     }
 
     fn map_box(&self, tape: &ChainTape, car: Option<[f32; 4]>) -> Option<[f32; 4]> {
-        self.links.iter().zip(&tape.tapes).fold(car, |b, ((_, link), tp)| link.map_box(tp.as_ref(), b))
+        self.links.iter().zip(&tape.tapes).fold(car, |b, (link, tp)| link.map_box(tp.as_ref(), b))
     }
 }
 
@@ -239,15 +246,17 @@ impl Chain<'_> {
             accumulate(gx, gy.iter().copied());
             return ms;
         }
-        let mut g = gy.to_vec();
-        for (i, ((_, link), tp)) in self.links.iter().zip(tapes).enumerate().rev() {
+        // The last stage reads `gy` itself; each earlier one what the stage after it wrote.
+        let mut g: Option<Vec<f32>> = None;
+        for (i, (link, tp)) in self.links.iter().zip(tapes).enumerate().rev() {
             let t = Instant::now();
+            let above = g.as_deref().unwrap_or(gy);
             if i == 0 {
-                link.adjoint(tp.as_ref(), &g, gx);
+                link.adjoint(tp.as_ref(), above, gx);
             } else {
                 let mut below = vec![0f32; link.input_len()];
-                link.adjoint(tp.as_ref(), &g, &mut below);
-                g = below;
+                link.adjoint(tp.as_ref(), above, &mut below);
+                g = Some(below);
             }
             ms[i] = t.elapsed().as_secs_f64() * 1e3;
         }
