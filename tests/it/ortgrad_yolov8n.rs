@@ -1,12 +1,14 @@
-//! YOLOv8n as a white box: the float surrogate of the int8 model (`detect::surrogate`) cut to its
-//! class branch (`attack::whitebox::class_branch`) and differentiated. Its forward gives the class
-//! probabilities of plain inference of the surrogate on real frames, and its input gradient
+//! YOLOv8n as a white box: the float surrogate of the int8 model (`detect::surrogate`), planned
+//! from its description (`attack::outputs::Plan`): its output concatenates boxes and class
+//! probabilities, so only the class piece is computed and differentiated. Its forward gives the
+//! class probabilities of plain inference of the surrogate on real frames, and its input gradient
 //! matches central differences of that forward.
 
 use crate::common;
 
 use pav::attack::loss::{DetectionLoss, Proposals, Reduce};
-use pav::attack::whitebox::{class_branch, WhiteBox, WhiteBoxOptions};
+use pav::attack::outputs::Plan;
+use pav::attack::whitebox::{WhiteBox, WhiteBoxOptions};
 use pav::dataset::fca::CarlaSample;
 use pav::detect::onnx::OnnxDetector;
 use pav::detect::preprocess::prepare;
@@ -24,6 +26,14 @@ fn surrogate() -> Model {
     dequantize(&Model::from_bytes(&std::fs::read(config().model).unwrap()).unwrap()).unwrap().0
 }
 
+/// The surrogate as its white box computes it without boxes: the class piece of its output.
+fn class_branch() -> Model {
+    let mut m = surrogate();
+    let plan = Plan::new(&mut m, &config().output.describe(80), 640, 80, false, false).unwrap();
+    assert_eq!((plan.graph_outputs.len(), plan.seeded), (1, 1), "{:?}", plan.graph_outputs);
+    m
+}
+
 fn frame(name: &str) -> CarlaSample {
     CarlaSample::load(&common::real_data().join("fca/carla_dataset/test").join(name)).unwrap()
 }
@@ -34,7 +44,7 @@ fn the_class_branch_forward_equals_the_surrogate_on_real_frames() {
     let path = tmp.path().join("float.onnx");
     std::fs::write(&path, surrogate().to_bytes()).unwrap();
     let mut plain = OnnxDetector::new(DetectorConfig { model: path, ..config() }, 2).unwrap();
-    let branch = class_branch(surrogate(), false).unwrap();
+    let branch = class_branch();
     // The box decoder (Softmax, Div, Sub) is gone with the boxes.
     assert!(branch.nodes.iter().all(|n| !["Softmax", "Div", "Sub"].contains(&n.op_type.as_str())));
     let d = differentiate_with(&branch, &[1, 3, 640, 640], Kernels::Fused).unwrap_or_else(|e| panic!("{e}"));
@@ -54,7 +64,7 @@ fn the_class_branch_forward_equals_the_surrogate_on_real_frames() {
 
 #[test]
 fn the_class_branch_gradient_matches_central_differences() {
-    let branch = class_branch(surrogate(), false).unwrap();
+    let branch = class_branch();
     let input = prepare(&frame("data12503.npz").image, &config().input).unwrap().0;
     let d = differentiate_with(&branch, &[1, 3, 640, 640], Kernels::Fused).unwrap();
     let mut g = GradSession::new("yolov8n class branch", d, 2).unwrap();

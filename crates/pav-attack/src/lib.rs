@@ -12,6 +12,8 @@ pub mod export;
 pub mod loss;
 #[cfg(feature = "optimize")]
 pub mod optimize;
+#[cfg(feature = "optimize")]
+pub mod outputs;
 pub mod pyramid;
 pub mod setup;
 pub mod smooth;

@@ -40,6 +40,8 @@
 //! second half of a four-white-box crossval fold, 21 of DEIMv2's 127 steps had no paper proposal while its
 //! best car score was ≥ 0.05, so L2 pushed nothing there.
 
+use pav_detect::decode::{ScoreRule, ScoreSite};
+use pav_detect::layout::Activation;
 use pav_detect::nms::iou;
 
 /// Sigmoid as `(1 + tanh(x/2))/2`, and its derivative `(1 − tanh²(x/2))/4`: both finite for every
@@ -78,9 +80,6 @@ pub fn iou_and_grad(a: &[f32; 4], b: &[f32; 4]) -> (f32, [f32; 4]) {
     // IoU = inter / (area_a + area_b − inter).
     (v, [0, 1, 2, 3].map(|k| (d_inter[k] * union - inter * (d_area[k] - d_inter[k])) / (union * union)))
 }
-
-/// One batch-1 darknet head map `[A·(5+C), H, W]`, flattened, with its `(H, W)`.
-pub type HeadMap = (Vec<f32>, (usize, usize));
 
 /// How the set of predictions becomes one number per term.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize)]
@@ -149,30 +148,18 @@ pub struct LossTerms {
 #[error("{0}")]
 pub struct HeadShapeError(String);
 
-/// Whether raw values are logits (sigmoid applied here) or probabilities.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Raw {
-    Logit,
-    Probability,
-}
-
-/// Where one prediction's values sit in the raw outputs.
-#[derive(Clone, Copy, Debug)]
-struct At {
-    output: usize,
-    obj: usize,
-    cls0: usize,
-    stride: usize,
-}
-
-/// Objectness and class probabilities of every predicted box, with the way back to the raw outputs.
+/// Objectness and class probabilities of every predicted box, read from a detector's raw
+/// outputs where its description puts them ([`ScoreSite`]), as its [`ScoreRule`] says, with the
+/// way back to those values.
 #[derive(Clone, Debug)]
 pub struct Predictions {
     classes: usize,
-    raw: Raw,
+    rule: ScoreRule,
     obj: Vec<f32>,
     cls: Vec<f32>,
-    at: Vec<At>,
+    at: Vec<ScoreSite>,
+    /// Per prediction without an objectness, the class whose probability stands for it.
+    best: Vec<usize>,
     /// Whether the head has objectness (false: objectness is the largest class probability and
     /// the detection score is the target probability alone).
     objectness: bool,
@@ -182,103 +169,74 @@ pub struct Predictions {
     weight_grad: Vec<[f32; 4]>,
 }
 
+/// A value through an activation that works on single values, and its derivative.
+fn activate(a: Activation, x: f32) -> (f32, f32) {
+    match a {
+        Activation::Sigmoid => sigmoid(x),
+        Activation::None | Activation::Softmax => (x, 1.0),
+    }
+}
+
 impl Predictions {
-    /// Darknet heads (`anchors[i]` anchors each, `classes` classes), logits.
-    pub fn darknet(maps: &[HeadMap], anchors: &[usize], classes: usize) -> Result<Self, HeadShapeError> {
-        if maps.len() != anchors.len() {
-            return Err(HeadShapeError(format!("{} head maps for {} heads", maps.len(), anchors.len())));
-        }
-        let mut p = Predictions::empty(classes, Raw::Logit, true);
-        for (output, ((map, (h, w)), &a)) in maps.iter().zip(anchors).enumerate() {
-            let hw = h * w;
-            if map.len() != a * (5 + classes) * hw {
+    /// Every prediction of `raw` (a detector's outputs, as its white box orders them): its
+    /// values at `sites`, read as `rule` says, for `classes` classes.
+    pub fn read(raw: &[&[f32]], sites: &[ScoreSite], rule: &ScoreRule, classes: usize) -> Result<Self, HeadShapeError> {
+        let col = |k: usize| match rule.background {
+            Some(bg) if k >= bg => k + 1,
+            _ => k,
+        };
+        let mut p = Predictions::empty(classes, rule.clone());
+        let mut logits = vec![0f32; rule.width];
+        for site in sites {
+            let (o, first, step) = site.scores;
+            let out = raw.get(o).ok_or_else(|| HeadShapeError(format!("no output {o} among {}", raw.len())))?;
+            let last = first + step * rule.width.saturating_sub(1);
+            if rule.width == 0 || last >= out.len() || classes + usize::from(rule.background.is_some()) != rule.width {
                 return Err(HeadShapeError(format!(
-                    "a head map of {} values does not fit {a} anchors × (5 + {classes}) × {h}×{w}",
-                    map.len()
+                    "{} values of output {o} do not hold {} class columns from {first} every {step}",
+                    out.len(),
+                    rule.width
                 )));
             }
-            for ai in 0..a {
-                let base = ai * (5 + classes) * hw;
-                for q in 0..hw {
-                    let at = At { output, obj: base + 4 * hw + q, cls0: base + 5 * hw + q, stride: hw };
-                    p.push(map, at);
-                }
+            let from = p.cls.len();
+            if rule.activation == Activation::Softmax {
+                logits.iter_mut().enumerate().for_each(|(j, l)| *l = out[first + j * step]);
+                let m = logits.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+                let z: f32 = logits.iter().map(|x| (x - m).exp()).sum();
+                p.cls.extend((0..classes).map(|k| (logits[col(k)] - m).exp() / z));
+            } else {
+                p.cls.extend((0..classes).map(|k| activate(rule.activation, out[first + col(k) * step]).0));
             }
-        }
-        Ok(p)
-    }
-
-    /// YOLOX rows `[R, 5 + C]` (box, objectness, classes), probabilities.
-    pub fn yolox(out: &[f32], classes: usize) -> Result<Self, HeadShapeError> {
-        let cols = 5 + classes;
-        if out.len() % cols != 0 {
-            return Err(HeadShapeError(format!("{} values are not rows of 5 + {classes}", out.len())));
-        }
-        let mut p = Predictions::empty(classes, Raw::Probability, true);
-        for r in 0..out.len() / cols {
-            p.push(out, At { output: 0, obj: r * cols + 4, cls0: r * cols + 5, stride: 1 });
-        }
-        Ok(p)
-    }
-
-    /// Ultralytics scores `[C, N]` (class probabilities of N predictions, class-major), without
-    /// objectness: see the module doc.
-    pub fn ultralytics(scores: &[f32], classes: usize) -> Result<Self, HeadShapeError> {
-        if classes == 0 || scores.len() % classes != 0 {
-            return Err(HeadShapeError(format!("{} values are not {classes} class rows", scores.len())));
-        }
-        let n = scores.len() / classes;
-        let mut p = Predictions::empty(classes, Raw::Probability, false);
-        for i in 0..n {
-            // The largest class probability stands for objectness; ties go to the first class.
-            let k = (0..classes).fold(0, |m, k| if scores[k * n + i] > scores[m * n + i] { k } else { m });
-            p.push(scores, At { output: 0, obj: k * n + i, cls0: i, stride: n });
-        }
-        Ok(p)
-    }
-
-    /// DETR class logits `[Q, C]` (query-major; sigmoid per class, as DEIM and RT-DETR score
-    /// them), without objectness: a query's objectness is its largest class probability, its
-    /// detection score the target probability, as for [`Predictions::ultralytics`].
-    pub fn detr(logits: &[f32], classes: usize) -> Result<Self, HeadShapeError> {
-        if classes == 0 || logits.len() % classes != 0 {
-            return Err(HeadShapeError(format!("{} values are not queries of {classes} classes", logits.len())));
-        }
-        let mut p = Predictions::empty(classes, Raw::Logit, false);
-        for q in 0..logits.len() / classes {
-            let row = &logits[q * classes..(q + 1) * classes];
+            // The class holding objectness when there is none: ties to the first (every
+            // activation keeps the order of a row's values).
+            let row = &p.cls[from..];
             let k = (0..classes).fold(0, |m, k| if row[k] > row[m] { k } else { m });
-            p.push(logits, At { output: 0, obj: q * classes + k, cls0: q * classes, stride: 1 });
+            let obj = match (site.objectness, rule.objectness) {
+                (Some((o, i)), Some(a)) => {
+                    let v = raw.get(o).and_then(|r| r.get(i)).ok_or_else(|| {
+                        HeadShapeError(format!("no objectness value {i} in output {o} of {}", raw.len()))
+                    })?;
+                    activate(a, *v).0
+                }
+                _ => row[k],
+            };
+            p.obj.push(obj);
+            p.best.push(k);
+            p.at.push(*site);
         }
         Ok(p)
     }
 
-    /// Rows of class probabilities `[R, C]`, one map per output (GFL heads: each grid level's
-    /// class map, already through a sigmoid), without objectness, as [`Predictions::ultralytics`].
-    pub fn class_rows(maps: &[Vec<f32>], classes: usize) -> Result<Self, HeadShapeError> {
-        let mut p = Predictions::empty(classes, Raw::Probability, false);
-        for (output, map) in maps.iter().enumerate() {
-            if classes == 0 || map.len() % classes != 0 {
-                return Err(HeadShapeError(format!("{} values are not rows of {classes} classes", map.len())));
-            }
-            for r in 0..map.len() / classes {
-                let row = &map[r * classes..(r + 1) * classes];
-                let k = (0..classes).fold(0, |m, k| if row[k] > row[m] { k } else { m });
-                p.push(map, At { output, obj: r * classes + k, cls0: r * classes, stride: 1 });
-            }
-        }
-        Ok(p)
-    }
-
-    /// No predictions yet, for heads of `classes` classes read as `raw`.
-    fn empty(classes: usize, raw: Raw, objectness: bool) -> Self {
+    /// No predictions yet, for heads of `classes` classes read as `rule` says.
+    fn empty(classes: usize, rule: ScoreRule) -> Self {
         Predictions {
             classes,
-            raw,
+            objectness: rule.objectness.is_some(),
+            rule,
             obj: vec![],
             cls: vec![],
             at: vec![],
-            objectness,
+            best: vec![],
             weight: None,
             weight_grad: vec![],
         }
@@ -300,10 +258,17 @@ impl Predictions {
     /// The detection score of prediction `i` for a target probability `car`, and its derivatives
     /// with respect to objectness and that probability.
     fn score(&self, i: usize, car: f32) -> (f32, f32, f32) {
-        if self.objectness {
-            (self.obj[i] * car, car, self.obj[i])
-        } else {
-            (car, 0.0, 1.0)
+        let [p, q] = self.rule.powers;
+        match (self.objectness, p == 1.0 && q == 1.0) {
+            (true, true) => (self.obj[i] * car, car, self.obj[i]),
+            (false, true) => (car, 0.0, 1.0),
+            (with, false) => {
+                // obj^p · car^q, its slopes finite where a factor is 0.
+                let (o, c) = (if with { self.obj[i].max(0.0) } else { 1.0 }, car.max(0.0));
+                let (op, cq) = (o.powf(p), c.powf(q));
+                let slope = |v: f32, e: f32| if v > 0.0 { e * v.powf(e - 1.0) } else { 0.0 };
+                (op * cq, if with { slope(o, p) * cq } else { 0.0 }, op * slope(c, q))
+            }
         }
     }
 
@@ -341,16 +306,6 @@ impl Predictions {
         Ok(())
     }
 
-    fn push(&mut self, raw: &[f32], at: At) {
-        let prob = |x: f32| if self.raw == Raw::Logit { sigmoid(x).0 } else { x };
-        self.obj.push(prob(raw[at.obj]));
-        for k in 0..self.classes {
-            let v = prob(raw[at.cls0 + k * at.stride]);
-            self.cls.push(v);
-        }
-        self.at.push(at);
-    }
-
     /// Number of predicted boxes.
     pub fn len(&self) -> usize {
         self.obj.len()
@@ -361,21 +316,60 @@ impl Predictions {
         self.obj.is_empty()
     }
 
+    /// Where class `k` of prediction `i` sits: (output, index).
+    fn class_at(&self, i: usize, k: usize) -> (usize, usize) {
+        let (o, first, step) = self.at[i].scores;
+        let col = match self.rule.background {
+            Some(bg) if k >= bg => k + 1,
+            _ => k,
+        };
+        (o, first + col * step)
+    }
+
     /// The gradient with respect to the raw outputs `raw` of a loss whose gradients with respect
     /// to the probabilities are `dobj` (per box) and `dcls` (box, class, value).
     fn backprop(&self, raw: &[&[f32]], dobj: &[f32], dcls: &[(usize, usize, f32)]) -> Vec<Vec<f32>> {
         let mut g: Vec<Vec<f32>> = raw.iter().map(|r| vec![0f32; r.len()]).collect();
-        let chain = |x: f32| if self.raw == Raw::Logit { sigmoid(x).1 } else { 1.0 };
+        // A prediction without objectness passes its objectness gradient to the class that holds it.
+        let mut by_class: Vec<(usize, usize, f32)> = Vec::new();
         for (i, &d) in dobj.iter().enumerate() {
-            if d != 0.0 {
-                let at = self.at[i];
-                g[at.output][at.obj] += d * chain(raw[at.output][at.obj]);
+            if d == 0.0 {
+                continue;
+            }
+            match (self.at[i].objectness, self.rule.objectness) {
+                (Some((o, j)), Some(a)) => g[o][j] += d * activate(a, raw[o][j]).1,
+                _ => by_class.push((i, self.best[i], d)),
             }
         }
-        for &(i, k, d) in dcls {
-            let at = self.at[i];
-            let j = at.cls0 + k * at.stride;
-            g[at.output][j] += d * chain(raw[at.output][j]);
+        by_class.extend_from_slice(dcls);
+        if self.rule.activation != Activation::Softmax {
+            for (i, k, d) in by_class {
+                let (o, j) = self.class_at(i, k);
+                g[o][j] += d * activate(self.rule.activation, raw[o][j]).1;
+            }
+            return g;
+        }
+        // Through a softmax over the row: ∂p_k/∂z_j = p_k (δ_kj − p_j), every column of the row
+        // (the background's too) receiving p_j (d_j − Σ_k d_k p_k).
+        by_class.sort_by_key(|t| t.0);
+        for row in by_class.chunk_by(|a, b| a.0 == b.0) {
+            let i = row[0].0;
+            let mut d = vec![0f32; self.classes];
+            row.iter().for_each(|&(_, k, v)| d[k] += v);
+            let s: f32 = (0..self.classes).map(|k| d[k] * self.cls[i * self.classes + k]).sum();
+            let (o, first, step) = self.at[i].scores;
+            let z: Vec<f32> = (0..self.rule.width).map(|j| raw[o][first + j * step]).collect();
+            let m = z.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+            let e: f32 = z.iter().map(|x| (x - m).exp()).sum();
+            for j in 0..self.rule.width {
+                let pj = (z[j] - m).exp() / e;
+                let dj = match self.rule.background {
+                    Some(bg) if j == bg => 0.0,
+                    Some(bg) if j > bg => d[j - 1],
+                    _ => d[j],
+                };
+                g[o][first + j * step] += pj * (dj - s);
+            }
         }
         g
     }
@@ -530,6 +524,51 @@ impl DetectionLoss {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use pav_detect::decode::{score_sites, RawOutput};
+    use pav_detect::layout::Description;
+
+    /// One batch-1 head map of 2 anchors × (5 + 3 classes) planes, flattened, with its `(H, W)`.
+    type HeadMap = (Vec<f32>, (usize, usize));
+
+    /// The predictions of the outputs `(name, shape, values)` as `desc` (TOML) describes them,
+    /// for 3 classes.
+    fn described(desc: &str, outs: &[(&str, Vec<usize>, &[f32])]) -> Result<Predictions, String> {
+        let d: Description = toml::from_str(desc).map_err(|e| e.to_string())?;
+        d.validate(3)?;
+        let raws: Vec<RawOutput> = outs
+            .iter()
+            .map(|(n, s, v)| RawOutput { name: n.to_string(), shape: s.clone(), data: v.to_vec() })
+            .collect();
+        let sites = score_sites(&d, &raws, 64, 64, 3).map_err(|e| e.to_string())?;
+        let raw: Vec<&[f32]> = outs.iter().map(|o| o.2).collect();
+        Predictions::read(&raw, &sites, &ScoreRule::of(&d, 3), 3).map_err(|e| e.to_string())
+    }
+
+    /// Darknet planes: two anchors, logits.
+    fn planes(m: &HeadMap) -> Result<Predictions, String> {
+        let part = "output = ['h']\narrange = 'planes'\nper_level = true\n";
+        let desc = format!("[[levels]]\nanchors = [[1, 1], [1, 1]]\n[boxes]\n{part}encoding = 'darknet'\n[objectness]\n{part}column = 4\nactivation = 'sigmoid'\n[scores]\n{part}column = 5\nactivation = 'sigmoid'\n");
+        let (h, w) = m.1;
+        described(&desc, &[("h", vec![1, m.0.len() / (h * w).max(1), h, w], &m.0)])
+    }
+
+    /// Rows (box, objectness, 3 classes) of probabilities.
+    fn row_predictions(v: &[f32]) -> Predictions {
+        let desc = "[boxes]\nencoding = 'xyxy'\n[objectness]\ncolumn = 4\n[scores]\ncolumn = 5\n";
+        described(desc, &[("o", vec![v.len() / 8, 8], v)]).unwrap()
+    }
+
+    /// Class probabilities `[classes, N]`, class-major, without objectness.
+    fn columns(v: &[f32], classes: usize) -> Result<Predictions, String> {
+        let desc = "[boxes]\noutput = 'b'\nencoding = 'xyxy'\n[scores]\noutput = 's'\narrange = 'columns'\n";
+        described(desc, &[("s", vec![classes, v.len() / classes], v)])
+    }
+
+    /// Query-major class logits `[Q, classes]`, without objectness.
+    fn queries(v: &[f32], classes: usize) -> Result<Predictions, String> {
+        let desc = "[boxes]\noutput = 'b'\nencoding = 'xyxy'\n[scores]\noutput = 's'\nactivation = 'sigmoid'\n";
+        described(desc, &[("s", vec![v.len() / classes, classes], v)])
+    }
 
     /// A 2-anchor, 3-class, 2×2 head with chosen logits.
     fn map(obj: [f32; 8], cls_top: [usize; 8]) -> (Vec<f32>, (usize, usize)) {
@@ -563,7 +602,7 @@ mod tests {
     }
 
     fn eval(l: &DetectionLoss, m: &HeadMap, beta: f32) -> (LossTerms, Vec<Vec<f32>>) {
-        let p = Predictions::darknet(std::slice::from_ref(m), &[2], 3).unwrap();
+        let p = planes(m).unwrap();
         l.terms(&p, &[&m.0], beta).unwrap()
     }
 
@@ -662,7 +701,7 @@ mod tests {
         let (t, g) = eval(&loss(Reduce::Mean), &map([-9.0; 8], [2; 8]), 1.0);
         assert_eq!((t.boxes, t.proposals, t.l1 + t.l2), (0, 0, 0.0));
         assert!(g[0].iter().all(|x| *x == 0.0));
-        assert!(Predictions::darknet(&[(vec![0.0; 5], (1, 1))], &[2], 3).is_err());
+        assert!(planes(&(vec![0.0; 5], (1, 1))).is_err());
     }
 
     #[test]
@@ -674,12 +713,11 @@ mod tests {
         for how in [Reduce::Mean, Reduce::TopK(3), Reduce::Softmax(0.05), Reduce::Softmax(1e-6), Reduce::LogMax] {
             let (t, g) = eval(&loss(how), &m, 1.0);
             assert!(t.l1.is_finite() && t.l2.is_finite() && g[0].iter().all(|v| v.is_finite()), "{how:?} {t:?}");
-            let p = Predictions::yolox(&rows, 3).unwrap();
-            let (t, g) = loss(how).terms(&p, &[&rows], 1.0).unwrap();
+            let (t, g) = loss(how).terms(&row_predictions(&rows), &[&rows], 1.0).unwrap();
             assert!(t.l1.is_finite() && t.l2.is_finite() && g[0].iter().all(|v| v.is_finite()), "{how:?} {t:?}");
         }
-        // An empty YOLOX output: zero terms.
-        let p = Predictions::yolox(&[], 3).unwrap();
+        // An empty output: zero terms.
+        let p = row_predictions(&[]);
         let (t, _) = loss(Reduce::TopK(1)).terms(&p, &[&[]], 1.0).unwrap();
         assert_eq!((t.l1, t.l2), (0.0, 0.0));
     }
@@ -696,7 +734,7 @@ mod tests {
     #[test]
     fn a_head_without_objectness_uses_its_best_class_and_the_car_probability() {
         let s = v8_scores();
-        let p = Predictions::ultralytics(&s, 3).unwrap();
+        let p = columns(&s, 3).unwrap();
         // Objectness = best class: 0.8, 0.7, 0.6, 0.05. Boxes ≥ 0.5: predictions 0, 1, 2; their
         // best classes are car, class 0, car.
         let (t, g) = loss(Reduce::Mean).terms(&p, &[&s], 2.0).unwrap();
@@ -712,7 +750,8 @@ mod tests {
         let (t, g) = loss(Reduce::TopK(1)).terms(&p, &[&s], 1.0).unwrap();
         assert!((t.l1 - 0.8).abs() < 1e-6 && (t.l2 - 0.8).abs() < 1e-6, "{t:?}");
         assert!((g[0][8] - 2.0).abs() < 1e-6 && g[0].iter().filter(|v| **v != 0.0).count() == 1, "{:?}", g[0]);
-        assert!(Predictions::ultralytics(&s[..11], 3).is_err());
+        // Class rows that are not the config's classes are refused.
+        assert!(columns(&s, 4).is_err());
     }
 
     #[test]
@@ -723,10 +762,10 @@ mod tests {
         for l in every_loss() {
             let how = l.reduce;
             let total = |v: &[f32]| {
-                let (t, _) = l.terms(&Predictions::ultralytics(v, 3).unwrap(), &[v], beta).unwrap();
+                let (t, _) = l.terms(&columns(v, 3).unwrap(), &[v], beta).unwrap();
                 t.l1 as f64 + beta as f64 * t.l2 as f64
             };
-            let (_, g) = l.terms(&Predictions::ultralytics(&s, 3).unwrap(), &[&s], beta).unwrap();
+            let (_, g) = l.terms(&columns(&s, 3).unwrap(), &[&s], beta).unwrap();
             for i in 0..s.len() {
                 let (mut a, mut b) = (s.clone(), s.clone());
                 a[i] += 1e-3;
@@ -736,7 +775,7 @@ mod tests {
             }
             // Saturated (0 and 1 exactly), all-equal and empty outputs.
             for v in [vec![1.0; 12], vec![0.0; 12], vec![0.5; 12], vec![]] {
-                let (t, g) = l.terms(&Predictions::ultralytics(&v, 3).unwrap(), &[&v], beta).unwrap();
+                let (t, g) = l.terms(&columns(&v, 3).unwrap(), &[&v], beta).unwrap();
                 assert!(t.l1.is_finite() && t.l2.is_finite() && g[0].iter().all(|x| x.is_finite()), "{how:?} {t:?}");
             }
         }
@@ -746,7 +785,7 @@ mod tests {
     fn yolox_rows_are_probabilities_with_identity_chain() {
         // Two rows, 3 classes: (box, obj, c0, c1, c2).
         let rows = vec![0.0, 0.0, 0.0, 0.0, 0.9, 0.1, 0.2, 0.7, 0.0, 0.0, 0.0, 0.0, 0.3, 0.6, 0.1, 0.3];
-        let p = Predictions::yolox(&rows, 3).unwrap();
+        let p = row_predictions(&rows);
         let (t, g) = loss(Reduce::Mean).terms(&p, &[&rows], 2.0).unwrap();
         // Row 0 is a box whose best class is the car (2); row 1 (0.3) is below the threshold.
         assert_eq!((t.boxes, t.proposals), (1, 1));
@@ -760,7 +799,7 @@ mod tests {
         // Four queries, 3 classes, query-major logits: the same probabilities as `v8_scores`
         // would give through the sigmoid, laid out per query.
         let logits: Vec<f32> = vec![0.3, -2.0, 1.4, 0.9, -1.1, 0.2, -0.6, 0.4, 0.1, -3.0, -2.5, -2.9];
-        let p = Predictions::detr(&logits, 3).unwrap();
+        let p = queries(&logits, 3).unwrap();
         let prob = |x: f32| sigmoid(x).0;
         let (t, _) = loss(Reduce::Mean).terms(&p, &[&logits], 1.0).unwrap();
         // Best class per query: car (1.4), class 0 (0.9), class 1 (0.4), class 1 (−2.5).
@@ -770,7 +809,7 @@ mod tests {
         for l in every_loss() {
             let how = l.reduce;
             let total = |v: &[f32]| {
-                let (t, _) = l.terms(&Predictions::detr(v, 3).unwrap(), &[v], beta).unwrap();
+                let (t, _) = l.terms(&queries(v, 3).unwrap(), &[v], beta).unwrap();
                 t.l1 as f64 + beta as f64 * t.l2 as f64
             };
             let (_, g) = l.terms(&p, &[&logits], beta).unwrap();
@@ -783,11 +822,11 @@ mod tests {
             }
             // Saturated logits (±1e4: probabilities 0 and 1 exactly), all-equal and empty outputs.
             for v in [vec![1e4; 12], vec![-1e4; 12], vec![0.0; 12], vec![]] {
-                let (t, g) = l.terms(&Predictions::detr(&v, 3).unwrap(), &[&v], beta).unwrap();
+                let (t, g) = l.terms(&queries(&v, 3).unwrap(), &[&v], beta).unwrap();
                 assert!(t.l1.is_finite() && t.l2.is_finite() && g[0].iter().all(|x| x.is_finite()), "{how:?} {t:?}");
             }
         }
-        assert!(Predictions::detr(&logits[..11], 3).is_err());
+        assert!(queries(&logits, 4).is_err());
     }
 
     #[test]
@@ -799,7 +838,7 @@ mod tests {
         let boxes = [[60.0, 0.0, 90.0, 20.0], [0.0, 0.0, 5.0, 5.0], [30.0, 10.0, 70.0, 30.0], [10.0, 10.0, 50.0, 40.0]];
         let prob = |x: f32| sigmoid(x).0;
         let weighed = |v: &[f32]| {
-            let mut p = Predictions::detr(v, 3).unwrap();
+            let mut p = queries(v, 3).unwrap();
             p.weigh(&boxes, car).unwrap();
             p
         };
@@ -823,7 +862,7 @@ mod tests {
             assert!((fd - g[0][i] as f64).abs() < 1e-3, "value {i}: {} vs {fd}", g[0][i]);
         }
         // No box on the car: nothing to push. A box list of the wrong length is refused.
-        let mut p = Predictions::detr(&logits, 3).unwrap();
+        let mut p = queries(&logits, 3).unwrap();
         p.weigh(&[[100.0, 100.0, 110.0, 110.0]; 4], car).unwrap();
         let (t, g) = l.terms(&p, &[&logits], 1.0).unwrap();
         assert!(t.l2 == 0.0 && g[0].iter().all(|&x| x == 0.0), "{t:?}");
@@ -873,12 +912,12 @@ mod tests {
         for reduce in [Reduce::LogMax, Reduce::Softmax(0.1)] {
             let l = DetectionLoss { iou: true, box_gradient: true, ..loss(reduce) };
             let total = |b: &[[f32; 4]]| {
-                let mut p = Predictions::detr(&logits, 3).unwrap();
+                let mut p = queries(&logits, 3).unwrap();
                 p.weigh(b, car).unwrap();
                 let t = l.terms(&p, &[&logits], 2.0).unwrap().0;
                 t.l1 as f64 + 2.0 * t.l2 as f64
             };
-            let mut p = Predictions::detr(&logits, 3).unwrap();
+            let mut p = queries(&logits, 3).unwrap();
             p.weigh(&boxes, car).unwrap();
             let (_, _, db) = l.terms_and_boxes(&p, &[&logits], 2.0).unwrap();
             assert!(!db.is_empty(), "{reduce:?}");

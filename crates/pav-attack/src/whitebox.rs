@@ -2,24 +2,31 @@
 //! gradient back to the composite's pixels.
 //!
 //! A white box is the evaluated model itself: the ONNX file its detector config names (the same
-//! one `evaluate` runs), differentiated as a graph (`detect::autodiff`) and run by ONNX Runtime
-//! (`detect::ortgrad`). The input transform the config describes (resize, channel order, scale,
-//! mean and std) is applied here with its exact adjoint. Outputs are read by their layout:
-//! darknet heads and YOLOX rows with objectness, Ultralytics class scores, DETR class logits and
-//! GFL class maps without, and the class scores a graph's own NMS reads (see `attack::loss`). Under `loss.iou` each prediction's box is read too
-//! (decoded from the darknet and YOLOX outputs; for Ultralytics, DETR, GFL and a graph cut before
-//! its NMS forward-only outputs, the box branches the gradient graph leaves out), to weight its
-//! score by its overlap with the car.
+//! one `evaluate` runs), differentiated as a graph (`pav_onnx::autodiff`) and run by ONNX Runtime
+//! (`pav_onnx::session`). The input transform the config describes (resize, channel order, scale,
+//! mean and std) is applied here with its exact adjoint. The outputs are read through the same
+//! description evaluate decodes them by (`detect::layout::Description`, a preset's or a `custom`
+//! one): its score and objectness values, with their activations and powers, become the loss's
+//! predictions ([`Predictions::read`]), and under `loss.iou` its boxes, decoded with their exact
+//! derivatives, weight each score by its overlap with the car. Where the outputs are final
+//! detections, the description's `raw` values (those before the graph's post-processor) are
+//! differentiated instead, the graph cut there. Only the outputs the loss reads are kept, and
+//! those it does not differentiate (the boxes, unless `loss.box_gradient`) are computed forward
+//! only.
 
 use super::config::OptimizeConfig;
 use super::defended::Defended;
 use super::loss::{DetectionLoss, HeadShapeError, Predictions};
+use super::outputs::{as_outputs, Plan, PlanError};
 use pav_core::image::resize::Resampler;
 use pav_core::rng::Rng;
 use pav_core::step::{Chain, ChainTape, Step};
-use pav_detect::config::{ChannelOrder, DetectorConfig, ExtraInput, ExtraValue, OutputLayout};
-use pav_detect::decode::{box_jacobians, decode, BoxTerm, LayoutError, RawOutput};
+use pav_detect::config::{ChannelOrder, DetectorConfig, ExtraInput, ExtraValue};
+use pav_detect::decode::{
+    box_jacobians_described, decode_described, score_sites, BoxTerm, LayoutError, RawOutput, ScoreRule, ScoreSite,
+};
 use pav_detect::defence::{Defence, DefenceError};
+use pav_detect::layout::{Description, Role};
 use pav_detect::preprocess::InputMap;
 use pav_detect::BBox;
 use pav_detect::DetectError;
@@ -46,38 +53,18 @@ pub struct DetectorGrad {
     pub backward_ms: f64,
 }
 
-/// How the outputs are read.
-#[derive(Clone, Debug)]
-enum Heads {
-    /// Darknet heads: per graph output (in graph order), its anchor count.
-    Darknet { anchors: Vec<usize>, classes: usize },
-    /// YOLOX rows `[R, 5 + C]`.
-    Yolox { classes: usize },
-    /// Ultralytics class probabilities `[C, N]` (the graph cut to its class branch).
-    Ultralytics { classes: usize },
-    /// DETR class logits `[Q, C]` (the graph cut before its post-processor, shapes folded).
-    Detr { classes: usize },
-    /// GFL class maps `[R, C]` per grid level, in the config's stride order; the box maps of
-    /// `4 · bins` follow them forward only under `loss.iou`.
-    Gfl { classes: usize, bins: usize },
-    /// Class scores `[C, N]` before a graph's own NMS (class-major, as Ultralytics'); the boxes
-    /// `[N, 4]` (xyxy, input pixels) follow forward only under `loss.iou`.
-    BeforeNms { classes: usize },
-}
-
 /// A detector with the paper's loss and its input gradient.
 pub struct WhiteBox {
     name: String,
     session: Mutex<GradSession>,
-    heads: Heads,
-    head_sizes: Vec<(usize, usize)>,
-    /// The differentiated outputs' names and shapes (what the box decoder reads).
-    out_shapes: Vec<(String, Vec<usize>)>,
-    /// How many of the outputs, from the first, hold the scores the loss reads; the box outputs
-    /// follow them (differentiated under `loss.box_gradient`, else forward only).
-    scored: usize,
-    /// The config's output layout.
-    layout: OutputLayout,
+    /// The description of the values differentiated.
+    description: Description,
+    /// Where each prediction's scores sit among the outputs, and how they are read.
+    sites: Vec<ScoreSite>,
+    rule: ScoreRule,
+    classes: usize,
+    /// The tensors the description reads and the graph outputs that compute them.
+    plan: Plan,
     loss: DetectionLoss,
     input: usize,
     resample: Resampler,
@@ -123,9 +110,12 @@ pub enum WhiteBoxError {
     /// Outputs that do not fit the layout.
     #[error("white-box detector: {0}")]
     Heads(#[from] HeadShapeError),
-    /// Box outputs that do not fit the layout.
-    #[error("white-box detector boxes: {0}")]
-    Boxes(#[from] LayoutError),
+    /// The outputs the description reads could not be planned.
+    #[error("white-box detector: {0}")]
+    Plan(#[from] PlanError),
+    /// Outputs that do not fit the detector's description.
+    #[error("white-box detector: {0}")]
+    Layout(#[from] LayoutError),
     /// A composite of another size than the one the detector was loaded for.
     #[error("white-box detector: a {got}-value composite, expected {expected}² RGB")]
     Size {
@@ -155,77 +145,6 @@ pub struct WhiteBoxOptions {
     pub threads: usize,
     /// Differentiate the float surrogate of a dynamically quantized model.
     pub surrogate: bool,
-}
-
-/// An Ultralytics graph cut to its class branch: its output is `Concat(boxes [4], classes [C])` on
-/// axis 1, and L1 and L2 read the class probabilities only, so the box decoder (a softmax over
-/// distance bins) needs no gradient: dropped, or with `boxes` kept as a second output `[1, 4, N]`
-/// (cx, cy, w, h in input pixels) for [`differentiate_first`] to compute without a gradient.
-pub fn class_branch(mut model: Model, boxes: bool) -> Result<Model, String> {
-    let out = match model.outputs.as_slice() {
-        [o] => o.clone(),
-        _ => return Err(format!("{} graph outputs, expected one [1, 4 + C, N]", model.outputs.len())),
-    };
-    let concat = model
-        .nodes
-        .iter()
-        .find(|n| n.outputs.contains(&out.name))
-        .filter(|n| n.op_type == "Concat" && n.inputs.len() == 2)
-        .ok_or("the output is not a Concat of boxes and class probabilities")?;
-    let value = |name: &str| ValueInfo { name: name.into(), elem_type: FLOAT, dims: vec![] };
-    model.outputs = vec![value(&concat.inputs[1])];
-    if boxes {
-        model.outputs.push(value(&concat.inputs[0]));
-    }
-    model.prune();
-    Ok(model)
-}
-
-/// A GFL graph's outputs put in the order its white box reads them: each level's class map
-/// `[1, R, classes]` in `strides` order, then (with `boxes`) each level's box map
-/// `[1, R, 4 · bins]`, matched by their declared shapes since exporters number them. Returns the
-/// number of forward-only outputs.
-fn gfl_outputs(
-    model: &mut Model,
-    strides: &[usize],
-    bins: usize,
-    classes: usize,
-    side: usize,
-    boxes: bool,
-) -> Result<usize, String> {
-    let fixed = |o: &ValueInfo| -> Option<Vec<i64>> {
-        o.dims.iter().map(|d| if let Dim::Fixed(v) = d { Some(*v) } else { None }).collect()
-    };
-    let find = |rows: usize, width: usize| {
-        model.outputs.iter().find(|o| {
-            fixed(o).is_some_and(|d| d.len() == 3 && d[0] == 1 && d[1] == rows as i64 && d[2] == width as i64)
-        })
-    };
-    let shown = || model.outputs.iter().map(|o| format!("{} {:?}", o.name, fixed(o))).collect::<Vec<_>>().join(", ");
-    let (mut cls, mut reg) = (Vec::new(), Vec::new());
-    for &s in strides {
-        let rows = (side / s) * (side / s);
-        match (find(rows, classes), find(rows, 4 * bins)) {
-            (Some(c), Some(r)) => {
-                cls.push(c.clone());
-                reg.push(r.clone());
-            }
-            _ => {
-                return Err(format!(
-                    "gfl at {side}²: stride {s} needs a [1, {rows}, {classes}] class map and a [1, {rows}, {}] box map declared among the graph's outputs: {}",
-                    4 * bins,
-                    shown()
-                ))
-            }
-        }
-    }
-    let n = if boxes { reg.len() } else { 0 };
-    model.outputs = cls;
-    if boxes {
-        model.outputs.extend(reg);
-    }
-    model.prune();
-    Ok(n)
 }
 
 /// `model` cut to compute the values of `outputs` (each with the config key that names it), its
@@ -291,77 +210,34 @@ impl WhiteBox {
         }
         // A clipped detector is trained through its clipping: the rewrite is differentiable.
         pav_detect::defence::clip_graph(&mut model, &cfg.model_defence)?;
-        // The box outputs `loss.iou` reads come last, computed forward only unless the loss
-        // differentiates its weight.
-        let mut forward_only = 0;
-        if matches!(cfg.output, OutputLayout::Ultralytics { .. }) {
-            model = class_branch(model, loss.iou).map_err(&unsupported)?;
-            forward_only = usize::from(loss.iou);
-        }
-        // A graph with its post-processor inside is cut before it, at the class scores (and the
-        // boxes `loss.iou` weights by) that the config names.
-        let before_post = match &cfg.output {
-            OutputLayout::Detr { logits, pred_boxes, .. } => Some((
-                (logits, "logits", "a DETR white box needs `logits` in the config's [output]: the class logits before the post-processor"),
-                (pred_boxes, "pred_boxes", "loss.iou on a DETR white box needs `pred_boxes` in the config's [output]: the decoder's boxes before the post-processor"),
-            )),
-            OutputLayout::Rows { scores, boxes, .. } => Some((
-                (scores, "scores", "a white box of the rows layout needs `scores` in the config's [output]: the class scores its NMS reads"),
-                (boxes, "boxes", "loss.iou on a rows white box needs `boxes` in the config's [output]: the boxes its NMS reads"),
-            )),
-            _ => None,
-        };
-        if let Some(((scores, key, missing), (boxes, box_key, boxes_missing))) = before_post {
-            let mut outputs = vec![(scores.clone().ok_or_else(|| unsupported(missing.into()))?, key)];
-            if loss.iou {
-                outputs.push((boxes.clone().ok_or_else(|| unsupported(boxes_missing.into()))?, box_key));
-                forward_only = 1;
+        // As evaluate decodes: the config's class list; the loss checks the outputs against it.
+        let classes = cfg.class_names.len();
+        let description = cfg.output.describe(classes).gradient().map_err(&unsupported)?.clone();
+        // Values the description names inside the graph: its post-processor (top-k, NMS) has no
+        // gradient, so the graph is cut there. The boxes are read only under `loss.iou`.
+        let mut named: Vec<(String, &str)> = Vec::new();
+        for (role, part) in description.parts() {
+            for n in part.output.iter().filter(|_| role != Role::Boxes || loss.iou) {
+                if !named.iter().any(|(m, _)| m == n) {
+                    named.push((n.clone(), role.table()));
+                }
             }
-            model = cut_before_post(model, &outputs, &i.extra, side, &cfg.name)?;
         }
-        if let OutputLayout::Gfl { strides, bins } = &cfg.output {
-            forward_only =
-                gfl_outputs(&mut model, strides, *bins, cfg.class_names.len(), side, loss.iou).map_err(&unsupported)?;
+        if named.iter().any(|(n, _)| !model.outputs.iter().any(|o| o.name == *n)) {
+            model = cut_before_post(model, &named, &i.extra, side, &cfg.name)?;
         }
         if let Some(x) = model.inputs.first() {
             if x.dims.len() == 4 && x.dims[2..].iter().any(|d| matches!(d, Dim::Fixed(v) if *v != side as i64)) {
                 return Err(unsupported(format!("the graph's input is fixed at {:?}, not {side}²", x.dims)));
             }
         }
-        let scored = model.outputs.len() - forward_only;
-        if loss.box_gradient {
-            forward_only = 0;
-        }
-        let seeded = model.outputs.len() - forward_only;
-        let d = differentiate_first(&model, &[1, 3, side as i64, side as i64], Kernels::Fused, seeded)?;
-        let names: Vec<&str> = d.outputs.iter().map(|(n, _)| n.as_str()).collect();
-        // As evaluate decodes: the config's class list; the loss checks the outputs against it.
-        let classes = cfg.class_names.len();
-        let heads = match &cfg.output {
-            OutputLayout::Darknet { heads } => {
-                let anchors = names
-                    .iter()
-                    .map(|n| heads.iter().find(|h| h.output == *n).map(|h| h.anchors.len()))
-                    .collect::<Option<Vec<usize>>>()
-                    .ok_or_else(|| {
-                        unsupported(format!("graph outputs {names:?} are not all darknet heads of the config"))
-                    })?;
-                Heads::Darknet { anchors, classes }
-            }
-            OutputLayout::Yolox { .. } if d.outputs.len() == 1 => Heads::Yolox { classes },
-            OutputLayout::Ultralytics { .. } => Heads::Ultralytics { classes },
-            OutputLayout::Detr { .. } => Heads::Detr { classes },
-            OutputLayout::Gfl { bins, .. } => Heads::Gfl { classes, bins: *bins },
-            OutputLayout::Rows { .. } => Heads::BeforeNms { classes },
-            other => {
-                return Err(unsupported(format!(
-                    "no white-box loss for the {} layout (objectness-based losses need darknet or yolox outputs)",
-                    format!("{other:?}").split([' ', '{']).next().unwrap_or("?")
-                )))
-            }
-        };
-        let head_sizes = d.outputs.iter().map(|(_, s)| (s[s.len() - 2] as usize, s[s.len() - 1] as usize)).collect();
-        let out_shapes = d.outputs.iter().map(|(n, s)| (n.clone(), s.iter().map(|&v| v as usize).collect())).collect();
+        // The outputs the loss differentiates (scores, objectness; the boxes too under
+        // `loss.box_gradient`), then those it reads forward only (the boxes under `loss.iou`).
+        let plan = Plan::new(&mut model, &description, side, classes, loss.iou, loss.box_gradient)?;
+        let d = differentiate_first(&model, &[1, 3, side as i64, side as i64], Kernels::Fused, plan.seeded)?;
+        let shapes: Vec<(String, Vec<i64>)> =
+            plan.tensors.iter().map(|(n, s)| (n.clone(), s.iter().map(|&v| v as i64).collect())).collect();
+        let sites = score_sites(&description, &as_outputs(&shapes), side, side, classes)?;
         let session = GradSession::new(&format!("{} (white-box)", cfg.name), d, o.threads)?;
         let channel = match i.channels {
             ChannelOrder::Rgb => [0, 1, 2],
@@ -372,11 +248,11 @@ impl WhiteBox {
         Ok(WhiteBox {
             name: cfg.name.clone(),
             session: Mutex::new(session),
-            heads,
-            head_sizes,
-            out_shapes,
-            scored,
-            layout: cfg.output.clone(),
+            rule: ScoreRule::of(&description, classes),
+            description,
+            sites,
+            classes,
+            plan,
             loss,
             input: side,
             // The config's filter, as evaluate resizes (without its 8-bit rounding, which has no gradient).
@@ -435,83 +311,29 @@ impl WhiteBox {
         grad
     }
 
-    /// Each prediction's box in composite pixels (xyxy), in the order [`Predictions`] reads them:
-    /// decoded as evaluate decodes darknet, YOLOX and GFL outputs, read from the box output for
-    /// Ultralytics (cx, cy, w, h in input pixels), DETR (the same as input shares) and a graph cut
-    /// before its NMS (corners in input pixels). With `grad`, each box comes with its derivative
-    /// by every output value it reads (an empty list without).
+    /// Each prediction's box in composite pixels (xyxy), in the order [`Predictions`] reads them,
+    /// decoded as evaluate decodes them; with `grad`, each with its derivative by every output
+    /// value it reads (an empty list without).
     fn boxes(&self, outs: &[Vec<f32>], grad: bool) -> Result<Vec<(BBox, Vec<BoxTerm>)>, WhiteBoxError> {
         let k = self.input as f32 / self.composite as f32;
         let c = self.composite as f32;
         let map = InputMap { scale_x: k, scale_y: k, pad_x: 0.0, pad_y: 0.0, frame_w: c, frame_h: c };
-        let aux = || {
-            outs.get(self.scored)
-                .ok_or_else(|| LayoutError("no box output: the white box was loaded without loss.iou".into()))
-        };
-        // A box of four values of the box output at `idx`, as centre and size or as corners, in
-        // `unit` input pixels.
-        let linear = |b: &[f32], idx: [usize; 4], unit: f32, centred: bool| {
-            let v = idx.map(|j| b[j] * unit);
-            let (bx, dv) = if centred {
-                let [cx, cy, w, h] = v;
-                let d = [[1.0, 0.0, 1.0, 0.0], [0.0, 1.0, 0.0, 1.0], [-0.5, 0.0, 0.5, 0.0], [0.0, -0.5, 0.0, 0.5]];
-                ([cx - w / 2.0, cy - h / 2.0, cx + w / 2.0, cy + h / 2.0], d)
-            } else {
-                (v, [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
-            };
-            let (bx, keep) = map.to_frame_with_grad(bx);
-            let terms = if grad {
-                (0..4).map(|j| (self.scored, idx[j], [0, 1, 2, 3].map(|q| unit * dv[j][q] * keep[q]))).collect()
-            } else {
-                Vec::new()
-            };
-            (bx, terms)
-        };
-        // The differentiated outputs as evaluate's decoder reads them.
-        let raw = |n: usize| -> Vec<RawOutput> {
-            self.out_shapes[..n]
-                .iter()
-                .zip(outs)
-                .map(|((name, shape), data)| RawOutput { name: name.clone(), shape: shape.clone(), data: data.clone() })
+        let raw: Vec<RawOutput> = self
+            .plan
+            .tensors
+            .iter()
+            .zip(outs)
+            .map(|((name, shape), data)| RawOutput { name: name.clone(), shape: shape.clone(), data: data.clone() })
+            .collect();
+        let (d, side) = (&self.description, self.input);
+        Ok(if grad {
+            box_jacobians_described(d, &raw, side, side, self.classes, &map)?
+        } else {
+            decode_described(d, &raw, side, side, self.classes, &map)?
+                .boxes
+                .into_iter()
+                .map(|b| (b, Vec::new()))
                 .collect()
-        };
-        let decoded = |raw: &[RawOutput], classes: usize| -> Result<Vec<(BBox, Vec<BoxTerm>)>, LayoutError> {
-            if grad {
-                return box_jacobians(&self.layout, raw, self.input, self.input, classes, &map);
-            }
-            let boxes = decode(&self.layout, raw, self.input, self.input, classes, &map)?.boxes;
-            Ok(boxes.into_iter().map(|b| (b, Vec::new())).collect())
-        };
-        Ok(match &self.heads {
-            Heads::Darknet { classes, .. } | Heads::Yolox { classes } => decoded(&raw(self.scored), *classes)?,
-            Heads::Ultralytics { .. } => {
-                let b = aux()?;
-                let n = b.len() / 4;
-                (0..n).map(|i| linear(b, [i, n + i, 2 * n + i, 3 * n + i], 1.0, true)).collect()
-            }
-            Heads::Detr { .. } => {
-                let b = aux()?;
-                (0..b.len() / 4).map(|q| linear(b, [0, 1, 2, 3].map(|j| 4 * q + j), self.input as f32, true)).collect()
-            }
-            Heads::BeforeNms { .. } => {
-                let b = aux()?;
-                (0..b.len() / 4).map(|i| linear(b, [0, 1, 2, 3].map(|j| 4 * i + j), 1.0, false)).collect()
-            }
-            Heads::Gfl { classes, bins } => {
-                // The class maps and, after them, the box maps, level by level: decoded as
-                // evaluate decodes them (matched by shape); a term's output is its place in `outs`.
-                let levels = self.scored;
-                aux()?;
-                let mut all = raw(levels);
-                all.extend(self.out_shapes[..levels].iter().zip(&outs[levels..]).map(|((name, shape), data)| {
-                    RawOutput {
-                        name: format!("{name} boxes"),
-                        shape: vec![1, shape[shape.len() - 2], 4 * bins],
-                        data: data.clone(),
-                    }
-                }));
-                decoded(&all, *classes)?
-            }
         })
     }
 
@@ -524,7 +346,7 @@ impl WhiteBox {
         beta: f32,
         car: Option<[f32; 4]>,
     ) -> Result<(DetectorLoss, Vec<Vec<f32>>), WhiteBoxError> {
-        let mut p = self.read(&outs[..self.scored])?;
+        let mut p = self.read(outs)?;
         let boxes = match (self.loss.iou, car) {
             (true, Some(car)) => {
                 let boxes = self.boxes(outs, self.loss.box_gradient)?;
@@ -533,37 +355,28 @@ impl WhiteBox {
             }
             _ => Vec::new(),
         };
-        let raw: Vec<&[f32]> = outs[..self.out_shapes.len()].iter().map(|v| v.as_slice()).collect();
+        let raw: Vec<&[f32]> = outs.iter().map(|v| v.as_slice()).collect();
         let (terms, mut grads, box_grads) = self.loss.terms_and_boxes(&p, &raw, beta)?;
         for (i, d) in box_grads {
             for &(o, idx, db) in &boxes[i].1 {
                 grads[o][idx] += (0..4).map(|k| d[k] * db[k]).sum::<f32>();
             }
         }
-        Ok((terms, grads))
+        Ok((terms, self.plan.scatter(grads)))
     }
 
     /// The differentiated outputs read as predictions.
-    fn read(&self, seeded: &[Vec<f32>]) -> Result<Predictions, HeadShapeError> {
-        Ok(match &self.heads {
-            Heads::Darknet { anchors, classes } => {
-                let maps: Vec<_> = seeded.iter().cloned().zip(self.head_sizes.iter().copied()).collect();
-                Predictions::darknet(&maps, anchors, *classes)?
-            }
-            Heads::Yolox { classes } => Predictions::yolox(&seeded[0], *classes)?,
-            Heads::Ultralytics { classes } => Predictions::ultralytics(&seeded[0], *classes)?,
-            Heads::Detr { classes } => Predictions::detr(&seeded[0], *classes)?,
-            Heads::Gfl { classes, .. } => Predictions::class_rows(seeded, *classes)?,
-            Heads::BeforeNms { classes } => Predictions::ultralytics(&seeded[0], *classes)?,
-        })
+    fn read(&self, outs: &[Vec<f32>]) -> Result<Predictions, HeadShapeError> {
+        let raw: Vec<&[f32]> = outs.iter().map(|v| v.as_slice()).collect();
+        Predictions::read(&raw, &self.sites, &self.rule, self.classes)
     }
 
     /// Each prediction's box in composite pixels and its unweighted detection score for the
-    /// target classes, for checks and plots (the box output is there under `loss.iou` only for
-    /// Ultralytics and DETR).
+    /// target classes, for checks and plots (boxes in outputs of their own are there under
+    /// `loss.iou` only).
     pub fn predictions(&self, img: &[f32], size: usize) -> Result<Vec<([f32; 4], f32)>, WhiteBoxError> {
         let (outs, ..) = self.outputs(&mut self.session(), img, size)?;
-        let scores = self.read(&outs[..self.scored])?.target_scores(&self.loss.target);
+        let scores = self.read(&outs)?.target_scores(&self.loss.target);
         Ok(self.boxes(&outs, false)?.into_iter().map(|b| b.0).zip(scores).collect())
     }
 
@@ -575,7 +388,7 @@ impl WhiteBox {
     ) -> Result<(Vec<Vec<f32>>, Pass, ChainTape), WhiteBoxError> {
         let (x, tape) = self.model_input(img, size)?;
         let (outs, pass) = s.forward(x)?;
-        Ok((outs, pass, tape))
+        Ok((self.plan.assemble(outs), pass, tape))
     }
 
     /// Loss of the `size × size` RGB composite `img` and its gradient for weight `beta` on L2;

@@ -507,6 +507,7 @@ impl OutputLayout {
                     objectness: Some(Part { column: 4, activation: Activation::Sigmoid, ..src.clone() }),
                     scores: Part { column: 5, activation: Activation::Sigmoid, ..src },
                     labels: None,
+                    raw: None,
                 }
             }
             OutputLayout::Yolox { output, strides } => {
@@ -519,6 +520,7 @@ impl OutputLayout {
                     objectness: Some(Part { column: 4, ..src.clone() }),
                     scores: Part { column: 5, ..src },
                     labels: None,
+                    raw: None,
                 }
             }
             OutputLayout::Ultralytics { output } => {
@@ -531,6 +533,7 @@ impl OutputLayout {
                     scores: Part { column: 4, ..src },
                     objectness: None,
                     labels: None,
+                    raw: None,
                 }
             }
             OutputLayout::Gfl { strides, bins } => Description {
@@ -548,8 +551,9 @@ impl OutputLayout {
                 scores: Part { per_level: true, width: Some(classes), ..Part::default() },
                 objectness: None,
                 labels: None,
+                raw: None,
             },
-            OutputLayout::Rows { output, columns, frame, .. } => {
+            OutputLayout::Rows { output, columns, frame, scores: before, boxes: before_boxes } => {
                 let at = |c: Column| columns.iter().position(|k| *k == c).unwrap_or(0);
                 let src = Part { output: named(output), width: Some(columns.len()), ..Part::default() };
                 Description {
@@ -565,9 +569,27 @@ impl OutputLayout {
                     scores: Part { column: at(Column::Score), ..src.clone() },
                     labels: Some(Part { column: at(Column::Class), ..src }),
                     objectness: None,
+                    // The class-major scores and the boxes the graph's NMS reads.
+                    raw: before.as_ref().map(|s| {
+                        Box::new(Description {
+                            boxes: Part {
+                                output: named(before_boxes),
+                                width: Some(4),
+                                encoding: Some(Encoding::Xyxy),
+                                ..Part::default()
+                            },
+                            scores: Part {
+                                output: vec![s.clone()],
+                                arrange: Arrange::Columns,
+                                width: Some(classes),
+                                ..Part::default()
+                            },
+                            ..Description::empty()
+                        })
+                    }),
                 }
             }
-            OutputLayout::Detr { labels, boxes, scores, .. } => Description {
+            OutputLayout::Detr { labels, boxes, scores, logits, pred_boxes, .. } => Description {
                 levels: Vec::new(),
                 order: CellOrder::AnchorCell,
                 centre: Centre::Cell,
@@ -575,6 +597,25 @@ impl OutputLayout {
                 scores: Part { output: vec![scores.clone()], ..Part::default() },
                 labels: Some(Part { output: vec![labels.clone()], ..Part::default() }),
                 objectness: None,
+                // The last decoder layer's class logits and boxes, before the top-k.
+                raw: logits.as_ref().map(|l| {
+                    Box::new(Description {
+                        boxes: Part {
+                            output: named(pred_boxes),
+                            width: Some(4),
+                            encoding: Some(Encoding::Cxcywh),
+                            normalized: true,
+                            ..Part::default()
+                        },
+                        scores: Part {
+                            output: vec![l.clone()],
+                            width: Some(classes),
+                            activation: Activation::Sigmoid,
+                            ..Part::default()
+                        },
+                        ..Description::empty()
+                    })
+                }),
             },
         }
     }

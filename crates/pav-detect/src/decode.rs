@@ -170,6 +170,8 @@ fn read_as(o: &RawOutput, arrange: Arrange, width: usize) -> Option<(usize, usiz
     match (arrange, s) {
         (Arrange::Rows, [r]) if single => Some((*r, 1, (0, 0))),
         (Arrange::Rows, [r, w]) => Some((*r, *w, (0, 0))),
+        // A grid of rows `[H, W, C]` (channels last): a row per cell.
+        (Arrange::Rows, [h, gw, w]) if !single => Some((h * gw, *w, (0, 0))),
         (Arrange::Columns, [w, r]) => Some((*r, *w, (0, 0))),
         (Arrange::Planes, [c, h, w]) if width > 0 && c % width == 0 => Some((c / width * h * w, width, (*h, *w))),
         _ => None,
@@ -183,6 +185,8 @@ struct Grid {
     sx: f32,
     sy: f32,
     anchors: Vec<[f32; 2]>,
+    /// Whether a cell's anchors share one row of the tensors (`order = "in-row"`).
+    in_row: bool,
 }
 
 impl Grid {
@@ -190,8 +194,18 @@ impl Grid {
         self.anchors.len().max(1)
     }
 
+    /// Its proposals.
     fn rows(&self) -> usize {
         self.gw * self.gh * self.anchors()
+    }
+
+    /// Its rows in the tensors: a row per cell when its anchors share one.
+    fn tensor_rows(&self) -> usize {
+        if self.in_row {
+            self.gw * self.gh
+        } else {
+            self.rows()
+        }
     }
 }
 
@@ -254,7 +268,7 @@ fn locate<'a>(
             .iter()
             .enumerate()
             .map(|(l, g)| {
-                let rows = (!planes || d.levels[l].stride.is_some()).then(|| g.rows());
+                let rows = (!planes || d.levels[l].stride.is_some()).then(|| g.tensor_rows());
                 match p.output.get(l) {
                     Some(n) => view(find(outs, n)?, rows),
                     None => pick(rows, Some(l)),
@@ -262,7 +276,7 @@ fn locate<'a>(
             })
             .collect()
     } else {
-        let rows = (!grids.is_empty()).then(|| grids.iter().map(Grid::rows).sum());
+        let rows = (!grids.is_empty()).then(|| grids.iter().map(Grid::tensor_rows).sum());
         Ok(vec![match p.output.first() {
             Some(n) => view(find(outs, n)?, rows)?,
             None => pick(rows, None)?,
@@ -300,7 +314,7 @@ fn grids(
                     (gw, gh, input_w as f32 / gw as f32, input_h as f32 / gh as f32)
                 }
             };
-            Ok(Grid { gw, gh, sx, sy, anchors: level.anchors.clone() })
+            Ok(Grid { gw, gh, sx, sy, anchors: level.anchors.clone(), in_row: d.order == CellOrder::InRow })
         })
         .collect()
 }
@@ -337,15 +351,19 @@ struct Anchor {
     ah: f32,
     cx0: f32,
     cy0: f32,
+    /// Its row among the level's rows of the tensors, and its place among the anchors of that
+    /// row (0 unless the cell's anchors share a row).
+    row: usize,
+    slot: usize,
 }
 
 impl Anchor {
-    /// Row `lr` of level `g`.
+    /// Proposal `lr` of level `g`.
     fn of(d: &Description, g: &Grid, lr: usize) -> Self {
         let (cells, na) = (g.gw * g.gh, g.anchors());
         let (a, cell) = match d.order {
             CellOrder::AnchorCell => (lr / cells, lr % cells),
-            CellOrder::CellAnchor => (lr % na, lr / na),
+            CellOrder::CellAnchor | CellOrder::InRow => (lr % na, lr / na),
         };
         let (gx, gy) = ((cell % g.gw) as f32, (cell / g.gw) as f32);
         let [aw, ah] = g.anchors.get(a).copied().unwrap_or([g.sx, g.sy]);
@@ -353,7 +371,8 @@ impl Anchor {
             Centre::Cell => ((gx + 0.5) * g.sx, (gy + 0.5) * g.sy),
             Centre::Pixel => (gx * g.sx + (g.sx - 1.0) / 2.0, gy * g.sy + (g.sy - 1.0) / 2.0),
         };
-        Anchor { gx, gy, sx: g.sx, sy: g.sy, aw, ah, cx0, cy0 }
+        let (row, slot) = if g.in_row { (cell, a) } else { (lr, 0) };
+        Anchor { gx, gy, sx: g.sx, sy: g.sy, aw, ah, cx0, cy0, row, slot }
     }
 }
 
@@ -365,6 +384,12 @@ struct BoxReader {
     enc: Encoding,
     cols: [usize; 4],
     column: usize,
+    /// Columns from one anchor's box to the next's in a shared row.
+    anchor_step: usize,
+    /// The encoding's own functions are already applied.
+    activated: bool,
+    /// The input's width and height, which `tanh-share` sizes are shares of.
+    input: [f32; 2],
     bins: usize,
     var: [f32; 2],
     norm: [f32; 2],
@@ -397,6 +422,9 @@ impl BoxReader {
             enc: b.encoding.unwrap_or(Encoding::Xyxy),
             cols: b.coords.unwrap_or([b.column, b.column + 1, b.column + 2, b.column + 3]),
             column: b.column,
+            anchor_step: b.anchor_step,
+            activated: b.activated,
+            input: [w, h],
             bins: b.bins.unwrap_or(0),
             var: b.variances.unwrap_or([1.0, 1.0]),
             norm: if b.normalized { [w, h] } else { [1.0, 1.0] },
@@ -412,7 +440,12 @@ impl BoxReader {
     /// Row `r` of `v`'s box in frame pixels; with `jac`, every value it reads is pushed with the
     /// box's derivative by it.
     fn read(&self, v: &View, r: usize, a: &Anchor, jac: Option<&mut Vec<BoxTerm>>) -> BBox {
-        let val = |k: usize| v.at(r, self.cols[k]);
+        let shift = a.slot * self.anchor_step;
+        let val = |k: usize| v.at(r, self.cols[k] + shift);
+        // The encoding's sigmoid and tanh with their derivatives, or nothing when the graph
+        // applied them.
+        let sig = |x: f32| if self.activated { (x, 1.0) } else { (sigmoid(x), sigmoid(x) * (1.0 - sigmoid(x))) };
+        let tanh = |x: f32| if self.activated { (x, 1.0) } else { (x.tanh(), 1.0 - x.tanh() * x.tanh()) };
         let [nx, ny] = self.norm;
         let [var_c, var_s] = self.var;
         let (bx, dv) = match self.enc {
@@ -423,14 +456,20 @@ impl BoxReader {
                 corners([(val(0) + a.gx) * a.sx, (val(1) + a.gy) * a.sy, w, h], [a.sx, a.sy, w, h])
             }
             Encoding::Darknet => {
-                let (s0, s1) = (sigmoid(val(0)), sigmoid(val(1)));
+                let ((s0, d0), (s1, d1)) = (sig(val(0)), sig(val(1)));
                 let (w, h) = (val(2).exp() * a.aw, val(3).exp() * a.ah);
-                let d = [s0 * (1.0 - s0) * a.sx, s1 * (1.0 - s1) * a.sy, w, h];
+                let d = [d0 * a.sx, d1 * a.sy, w, h];
                 corners([(s0 + a.gx) * a.sx, (s1 + a.gy) * a.sy, w, h], d)
             }
+            Encoding::TanhShare => {
+                let ((t0, d0), (t1, d1)) = (tanh(val(0)), tanh(val(1)));
+                let ((s2, d2), (s3, d3)) = (sig(val(2)), sig(val(3)));
+                let [iw, ih] = self.input;
+                let c = [(a.gx + t0) * a.sx, (a.gy + t1) * a.sy, s2 * iw, s3 * ih];
+                corners(c, [d0 * a.sx, d1 * a.sy, d2 * iw, d3 * ih])
+            }
             Encoding::Yolov5 => {
-                let s = [0, 1, 2, 3].map(|k| sigmoid(val(k)));
-                let ds = s.map(|s| s * (1.0 - s));
+                let (s, ds) = ([0, 1, 2, 3].map(|k| sig(val(k)).0), [0, 1, 2, 3].map(|k| sig(val(k)).1));
                 let c = [
                     (s[0] * 2.0 - 0.5 + a.gx) * a.sx,
                     (s[1] * 2.0 - 0.5 + a.gy) * a.sy,
@@ -455,7 +494,7 @@ impl BoxReader {
         let (b, keep) = self.finish(bx);
         if let Some(jac) = jac {
             for (k, d) in dv.iter().enumerate() {
-                jac.push((v.output, v.index(r, self.cols[k]), [0, 1, 2, 3].map(|j| d[j] * keep[j])));
+                jac.push((v.output, v.index(r, self.cols[k] + shift), [0, 1, 2, 3].map(|j| d[j] * keep[j])));
             }
         }
         b
@@ -467,11 +506,18 @@ impl BoxReader {
         let mut dist = [0f32; 4];
         // Per side: the softmax and its expectation, for the derivative step·p_k·(k − E).
         let mut soft: Vec<(Vec<f32>, f32)> = Vec::new();
+        let column = self.column + a.slot * self.anchor_step;
         for (side, out) in dist.iter_mut().enumerate() {
-            let at = |k: usize| v.at(r, self.column + side * bins + k);
-            let m = (0..bins).map(at).fold(f32::NEG_INFINITY, f32::max);
-            let e: Vec<f32> = (0..bins).map(|k| (at(k) - m).exp()).collect();
-            let z: f32 = e.iter().sum();
+            let at = |k: usize| v.at(r, column + side * bins + k);
+            // Already a distribution when the graph applied the softmax.
+            let (e, z): (Vec<f32>, f32) = if self.activated {
+                ((0..bins).map(at).collect(), 1.0)
+            } else {
+                let m = (0..bins).map(at).fold(f32::NEG_INFINITY, f32::max);
+                let e: Vec<f32> = (0..bins).map(|k| (at(k) - m).exp()).collect();
+                let z = e.iter().sum();
+                (e, z)
+            };
             let step = if side % 2 == 0 { a.sx } else { a.sy };
             let mean = e.iter().enumerate().map(|(k, v)| k as f32 * v).sum::<f32>() / z;
             *out = mean * step;
@@ -486,8 +532,10 @@ impl BoxReader {
                 let sign = if side < 2 { -1.0 } else { 1.0 };
                 for (k, p) in p.iter().enumerate() {
                     let mut d = [0f32; 4];
-                    d[side] = sign * step * p * (k as f32 - mean) * keep[side];
-                    jac.push((v.output, v.index(r, self.column + side * bins + k), d));
+                    // ∂E/∂p_k = k for a given distribution; through a softmax, p_k·(k − E).
+                    let dk = if self.activated { k as f32 } else { p * (k as f32 - mean) };
+                    d[side] = sign * step * dk * keep[side];
+                    jac.push((v.output, v.index(r, column + side * bins + k), d));
                 }
             }
         }
@@ -522,8 +570,20 @@ pub fn box_jacobians(
     num_classes: usize,
     map: &InputMap,
 ) -> Result<Vec<(BBox, Vec<BoxTerm>)>, LayoutError> {
+    box_jacobians_described(&layout.describe(num_classes), outs, input_w, input_h, num_classes, map)
+}
+
+/// [`box_jacobians`] under a [`Description`].
+pub fn box_jacobians_described(
+    d: &Description,
+    outs: &[RawOutput],
+    input_w: usize,
+    input_h: usize,
+    classes: usize,
+    map: &InputMap,
+) -> Result<Vec<(BBox, Vec<BoxTerm>)>, LayoutError> {
     let mut terms = Vec::new();
-    let p = decode_rows(&layout.describe(num_classes), outs, input_w, input_h, num_classes, map, Some(&mut terms))?;
+    let p = decode_rows(d, outs, input_w, input_h, classes, map, Some(&mut terms))?;
     Ok(p.boxes.into_iter().zip(terms).collect())
 }
 
@@ -539,6 +599,183 @@ pub fn decode_described(
     decode_rows(d, outs, input_w, input_h, classes, map, None)
 }
 
+/// A description's parts found among the outputs, with the grid their rows follow.
+struct Located<'a> {
+    levels: Vec<Grid>,
+    boxes: Vec<View<'a>>,
+    scores: Vec<View<'a>>,
+    objectness: Option<Vec<View<'a>>>,
+    labels: Option<Vec<View<'a>>>,
+    /// Proposals over every level.
+    total: usize,
+}
+
+/// One proposal: its anchor and, per part, the view and row that hold its values.
+struct RowAt<'v, 'a> {
+    anchor: Anchor,
+    boxes: Option<(&'v View<'a>, usize)>,
+    scores: (&'v View<'a>, usize),
+    objectness: Option<(&'v View<'a>, usize)>,
+    labels: Option<(&'v View<'a>, usize)>,
+}
+
+impl<'a> Located<'a> {
+    /// Finds the parts of `d` among `outs` (the boxes only `with_boxes`) and checks that they
+    /// agree on the rows.
+    fn new(
+        d: &Description,
+        outs: &'a [RawOutput],
+        input_w: usize,
+        input_h: usize,
+        classes: usize,
+        with_boxes: bool,
+    ) -> Result<Self, LayoutError> {
+        let grids = grids(d, outs, input_w, input_h, classes)?;
+        let boxes = if with_boxes { locate(d, Role::Boxes, outs, &grids, classes)? } else { Vec::new() };
+        let scores = locate(d, Role::Scores, outs, &grids, classes)?;
+        let objectness =
+            d.objectness.as_ref().map(|_| locate(d, Role::Objectness, outs, &grids, classes)).transpose()?;
+        let labels = d.labels.as_ref().map(|_| locate(d, Role::Labels, outs, &grids, classes)).transpose()?;
+        // Without a grid, every part must hold as many rows as the boxes (the scores without).
+        let first = boxes.first().unwrap_or(&scores[0]);
+        let rows = if grids.is_empty() { first.rows } else { grids.iter().map(Grid::tensor_rows).sum() };
+        for (role, v) in
+            [(Role::Scores, Some(&scores)), (Role::Objectness, objectness.as_ref()), (Role::Labels, labels.as_ref())]
+        {
+            if let Some(v) = v.filter(|v| v.len() == 1 && v[0].rows != rows) {
+                return Err(LayoutError(format!(
+                    "[{}] holds {} rows, [output.{}] {rows} (outputs: {})",
+                    role.table(),
+                    v[0].rows,
+                    if with_boxes { "boxes" } else { "scores" },
+                    listing(outs)
+                )));
+            }
+        }
+        let levels = if grids.is_empty() {
+            vec![Grid { gw: rows, gh: 1, sx: 1.0, sy: 1.0, anchors: Vec::new(), in_row: false }]
+        } else {
+            grids
+        };
+        let total = levels.iter().map(Grid::rows).sum();
+        Ok(Located { levels, boxes, scores, objectness, labels, total })
+    }
+
+    /// Calls `f` with every proposal in order.
+    fn each<'v>(
+        &'v self,
+        d: &Description,
+        mut f: impl FnMut(RowAt<'v, 'a>) -> Result<(), LayoutError>,
+    ) -> Result<(), LayoutError> {
+        let mut start = 0;
+        for (l, g) in self.levels.iter().enumerate() {
+            for lr in 0..g.rows() {
+                let anchor = Anchor::of(d, g, lr);
+                let at = |views| {
+                    let (v, o) = level_view(views, l, start);
+                    (v, o + anchor.row)
+                };
+                let row = RowAt {
+                    boxes: (!self.boxes.is_empty()).then(|| at(&self.boxes)),
+                    scores: at(&self.scores),
+                    objectness: self.objectness.as_deref().map(at),
+                    labels: self.labels.as_deref().map(at),
+                    anchor,
+                };
+                f(row)?;
+            }
+            start += g.tensor_rows();
+        }
+        Ok(())
+    }
+}
+
+/// How a description turns one proposal's raw values into class scores, for a white box that
+/// reads the same values with their derivatives ([`score_sites`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ScoreRule {
+    /// Class score columns, the background's included.
+    pub width: usize,
+    /// The background column, dropped after the activation.
+    pub background: Option<usize>,
+    /// The function the class values still need.
+    pub activation: Activation,
+    /// The objectness's function, when the model has one.
+    pub objectness: Option<Activation>,
+    /// The powers of objectness and class score in the detection score, `obj^p · cls^q`.
+    pub powers: [f32; 2],
+}
+
+/// Where one proposal's score values sit: each as (output, index in its data).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ScoreSite {
+    /// The objectness value, when the model has one.
+    pub objectness: Option<(usize, usize)>,
+    /// The output, the index of the first class column, and the step from one column to the next.
+    pub scores: (usize, usize, usize),
+}
+
+impl ScoreRule {
+    /// The rule of `d` for `classes` classes.
+    pub fn of(d: &Description, classes: usize) -> Self {
+        let power = |p: Option<f32>| p.unwrap_or(1.0);
+        ScoreRule {
+            width: d.count(Role::Scores, classes),
+            background: d.scores.background,
+            activation: d.scores.activation,
+            objectness: d.objectness.as_ref().map(|o| o.activation),
+            powers: [power(d.objectness.as_ref().and_then(|o| o.power)), power(d.scores.power)],
+        }
+    }
+}
+
+/// Where every proposal of [`decode_described`]'s order reads its scores, for outputs of the
+/// given names and shapes (their data is not read). Final detections (labels) are refused: their
+/// scores passed through the graph's post-processor.
+pub fn score_sites(
+    d: &Description,
+    outs: &[RawOutput],
+    input_w: usize,
+    input_h: usize,
+    classes: usize,
+) -> Result<Vec<ScoreSite>, LayoutError> {
+    if d.labels.is_some() {
+        return Err(LayoutError("final detections (labels) have no score sites".into()));
+    }
+    let at = Located::new(d, outs, input_w, input_h, classes, false)?;
+    let mut sites = Vec::with_capacity(at.total);
+    let (s, o) = (&d.scores, d.objectness.as_ref());
+    at.each(d, |r| {
+        let (v, row) = r.scores;
+        let first = v.index(row, s.column + r.anchor.slot * s.anchor_step);
+        let step = v.index(row, s.column + 1).wrapping_sub(v.index(row, s.column));
+        let objectness =
+            r.objectness.zip(o).map(|((v, row), p)| (v.output, v.index(row, p.column + r.anchor.slot * p.anchor_step)));
+        sites.push(ScoreSite { objectness, scores: (v.output, first, step) });
+        Ok(())
+    })?;
+    Ok(sites)
+}
+
+/// Which outputs (positions in `outs`) each part of `d` reads: boxes (only `with_boxes`),
+/// scores, objectness.
+pub fn part_outputs(
+    d: &Description,
+    outs: &[RawOutput],
+    input_w: usize,
+    input_h: usize,
+    classes: usize,
+    with_boxes: bool,
+) -> Result<[Vec<usize>; 3], LayoutError> {
+    let at = Located::new(d, outs, input_w, input_h, classes, with_boxes)?;
+    let of = |v: &[View]| {
+        let mut o: Vec<usize> = v.iter().map(|v| v.output).collect();
+        o.dedup();
+        o
+    };
+    Ok([of(&at.boxes), of(&at.scores), at.objectness.as_deref().map(of).unwrap_or_default()])
+}
+
 /// [`decode_described`], and with `jac` each box's derivatives by the values it reads, one list
 /// per box.
 fn decode_rows(
@@ -550,92 +787,78 @@ fn decode_rows(
     map: &InputMap,
     mut jac: Option<&mut Vec<Vec<BoxTerm>>>,
 ) -> Result<Proposals, LayoutError> {
-    let grids = grids(d, outs, input_w, input_h, classes)?;
-    let boxes = locate(d, Role::Boxes, outs, &grids, classes)?;
-    let scores = locate(d, Role::Scores, outs, &grids, classes)?;
-    let obj = d.objectness.as_ref().map(|_| locate(d, Role::Objectness, outs, &grids, classes)).transpose()?;
-    let labels = d.labels.as_ref().map(|_| locate(d, Role::Labels, outs, &grids, classes)).transpose()?;
-    // Without a grid, every part must hold as many rows as the boxes.
-    let total = if grids.is_empty() { boxes[0].rows } else { grids.iter().map(Grid::rows).sum() };
-    for (role, v) in [(Role::Scores, Some(&scores)), (Role::Objectness, obj.as_ref()), (Role::Labels, labels.as_ref())]
-    {
-        if let Some(v) = v.filter(|v| v.len() == 1 && v[0].rows != total) {
-            return Err(LayoutError(format!(
-                "[{}] holds {} rows, [output.boxes] {total} (outputs: {})",
-                role.table(),
-                v[0].rows,
-                listing(outs)
-            )));
-        }
-    }
+    let at = Located::new(d, outs, input_w, input_h, classes, true)?;
     let reader = BoxReader::new(d, input_w, input_h, map);
     let s = &d.scores;
-    let width = d.count(Role::Scores, classes);
-    let mut p = Proposals::with_capacity(classes, total);
+    let rule = ScoreRule::of(d, classes);
+    let width = rule.width;
+    let mut p = Proposals::with_capacity(classes, at.total);
     let mut logits = Vec::with_capacity(width);
-    let label_col = d.labels.as_ref().map_or(0, |p| p.column);
-    let (obj_col, obj_act) = d.objectness.as_ref().map_or((0, Activation::None), |p| (p.column, p.activation));
-    let one = [Grid { gw: total, gh: 1, sx: 1.0, sy: 1.0, anchors: Vec::new() }];
-    let levels: &[Grid] = if grids.is_empty() { &one } else { &grids };
-    let mut start = 0;
-    for (l, g) in levels.iter().enumerate() {
-        let ((bv, bo), (sv, so)) = (level_view(&boxes, l, start), level_view(&scores, l, start));
-        let ov = obj.as_deref().map(|v| level_view(v, l, start));
-        let lv = labels.as_deref().map(|v| level_view(v, l, start));
-        for lr in 0..g.rows() {
-            let label = match lv {
-                Some((v, o)) => {
-                    let label = v.at(o + lr, label_col);
-                    // Exports pad to a fixed row count with class −1.
-                    if label < 0.0 || label as usize >= classes {
-                        continue;
-                    }
-                    Some(label as usize)
+    let (label_col, label_step) = d.labels.as_ref().map_or((0, 0), |p| (p.column, p.anchor_step));
+    let (obj_col, obj_step) = d.objectness.as_ref().map_or((0, 0), |p| (p.column, p.anchor_step));
+    let [obj_power, cls_power] = rule.powers;
+    at.each(d, |r| {
+        let slot = r.anchor.slot;
+        let label = match r.labels {
+            Some((v, row)) => {
+                let label = v.at(row, label_col + slot * label_step);
+                // Exports pad to a fixed row count with class −1.
+                if label < 0.0 || label as usize >= classes {
+                    return Ok(());
                 }
-                None => None,
-            };
-            let terms = jac.as_deref_mut().map(|j| {
-                j.push(Vec::new());
-                j.last_mut().expect("just pushed")
-            });
-            p.boxes.push(reader.read(bv, bo + lr, &Anchor::of(d, g, lr), terms));
-            let sr = so + lr;
-            if let Some(label) = label {
-                let mut row = vec![0f32; classes];
-                let x = sv.at(sr, s.column);
-                row[label] = s.activation.apply(x);
-                p.scores.extend(row);
-                continue;
+                Some(label as usize)
             }
-            if s.activation == Activation::Softmax {
-                logits.clear();
-                sv.gather(sr, s.column, width, &mut logits);
-                let m = logits.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
-                let z: f32 = logits.iter().map(|x| (x - m).exp()).sum();
-                let bg = s.background;
-                p.scores
-                    .extend(logits.iter().enumerate().filter(|(k, _)| Some(*k) != bg).map(|(_, x)| (x - m).exp() / z));
-                continue;
-            }
-            let from = p.scores.len();
+            None => None,
+        };
+        let terms = jac.as_deref_mut().map(|j| {
+            j.push(Vec::new());
+            j.last_mut().expect("just pushed")
+        });
+        let (bv, br) = r.boxes.expect("located with the boxes");
+        p.boxes.push(reader.read(bv, br, &r.anchor, terms));
+        let (sv, sr) = r.scores;
+        let column = s.column + slot * s.anchor_step;
+        if let Some(label) = label {
+            let mut row = vec![0f32; classes];
+            row[label] = s.activation.apply(sv.at(sr, column));
+            p.scores.extend(row);
+            return Ok(());
+        }
+        let from = p.scores.len();
+        if s.activation == Activation::Softmax {
+            logits.clear();
+            sv.gather(sr, column, width, &mut logits);
+            let m = logits.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+            let z: f32 = logits.iter().map(|x| (x - m).exp()).sum();
+            let bg = s.background;
+            p.scores.extend(logits.iter().enumerate().filter(|(k, _)| Some(*k) != bg).map(|(_, x)| (x - m).exp() / z));
+        } else {
             match s.background {
                 Some(bg) => {
-                    sv.gather(sr, s.column, bg, &mut p.scores);
-                    sv.gather(sr, s.column + bg + 1, width - bg - 1, &mut p.scores);
+                    sv.gather(sr, column, bg, &mut p.scores);
+                    sv.gather(sr, column + bg + 1, width - bg - 1, &mut p.scores);
                 }
-                None => sv.gather(sr, s.column, width, &mut p.scores),
-            }
-            let row = &mut p.scores[from..];
-            if s.activation == Activation::Sigmoid {
-                row.iter_mut().for_each(|x| *x = sigmoid(*x));
-            }
-            if let Some((v, o)) = ov {
-                let o = obj_act.apply(v.at(o + lr, obj_col));
-                row.iter_mut().for_each(|x| *x *= o);
+                None => sv.gather(sr, column, width, &mut p.scores),
             }
         }
-        start += g.rows();
-    }
+        let row = &mut p.scores[from..];
+        if s.activation == Activation::Sigmoid {
+            row.iter_mut().for_each(|x| *x = sigmoid(*x));
+        }
+        if cls_power != 1.0 {
+            row.iter_mut().for_each(|x| *x = x.max(0.0).powf(cls_power));
+        }
+        if let Some((v, orow)) = r.objectness {
+            let o = d
+                .objectness
+                .as_ref()
+                .map_or(Activation::None, |p| p.activation)
+                .apply(v.at(orow, obj_col + slot * obj_step));
+            let o = if obj_power != 1.0 { o.max(0.0).powf(obj_power) } else { o };
+            row.iter_mut().for_each(|x| *x *= o);
+        }
+        Ok(())
+    })?;
     if let Some(bad) = p.scores.iter().position(|s| !s.is_finite()) {
         return Err(LayoutError(format!(
             "non-finite score at proposal {} class {}",

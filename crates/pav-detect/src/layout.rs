@@ -39,6 +39,9 @@ pub enum CellOrder {
     AnchorCell,
     /// Cell by cell row-major, each cell's anchors together (SSD's order).
     CellAnchor,
+    /// Cell by cell row-major, one row per cell holding every anchor's values side by side
+    /// (YOLO-FastestV2): a part's anchors are its `anchor_step` columns apart.
+    InRow,
 }
 
 /// Where a grid cell's point is, for encodings measured from it.
@@ -72,6 +75,9 @@ pub enum Encoding {
     Ltrb,
     /// As `ltrb`, each distance a distribution over `bins` (softmax, expectation; GFL).
     LtrbBins,
+    /// FastestDet: `cx = (gx + tanh(v0))·s`, `w = σ(v2)·W`: centre offsets through tanh from the
+    /// cell's corner, sizes as shares of the input's width W and height through a sigmoid.
+    TanhShare,
     /// SSD: offsets from a prior box (centre `c`, size `aw, ah`) scaled by `variances`:
     /// `cx = c + v0·var0·aw`, `w = aw·e^(v2·var1)`.
     Prior,
@@ -166,6 +172,18 @@ pub struct Part {
     /// the others; dropped after the activation.
     #[serde(default)]
     pub background: Option<usize>,
+    /// With `order = "in-row"`: the columns from one anchor's values to the next's in a cell's
+    /// row; 0 (the default) for one block the cell's anchors share.
+    #[serde(default)]
+    pub anchor_step: usize,
+    /// Boxes: the encoding's own functions (the sigmoids of `darknet`, `yolov5` and
+    /// `tanh-share`, its tanh, the softmax of `ltrb-bins`) are already applied in the graph.
+    #[serde(default)]
+    pub activated: bool,
+    /// Scores and objectness: the power each enters the detection score with, `obj^p · cls^q`
+    /// (FastestDet's 0.6 and 0.4); 1 when absent.
+    #[serde(default)]
+    pub power: Option<f32>,
 }
 
 fn one_or_many<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<String>, D::Error> {
@@ -206,6 +224,10 @@ pub struct Description {
     /// Each row's class, for final detections.
     #[serde(default)]
     pub labels: Option<Part>,
+    /// The values before the graph's own post-processor (its top-k or NMS), described the same
+    /// way: what a white box differentiates when the outputs are final detections.
+    #[serde(default)]
+    pub raw: Option<Box<Description>>,
 }
 
 /// Which part of a [`Description`].
@@ -234,6 +256,20 @@ impl Role {
 }
 
 impl Description {
+    /// No levels and no parts read yet: the start of a description written in code.
+    pub fn empty() -> Description {
+        Description {
+            levels: Vec::new(),
+            order: CellOrder::AnchorCell,
+            centre: Centre::Cell,
+            boxes: Part::default(),
+            scores: Part::default(),
+            objectness: None,
+            labels: None,
+            raw: None,
+        }
+    }
+
     /// The parts present, with their roles.
     pub fn parts(&self) -> Vec<(Role, &Part)> {
         let mut v = vec![(Role::Boxes, &self.boxes), (Role::Scores, &self.scores)];
@@ -253,13 +289,41 @@ impl Description {
         }
     }
 
+    /// Anchors whose values share one row: each level's anchors with `order = "in-row"`, else 1.
+    pub fn anchors_per_row(&self) -> usize {
+        match self.order {
+            CellOrder::InRow => self.levels.iter().map(|l| l.anchors.len().max(1)).max().unwrap_or(1),
+            _ => 1,
+        }
+    }
+
     /// The last column (exclusive) a part reads.
     pub fn reach(&self, role: Role, classes: usize) -> usize {
         let p = self.part(role);
-        match (role, p.coords) {
+        let last = (self.anchors_per_row() - 1) * p.anchor_step;
+        last + match (role, p.coords) {
             (Role::Boxes, Some(c)) => c.iter().max().map_or(0, |m| m + 1),
             _ => p.column + self.count(role, classes),
         }
+    }
+
+    /// Every column of a row that a part reads, the anchors sharing the row included.
+    pub fn columns(&self, role: Role, classes: usize) -> Vec<usize> {
+        let p = self.part(role);
+        let base: Vec<usize> = match (role, p.coords) {
+            (Role::Boxes, Some(c)) => c.to_vec(),
+            _ => (p.column..p.column + self.count(role, classes)).collect(),
+        };
+        (0..self.anchors_per_row()).flat_map(|a| base.iter().map(move |c| c + a * p.anchor_step)).collect()
+    }
+
+    /// The description a white box differentiates: [`Description::raw`] when there is one.
+    pub fn gradient(&self) -> Result<&Description, String> {
+        let d = self.raw.as_deref().unwrap_or(self);
+        if d.labels.is_some() {
+            return Err("the outputs are final detections (labels), which have no gradient: describe the values before the post-processor as [output.raw]".into());
+        }
+        Ok(d)
     }
 
     /// The row width of a part's tensor: its own `width`, else as far as the columns of the
@@ -291,7 +355,7 @@ impl Description {
         let b = &self.boxes;
         let Some(enc) = b.encoding else {
             return Err(
-                "[output.boxes] needs an `encoding`: xyxy, cxcywh, grid, darknet, yolov5, ltrb, ltrb-bins or prior"
+                "[output.boxes] needs an `encoding`: xyxy, cxcywh, grid, darknet, yolov5, tanh-share, ltrb, ltrb-bins or prior"
                     .into(),
             );
         };
@@ -303,6 +367,7 @@ impl Description {
                 | Encoding::Ltrb
                 | Encoding::LtrbBins
                 | Encoding::Prior
+                | Encoding::TanhShare
         );
         let name = format!("{enc:?}").to_lowercase();
         if gridded && self.levels.is_empty() {
@@ -356,6 +421,22 @@ impl Description {
             {
                 return Err(format!("[{t}] has box keys (encoding, coords, bins, variances, normalized, clip, frame): they belong in [output.boxes]"));
             }
+            if p.anchor_step > 0 && self.order != CellOrder::InRow {
+                return Err(format!("[{t}] has `anchor_step`: it belongs to `order = \"in-row\"`"));
+            }
+            if self.order == CellOrder::InRow && p.arrange == Arrange::Planes {
+                return Err(format!("[{t}] arranged in planes cannot hold several anchors in one row: use rows or columns with `order = \"in-row\"`"));
+            }
+            if role != Role::Boxes && p.activated {
+                return Err(format!("[{t}] has `activated`: scores and objectness say so with `activation`"));
+            }
+            if let Some(q) = p.power {
+                if !matches!(role, Role::Scores | Role::Objectness) || !(q.is_finite() && q > 0.0) {
+                    return Err(format!(
+                        "[{t}] power = {q}: only scores and objectness take a power, and it must be positive"
+                    ));
+                }
+            }
             if role != Role::Scores && p.background.is_some() {
                 return Err(format!("[{t}] has `background`: it belongs in [output.scores]"));
             }
@@ -376,6 +457,13 @@ impl Description {
         if enc != Encoding::LtrbBins && b.bins.is_some() {
             return Err("`bins` belongs to the `ltrb-bins` encoding".into());
         }
+        if b.activated
+            && !matches!(enc, Encoding::Darknet | Encoding::Yolov5 | Encoding::TanhShare | Encoding::LtrbBins)
+        {
+            return Err(format!(
+                "`activated` says the encoding's sigmoid, tanh or softmax is already applied; `{name}` applies none, so its values are read as they are"
+            ));
+        }
         if enc != Encoding::Prior && b.variances.is_some() {
             return Err("`variances` belong to the `prior` encoding".into());
         }
@@ -395,6 +483,17 @@ impl Description {
         }
         if self.scores.activation == Activation::Softmax && self.objectness.is_some() {
             return Err("softmax scores with an objectness: give the objectness its own sigmoid scores instead".into());
+        }
+        if self.labels.is_some() && self.scores.power.is_some() {
+            return Err("final detections (labels) are scored by their score column: no power".into());
+        }
+        if let Some(raw) = &self.raw {
+            if raw.labels.is_some() || raw.raw.is_some() {
+                return Err(
+                    "[output.raw] describes the values before the post-processor: no labels, no raw of its own".into(),
+                );
+            }
+            raw.validate(classes).map_err(|e| format!("[output.raw]: {e}"))?;
         }
         Ok(())
     }

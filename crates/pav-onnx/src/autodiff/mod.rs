@@ -113,34 +113,16 @@ pub struct Differentiated {
     pub saves_input: bool,
 }
 
-/// Name of the gradient input that seeds `output`'s gradient.
-pub fn grad_name(value: &str) -> String {
-    format!("grad_{value}")
+/// Every value's shape for an input of `input_shape`, the values that depend on the input, and
+/// the element types of those that are not float.
+struct Values {
+    input: String,
+    shape: HashMap<String, Vec<i64>>,
+    live: HashSet<String>,
+    elem: HashMap<String, i32>,
 }
 
-/// Differentiates `model` (batch 1, input of `input_shape`) with respect to its first input, with
-/// standard ONNX operators.
-pub fn differentiate(model: &Model, input_shape: &[i64]) -> Result<Differentiated, AutodiffError> {
-    differentiate_with(model, input_shape, Kernels::Onnx)
-}
-
-/// [`differentiate`] with the backward written by `kernels`.
-pub fn differentiate_with(
-    model: &Model,
-    input_shape: &[i64],
-    kernels: Kernels,
-) -> Result<Differentiated, AutodiffError> {
-    differentiate_first(model, input_shape, kernels, model.outputs.len())
-}
-
-/// [`differentiate_with`] for the first `seeded` outputs of `model`; the others are computed by
-/// the forward only ([`Differentiated::forward_only`]), so the backward never walks their branch.
-pub fn differentiate_first(
-    model: &Model,
-    input_shape: &[i64],
-    kernels: Kernels,
-    seeded: usize,
-) -> Result<Differentiated, AutodiffError> {
+fn values(model: &Model, input_shape: &[i64]) -> Result<Values, AutodiffError> {
     let input = model.inputs.first().ok_or_else(|| AutodiffError::Graph("no input".into()))?.name.clone();
     let consts: HashMap<&str, &Initializer> = model.initializers.iter().map(|i| (i.name.as_str(), i)).collect();
     let mut shape: HashMap<String, Vec<i64>> = HashMap::from([(input.clone(), input_shape.to_vec())]);
@@ -192,6 +174,53 @@ pub fn differentiate_first(
             }
         }
     }
+    Ok(Values { input, shape, live, elem })
+}
+
+/// The shapes of `model`'s outputs for an input of `input_shape` (batch 1), as differentiation
+/// fixes them: what a caller reads to choose the outputs to differentiate.
+pub fn output_shapes(model: &Model, input_shape: &[i64]) -> Result<Vec<(String, Vec<i64>)>, AutodiffError> {
+    let v = values(model, input_shape)?;
+    model
+        .outputs
+        .iter()
+        .map(|o| {
+            let s = v.shape.get(&o.name).cloned();
+            s.map(|s| (o.name.clone(), s)).ok_or_else(|| AutodiffError::Graph(format!("unknown output {}", o.name)))
+        })
+        .collect()
+}
+
+/// Name of the gradient input that seeds `output`'s gradient.
+pub fn grad_name(value: &str) -> String {
+    format!("grad_{value}")
+}
+
+/// Differentiates `model` (batch 1, input of `input_shape`) with respect to its first input, with
+/// standard ONNX operators.
+pub fn differentiate(model: &Model, input_shape: &[i64]) -> Result<Differentiated, AutodiffError> {
+    differentiate_with(model, input_shape, Kernels::Onnx)
+}
+
+/// [`differentiate`] with the backward written by `kernels`.
+pub fn differentiate_with(
+    model: &Model,
+    input_shape: &[i64],
+    kernels: Kernels,
+) -> Result<Differentiated, AutodiffError> {
+    differentiate_first(model, input_shape, kernels, model.outputs.len())
+}
+
+/// [`differentiate_with`] for the first `seeded` outputs of `model`; the others are computed by
+/// the forward only ([`Differentiated::forward_only`]), so the backward never walks their branch.
+pub fn differentiate_first(
+    model: &Model,
+    input_shape: &[i64],
+    kernels: Kernels,
+    seeded: usize,
+) -> Result<Differentiated, AutodiffError> {
+    let consts: HashMap<&str, &Initializer> = model.initializers.iter().map(|i| (i.name.as_str(), i)).collect();
+    let Values { input, shape, live, elem } = values(model, input_shape)?;
     let mut bw = Back {
         tape: Tape { nodes: Vec::new(), inits: Vec::new(), count: 0, opset: 13 },
         saved: Vec::new(),
