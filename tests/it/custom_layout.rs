@@ -25,7 +25,7 @@ const HEADS: [(&str, usize, [[f32; 2]; 3]); 2] = [
 
 /// YOLOv3-tiny with its heads decoded in the graph and flattened to `[1, 2535, 85]` rows
 /// (cx, cy, w, h in input pixels, objectness, class probabilities), anchor by anchor.
-fn flattened_yolov3_tiny(out: &Path) -> PathBuf {
+pub(crate) fn flattened_yolov3_tiny(out: &Path) -> PathBuf {
     let src = common::repo().join(".deps/models/yolov3-tiny/yolov3-tiny.onnx");
     let mut m = Model::from_bytes(&std::fs::read(src).unwrap()).unwrap();
     let f = 85;
@@ -78,7 +78,7 @@ fn flattened_yolov3_tiny(out: &Path) -> PathBuf {
 }
 
 /// A config as YOLOv3-tiny's shipped one with another model and `[output]`.
-fn config_like_yolov3_tiny(dir: &Path, model: &Path, output: &str) -> DetectorConfig {
+pub(crate) fn config_like_yolov3_tiny(dir: &Path, model: &Path, output: &str) -> DetectorConfig {
     let shipped = std::fs::read_to_string(common::detector_config("yolov3-tiny")).unwrap();
     let input = &shipped[shipped.find("[input]").unwrap()..shipped.find("[output]").unwrap()];
     let names = common::repo().join(".deps/models/yolov3-tiny/coco.names");
@@ -92,7 +92,7 @@ fn config_like_yolov3_tiny(dir: &Path, model: &Path, output: &str) -> DetectorCo
     DetectorConfig::load(&path).unwrap()
 }
 
-const FLAT: &str = "[output]\nlayout = \"custom\"\n[[output.levels]]\nstride = 32\nanchors = [[81, 82], [135, 169], [344, 319]]\n[[output.levels]]\nstride = 16\nanchors = [[10, 14], [23, 27], [37, 58]]\n[output.boxes]\nencoding = \"cxcywh\"\n[output.objectness]\ncolumn = 4\n[output.scores]\ncolumn = 5\n";
+pub(crate) const FLAT: &str = "[output]\nlayout = \"custom\"\n[[output.levels]]\nstride = 32\nanchors = [[81, 82], [135, 169], [344, 319]]\n[[output.levels]]\nstride = 16\nanchors = [[10, 14], [23, 27], [37, 58]]\n[output.boxes]\nencoding = \"cxcywh\"\n[output.objectness]\ncolumn = 4\n[output.scores]\ncolumn = 5\n";
 
 #[test]
 fn flattened_anchor_rows_of_a_real_model_give_the_darknet_heads_proposals() {

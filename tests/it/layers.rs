@@ -535,3 +535,26 @@ fn the_function_reader_measures_bodies_and_skips_literals() {
     assert_eq!(all[1].2, 1);
     assert_eq!(code_of("fn f<'a>(x: &'a str) { let c = '{'; } // }"), "fn f<'a>(x: &'a str) { let c = ; } ");
 }
+
+/// pav-attack reads a detector only through its description: its code (comments aside) names no
+/// output layout and no model family.
+#[test]
+fn the_attack_names_no_detector_family() {
+    let src = common::repo().join("crates/pav-attack/src");
+    let files = common::files_with_extension(&src, "rs");
+    assert!(files.len() > 10, "{} files under {}", files.len(), src.display());
+    let mut found = Vec::new();
+    for f in &files {
+        let text = std::fs::read_to_string(f).unwrap();
+        let code = text.split("#[cfg(test)]").next().unwrap_or_default();
+        for (i, line) in code.lines().enumerate() {
+            let line = line.split("//").next().unwrap_or_default().to_lowercase();
+            for word in ["outputlayout", "darknet", "yolo", "ultralytics", "detr", "gfl", "nanodet", "picodet"] {
+                if line.contains(word) {
+                    found.push(format!("{}:{}: {word}", f.display(), i + 1));
+                }
+            }
+        }
+    }
+    assert!(found.is_empty(), "per-family code in pav-attack:\n{}", found.join("\n"));
+}

@@ -20,6 +20,7 @@ mod cli_pav;
 mod cli_rig;
 #[cfg(feature = "eval")]
 mod custom_layout;
+mod custom_white_box;
 mod darknet_onnx;
 mod data_fetch;
 #[cfg(feature = "eval")]

@@ -48,6 +48,13 @@ pub enum PlanError {
     Layout(#[from] LayoutError),
 }
 
+/// A value the graph computes, what the loss does with it, and its size along a split axis.
+type Piece = (String, Use, usize);
+
+/// A tensor's split along an axis (the sizes before and after it; none: computed whole) and its
+/// pieces.
+type Split = (Option<(usize, usize)>, Vec<Piece>);
+
 /// What the loss does with a value: differentiate it, read it forward only, or nothing.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 enum Use {
@@ -99,9 +106,9 @@ impl Plan {
             r
         };
         let (mut seeded, mut forward): (Vec<String>, Vec<String>) = (Vec::new(), Vec::new());
-        // Per tensor: its parts as (value, use, size along the split axis), to index once the
-        // seeded outputs are all known.
-        let mut planned: Vec<(usize, Option<(usize, usize)>, Vec<(String, Use, usize)>)> = Vec::new();
+        // Per tensor: its split (outer and inner sizes) and pieces, to index once the seeded
+        // outputs are all known.
+        let mut planned: Vec<Split> = Vec::new();
         let mut tensors = Vec::new();
         for (k, (name, shape)) in shapes.iter().enumerate() {
             let read = roles(k);
@@ -123,7 +130,7 @@ impl Plan {
                 }
             }
             tensors.push((name.clone(), shape.iter().map(|&v| v.max(0) as usize).collect()));
-            planned.push((k, axis, parts));
+            planned.push((axis, parts));
         }
         let index = |value: &str| {
             seeded
@@ -133,7 +140,7 @@ impl Plan {
         };
         let sources = planned
             .iter()
-            .map(|(_, axis, parts)| match axis {
+            .map(|(axis, parts)| match axis {
                 None => Source::Whole(index(&parts[0].0).expect("a tensor the loss reads is computed")),
                 Some((outer, inner)) => Source::Pieces {
                     outer: *outer,
@@ -213,7 +220,7 @@ fn concat_pieces(
     read: &[(Role, Use)],
     classes: usize,
     x: &[i64],
-) -> Option<(usize, Vec<(String, Use, usize)>)> {
+) -> Option<(usize, Vec<Piece>)> {
     let node = model.nodes.iter().find(|n| n.outputs.first().is_some_and(|o| o == name) && n.op_type == "Concat")?;
     let rank = shape.len() as i64;
     let axis = node.attrs.iter().find(|(k, _)| k == "axis").and_then(|(_, a)| match a {

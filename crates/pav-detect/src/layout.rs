@@ -431,7 +431,7 @@ impl Description {
                 return Err(format!("[{t}] has `activated`: scores and objectness say so with `activation`"));
             }
             if let Some(q) = p.power {
-                if !matches!(role, Role::Scores | Role::Objectness) || !(q.is_finite() && q > 0.0) {
+                if !(matches!(role, Role::Scores | Role::Objectness) && q.is_finite() && q > 0.0) {
                     return Err(format!(
                         "[{t}] power = {q}: only scores and objectness take a power, and it must be positive"
                     ));

@@ -300,6 +300,31 @@ fn neg() {
 }
 
 #[test]
+fn exp() {
+    check(single("Exp", &[], vec![], vec![]), [1, 2, 3, 3], 2e-3);
+}
+
+#[test]
+fn tanh() {
+    check(single("Tanh", &[], vec![], vec![]), [1, 2, 3, 3], 2e-3);
+}
+
+#[test]
+fn min() {
+    // A cap inside the inputs' range: some values pass, some are capped.
+    check(single("Min", &["cap"], vec![], vec![scalar("cap", 0.1)]), [1, 2, 4, 4], 2e-3);
+    // A second operand that depends on the input is refused by name.
+    let m = model(vec![node("Neg", &["x"], "n", vec![]), node("Min", &["x", "n"], "y", vec![])], vec![], &["y"]);
+    let e = differentiate_with(&m, &[1, 1, 2, 2], Kernels::Onnx).unwrap_err().to_string();
+    assert!(e.contains("Min") && e.contains("constant"), "{e}");
+}
+
+#[test]
+fn max() {
+    check(single("Max", &["floor"], vec![], vec![scalar("floor", -0.2)]), [1, 2, 4, 4], 2e-3);
+}
+
+#[test]
 fn clip() {
     check(single("Clip", &["lo", "hi"], vec![], vec![scalar("lo", -0.3), scalar("hi", 0.4)]), [1, 2, 4, 4], 2e-3);
     // Only a lower bound (the upper input left empty).

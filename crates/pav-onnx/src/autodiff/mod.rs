@@ -18,7 +18,7 @@
 //!   permutation.
 //! - For transformers (DETR): `Sub`, `Div` and broadcasting in every binary operator (the gradient
 //!   summed back over the broadcast axes), `MatMul` (G·Bᵀ and Aᵀ·G), `Pow` by a constant, `Sqrt`,
-//!   `Log`, `Neg`, `Clip`, `Softmax`, `ReduceMean`, `ReduceSum`, `ReduceMax` (to the maximum),
+//!   `Log`, `Neg`, `Clip`, `Exp`, `Tanh`, `Min` and `Max` with a constant, `Softmax`, `ReduceMean`, `ReduceSum`, `ReduceMax` (to the maximum),
 //!   `Flatten`, `(Un)Squeeze`, `Cast` to float, constant `Pad`, `AveragePool` (a transposed
 //!   uniform convolution), `GlobalAveragePool`, `Expand`.
 //! - Selections: `TopK`'s values, `GatherElements` and `Gather` (constant indices) scatter the

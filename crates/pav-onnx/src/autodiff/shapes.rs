@@ -218,8 +218,8 @@ pub(super) fn infer(
     Ok(match n.op_type.as_str() {
         // Split: the input's shape here; each output's is cut from it by `split_sizes`.
         "Identity" | "LeakyRelu" | "Relu" | "Sigmoid" | "HardSigmoid" | "Split" | "Pow" | "Sqrt" | "Log"
-        | "Softmax" | "Cast" | "Clip" | "Neg" => x,
-        "Add" | "Mul" | "Sub" | "Div" => {
+        | "Softmax" | "Cast" | "Clip" | "Neg" | "Exp" | "Tanh" => x,
+        "Add" | "Mul" | "Sub" | "Div" | "Min" | "Max" => {
             let y = get(1)?;
             broadcast(&x, &y).ok_or_else(|| bad(format!("operands {x:?} and {y:?} do not broadcast")))?
         }

@@ -173,3 +173,48 @@ pub(super) fn cast(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffErr
     bw.add(&x, g);
     Ok(())
 }
+
+/// `g·y`, from the saved output `y = eˣ`.
+pub(super) fn exp(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
+    let (x, y) = (cx.n.inputs[0].clone(), cx.n.outputs[0].clone());
+    bw.save(&y);
+    let gx = bw.tape.node("Mul", vec![g, y], vec![]);
+    bw.add(&x, gx);
+    Ok(())
+}
+
+/// `g·(1 − y²)`, from the saved output `y = tanh x`.
+pub(super) fn tanh(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
+    let (x, y) = (cx.n.inputs[0].clone(), cx.n.outputs[0].clone());
+    bw.save(&y);
+    let one = bw.tape.scalar(1.0);
+    let y2 = bw.tape.node("Mul", vec![y.clone(), y], vec![]);
+    let d = bw.tape.node("Sub", vec![one, y2], vec![]);
+    let gx = bw.tape.node("Mul", vec![g, d], vec![]);
+    bw.add(&x, gx);
+    Ok(())
+}
+
+/// Min and Max of the input and a constant that broadcasts into it: `g` where the input is the
+/// one selected (strictly below, or above, the constant), else 0.
+pub(super) fn min_max(cx: &Ctx, bw: &mut Back, g: String) -> Result<(), AutodiffError> {
+    let n = cx.n;
+    let x = n.inputs[0].clone();
+    let [_, c] = n.inputs.as_slice() else {
+        return Err(cx.bad("two operands: the input and a constant"));
+    };
+    if cx.live.contains(c) {
+        return Err(cx.bad("the second operand must be a constant"));
+    }
+    let c = bw.reuse(cx, c).ok_or_else(|| cx.bad("the second operand must be a constant"))?;
+    if cx.shape.get(&x) != cx.shape.get(&n.outputs[0]) {
+        return Err(cx.bad("the constant must broadcast into the input, not the input into it"));
+    }
+    bw.save(&x);
+    let op = if n.op_type == "Min" { "Less" } else { "Greater" };
+    let keep = bw.tape.node(op, vec![x.clone(), c], vec![]);
+    let zero = bw.tape.scalar(0.0);
+    let gx = bw.tape.node("Where", vec![keep, g, zero], vec![]);
+    bw.add(&x, gx);
+    Ok(())
+}
