@@ -7,6 +7,10 @@
 //! - a description that does not fit its model is refused when the model loads, naming the
 //!   model's outputs;
 //! - `model inspect` guesses both as `custom` and writes skeletons that load once completed;
+//! - the forms other exports take: values the graph already activated (for the encoding too),
+//!   several anchors side by side in one row with a shared class block, scores as a product of
+//!   powers, centre offsets through tanh with sizes as shares of the input, and outputs without
+//!   a batch dimension, each from a graph built here with known outputs;
 //! - every `custom` layout the README and docs/evaluate.md show loads as written.
 
 use crate::common;
@@ -266,4 +270,160 @@ fn every_documented_custom_layout_loads_as_written() {
         }
     }
     assert_eq!(seen, 3, "the README's YOLOv5 export, docs/evaluate.md's raw heads and SSD");
+}
+
+/// The logit of `p`.
+fn logit(p: f32) -> f32 {
+    (p / (1.0 - p)).ln()
+}
+
+/// A 32² frame of one colour: the constant models ignore it.
+fn blank() -> pav::image::Frame {
+    pav::image::Frame { width: 32, height: 32, bgr: vec![90; 32 * 32 * 3] }
+}
+
+/// Proposals of a constant model of `outputs` under the `[output]` table `output`.
+fn proposals(dir: &Path, outputs: &[(&str, Vec<i64>, Vec<f32>)], output: &str) -> pav::detect::decode::Proposals {
+    let model = constant_model(dir, outputs);
+    let cfg = config(dir, &model, output).unwrap_or_else(|e| panic!("{output}\n→ {e}"));
+    OnnxDetector::new(cfg, 1).unwrap_or_else(|e| panic!("{e}")).propose(&blank()).unwrap()
+}
+
+fn close(a: [f32; 4], b: [f32; 4]) -> bool {
+    a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-3)
+}
+
+const YOLOV5_PLANES: &str = "[output]\nlayout = \"custom\"\n[[output.levels]]\nstride = 16\nanchors = [[10, 14], [20, 30]]\n[output.boxes]\noutput = [\"h\"]\narrange = \"planes\"\nper_level = true\nencoding = \"yolov5\"\n[output.objectness]\noutput = [\"h\"]\narrange = \"planes\"\nper_level = true\ncolumn = 4\nactivation = \"sigmoid\"\n[output.scores]\noutput = [\"h\"]\narrange = \"planes\"\nper_level = true\ncolumn = 5\nactivation = \"sigmoid\"\n";
+
+#[test]
+fn values_the_graph_already_activated_decode_as_their_logits_do() {
+    // YOLOv5 heads at 32² (stride 16, 2×2 cells, two anchors, two classes): logits, and the same
+    // values through the sigmoid as an export that applies it writes them.
+    let tmp = tempfile::tempdir().unwrap();
+    let n = 2 * 7 * 4;
+    let mut raw: Vec<f32> = (0..n).map(|k| ((k * 5 % 13) as f32 - 6.0) / 4.0).collect();
+    // Anchor 1 (20 × 30), cell (0, 1): box logits 0, objectness 0.9, car 0.8.
+    let at = |k: usize| (7 + k) * 4 + 2;
+    (0..4).for_each(|k| raw[at(k)] = 0.0);
+    raw[at(4)] = logit(0.9);
+    raw[at(6)] = logit(0.8);
+    let sig: Vec<f32> = raw.iter().map(|&x| 1.0 / (1.0 + (-x).exp())).collect();
+    let a = proposals(tmp.path(), &[("h", vec![1, 14, 2, 2], raw)], YOLOV5_PLANES);
+    let activated = YOLOV5_PLANES.replace("encoding = \"yolov5\"\n", "encoding = \"yolov5\"\nactivated = true\n");
+    let b =
+        proposals(tmp.path(), &[("h", vec![1, 14, 2, 2], sig)], &activated.replace("activation = \"sigmoid\"\n", ""));
+    assert_eq!(a.len(), 8);
+    for i in 0..8 {
+        assert!(close(a.boxes[i], b.boxes[i]), "{i}: {:?} vs {:?}", a.boxes[i], b.boxes[i]);
+        assert!(a.row(i).iter().zip(b.row(i)).all(|(x, y)| (x - y).abs() < 1e-5), "{i}");
+    }
+    // Row 6 = anchor 1, cell 2: centre ((2·0.5 − 0.5 + 0)·16, (0.5 + 1)·16) = (8, 24), size
+    // (2·0.5)² × (20, 30).
+    assert!(close(b.boxes[6], [0.0, 9.0, 18.0, 32.0]), "{:?}", b.boxes[6]);
+    assert!((b.row(6)[1] - 0.72).abs() < 1e-5, "{:?}", b.row(6));
+    // A sigmoid the encoding does not have is refused.
+    let e = config(
+        tmp.path(),
+        Path::new("m.onnx"),
+        &SSD.replace("encoding = \"prior\"\n", "encoding = \"prior\"\nactivated = true\n"),
+    )
+    .unwrap_err();
+    assert!(e.contains("`prior` applies none"), "{e}");
+}
+
+const FASTEST_V2: &str = "[output]\nlayout = \"custom\"\norder = \"in-row\"\n[[output.levels]]\nstride = 16\nanchors = [[8, 8], [16, 24], [24, 12]]\n[output.boxes]\noutput = [\"o\"]\nper_level = true\nencoding = \"yolov5\"\nactivated = true\nanchor_step = 4\n[output.objectness]\noutput = [\"o\"]\nper_level = true\ncolumn = 12\nanchor_step = 1\npower = 0.6\n[output.scores]\noutput = [\"o\"]\nper_level = true\ncolumn = 15\npower = 0.4\n";
+
+#[test]
+fn several_anchors_in_one_row_share_its_class_block_and_score_as_a_product_of_powers() {
+    // YOLO-FastestV2's head at 32²: [1, 2, 2, 3·4 + 3 + 2] channels last, already activated.
+    let tmp = tempfile::tempdir().unwrap();
+    let mut v = vec![0.25f32; 2 * 2 * 17];
+    // Cell (0, 1) (row 2): anchor 0 (8 × 8) at the cell's centre, objectness 0.64; anchor 1
+    // objectness 0; classes (0.2, 0.8) for all three.
+    let row = 2 * 17;
+    v[row..row + 4].copy_from_slice(&[0.5, 0.5, 0.5, 0.5]);
+    v[row + 12] = 0.64;
+    v[row + 13] = 0.0;
+    v[row + 15..row + 17].copy_from_slice(&[0.2, 0.8]);
+    let p = proposals(tmp.path(), &[("o", vec![1, 2, 2, 17], v)], FASTEST_V2);
+    assert_eq!((p.len(), p.num_classes), (12, 2));
+    // Cell by cell, each cell's anchors together: proposal 6 is cell 2's anchor 0.
+    assert!(close(p.boxes[6], [4.0, 20.0, 12.0, 28.0]), "{:?}", p.boxes[6]);
+    let want = 0.64f32.powf(0.6) * 0.8f32.powf(0.4);
+    assert!((p.row(6)[1] - want).abs() < 1e-5, "{:?} vs {want}", p.row(6));
+    // Anchor 1 of the same cell reads its own objectness (0) and box (anchor 16 × 24).
+    assert_eq!(p.row(7), [0.0, 0.0]);
+    // Its values 0.25: height (2·0.25)²·24 = 6 about the centre (0·16 + 16).
+    assert!(close([p.boxes[7][1], p.boxes[7][3], 0.0, 0.0], [13.0, 19.0, 0.0, 0.0]), "{:?}", p.boxes[7]);
+    // `model inspect` names the head; its skeleton decodes it once the anchors are filled in.
+    let model = constant_model(tmp.path(), &[("o", vec![1, 2, 2, 17], vec![0.5; 68])]);
+    let insp = Inspection::from_bytes(&std::fs::read(&model).unwrap()).unwrap();
+    let guess = insp.guess(32);
+    assert!(
+        guess.layout == Some("custom") && guess.why.contains("YOLO-FastestV2") && guess.why.contains("2 classes"),
+        "{}",
+        guess.why
+    );
+    let text = insp.skeleton("mine", &model.display().to_string(), 32, &guess);
+    let out = &text[text.find("[output]").unwrap()..text.find("[classes]").unwrap()];
+    let out = out.replace("anchors = []", "anchors = [[8, 8], [16, 24], [24, 12]]");
+    assert_eq!(proposals(tmp.path(), &[("o", vec![1, 2, 2, 17], vec![0.5; 68])], &out).len(), 12, "{out}");
+}
+
+const FASTEST_DET: &str = "[output]\nlayout = \"custom\"\n[[output.levels]]\nstride = 16\n[output.boxes]\noutput = [\"o\"]\narrange = \"planes\"\nper_level = true\ncolumn = 1\nencoding = \"tanh-share\"\n[output.objectness]\noutput = [\"o\"]\narrange = \"planes\"\nper_level = true\ncolumn = 0\npower = 0.6\n[output.scores]\noutput = [\"o\"]\narrange = \"planes\"\nper_level = true\ncolumn = 5\npower = 0.4\n";
+
+#[test]
+fn centre_offsets_through_tanh_and_sizes_as_shares_of_the_input_decode_as_fastestdet() {
+    // FastestDet's head at 32²: [1, 1 + 4 + 2, 2, 2] planes: objectness, box, classes.
+    let tmp = tempfile::tempdir().unwrap();
+    let mut v = vec![0.1f32; 7 * 4];
+    // Cell (1, 1): objectness 0.81, offsets tanh⁻¹(0.5) and 0, sizes σ⁻¹ of 1/4 and 1/2, car 0.9.
+    let at = |c: usize| c * 4 + 3;
+    for (c, x) in [(0, 0.81), (1, 0.5f32.atanh()), (2, 0.0), (3, logit(0.25)), (4, logit(0.5)), (5, 0.1), (6, 0.9)] {
+        v[at(c)] = x;
+    }
+    let p = proposals(tmp.path(), &[("o", vec![1, 7, 2, 2], v)], FASTEST_DET);
+    assert_eq!(p.len(), 4);
+    // Centre ((1 + 0.5)·16, (1 + 0)·16) = (24, 16), size (8, 16).
+    assert!(close(p.boxes[3], [20.0, 8.0, 28.0, 24.0]), "{:?}", p.boxes[3]);
+    let want = 0.81f32.powf(0.6) * 0.9f32.powf(0.4);
+    assert!((p.row(3)[1] - want).abs() < 1e-5, "{:?} vs {want}", p.row(3));
+    // `model inspect` names the head and its skeleton decodes it once the classes are the model's.
+    let model = constant_model(tmp.path(), &[("o", vec![1, 7, 2, 2], vec![0.5; 28])]);
+    let insp = Inspection::from_bytes(&std::fs::read(&model).unwrap()).unwrap();
+    let guess = insp.guess(32);
+    assert!(guess.layout == Some("custom") && guess.why.contains("FastestDet"), "{}", guess.why);
+    let text = insp.skeleton("mine", &model.display().to_string(), 32, &guess);
+    let out = &text[text.find("[output]").unwrap()..text.find("[classes]").unwrap()];
+    assert_eq!(proposals(tmp.path(), &[("o", vec![1, 7, 2, 2], vec![0.5; 28])], out).len(), 4, "{out}");
+}
+
+#[test]
+fn outputs_without_a_batch_dimension_decode_and_inspect_as_with_one() {
+    // NanoDet's legacy export: class maps [R, 2] and box maps [R, 4·4] per level of strides 8,
+    // 16, 32 at 32², no batch dimension.
+    let tmp = tempfile::tempdir().unwrap();
+    let mut outputs = Vec::new();
+    for (l, s) in [8i64, 16, 32].iter().enumerate() {
+        let r = (32 / s) * (32 / s);
+        let mut cls = vec![0.05f32; r as usize * 2];
+        let mut reg = vec![0f32; r as usize * 16];
+        if l == 0 {
+            // Cell (1, 1) of stride 8: car 0.7, each side's distance one stride (bin 1).
+            cls[5 * 2 + 1] = 0.7;
+            (0..4).for_each(|side| reg[5 * 16 + side * 4 + 1] = 20.0);
+        }
+        outputs.push((format!("cls{l}"), vec![r, 2], cls));
+        outputs.push((format!("reg{l}"), vec![r, 16], reg));
+    }
+    let named: Vec<(&str, Vec<i64>, Vec<f32>)> =
+        outputs.iter().map(|(n, s, v)| (n.as_str(), s.clone(), v.clone())).collect();
+    let p = proposals(tmp.path(), &named, "[output]\nlayout = \"gfl\"\nstrides = [8, 16, 32]\nbins = 4\n");
+    assert_eq!(p.len(), 21);
+    // Centre (1·8 + 3.5, 1·8 + 3.5), one stride to each side.
+    assert!(close(p.boxes[5], [3.5, 3.5, 19.5, 19.5]), "{:?}", p.boxes[5]);
+    assert!((p.row(5)[1] - 0.7).abs() < 1e-6);
+    let model = constant_model(tmp.path(), &named);
+    let guess = Inspection::from_bytes(&std::fs::read(&model).unwrap()).unwrap().guess(32);
+    assert_eq!(guess.layout, Some("gfl"), "{}", guess.why);
 }

@@ -869,6 +869,48 @@ mod tests {
         assert!(p.weigh(&boxes[..3], car).is_err());
     }
 
+    /// Scores as a product of powers (FastestDet's obj^0.6 · cls^0.4) and scores through a softmax
+    /// with a background column (SSD's): the loss's gradient by every raw value against central
+    /// differences, for every reduction.
+    #[test]
+    fn powers_and_softmax_scores_have_exact_gradients() {
+        let rows: Vec<f32> = vec![
+            0.0, 0.0, 1.0, 1.0, 0.81, 0.2, 0.1, 0.7, //
+            0.0, 0.0, 1.0, 1.0, 0.3, 0.6, 0.3, 0.1, //
+            0.0, 0.0, 1.0, 1.0, 0.55, 0.1, 0.2, 0.45,
+        ];
+        let powers =
+            "[boxes]\nencoding = 'xyxy'\n[objectness]\ncolumn = 4\npower = 0.6\n[scores]\ncolumn = 5\npower = 0.4\n";
+        let logits: Vec<f32> = vec![0.2, -1.0, 0.4, 1.3, 1.1, 0.3, -0.2, 0.6, -0.4, 0.9, 0.1, 0.5];
+        let softmax = "[boxes]\noutput = 'b'\nencoding = 'xyxy'\n[scores]\noutput = 's'\nactivation = 'softmax'\nbackground = 0\n";
+        let cases: [(&str, &str, Vec<usize>, &[f32]); 2] =
+            [(powers, "o", vec![3, 8], &rows), (softmax, "s", vec![3, 4], &logits)];
+        let beta = 0.7;
+        for (desc, name, shape, values) in cases {
+            let p = |v: &[f32]| described(desc, &[(name, shape.clone(), v)]).unwrap();
+            let first = p(values);
+            // The detection score is the description's: 0.81^0.6 · 0.7^0.4 for the first row.
+            if desc.contains("power") {
+                assert!((first.target_scores(&[2])[0] - 0.81f32.powf(0.6) * 0.7f32.powf(0.4)).abs() < 1e-6);
+            }
+            for l in every_loss() {
+                let total = |v: &[f32]| {
+                    let (t, _) = l.terms(&p(v), &[v], beta).unwrap();
+                    t.l1 as f64 + beta as f64 * t.l2 as f64
+                };
+                let (_, g) = l.terms(&first, &[values], beta).unwrap();
+                for i in 0..values.len() {
+                    let (mut a, mut b) = (values.to_vec(), values.to_vec());
+                    a[i] += 1e-3;
+                    b[i] -= 1e-3;
+                    let fd = (total(&a) - total(&b)) / 2e-3;
+                    assert!((fd - g[0][i] as f64).abs() < 2e-3, "{:?} value {i}: {} vs {fd}", l.reduce, g[0][i]);
+                }
+                assert!(g[0].iter().any(|x| x.abs() > 1e-3), "{:?}: no gradient", l.reduce);
+            }
+        }
+    }
+
     /// The IoU's derivative by each corner against central differences (f64), for boxes that
     /// overlap in every arrangement (inside, across each side, around), and zero where they do not.
     #[test]

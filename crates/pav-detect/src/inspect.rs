@@ -121,7 +121,14 @@ impl Inspection {
                     .into(),
             );
         }
-        let shapes: Vec<(&Port, Vec<usize>)> = shapes.into_iter().map(|(p, s)| (p, s.unwrap())).collect();
+        // Exports without a batch dimension (`[1600, 80]`) read as batch 1.
+        let shapes: Vec<(&Port, Vec<usize>)> = shapes
+            .into_iter()
+            .map(|(p, s)| {
+                let s = s.unwrap_or_default();
+                (p, if s.len() == 2 && p.dtype == "float32" { [&[1][..], &s].concat() } else { s })
+            })
+            .collect();
         let rows = |strides: &[usize]| strides.iter().map(|s| (side / s) * (side / s)).sum::<usize>();
         let has_int = shapes.iter().any(|(p, _)| p.dtype == "int64");
         let box4 = shapes.iter().any(|(_, s)| s.last() == Some(&4));
@@ -158,6 +165,32 @@ impl Inspection {
                     ),
                 );
             }
+        }
+        let grid = |h: usize, w: usize| h == w && h > 0 && side % h == 0 && h * 64 >= side;
+        if let [(_, s)] = shapes.as_slice() {
+            if s.len() == 4 && grid(s[2], s[3]) && s[1] > 5 && !(s[1] % 3 == 0 && s[1] / 3 > 5) {
+                return g(
+                    Some("custom"),
+                    format!(
+                        "one [1, {}, {h}, {h}] map of stride {}: an anchor-free grid of objectness, 4 box values and {} classes per cell (FastestDet's head)",
+                        s[1],
+                        side / s[2],
+                        s[1] - 5,
+                        h = s[2]
+                    ),
+                );
+            }
+        }
+        if shapes.iter().all(|(_, s)| s.len() == 4 && grid(s[1], s[2]) && s[3] > 15 && s[3] == shapes[0].1[3]) {
+            let k = shapes[0].1[3];
+            return g(
+                Some("custom"),
+                format!(
+                    "{} [1, H, W, {k}] grids with channels last: per cell several anchors' boxes side by side, an objectness per anchor and one class block they share (YOLO-FastestV2's head: {k} = 3 × (4 box + 1 objectness) + {} classes)",
+                    shapes.len(),
+                    k - 15
+                ),
+            );
         }
         if shapes.iter().all(|(_, s)| s.len() == 4 && s[2] * 32 >= side && side % s[2] == 0)
             && shapes.iter().all(|(_, s)| s[1] % 3 == 0 && s[1] / 3 > 5)
@@ -268,6 +301,25 @@ impl Inspection {
                     .unwrap_or_default();
                 let frame = if scale_input.is_some() { "image" } else { "input" };
                 t.push_str(&format!("layout = \"rows\"\noutput = \"{rows}\"\ncolumns = [\"class\", \"score\", \"x1\", \"y1\", \"x2\", \"y2\"]   # CHECK: the upstream post-processor's order\nframe = \"{frame}\"      # CHECK: image (boxes in frame pixels) or input\n"));
+            }
+            Some("custom") if guess.why.contains("FastestDet") => {
+                let (name, stride) = (&self.outputs[0].name, self.shape(&self.outputs[0]).map_or(0, |s| side / s[2].max(1)));
+                let part = format!("output = [\"{name}\"]\narrange = \"planes\"\nper_level = true\n");
+                t.push_str(&format!(
+                    "layout = \"custom\"\n# FastestDet's head: per cell objectness, 4 box values, then the class scores (CHECK\n# against the upstream post-processor: centre offsets through tanh, sizes as shares of\n# the input through a sigmoid, scores obj^0.6 · cls^0.4, obj and classes already\n# activated in the graph).\n[[output.levels]]\nstride = {stride}\n\n[output.boxes]\n{part}column = 1\nencoding = \"tanh-share\"\n\n[output.objectness]\n{part}column = 0\npower = 0.6\n\n[output.scores]\n{part}column = 5\npower = 0.4\n"
+                ));
+            }
+            Some("custom") if guess.why.contains("YOLO-FastestV2") => {
+                let names = self.outputs.iter().map(|p| format!("\"{}\"", p.name)).collect::<Vec<_>>().join(", ");
+                t.push_str("layout = \"custom\"\norder = \"in-row\"     # each cell's row holds its three anchors side by side\n# CHECK: one level per output, with its stride and three anchors [w, h] in input pixels,\n# from the model's config.\n");
+                for p in &self.outputs {
+                    let stride = self.shape(p).map_or(0, |s| side / s[1].max(1));
+                    t.push_str(&format!("[[output.levels]]\nstride = {stride}\nanchors = []\n"));
+                }
+                let part = format!("output = [{names}]\nper_level = true\n");
+                t.push_str(&format!(
+                    "\n[output.boxes]\n{part}encoding = \"yolov5\"\nactivated = true     # CHECK: the export applies the sigmoid\nanchor_step = 4\n\n[output.objectness]\n{part}column = 12\nanchor_step = 1\npower = 0.6          # CHECK: the upstream score rule\n\n[output.scores]\n{part}column = 15\npower = 0.4\n"
+                ));
             }
             Some("custom") => match self.ssd_outputs() {
                 Some((b, sc)) => t.push_str(&format!(

@@ -512,6 +512,13 @@ mod tests {
     fn descriptions_that_cannot_work_are_refused_with_the_reason() {
         let ssd = "[[levels]]\nstride = 8\nanchors = [[10, 10]]\n[boxes]\nencoding = 'prior'\nvariances = [0.1, 0.2]\nwidth = 4\n[scores]\nactivation = 'softmax'\nbackground = 0\nwidth = 81\n";
         custom(ssd).unwrap();
+        // Three anchors side by side in a row: boxes every 4 columns, objectness every 1.
+        let in_row = "order = 'in-row'\n[[levels]]\nstride = 16\nanchors = [[8, 8], [16, 24], [24, 12]]\n[boxes]\nencoding = 'yolov5'\nactivated = true\nanchor_step = 4\n[objectness]\ncolumn = 12\nanchor_step = 1\n[scores]\ncolumn = 15\n";
+        let d = custom(in_row).unwrap();
+        assert_eq!(
+            (d.anchors_per_row(), d.width(Role::Boxes, 80), d.columns(Role::Objectness, 80)),
+            (3, 95, vec![12, 13, 14])
+        );
         let cases = [
             ("[boxes]\n[scores]\n", "needs an `encoding`"),
             ("[boxes]\nencoding = 'grid'\n[scores]\ncolumn = 4\n", "list its [[output.levels]]"),
@@ -530,6 +537,15 @@ mod tests {
                 "no objectness",
             ),
             ("[boxes]\nencoding = 'xyxy'\noutput = ['a', 'b']\n[scores]\ncolumn = 4\n", "one per level"),
+            ("[boxes]\nencoding = 'xyxy'\nanchor_step = 4\n[scores]\ncolumn = 4\n", "belongs to `order = \"in-row\"`"),
+            ("[boxes]\nencoding = 'cxcywh'\nactivated = true\n[scores]\ncolumn = 4\n", "`cxcywh` applies none"),
+            ("[boxes]\nencoding = 'xyxy'\n[scores]\ncolumn = 4\nactivated = true\n", "say so with `activation`"),
+            ("[boxes]\nencoding = 'xyxy'\n[scores]\ncolumn = 4\npower = 0\n", "must be positive"),
+            (
+                "order = 'in-row'\n[[levels]]\nanchors = [[1, 1]]\n[boxes]\narrange = 'planes'\nper_level = true\nencoding = 'darknet'\n[scores]\narrange = 'planes'\nper_level = true\ncolumn = 4\n",
+                "cannot hold several anchors",
+            ),
+            ("[boxes]\nencoding = 'xyxy'\n[scores]\ncolumn = 4\n[raw.boxes]\nencoding = 'xyxy'\n[raw.scores]\ncolumn = 4\n[raw.labels]\ncolumn = 5\n", "[output.raw]"),
         ];
         for (body, want) in cases {
             let e = custom(body).unwrap_err();
