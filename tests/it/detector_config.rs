@@ -1,11 +1,16 @@
 //! A detector config's keys mean one thing wherever pav reads them: `nms_iou` is the suppression
 //! of every path that turns proposals into detections (eval-digital's and crossval's P@0.5 read
-//! `studies::table2::detect_view`), with 0.5 when the key is absent.
+//! `studies::table2::detect_view`), with 0.5 when the key is absent; and each key of the input,
+//! the output and the classes changes inference and the white box wherever it should.
 
 use crate::common;
 
 use pav::attack::config::OptimizeConfig;
+use pav::attack::loss::{DetectionLoss, Proposals, Reduce};
 use pav::attack::setup::Setup;
+use pav::attack::whitebox::{WhiteBox, WhiteBoxOptions};
+use pav::detect::onnx::OnnxDetector;
+use pav::detect::{Detector, DetectorConfig};
 use pav::studies::table2::detect_view;
 use std::path::Path;
 
@@ -46,4 +51,60 @@ fn nms_iou_sets_the_suppression_of_the_detections_that_p50_scores() {
     let [absent, half, tight, loose] = counts;
     assert_eq!(absent, half, "a config without nms_iou suppresses at 0.5");
     assert!(tight < half && half < loose, "suppression at 0.05, 0.5, 0.95 kept {tight}, {half}, {loose} boxes");
+}
+
+/// What one config reads on a real frame (inference) and on a 600² composite (the white box,
+/// under the IoU-weighted log-max, so that boxes count too).
+fn readings(path: &Path, frame: &pav::image::Frame, composite: &[f32], car: [f32; 4]) -> (Vec<f32>, [f32; 2]) {
+    let cfg = DetectorConfig::load(path).unwrap();
+    let p = OnnxDetector::new(cfg.clone(), 1).unwrap().propose(frame).unwrap();
+    let eval: Vec<f32> = p.boxes.iter().flatten().chain(&p.scores).copied().collect();
+    let loss = DetectionLoss {
+        box_threshold: 0.05,
+        target: cfg.target_classes.clone(),
+        reduce: Reduce::LogMax,
+        proposals: Proposals::ArgMax,
+        iou: true,
+        box_gradient: false,
+    };
+    let o = WhiteBoxOptions { composite: 600, input: None, threads: 1, surrogate: false };
+    let g = WhiteBox::with_options(&cfg, loss, o).unwrap().loss_and_grad(composite, 600, 1.0, Some(car)).unwrap();
+    (eval, [g.loss.l2, g.loss.max_score])
+}
+
+#[test]
+fn every_input_output_and_class_key_changes_inference_and_the_white_box_where_it_should() {
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    // A wide frame, where a letterbox and a stretch differ.
+    let frame = common::reference_image("turntable.mp4#0");
+    let mut cfg = OptimizeConfig::load(&common::repo().join("configs/optimize/paper.toml")).unwrap();
+    cfg.views.train = cfg.views.train[1..2].to_vec();
+    cfg.views.test.clear();
+    let s = Setup::load_photos(&cfg, Some(600)).unwrap();
+    let v = &s.train[0];
+    let car = v.car_box.expect("the car is in view");
+    let base = readings(&yolov3_tiny_with(tmp.path(), "base", ""), &frame, &v.photo, car);
+    assert!(base.1[1] > 0.5, "the car is seen: {:?}", base.1);
+    // (key, TOML, whether inference changes, whether the white box changes). The white box
+    // scores square composites, so the letterbox's placement and padding never reach it; the
+    // anchors (all halved) move its boxes and so the IoU weight.
+    let cases = [
+        ("input.width, input.height", "[input]\nwidth = 320\nheight = 320\n", true, true),
+        ("input.channels", "[input]\nchannels = \"bgr\"\n", true, true),
+        ("input.scale", "[input]\nscale = 0.0035\n", true, true),
+        ("input.mean", "[input]\nmean = [0.1, 0.05, 0.0]\n", true, true),
+        ("input.std", "[input]\nstd = [0.9, 1.0, 1.1]\n", true, true),
+        ("input.interpolation", "[input]\ninterpolation = \"antialias\"\n", true, true),
+        ("input.resize", "[input]\nresize = \"letterbox\"\n", true, false),
+        ("output.heads", "[output]\nheads = [{ output = \"head0\", anchors = [[40, 41], [67, 84], [172, 160]] }, { output = \"head1\", anchors = [[5, 7], [11, 13], [18, 29]] }]\n", true, true),
+        ("classes.target", "[classes]\ntarget = [\"truck\"]\n", false, true),
+    ];
+    for (key, toml, eval_changes, white_box_changes) in cases {
+        let name = key.replace([',', ' ', '.'], "_");
+        let (eval, wb) = readings(&yolov3_tiny_with(tmp.path(), &name, toml), &frame, &v.photo, car);
+        eprintln!("{key}: white box {wb:?} (base {:?})", base.1);
+        assert_eq!(eval != base.0, eval_changes, "{key}: inference changed: {}", eval != base.0);
+        assert_eq!(wb != base.1, white_box_changes, "{key}: the white box changed: {}", wb != base.1);
+    }
 }

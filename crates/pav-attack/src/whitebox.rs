@@ -147,6 +147,21 @@ pub struct WhiteBoxOptions {
     pub surrogate: bool,
 }
 
+/// The extra inputs of `model` that are still inputs made neutral constants for a `side`² input:
+/// a `scale_yx` of 1 leaves boxes in input pixels; a `size_wh` is the input's.
+fn neutral_extras(model: &mut Model, extra: &[ExtraInput], side: usize) {
+    for e in extra {
+        if !model.inputs.iter().any(|v| v.name == e.name) {
+            continue;
+        }
+        model.inputs.retain(|v| v.name != e.name);
+        model.initializers.push(match e.value {
+            ExtraValue::ScaleYx => Initializer::f32(&e.name, &[1, 2], vec![1.0, 1.0]),
+            ExtraValue::SizeWh => Initializer::i64(&e.name, &[1, 2], vec![side as i64; 2]),
+        });
+    }
+}
+
 /// `model` cut to compute the values of `outputs` (each with the config key that names it), its
 /// extra inputs made neutral constants (a `scale_yx` of 1 leaves boxes in input pixels; a
 /// `size_wh` is the input's), its shapes folded for a `side`² input: a graph whose
@@ -158,13 +173,7 @@ pub fn cut_before_post(
     side: usize,
     name: &str,
 ) -> Result<Model, WhiteBoxError> {
-    for e in extra {
-        model.inputs.retain(|v| v.name != e.name);
-        model.initializers.push(match e.value {
-            ExtraValue::ScaleYx => Initializer::f32(&e.name, &[1, 2], vec![1.0, 1.0]),
-            ExtraValue::SizeWh => Initializer::i64(&e.name, &[1, 2], vec![side as i64; 2]),
-        });
-    }
+    neutral_extras(&mut model, extra, side);
     if let Some((o, key)) = outputs.iter().find(|(o, _)| !model.nodes.iter().any(|n| n.outputs.contains(o))) {
         let why = format!("no value `{o}` (the config's `{key}`) in the graph");
         return Err(WhiteBoxError::Unsupported { name: name.into(), why });
@@ -210,6 +219,17 @@ impl WhiteBox {
         }
         // A clipped detector is trained through its clipping: the rewrite is differentiable.
         pav_detect::defence::clip_graph(&mut model, &cfg.model_defence)?;
+        // The image is the input the config names (else the first); the others get constants.
+        if let Some(n) = &i.name {
+            let k = model
+                .inputs
+                .iter()
+                .position(|v| &v.name == n)
+                .ok_or_else(|| unsupported(format!("the graph has no input `{n}` (the config's input.name)")))?;
+            let x = model.inputs.remove(k);
+            model.inputs.insert(0, x);
+        }
+        neutral_extras(&mut model, &i.extra, side);
         // As evaluate decodes: the config's class list; the loss checks the outputs against it.
         let classes = cfg.class_names.len();
         let description = cfg.output.describe(classes).gradient().map_err(&unsupported)?.clone();
