@@ -263,13 +263,22 @@ fn every_documented_custom_layout_loads_as_written() {
             if !block.contains("layout = \"custom\"") {
                 continue;
             }
-            let cfg =
-                config(tmp.path(), Path::new("m.onnx"), block).unwrap_or_else(|e| panic!("{doc}:\n{block}\n→ {e}"));
+            // A whole config (its file name on line one) loads as it is; an `[output]` table
+            // loads in a config around it.
+            let cfg = match block.lines().next().and_then(|l| l.strip_prefix("# ")) {
+                Some(name) => {
+                    common::real_data();
+                    std::fs::write(tmp.path().join(name), block).unwrap();
+                    DetectorConfig::load(&tmp.path().join(name)).map_err(|e| e.to_string())
+                }
+                None => config(tmp.path(), Path::new("m.onnx"), block),
+            }
+            .unwrap_or_else(|e| panic!("{doc}:\n{block}\n→ {e}"));
             assert!(matches!(cfg.output, pav::detect::config::OutputLayout::Custom(_)));
             seen += 1;
         }
     }
-    assert_eq!(seen, 3, "the README's YOLOv5 export, docs/evaluate.md's raw heads and SSD");
+    assert_eq!(seen, 4, "the README's YOLOv5 export, docs/evaluate.md's raw heads, SSD and own detector");
 }
 
 /// The logit of `p`.

@@ -366,3 +366,42 @@ fn the_quick_start_runs_as_written() {
     let record = std::fs::read_to_string(out.join("digital-printed/run.toml")).unwrap();
     assert!(record.contains("print = \"true\""), "{record}");
 }
+
+/// docs/evaluate.md's worked example of attacking a described detector, as written: its config
+/// blocks saved under the names their first lines give, its shell blocks run in order.
+#[test]
+fn attacking_your_own_detector_runs_as_written() {
+    common::real_data();
+    let doc = std::fs::read_to_string(common::repo().join("docs/evaluate.md")).unwrap();
+    let start = doc.find("## Attacking your own detector").expect("the section");
+    let end = doc[start + 3..].find("\n## ").map_or(doc.len(), |e| start + 3 + e);
+    let tmp = scratch();
+    let mut script = String::new();
+    let mut files = Vec::new();
+    for b in blocks(&doc[start..end]).unwrap() {
+        match b.info.as_str() {
+            "toml" => {
+                let name = b.text.lines().next().and_then(|l| l.strip_prefix("# ")).expect("a file name on line one");
+                std::fs::write(tmp.path().join(name), &b.text).unwrap();
+                files.push(name.to_string());
+            }
+            "sh" => script.push_str(&b.text),
+            other => panic!("a `{other}` block on line {}", b.line),
+        }
+    }
+    assert_eq!(files, ["my_detector.toml", "my_attack.toml"]);
+    let o = run_script(tmp.path(), &script);
+    assert!(o.status.success(), "{}", common::output_text(&o));
+    let text = common::output_text(&o);
+    assert!(text.contains("best car"), "model check shows the car: {text}");
+    let out = tmp.path().join("out/my_attack");
+    let detectors = std::fs::read_to_string(out.join("loss_detectors.csv")).unwrap();
+    assert!(detectors.lines().skip(1).all(|l| l.split(',').nth(1) == Some("my_detector")), "{detectors}");
+    // The described detector's car score on the training views, before and after.
+    let rows = summary(&out.join("scores.csv"));
+    let train: Vec<_> = rows.iter().filter(|r| r["split"] == "train").collect();
+    let mean = |k: &str| train.iter().map(|r| r[k].parse::<f64>().unwrap()).sum::<f64>() / train.len() as f64;
+    let (before, after) = (mean("initial"), mean("optimized"));
+    eprintln!("my_detector on {} training views: {before:.3} → {after:.3}", train.len());
+    assert!(train.len() == 6 && after < 0.5 * before, "{before} → {after}");
+}

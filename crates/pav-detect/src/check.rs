@@ -37,9 +37,11 @@ pub struct Checked {
 /// video as `VIDEO#K`.
 pub fn read_input(spec: &str) -> Result<Frame, CheckError> {
     let bad = |msg: String| CheckError::Image { path: spec.to_string(), msg };
+    // A data store entry (`data:NAME`) is fetched or found where the store keeps it.
+    let local = |p: &str| pav_core::data::resolve(Path::new("."), Path::new(p)).map_err(|e| bad(e.to_string()));
     if let Some((video, k)) = spec.rsplit_once('#') {
         let k: usize = k.parse().map_err(|_| bad(format!("`{k}` is not a frame number")))?;
-        let mut rd = pav_core::video::VideoReader::open(Path::new(video)).map_err(|e| bad(e.to_string()))?;
+        let mut rd = pav_core::video::VideoReader::open(&local(video)?).map_err(|e| bad(e.to_string()))?;
         while let Some((i, f)) = rd.read().map_err(|e| bad(e.to_string()))? {
             if i == k {
                 return Ok(f);
@@ -47,11 +49,11 @@ pub fn read_input(spec: &str) -> Result<Frame, CheckError> {
         }
         return Err(bad(format!("the video has no frame {k}")));
     }
-    let path = Path::new(spec);
+    let path = local(spec)?;
     if path.extension().is_some_and(|e| e == "npz") {
-        return CarlaSample::load(path).map(|s| s.image).map_err(|e| bad(e.to_string()));
+        return CarlaSample::load(&path).map(|s| s.image).map_err(|e| bad(e.to_string()));
     }
-    pav_core::video::read_image(path).map_err(|e| bad(e.to_string()))
+    pav_core::video::read_image(&path).map_err(|e| bad(e.to_string()))
 }
 
 /// Runs `det` on `frame`: detections from `min_score` after the config's NMS, and the target's best.

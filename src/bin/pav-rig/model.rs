@@ -33,7 +33,8 @@ pub enum Cmd {
     Check {
         /// The detector config.
         config: PathBuf,
-        /// Image files (any format OpenCV reads), FCA `.npz` samples, or `VIDEO#K` for frame K.
+        /// Image files (any format OpenCV reads), FCA `.npz` samples, or `VIDEO#K` for frame K;
+        /// `data:NAME` for a manifest entry.
         #[arg(required = true)]
         images: Vec<String>,
         /// List detections from this score.
