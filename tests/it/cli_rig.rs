@@ -266,3 +266,52 @@ fn the_simulated_car_is_filmed_at_the_angles_its_sidecar_states() {
         .unwrap();
     assert!(!o.status.success() && common::output_text(&o).contains("--car"), "{}", common::output_text(&o));
 }
+
+/// A simulated capture with its controls locked: each set before the turn and read back after,
+/// both in run.toml; a value the camera refuses stops the capture before the table turns, naming
+/// the control and the camera's range, or with `--allow-auto` is recorded as left automatic.
+#[test]
+fn capture_locks_the_cameras_controls_and_records_them() {
+    let tmp = tempfile::tempdir().unwrap();
+    let capture = |name: &str, extra: &[&str]| {
+        let video = tmp.path().join(format!("{name}.mp4"));
+        let o = pav_rig()
+            .args(["capture", "--port", "sim", "--time-scale", "10", "--max-angle-error", "2", "--camera", "sim"])
+            .args(["--width", "160", "--height", "120", "--codec", "mp4v"])
+            .args(extra)
+            .arg("-o")
+            .arg(&video)
+            .env("RUST_BACKTRACE", "0")
+            .output()
+            .unwrap();
+        (o.status.success(), common::output_text(&o), tmp.path().join(format!("{name}.run.toml")), video)
+    };
+    let (ok, out, record, _) = capture("locked", &["--exposure", "120", "--white-balance", "4000", "--focus", "30"]);
+    assert!(ok, "{out}");
+    assert!(out.contains("locked exposure at 120"), "{out}");
+    let run = common::run_record(&record);
+    for (k, v) in [("exposure", "120"), ("white_balance", "4000"), ("focus", "30")] {
+        assert_eq!(run["settings"][format!("{k}_set")].as_str(), Some(v), "{run}");
+        assert_eq!(run["result"][format!("{k}_read")].as_str(), Some(v), "{run}");
+    }
+    assert!(run["settings"].get("gain_set").is_none(), "gain was not asked for: {run}");
+
+    // Off the camera's range: refused before the table turns, nothing recorded.
+    let (ok, out, _, video) = capture("refused", &["--white-balance", "9000"]);
+    assert!(
+        !ok && out.contains("white_balance from 2800 to 6500 in steps of 10") && out.contains("--allow-auto"),
+        "{out}"
+    );
+    assert!(!video.exists(), "no video for a refused control");
+    // With --allow-auto: recorded as left automatic, the others locked.
+    let (ok, out, record, _) = capture("auto", &["--white-balance", "9000", "--gain", "12", "--allow-auto"]);
+    assert!(ok && out.contains("warning: left automatic"), "{out}");
+    let run = common::run_record(&record);
+    assert!(run["result"]["white_balance_warning"].as_str().unwrap().contains("not 9000"), "{run}");
+    assert_eq!(run["result"]["white_balance_read"].as_str(), Some("none"), "{run}");
+    assert_eq!(run["result"]["gain_read"].as_str(), Some("12"), "{run}");
+    // Without controls asked for, the record says they were left automatic.
+    let (ok, out, record, _) = capture("plain", &[]);
+    assert!(ok && out.contains("left automatic"), "{out}");
+    assert_eq!(common::run_record(&record)["settings"]["controls"].as_str(), Some("automatic"));
+}

@@ -2,7 +2,9 @@
 //! simulated camera that films the simulated turntable.
 
 use super::clock::{Clock, SystemClock};
+use super::controls::{CameraControls, Control, SimControls};
 use super::sim::Truth;
+use super::v4l2::V4l2Controls;
 use opencv::core::{Mat, Point, Scalar};
 use opencv::prelude::*;
 use opencv::{imgproc, videoio};
@@ -108,6 +110,11 @@ pub trait FrameSource {
     fn fps(&self) -> f64;
     /// Next frame and its capture instant; `None` when the source ends.
     fn grab(&mut self) -> Result<Option<(Frame, Instant)>, CameraError>;
+    /// Its exposure, gain, white balance and focus, for a source that has them (a V4L2 camera,
+    /// the simulated camera).
+    fn controls(&mut self) -> Option<&mut dyn CameraControls> {
+        None
+    }
 }
 
 /// Waits on `clock` until `due`, then moves it one frame period on (never bursting to catch up).
@@ -128,6 +135,9 @@ pub struct LiveCapture {
     index: usize,
     /// Frames placed by their source timestamps; `None`: by the read instant.
     stamps: Option<SourceClock>,
+    /// A V4L2 camera's controls (opened when asked for).
+    controls: Option<V4l2Controls>,
+    device: Option<PathBuf>,
 }
 
 impl LiveCapture {
@@ -148,6 +158,7 @@ impl LiveCapture {
         }
         let mut c = Self::wrap(cap, name)?;
         c.stamps = Some(SourceClock::default());
+        c.device = Some(device.into());
         Ok(c)
     }
 
@@ -172,7 +183,17 @@ impl LiveCapture {
         let g = |p| cap.get(p).unwrap_or(0.0);
         let size = (g(videoio::CAP_PROP_FRAME_WIDTH) as usize, g(videoio::CAP_PROP_FRAME_HEIGHT) as usize);
         let fps = Some(g(videoio::CAP_PROP_FPS)).filter(|f| f.is_finite() && *f > 0.0).unwrap_or(30.0);
-        Ok(LiveCapture { cap, name, size, fps, mat: Mat::default(), index: 0, stamps: None })
+        Ok(LiveCapture {
+            cap,
+            name,
+            size,
+            fps,
+            mat: Mat::default(),
+            index: 0,
+            stamps: None,
+            controls: None,
+            device: None,
+        })
     }
 }
 
@@ -230,6 +251,14 @@ impl FrameSource for LiveCapture {
         self.index += 1;
         Ok(Some((f, at)))
     }
+    fn controls(&mut self) -> Option<&mut dyn CameraControls> {
+        // Opened on first use: a GStreamer source has none, and a camera whose controls cannot
+        // be opened still captures (the lock then fails, naming the device).
+        if self.controls.is_none() {
+            self.controls = V4l2Controls::open(self.device.as_ref()?).ok();
+        }
+        self.controls.as_mut().map(|c| c as &mut dyn CameraControls)
+    }
 }
 
 /// Replays a video file as if it were a live camera, at its own frame rate.
@@ -283,6 +312,8 @@ pub struct SimCamera {
     pub true_angles: Vec<f64>,
     /// Fail with a read error at this frame (fault injection).
     pub fail_at: Option<usize>,
+    /// Its exposure, gain, white balance and focus.
+    pub controls: SimControls,
 }
 
 impl SimCamera {
@@ -297,6 +328,7 @@ impl SimCamera {
             index: 0,
             true_angles: Vec::new(),
             fail_at: None,
+            controls: SimControls::default(),
         }
     }
 
@@ -363,7 +395,10 @@ impl FrameSource for SimCamera {
             source,
         };
         let f = match &self.car {
-            Some(car) => car.frame(angle as f32, self.size.0, self.size.1),
+            // A locked exposure does not follow the car.
+            Some(car) => {
+                car.frame_exposed(angle as f32, self.size.0, self.size.1, !self.controls.is_locked(Control::Exposure))
+            }
             None => {
                 let m = self.render(angle).map_err(|e| err(e.into()))?;
                 mat_to_frame(&m).map_err(|e| err(e.into()))?
@@ -372,6 +407,9 @@ impl FrameSource for SimCamera {
         self.true_angles.push(angle);
         self.index += 1;
         Ok(Some((f, at)))
+    }
+    fn controls(&mut self) -> Option<&mut dyn CameraControls> {
+        Some(&mut self.controls)
     }
 }
 

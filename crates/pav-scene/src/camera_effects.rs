@@ -205,6 +205,21 @@ pub fn cut(rgb: &[f32], side: usize, (width, height): (usize, usize)) -> Frame {
     Frame { width, height, bgr }
 }
 
+/// An automatic exposure on an 8-bit frame when the rig lists it: every level scaled by
+/// `(128 / m)^s`, `m` the frame's mean level and `s` the rig's `camera.auto_exposure`, so that a
+/// frame the car darkens is brightened, background and all, as a webcam's exposure follows the
+/// car. Applied before the sensor noise, as an exposure change is.
+pub fn apply_auto_exposure(rig: &RigConfig, frame: &mut Frame) {
+    if !rig.has(CameraEffect::AutoExposure) || frame.bgr.is_empty() {
+        return;
+    }
+    let mean = frame.bgr.iter().map(|&v| f64::from(v)).sum::<f64>() / frame.bgr.len() as f64;
+    let gain = (128.0 / mean.max(1.0)).powf(rig.camera.auto_exposure) as f32;
+    for v in &mut frame.bgr {
+        *v = (f32::from(*v) * gain).round().clamp(0.0, 255.0) as u8;
+    }
+}
+
 /// Sensor noise on an 8-bit frame when the rig lists it: a level `v` gets Gaussian noise of
 /// variance `read² + shot_gain · v`, drawn from `seed` (the frame's index keeps frames apart).
 pub fn apply_noise(rig: &RigConfig, frame: &mut Frame, seed: u64) {

@@ -6,7 +6,7 @@
 //! A rig config may `extends = "other.toml"` and set only what differs.
 //!
 //! ```toml
-//! effects = ["defocus", "motion-blur", "noise", "codec"]   # only these are simulated
+//! effects = ["defocus", "motion-blur", "noise", "codec"]   # only these are simulated (also "auto-exposure")
 //!
 //! [mesh]                       # the car, as in a views config
 //! obj = "data:rauca-e2e/pytorch3d_Etron.obj"
@@ -22,6 +22,13 @@
 //! exposure_s = 0.0167          # at most 1 / fps
 //! f_number = 1.8
 //! focus_m = 0.55               # default: the distance to the model's centre
+//! auto_exposure = 0.5          # the `auto-exposure` effect's strength, 0 to 1
+//!
+//! [camera.controls]            # what `pav-rig capture` locks on a real camera (each optional)
+//! exposure = 166               # × 100 µs
+//! gain = 0
+//! white_balance = 4600         # K
+//! focus = 30
 //!
 //! [placement]
 //! distance_m = 0.55            # horizontal, camera to the table's axis
@@ -92,6 +99,35 @@ pub struct RigCamera {
     /// The video's bitrate at the capture's resolution, kbit/s (the `codec` effect).
     #[serde(default = "bitrate")]
     pub bitrate_kbps: f64,
+    /// How strongly an automatic exposure pulls each frame's mean level to mid-grey, 0 (held) to 1
+    /// (every frame brought to it): the `auto-exposure` effect.
+    #[serde(default = "auto_exposure")]
+    pub auto_exposure: f64,
+    /// The settings a real capture locks before the table turns (`pav-rig capture --rig`).
+    #[serde(default)]
+    pub controls: Controls,
+}
+
+/// A real camera's settings, each locked with its automatic mode off when given.
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(deny_unknown_fields)]
+pub struct Controls {
+    /// Exposure time in V4L2's units of 100 µs.
+    #[serde(default)]
+    pub exposure: Option<i64>,
+    /// Gain, in the camera's units.
+    #[serde(default)]
+    pub gain: Option<i64>,
+    /// White balance, kelvin.
+    #[serde(default)]
+    pub white_balance: Option<i64>,
+    /// Focus position, in the camera's units.
+    #[serde(default)]
+    pub focus: Option<i64>,
+}
+
+fn auto_exposure() -> f64 {
+    0.5
 }
 
 fn read_noise() -> f64 {
@@ -251,6 +287,9 @@ pub enum CameraEffect {
     Noise,
     /// H.264 at the capture's bitrate.
     Codec,
+    /// An automatic exposure that follows the frame: each frame's levels scaled towards a mean
+    /// of mid-grey, by `camera.auto_exposure`.
+    AutoExposure,
 }
 
 /// A rig config.
@@ -348,6 +387,9 @@ impl RigConfig {
                 Err(format!("{name} = {v}: must be positive"))
             }
         };
+        if !(0.0..=1.0).contains(&c.auto_exposure) {
+            return Err(format!("camera.auto_exposure = {}: a strength from 0 (held) to 1", c.auto_exposure));
+        }
         match (c.focal_mm, c.sensor_mm, c.fov_deg) {
             (Some(f), Some([w, h]), None) => {
                 positive("camera.focal_mm", f)?;

@@ -7,7 +7,7 @@
 
 #[cfg(feature = "video")]
 use super::camera_effects::codec_kbps;
-use super::camera_effects::{apply_noise, apply_optics, behind, cut, noise_seed, Behind};
+use super::camera_effects::{apply_auto_exposure, apply_noise, apply_optics, behind, cut, noise_seed, Behind};
 use super::rig::{RigConfig, Shot};
 #[cfg(feature = "video")]
 use super::views::{read_manifest, ViewRecord, ViewSetInfo};
@@ -130,6 +130,7 @@ pub fn write_videos(dir: &Path, period_s: f64) -> Result<Vec<TurntableVideo>, Vi
                     img = img.into_square(false);
                     apply_optics(rig, shot, mesh, cam, &mut img.rgb, side);
                     let mut f = cut(&img.rgb, side, shot.size);
+                    apply_auto_exposure(rig, &mut f);
                     apply_noise(rig, &mut f, noise_seed(r.azimuth_deg, r.elevation_deg));
                     f
                 }
@@ -347,11 +348,20 @@ impl CarScene {
     /// makes them; a rig's scene then gets the camera effects the rig lists (but the codec,
     /// which is the video writer's).
     pub fn frame(&self, angle_deg: f32, width: usize, height: usize) -> Frame {
+        self.frame_exposed(angle_deg, width, height, true)
+    }
+
+    /// [`CarScene::frame`], with the rig's automatic exposure only when `auto_exposure` (a real
+    /// camera's exposure locked has none).
+    pub fn frame_exposed(&self, angle_deg: f32, width: usize, height: usize, auto_exposure: bool) -> Frame {
         let side = width.max(height);
         let mut rgb = pav_core::image::halve(&self.render(angle_deg, 2 * side), 2 * side, 2 * side);
         let Some((rig, shot)) = &self.rig else { return cut(&rgb, side, (width, height)) };
         apply_optics(rig, shot, &self.mesh, &self.camera(angle_deg), &mut rgb, side);
         let mut frame = cut(&rgb, side, (width, height));
+        if auto_exposure {
+            apply_auto_exposure(rig, &mut frame);
+        }
         apply_noise(rig, &mut frame, noise_seed(angle_deg.rem_euclid(360.0), self.elevation_deg));
         frame
     }

@@ -4,10 +4,12 @@ use crate::common::{ctrl_c_flag, Bar};
 use crate::port::{connect, parse_signed_seconds, PortArgs};
 use anyhow::{bail, Context, Result};
 use pav::rig::capture::{capture, CaptureOptions};
+use pav::rig::controls::{lock_all, read_back, Control};
 use pav::rig::source::open_source;
 use pav::scene::rig::RigConfig;
 use pav::scene::turntable::CarScene;
 use pav::scene::views::ViewsConfig;
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -64,6 +66,38 @@ pub struct Args {
     /// With --car: the camera's elevation (the paper's polar angle, 0 or 20) instead of the config's first.
     #[arg(long, requires = "car", allow_hyphen_values = true)]
     elevation: Option<f32>,
+    /// Lock the exposure time at this value (× 100 µs, V4L2's unit), automatic exposure off,
+    /// before the table turns [default: the rig's `[camera.controls]`]. `pav-rig camera list`
+    /// shows the camera's ranges.
+    #[arg(long)]
+    exposure: Option<i64>,
+    /// Lock the gain (the camera's units), automatic gain off.
+    #[arg(long)]
+    gain: Option<i64>,
+    /// Lock the white balance (kelvin), automatic white balance off.
+    #[arg(long)]
+    white_balance: Option<i64>,
+    /// Lock the focus (the camera's units), autofocus off.
+    #[arg(long)]
+    focus: Option<i64>,
+    /// Record a control the camera lacks or refuses as left automatic (a warning in run.toml)
+    /// instead of failing.
+    #[arg(long)]
+    allow_auto: bool,
+}
+
+/// The controls to lock: the flags, else the rig's `[camera.controls]`.
+fn wanted(a: &Args, rig: Option<&RigConfig>) -> BTreeMap<Control, i64> {
+    let from_rig = rig.map(|r| r.camera.controls.clone()).unwrap_or_default();
+    [
+        (Control::Exposure, a.exposure.or(from_rig.exposure)),
+        (Control::Gain, a.gain.or(from_rig.gain)),
+        (Control::WhiteBalance, a.white_balance.or(from_rig.white_balance)),
+        (Control::Focus, a.focus.or(from_rig.focus)),
+    ]
+    .into_iter()
+    .filter_map(|(c, v)| v.map(|v| (c, v)))
+    .collect()
 }
 
 pub fn run(a: &Args) -> Result<()> {
@@ -127,12 +161,39 @@ pub fn run(a: &Args) -> Result<()> {
             record = record.setting("placement", a.placement);
         }
     }
+    // Exposure, gain, white balance and focus locked before the table turns, so that the image
+    // does not follow the car; each read back after the turn.
+    let want = wanted(a, rig.as_ref());
+    let mut locked = Vec::new();
+    if !want.is_empty() {
+        let what = cam.describe();
+        let controls = cam
+            .controls()
+            .with_context(|| format!("{what} has no controls pav can set: lock them on a V4L2 camera"))?;
+        locked = lock_all(controls, &want, a.allow_auto)?;
+        for l in &locked {
+            match &l.warning {
+                Some(w) => eprintln!("warning: {w}"),
+                None => eprintln!("locked {} at {}", l.control.name(), l.set),
+            }
+            record = record.setting(&format!("{}_set", l.control.name()), l.set);
+        }
+    } else if cam.controls().is_some() {
+        eprintln!("exposure, gain, white balance and focus left automatic: lock them with --exposure, --gain, --white-balance, --focus (see `pav-rig camera list`)");
+        record = record.setting("controls", "automatic");
+    }
     let record_path = a.out.with_extension("run.toml");
     let write =
         |r: &pav::provenance::Run| r.write(&record_path).with_context(|| format!("writing {}", record_path.display()));
     write(&record)?;
     let stop = ctrl_c_flag()?;
     let result = capture(&mut table, cam.as_mut(), &opts, &Bar::default(), &stop);
+    if let Some(controls) = cam.controls().filter(|_| !locked.is_empty()) {
+        read_back(controls, &mut locked);
+    }
+    for (k, v) in locked.iter().flat_map(|l| l.entries()) {
+        record.result(&k, v);
+    }
     match &result {
         Ok(sum) => {
             record.result("frames", sum.frames);

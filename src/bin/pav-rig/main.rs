@@ -6,6 +6,7 @@ mod common;
 
 mod bench;
 mod bench_rig;
+mod camera;
 mod capture;
 mod compare;
 mod evaluate;
@@ -46,6 +47,9 @@ enum Cmd {
     Simulate(simulate::Args),
     /// Record one or more turntable revolutions: video plus a per-frame angle sidecar.
     Capture(capture::Args),
+    /// Camera controls: what a capture can lock.
+    #[command(subcommand)]
+    Camera(camera::Cmd),
     /// A real capture beside its simulation: A_physical of both and per-angle car scores, the
     /// angle offset between the two tables found from the scores.
     Compare(compare::Args),
@@ -63,6 +67,7 @@ fn main() -> Result<()> {
         Cmd::Turntable(a) => turntable::run(a),
         Cmd::Simulate(a) => simulate::run(a),
         Cmd::Capture(a) => capture::run(a),
+        Cmd::Camera(c) => camera::run(c),
         Cmd::Compare(a) => compare::run(a),
         Cmd::Paired(a) => paired::run(a),
     }
