@@ -315,3 +315,68 @@ fn capture_locks_the_cameras_controls_and_records_them() {
     assert!(ok && out.contains("left automatic"), "{out}");
     assert_eq!(common::run_record(&record)["settings"]["controls"].as_str(), Some("automatic"));
 }
+
+/// The rig's simulated automatic exposure, filmed by the simulated camera: `evaluate` flags the
+/// drift it causes at full strength, not at strength zero, and not once the capture locks the
+/// exposure; the turntable fixture is steady.
+#[test]
+fn a_simulated_automatic_exposure_is_flagged_unless_the_exposure_is_locked() {
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let base = common::repo().join("configs/rig/fixture.toml");
+    let drift = |name: &str, strength: f64, extra: &[&str]| {
+        let rig = tmp.path().join(format!("{name}.toml"));
+        std::fs::write(
+            &rig,
+            format!(
+                "extends = {:?}\neffects = [\"codec\", \"auto-exposure\"]\n[camera]\nauto_exposure = {strength}\n",
+                base.display().to_string()
+            ),
+        )
+        .unwrap();
+        let video = tmp.path().join(format!("{name}.mp4"));
+        let o = pav_rig()
+            .args(["capture", "--port", "sim", "--time-scale", "10", "--max-angle-error", "2", "--camera", "sim"])
+            .args(["--width", "320", "--height", "180", "--codec", "mp4v", "--rig"])
+            .arg(&rig)
+            .args(extra)
+            .arg("-o")
+            .arg(&video)
+            .env("RUST_BACKTRACE", "0")
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", common::output_text(&o));
+        evaluated(&video, &tmp.path().join(format!("{name}-eval")))
+    };
+    let (flag, luminance) = drift("auto", 1.0, &[]);
+    assert!(flag && luminance > 0.05, "full strength: {luminance}");
+    let (flag, luminance) = drift("held", 0.0, &[]);
+    assert!(!flag && luminance < 0.05, "strength zero: {luminance}");
+    let (flag, luminance) = drift("locked", 1.0, &["--exposure", "166"]);
+    assert!(!flag, "a locked exposure does not follow the car: {luminance}");
+    let (flag, luminance) = evaluated(&common::repo().join("fixtures/turntable.mp4"), &tmp.path().join("fixture"));
+    assert!(!flag, "the turntable fixture: {luminance}");
+}
+
+/// `evaluate`'s drift flag and luminance drift for `video` with YOLOX-Nano, as summary.csv has
+/// them, the flag also marked in summary.md.
+fn evaluated(video: &std::path::Path, out: &std::path::Path) -> (bool, f64) {
+    let o = pav_rig()
+        .arg("evaluate")
+        .arg(video)
+        .args(["-d", &common::detector_config("yolox_nano").display().to_string(), "--no-plots", "-o"])
+        .arg(out)
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", common::output_text(&o));
+    let mut rd = csv::Reader::from_path(out.join("summary.csv")).unwrap();
+    let head = rd.headers().unwrap().clone();
+    let row = rd.records().next().unwrap().unwrap();
+    let get = |k: &str| row[head.iter().position(|h| h == k).unwrap()].to_string();
+    let flag = get("drift_flag") == "true";
+    let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
+    assert_eq!(md.contains("⚠ drifted"), flag, "{md}");
+    eprintln!("{}: luminance drift {}, flagged {flag}", video.display(), get("luminance_drift"));
+    (flag, get("luminance_drift").parse().unwrap())
+}

@@ -62,6 +62,7 @@ fn opts(out: &Path, frames: Frames) -> EvalOptions {
         plots: true,
         parallel: 1,
         lanes: 1,
+        drift: pav::eval::drift::DriftLimits::default(),
     }
 }
 
@@ -176,7 +177,9 @@ fn several_videos_make_a_table_and_bad_ones_keep_the_rest() {
     }
     let md = std::fs::read_to_string(out_dir.join("summary.md")).unwrap();
     assert!(md.contains("| Video | yolox_nano | yolov8n_int8 |"), "{md}");
-    assert!(md.contains("| original | 66.7 | 66.7 |"), "{md}");
+    // The orbit's camera moves, so the street behind the car changes over the clip: its light
+    // drifts, and its A_physical carries the mark.
+    assert!(md.contains("| original | 66.7 ⚠ | 66.7 ⚠ |"), "{md}");
     assert!(md.contains("Score threshold **0.5**; target classes **car**"), "{md}");
     let summary = std::fs::read_to_string(out_dir.join("summary.csv")).unwrap();
     assert!(summary.lines().any(|l| l.starts_with("missing,yolox_nano") && l.contains("failed")), "{summary}");
@@ -208,7 +211,7 @@ fn even_sampling_picks_the_middle_of_equal_stretches_and_shared_labels_pool() {
     assert_eq!((cell.decoded_frames, cell.status.as_str()), (90, "complete"));
     let csv = std::fs::read_to_string(tmp.path().join("out/summary.csv")).unwrap();
     assert!(
-        csv.lines().any(|l| l.starts_with("texture,yolox_nano,car,0.5,even 11,22,") && l.ends_with(",2,complete")),
+        csv.lines().any(|l| l.starts_with("texture,yolox_nano,car,0.5,even 11,22,") && l.contains(",2,complete,")),
         "{csv}"
     );
     let frames_csv = std::fs::read_to_string(tmp.path().join("out/frames.csv")).unwrap();

@@ -206,6 +206,7 @@ fn run_evaluate(
         plots: false,
         parallel: 1,
         lanes: sharing.lanes,
+        drift: super::drift::DriftLimits::default(),
     };
     let job = VideoJob { path: opts.video.clone(), label: "bench".into(), sidecar: None };
     let mut dets: Vec<Box<dyn Detector>> = vec![Box::new(OnnxDetector::new(cfg.clone(), sharing.threads)?)];

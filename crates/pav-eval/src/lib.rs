@@ -8,6 +8,7 @@ pub mod bench;
 mod charts;
 pub mod compare;
 pub mod digital;
+pub mod drift;
 #[cfg(feature = "eval")]
 pub mod merge;
 pub mod paired;

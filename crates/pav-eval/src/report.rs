@@ -1,6 +1,7 @@
 //! Evaluation reports: per-frame CSV (streamed), summary CSV/Markdown shaped like the paper's
 //! Table V, and per-angle CSV.
 
+use super::drift::{Drift, DriftLimits};
 use super::physical::{angle_bins, Accuracy, FrameRecord, Z95};
 use pav_core::table::unique;
 use std::fmt::Write as _;
@@ -99,6 +100,21 @@ pub struct SummaryRow {
     pub videos: usize,
     /// `complete`, or what cut the run short.
     pub status: String,
+    /// How far the light outside the car drifted over the turn (none: fewer than two frames).
+    #[serde(default)]
+    pub drift: Option<Drift>,
+}
+
+impl SummaryRow {
+    /// Whether its light drifted past the limits: its A_physical is then in doubt.
+    pub fn drifted(&self) -> bool {
+        self.drift.is_some_and(|d| d.flagged)
+    }
+
+    /// Its A_physical in %, marked `⚠` when the light drifted.
+    fn rate_marked(&self) -> String {
+        format!("{}{}", pct(self.accuracy.rate()), if self.drifted() { " ⚠" } else { "" })
+    }
 }
 
 /// Settings printed with every report.
@@ -114,6 +130,8 @@ pub(crate) struct ReportSettings {
     pub angle_bins: usize,
     /// Where angles came from, per video label.
     pub angle_sources: Vec<(String, String)>,
+    /// The limits of the light's drift.
+    pub drift: DriftLimits,
 }
 
 fn pct(x: Option<f64>) -> String {
@@ -138,6 +156,9 @@ pub(crate) fn write_summary_csv(path: &Path, rows: &[SummaryRow], s: &ReportSett
         "declared_frames",
         "videos",
         "status",
+        "luminance_drift",
+        "colour_drift",
+        "drift_flag",
     ])
     .map_err(|e| csv_err(path, e))?;
     for r in rows {
@@ -158,6 +179,9 @@ pub(crate) fn write_summary_csv(path: &Path, rows: &[SummaryRow], s: &ReportSett
             r.declared_frames.to_string(),
             r.videos.to_string(),
             r.status.clone(),
+            f(r.drift.map(|d| d.luminance)),
+            f(r.drift.map(|d| d.colour)),
+            r.drifted().to_string(),
         ])
         .map_err(|e| csv_err(path, e))?;
     }
@@ -215,13 +239,40 @@ pub(crate) fn summary_markdown(rows: &[SummaryRow], records: &[FrameRecord], s: 
             .map(|d| {
                 rows.iter()
                     .find(|r| &&r.video == v && &&r.detector == d)
-                    .map(|r| pct(r.accuracy.rate()))
+                    .map(SummaryRow::rate_marked)
                     .unwrap_or_default()
             })
             .collect();
         let _ = writeln!(md, "| {v} | {} |", cells.join(" | "));
     }
-    let _ = writeln!(md, "\nValues in %.\n\n## Details\n");
+    let drifted = rows.iter().any(SummaryRow::drifted);
+    let _ = writeln!(
+        md,
+        "\nValues in %.{}\n",
+        if drifted { " ⚠: the light outside the car drifted past its limits over the turn (below)." } else { "" }
+    );
+    let _ = writeln!(md, "## Light over the turn\n");
+    let _ = writeln!(
+        md,
+        "Outside the car's boxes, per frame: the mean luminance's spread (5th to 95th percentile) as a share of its median, and the larger spread of the grey-world red and blue shares. Limits: {:.0} % and {:.3}.\n",
+        100.0 * s.drift.luminance,
+        s.drift.colour
+    );
+    let _ = writeln!(md, "| Video | Luminance drift % | Colour drift | Flag |");
+    let _ = writeln!(md, "|---|---:|---:|---|");
+    for v in &videos {
+        let d = rows.iter().find(|r| &&r.video == v).and_then(|r| r.drift);
+        let (l, c, flag) = match d {
+            Some(d) => (
+                format!("{:.1}", 100.0 * d.luminance),
+                format!("{:.4}", d.colour),
+                if d.flagged { "⚠ drifted" } else { "steady" },
+            ),
+            None => ("n/a".into(), "n/a".into(), "fewer than two frames"),
+        };
+        let _ = writeln!(md, "| {v} | {l} | {c} | {flag} |");
+    }
+    let _ = writeln!(md, "\n## Details\n");
     let _ = writeln!(md, "| Video | Detector | Videos | f_d | f_o | A_physical % | 95% CI (Wilson) | Status |");
     let _ = writeln!(md, "|---|---|---:|---:|---:|---:|---|---|");
     for r in rows {
@@ -238,7 +289,7 @@ pub(crate) fn summary_markdown(rows: &[SummaryRow], records: &[FrameRecord], s: 
             r.videos,
             r.accuracy.detected,
             r.accuracy.total,
-            pct(r.accuracy.rate()),
+            r.rate_marked(),
             ci,
             r.status
         );
@@ -310,9 +361,9 @@ pub fn summary_table(rows: &[SummaryRow], threshold: f32) -> String {
             r.classes,
             r.accuracy.detected,
             r.accuracy.total,
-            pct(r.accuracy.rate()),
+            r.rate_marked(),
             ci,
-            r.status
+            if r.drifted() { format!("{}; the light drifted", r.status) } else { r.status.clone() }
         );
     }
     s

@@ -4,6 +4,7 @@
 //! was scored, so a corrupt video, a failing detector or Ctrl-C never loses finished work.
 
 use super::charts::{accuracy_bars, polar_video};
+use super::drift::{Drift, DriftLimits, FrameLight, Light};
 use super::physical::{Accuracy, FrameRecord};
 use super::report::{
     summary_markdown, write_angles_csv, write_summary_csv, write_text, FrameCsv, ReportError, ReportSettings,
@@ -97,6 +98,8 @@ pub struct EvalOptions {
     /// Frames scored at once, each by its own copy of every detector (1: one frame at a time).
     /// Records and reports come out in the same order either way.
     pub lanes: usize,
+    /// How far a video's light may drift over the turn before it is flagged.
+    pub drift: DriftLimits,
 }
 
 /// Wall-clock split of a run, for benchmarks.
@@ -180,6 +183,10 @@ impl EvalOptions {
         if self.angle_bins == 0 {
             return bad("the per-angle breakdown needs at least one sector".into());
         }
+        let d = &self.drift;
+        if !(d.luminance.is_finite() && d.luminance > 0.0 && d.colour.is_finite() && d.colour > 0.0) {
+            return bad(format!("drift limits {} (luminance) and {} (colour) must be positive", d.luminance, d.colour));
+        }
         if matches!(self.frames, Frames::Stride(0) | Frames::Even(0)) {
             return bad(format!("{}: at least one frame must be scored", self.frames.tag()));
         }
@@ -200,6 +207,7 @@ fn failed_rows(label: &str, detectors: &[Box<dyn Detector>], why: &str) -> Vec<S
             declared_frames: 0,
             videos: 1,
             status: format!("failed: {why}"),
+            drift: None,
         })
         .collect()
 }
@@ -385,7 +393,7 @@ pub fn evaluate(
         let mut lanes: Vec<&mut [Box<dyn Detector>]> =
             std::iter::once(&mut *detectors).chain(copies.iter_mut().map(|c| c.as_mut_slice())).collect();
         let scored = score_video(&mut video, job, &file, &mut lanes, opts, progress, stop, &mut csv, &mut out)?;
-        close_video(&video, scored, job, detectors, &mut out);
+        close_video(&video, scored, job, detectors, &opts.drift, &mut out);
         if out.interrupted {
             break;
         }
@@ -403,7 +411,7 @@ pub fn evaluate(
 struct OpenVideo {
     angles: Angles,
     info: pav_core::video::VideoInfo,
-    frames: Prefetch<Vec<Prepared>>,
+    frames: Prefetch<(Vec<Prepared>, Light)>,
     /// The video's status so far: `complete` until something says otherwise.
     status: String,
     /// A failure known at opening (fewer frames than asked), to report once scoring starts.
@@ -453,7 +461,7 @@ fn open_video(
     }
     // The decoder thread also prepares every detector's input, so this thread only runs models.
     let inputs: Vec<InputConfig> = detectors.iter().map(|d| d.input().clone()).collect();
-    let make = move |f: Frame| inputs.iter().map(|c| Some(prepare(&f, c))).collect::<Vec<_>>();
+    let make = move |f: Frame| (inputs.iter().map(|c| Some(prepare(&f, c))).collect::<Vec<_>>(), Light::of(&f));
     let depth = (2 * opts.lanes.max(1)).max(4);
     let frames = match (opts.frames, picks) {
         (Frames::Stride(n), _) => Prefetch::with(reader, move |i| i % n == 0, depth, make),
@@ -477,6 +485,8 @@ struct Scoring {
     failed: Vec<Option<String>>,
     /// Its first record in the run's records.
     first_record: usize,
+    /// Each scored frame's light, by frame index.
+    lights: Vec<(usize, Light)>,
 }
 
 /// Scores the frames of one opened video in batches of one frame per lane, flushing each record
@@ -495,8 +505,14 @@ fn score_video(
 ) -> Result<Scoring, ReportError> {
     let n_det = lanes[0].len();
     progress.begin(&job.label, video.info.declared_frames as u64);
-    let mut s =
-        Scoring { decoded: 0, no_angle: 0, scored: 0, failed: vec![None; n_det], first_record: out.records.len() };
+    let mut s = Scoring {
+        decoded: 0,
+        no_angle: 0,
+        scored: 0,
+        failed: vec![None; n_det],
+        first_record: out.records.len(),
+        lights: Vec::new(),
+    };
     loop {
         if stop.load(Ordering::Relaxed) {
             video.status = format!("interrupted after {} frames", s.decoded);
@@ -526,19 +542,21 @@ fn score_video(
             }
         }
         out.timing.decode_s += t0.elapsed().as_secs_f64();
-        let (idxs, prepared): (Vec<(usize, usize)>, Vec<Vec<Prepared>>) =
-            batch.into_iter().map(|(i, d, f)| ((i, d), f)).unzip();
+        // Per frame: its index, the frames decoded through it, its light; and the models' inputs.
+        let (idxs, prepared): (Vec<_>, Vec<Vec<Prepared>>) =
+            batch.into_iter().map(|(i, d, (f, light))| ((i, d, light), f)).unzip();
         let in_use = idxs.len();
         let workers = opts.parallel.max(1) * in_use;
         let results = run_batch(&mut lanes[..in_use], prepared, &s.failed, &out.timing.detector_s, workers);
         let mut through = s.decoded;
-        for ((idx, decoded_here), results) in idxs.into_iter().zip(results) {
+        for ((idx, decoded_here, light), results) in idxs.into_iter().zip(results) {
             if s.failed.iter().all(Option::is_some) {
                 break;
             }
             through = decoded_here;
             out.timing.frames_scored += 1;
             s.scored += 1;
+            s.lights.push((idx, light));
             let (time_s, angle_deg) = video.angles.at(idx, video.info.fps);
             s.no_angle += usize::from(angle_deg.is_none());
             for (k, (det, result)) in lanes[0].iter().zip(results).enumerate() {
@@ -610,7 +628,14 @@ fn frame_record(
 
 /// The video's final status (cut short, no frames, angles that do not match its frames) and its
 /// summary rows, one per detector.
-fn close_video(video: &OpenVideo, s: Scoring, job: &VideoJob, detectors: &[Box<dyn Detector>], out: &mut EvalOutcome) {
+fn close_video(
+    video: &OpenVideo,
+    s: Scoring,
+    job: &VideoJob,
+    detectors: &[Box<dyn Detector>],
+    limits: &DriftLimits,
+    out: &mut EvalOutcome,
+) {
     let (declared, decoded) = (video.info.declared_frames, s.decoded);
     let mut status = video.status.clone();
     if decoded == 0 && status == "complete" {
@@ -639,6 +664,7 @@ fn close_video(video: &OpenVideo, s: Scoring, job: &VideoJob, detectors: &[Box<d
         }
     }
     let recs = &out.records[s.first_record..];
+    let drift = Drift::of(&frame_lights(&s.lights, recs), limits);
     let rows: Vec<SummaryRow> = detectors
         .iter()
         .zip(&s.failed)
@@ -651,9 +677,26 @@ fn close_video(video: &OpenVideo, s: Scoring, job: &VideoJob, detectors: &[Box<d
             declared_frames: declared,
             videos: 1,
             status: failed.clone().unwrap_or_else(|| status.clone()),
+            drift,
         })
         .collect();
     out.rows.extend(rows);
+}
+
+/// Each scored frame's light outside the boxes any detector found the car in on it.
+fn frame_lights(lights: &[(usize, Light)], recs: &[FrameRecord]) -> Vec<FrameLight> {
+    lights
+        .iter()
+        .map(|(frame, light)| {
+            let boxes: Vec<[f32; 4]> = recs
+                .iter()
+                .filter(|r| r.frame == *frame && r.detected)
+                .filter_map(|r| Some([r.x1?, r.y1?, r.x2?, r.y2?]))
+                .collect();
+            let (luminance, r, b) = light.outside(&boxes);
+            FrameLight { frame: *frame, luminance, r, b }
+        })
+        .collect()
 }
 
 /// What each video added to `out`, from where each one's rows, records, failures and angle
@@ -684,6 +727,7 @@ pub(crate) fn settings(opts: &EvalOptions, angle_sources: Vec<(String, String)>)
         sampling_text: opts.frames.to_string(),
         angle_bins: opts.angle_bins,
         angle_sources,
+        drift: opts.drift,
     }
 }
 
@@ -733,6 +777,7 @@ pub(crate) fn pool(rows: Vec<SummaryRow>) -> Vec<SummaryRow> {
                 c.decoded_frames += r.decoded_frames;
                 c.declared_frames += r.declared_frames;
                 c.videos += r.videos;
+                c.drift = Drift::pooled(c.drift, r.drift);
                 statuses.push(r.status);
             }
             None => {

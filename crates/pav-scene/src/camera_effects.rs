@@ -206,14 +206,23 @@ pub fn cut(rgb: &[f32], side: usize, (width, height): (usize, usize)) -> Frame {
 }
 
 /// An automatic exposure on an 8-bit frame when the rig lists it: every level scaled by
-/// `(128 / m)^s`, `m` the frame's mean level and `s` the rig's `camera.auto_exposure`, so that a
+/// `(128 / m)^s`, `m` the mean level of the frame's central half (centre-weighted metering, as
+/// webcams meter, where the car stands) and `s` the rig's `camera.auto_exposure`, so that a
 /// frame the car darkens is brightened, background and all, as a webcam's exposure follows the
 /// car. Applied before the sensor noise, as an exposure change is.
 pub fn apply_auto_exposure(rig: &RigConfig, frame: &mut Frame) {
     if !rig.has(CameraEffect::AutoExposure) || frame.bgr.is_empty() {
         return;
     }
-    let mean = frame.bgr.iter().map(|&v| f64::from(v)).sum::<f64>() / frame.bgr.len() as f64;
+    let (w, h) = (frame.width, frame.height);
+    let (mut sum, mut n) = (0f64, 0usize);
+    for y in h / 4..(3 * h / 4).max(h / 4 + 1) {
+        for v in &frame.bgr[(y * w + w / 4) * 3..(y * w + (3 * w / 4).max(w / 4 + 1)) * 3] {
+            sum += f64::from(*v);
+            n += 1;
+        }
+    }
+    let mean = sum / n.max(1) as f64;
     let gain = (128.0 / mean.max(1.0)).powf(rig.camera.auto_exposure) as f32;
     for v in &mut frame.bgr {
         *v = (f32::from(*v) * gain).round().clamp(0.0, 255.0) as u8;

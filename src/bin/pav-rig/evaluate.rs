@@ -4,6 +4,7 @@ use crate::common::{ctrl_c_flag, defence_chains, parse_defence, Bar, DefenceArg,
 use crate::port::parse_seconds;
 use anyhow::{bail, Result};
 use pav::detect::load::load_detectors;
+use pav::eval::drift::DriftLimits;
 use pav::eval::report::summary_table;
 use pav::eval::run::{evaluate, video_jobs, EvalOptions, EvalOutcome, Frames, VideoJob};
 use pav::eval::squeeze::Thresholds;
@@ -81,6 +82,15 @@ pub struct Args {
     /// With --squeeze: one fixed threshold for every detector instead.
     #[arg(long, requires = "squeeze", conflicts_with = "squeeze_clean")]
     squeeze_threshold: Option<f32>,
+    /// Flag a video whose light outside the car drifts more than this over the turn: the spread
+    /// of its mean luminance (5th to 95th percentile) as a share of the median. A camera on
+    /// automatic exposure that follows the car drifts; its A_physical is marked ⚠.
+    #[arg(long, default_value_t = 0.05)]
+    drift_luminance: f64,
+    /// Flag a video whose grey-world colour (red or blue share) spreads more than this over the
+    /// turn (5th to 95th percentile): automatic white balance.
+    #[arg(long, default_value_t = 0.01)]
+    drift_colour: f64,
     /// Skip the PNG plots.
     #[arg(long)]
     no_plots: bool,
@@ -127,6 +137,7 @@ pub fn run(a: &Args) -> Result<()> {
         plots: !a.no_plots,
         parallel: sharing.parallel,
         lanes: sharing.lanes,
+        drift: DriftLimits { luminance: a.drift_luminance, colour: a.drift_colour },
     };
     opts.check()?;
     // A merge scores nothing; the others load their detectors before anything is written.
