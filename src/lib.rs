@@ -5,7 +5,7 @@
 //!
 //! | layer | crates (modules of this crate) |
 //! |---|---|
-//! | 0 base | `pav-core`: [`cluster`], [`colour`], [`data`], [`extends`], [`provenance`], [`image`], [`video`], [`geometry`], [`rng`], [`shard`], [`sidecar`], [`step`], [`table`], [`plot`], [`progress`]; `pav-onnx` (ONNX graphs and their gradients, no pav dependency) |
+//! | 0 base | `pav-core`: [`cluster`], [`colour`], [`data`], [`extends`], [`provenance`], [`results`], [`image`], [`video`], [`geometry`], [`rng`], [`shard`], [`sidecar`], [`step`], [`table`], [`plot`], [`progress`]; `pav-onnx` (ONNX graphs and their gradients, no pav dependency) |
 //! | 1 method blocks | `pav-print` ([`print`]), `pav-render` ([`render`]), `pav-scene` ([`scene`]), `pav-dataset` ([`dataset`]), `pav-detect` ([`detect`]) |
 //! | 2 jobs | `pav-attack` ([`attack`], the optimizer), `pav-eval` ([`eval`], scoring), `pav-rig` ([`rig`], turntable and capture) |
 //! | 3 studies | `pav-studies` ([`studies`]): the paper's tables and the studies, which combine the optimizer and scoring |
@@ -23,7 +23,7 @@ pub use pav_core::plot;
 #[cfg(feature = "video")]
 pub use pav_core::video;
 pub use pav_core::{
-    cluster, colour, data, extends, geometry, image, progress, provenance, rng, shard, sidecar, step, table,
+    cluster, colour, data, extends, geometry, image, progress, provenance, results, rng, shard, sidecar, step, table,
 };
 
 pub use pav_attack as attack;

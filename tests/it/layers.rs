@@ -17,6 +17,7 @@ const LAYERS: [&[&str]; 4] = [
         "data",
         "extends",
         "provenance",
+        "results",
         "image",
         "video",
         "geometry",

@@ -50,6 +50,7 @@ mod print_charts;
 mod project;
 mod render_fca;
 mod render_impala;
+mod results;
 mod rig_shot;
 #[cfg(feature = "optimize")]
 mod slurm;

@@ -12,6 +12,7 @@ pub mod image;
 pub mod plot;
 pub mod progress;
 pub mod provenance;
+pub mod results;
 pub mod rng;
 pub mod shard;
 pub mod sidecar;

@@ -183,7 +183,7 @@ fn git_state_in(cwd: &Path) -> (String, bool) {
 }
 
 /// Size and hash of a file or folder, with its manifest name when it lies in the data store.
-fn describe(path: &Path) -> Option<Input> {
+pub fn describe(path: &Path) -> Option<Input> {
     let (bytes, sha256) = if path.is_dir() {
         let mut files = Vec::new();
         walk(path, &mut files);

@@ -22,6 +22,7 @@ mod optimize;
 mod paint;
 mod print;
 mod render;
+mod results;
 #[cfg(feature = "optimize")]
 mod table1;
 mod uv;
@@ -85,6 +86,10 @@ enum Cmd {
     /// with checksums, find.
     #[command(subcommand)]
     Data(data::Cmd),
+    /// Results as data: record a run's headline table under results/, and generate the
+    /// documents' tables from those files.
+    #[command(subcommand)]
+    Results(results::Cmd),
     /// Scripts that run a long job on a cluster: a Slurm job array (or a Kubernetes Indexed
     /// Job) of its shards and the merge that joins them.
     #[command(subcommand)]
@@ -163,6 +168,7 @@ fn main() -> Result<()> {
         Cmd::Views(c) => views::run(&c),
         Cmd::Print(c) => print::run(&c),
         Cmd::Data(c) => data::run(&c),
+        Cmd::Results(c) => results::run(&c),
         Cmd::Cluster(c) => cluster::run(&c),
     }
 }

@@ -1,0 +1,97 @@
+//! Results as data (`pav_core::results`): every results block in README.md and docs/ is what the
+//! generator writes from results/ now; a number edited by hand fails that check, and a table
+//! whose config changed is marked stale with the command that reruns it.
+
+use crate::common;
+
+use pav::results::{documents, regenerate, ResultFile, DIR};
+use std::path::Path;
+
+#[test]
+fn every_results_block_is_what_the_generator_writes() {
+    common::real_data();
+    let root = common::repo();
+    let differ = regenerate(&root, false).unwrap();
+    let names: Vec<String> = differ.iter().map(|(p, _)| p.display().to_string()).collect();
+    assert!(names.is_empty(), "run `pav results write`: these differ from results/: {names:?}");
+    // Every results file is shown somewhere, and parses.
+    let docs: String = documents(&root).iter().map(|p| std::fs::read_to_string(p).unwrap()).collect();
+    let files = common::files_with_extension(&root.join(DIR), "json");
+    assert!(!files.is_empty());
+    for f in files {
+        let name = f.file_stem().unwrap().to_string_lossy().into_owned();
+        let r = ResultFile::load(&root, &name).unwrap();
+        assert!(!r.rows.is_empty() && r.rows.iter().all(|row| row.len() == r.columns.len()), "{name}");
+        assert!(docs.contains(&format!("<!-- results:{name} -->")), "results/{name}.json is shown nowhere");
+    }
+}
+
+/// A copy of the repository's documents and results under a temporary root, with `configs`
+/// copied (so that it can be changed) and the other inputs linked.
+fn copy_root() -> tempfile::TempDir {
+    let root = common::repo();
+    let tmp = tempfile::tempdir().unwrap();
+    for d in ["docs", DIR, "configs"] {
+        copy_dir(&root.join(d), &tmp.path().join(d));
+    }
+    std::fs::copy(root.join("README.md"), tmp.path().join("README.md")).unwrap();
+    for d in ["fixtures", ".deps", "data"] {
+        std::os::unix::fs::symlink(root.join(d), tmp.path().join(d)).unwrap();
+    }
+    tmp
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap().flatten() {
+        let (p, dest) = (e.path(), to.join(e.file_name()));
+        if p.is_dir() {
+            copy_dir(&p, &dest);
+        } else {
+            std::fs::copy(&p, &dest).unwrap();
+        }
+    }
+}
+
+#[test]
+fn a_number_edited_by_hand_fails_the_check() {
+    common::real_data();
+    let tmp = copy_root();
+    assert!(regenerate(tmp.path(), false).unwrap().is_empty(), "the copy matches before the edit");
+    let readme = tmp.path().join("README.md");
+    let text = std::fs::read_to_string(&readme).unwrap();
+    let start = text.find("<!-- results:main-job -->").expect("the main job's table");
+    // The first A_physical cell of the table, changed by one tenth.
+    let row = start + text[start..].find("\n| ").unwrap() + 1;
+    let row = row + text[row..].find('\n').unwrap() + 1; // past the heading
+    let row = row + text[row..].find('\n').unwrap() + 1; // past the rule
+    let line = &text[row..row + text[row..].find('\n').unwrap()];
+    let edited = line.replacen(".", ",", 1).replacen(",", ".0", 1);
+    assert_ne!(line, edited);
+    std::fs::write(&readme, text.replacen(line, &edited, 1)).unwrap();
+    let differ = regenerate(tmp.path(), false).unwrap();
+    assert_eq!(differ.len(), 1, "{differ:?}");
+    assert!(differ[0].0.ends_with("README.md") && differ[0].1.contains(line), "the generator writes the number back");
+}
+
+#[test]
+fn a_changed_config_marks_its_table_stale() {
+    common::real_data();
+    let tmp = copy_root();
+    let config = tmp.path().join("configs/detectors/yolox_nano.toml");
+    let mut text = std::fs::read_to_string(&config).unwrap();
+    text.push_str("nms_iou = 0.6\n");
+    std::fs::write(&config, text).unwrap();
+    let differ = regenerate(tmp.path(), false).unwrap();
+    let (doc, new) = differ.iter().find(|(p, _)| p.ends_with("README.md")).expect("the README's main-job table");
+    let r = ResultFile::load(tmp.path(), "main-job").unwrap();
+    assert!(
+        new.contains(&format!("**Stale since commit {}**: configs/detectors/yolox_nano.toml changed", r.commit))
+            && new.contains(&format!("Rerun `{}`", r.command)),
+        "{}:\n{new}",
+        doc.display()
+    );
+    // Written, the mark stays until the run is recorded again; the check then passes on it.
+    regenerate(tmp.path(), true).unwrap();
+    assert!(regenerate(tmp.path(), false).unwrap().is_empty());
+}
