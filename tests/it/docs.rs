@@ -324,7 +324,24 @@ fn the_main_job_scores_the_turntable_fixture() {
     let out = tmp.path().join("out/evaluate");
     let video = Path::new(job.split_whitespace().nth(1).unwrap()).file_stem().unwrap().to_str().unwrap().to_string();
     assert_scored(&summary(&out.join("summary.csv")), &video, &common::output_text(&o));
-    assert!(out.join(format!("polar_{video}.png")).is_file());
+    // The README's first figure and its table are this run's, as it writes them today.
+    let figure = std::fs::read(out.join(format!("polar_{video}.png"))).unwrap();
+    assert!(
+        figure == std::fs::read(common::repo().join("docs/quickstart_polar.png")).unwrap(),
+        "docs/quickstart_polar.png is not what the main job draws now: copy out/evaluate/polar_{video}.png over it"
+    );
+    let recorded = pav::results::ResultFile::load(&common::repo(), "main-job").unwrap();
+    let run = pav::provenance::Run::read(&out.join("run.toml")).unwrap();
+    let fresh = pav::results::ResultFile::from_run(
+        &run,
+        &out.join("summary.csv"),
+        &recorded.from_columns,
+        &recorded.title,
+        tmp.path(),
+    )
+    .unwrap();
+    assert_eq!(fresh.rows, recorded.rows, "results/main-job.json is not what the main job gives now");
+    assert_eq!(fresh.command, recorded.command);
 }
 
 /// The quick start, block by block as the README has it, in a scratch folder.

@@ -35,6 +35,10 @@ pub struct ResultFile {
     pub transcribed: Option<Transcribed>,
     /// Column headings.
     pub columns: Vec<String>,
+    /// The columns as taken from the run's CSV (see [`ResultFile::from_run`]), so that a fresh
+    /// run can be compared cell by cell.
+    #[serde(default)]
+    pub from_columns: Vec<String>,
     /// Rows of cells, as the table shows them (intervals included).
     pub rows: Vec<Vec<String>>,
     /// A sentence printed under the table.
@@ -140,6 +144,7 @@ impl ResultFile {
             inputs,
             transcribed: None,
             columns: picks.into_iter().map(|p| p.shown).collect(),
+            from_columns: columns.to_vec(),
             rows,
             note: None,
         })
@@ -297,10 +302,10 @@ pub fn generate(text: &str, doc: &str, root: &Path) -> Result<String, ResultsErr
     Ok(out)
 }
 
-/// The documents under `root` that hold results blocks: README.md and every Markdown file
-/// under docs/.
+/// The documents under `root` a user reads, where results blocks may stand: README.md, then every
+/// Markdown file under docs/, sorted.
 pub fn documents(root: &Path) -> Vec<PathBuf> {
-    let mut out = vec![root.join("README.md")];
+    let mut out = Vec::new();
     let mut stack = vec![root.join("docs")];
     while let Some(d) = stack.pop() {
         let Ok(rd) = std::fs::read_dir(&d) else { continue };
@@ -314,6 +319,7 @@ pub fn documents(root: &Path) -> Vec<PathBuf> {
         }
     }
     out.sort();
+    out.insert(0, root.join("README.md"));
     out
 }
 

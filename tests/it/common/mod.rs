@@ -241,7 +241,5 @@ pub fn files_with_extension(dir: &Path, ext: &str) -> Vec<PathBuf> {
 
 /// The documents under `root` a user reads: README.md and every Markdown file under docs/, sorted.
 pub fn doc_files(root: &Path) -> Vec<PathBuf> {
-    let mut out = vec![root.join("README.md")];
-    out.extend(files_with_extension(&root.join("docs"), "md"));
-    out
+    pav::results::documents(root)
 }
