@@ -422,3 +422,18 @@ fn attacking_your_own_detector_runs_as_written() {
     eprintln!("my_detector on {} training views: {before:.3} → {after:.3}", train.len());
     assert!(train.len() == 6 && after < 0.5 * before, "{before} → {after}");
 }
+
+/// Reports are short papers: none runs past 400 lines (the history of how the work went stays in
+/// git).
+#[test]
+fn every_report_is_400_lines_or_fewer() {
+    let reports = common::files_with_extension(&common::repo().join("docs/reports"), "md");
+    assert!(reports.len() >= 8, "{reports:?}");
+    let long: Vec<String> = reports
+        .iter()
+        .map(|p| (p, std::fs::read_to_string(p).unwrap().lines().count()))
+        .filter(|(_, n)| *n > 400)
+        .map(|(p, n)| format!("{}: {n} lines", p.display()))
+        .collect();
+    assert!(long.is_empty(), "{long:?}");
+}
