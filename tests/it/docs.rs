@@ -336,6 +336,7 @@ fn the_main_job_scores_the_turntable_fixture() {
         &run,
         &out.join("summary.csv"),
         &recorded.from_columns,
+        &recorded.from_rows,
         &recorded.title,
         tmp.path(),
     )

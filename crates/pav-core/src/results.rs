@@ -39,6 +39,9 @@ pub struct ResultFile {
     /// run can be compared cell by cell.
     #[serde(default)]
     pub from_columns: Vec<String>,
+    /// The rows of the run's CSV the table keeps, as `HEADING=VALUE` conditions (none: all).
+    #[serde(default)]
+    pub from_rows: Vec<String>,
     /// Rows of cells, as the table shows them (intervals included).
     pub rows: Vec<Vec<String>>,
     /// A sentence printed under the table.
@@ -109,13 +112,15 @@ impl ResultFile {
 
     /// The table `title` of the CSV `table` written by the run recorded in `run` (its
     /// `run.toml`), with the run's command, commit, seeds and inputs (paths made relative to
-    /// `root`). Each of `columns` is `HEADING[+HEADING][=SHOWN][:FORMAT]`: one CSV column, or two
+    /// `root`), keeping the rows that meet every `HEADING=VALUE` of `rows_where`. Each of
+    /// `columns` is `HEADING[+HEADING][=SHOWN][:FORMAT]`: one CSV column, or two
     /// shown as an interval `a–b`, under the heading SHOWN, formatted as `pct` (× 100, one
     /// decimal) or with a number of decimals.
     pub fn from_run(
         run: &Run,
         table: &Path,
         columns: &[String],
+        rows_where: &[String],
         title: &str,
         root: &Path,
     ) -> Result<ResultFile, ResultsError> {
@@ -123,10 +128,20 @@ impl ResultFile {
             .map_err(|e| ResultsError::Parse { path: table.into(), msg: e.to_string() })?;
         let head = rd.headers().map_err(|e| ResultsError::Parse { path: table.into(), msg: e.to_string() })?.clone();
         let picks: Vec<Column> = columns.iter().map(|c| Column::parse(c, &head, table)).collect::<Result<_, _>>()?;
+        let conditions: Vec<(usize, &str)> = rows_where
+            .iter()
+            .map(|w| {
+                let (k, v) = w.split_once('=').unwrap_or((w, ""));
+                let c = Column::parse(k, &head, table)?;
+                Ok((c.at[0], v))
+            })
+            .collect::<Result<_, ResultsError>>()?;
         let mut rows = Vec::new();
         for r in rd.records() {
             let r = r.map_err(|e| ResultsError::Parse { path: table.into(), msg: e.to_string() })?;
-            rows.push(picks.iter().map(|c| c.cell(&r)).collect());
+            if conditions.iter().all(|(at, v)| r.get(*at) == Some(*v)) {
+                rows.push(picks.iter().map(|c| c.cell(&r)).collect());
+            }
         }
         let seeds =
             run.settings.get("seeds").or(run.settings.get("seed")).map_or(Vec::new(), |s| {
@@ -145,6 +160,7 @@ impl ResultFile {
             transcribed: None,
             columns: picks.into_iter().map(|p| p.shown).collect(),
             from_columns: columns.to_vec(),
+            from_rows: rows_where.to_vec(),
             rows,
             note: None,
         })
@@ -275,22 +291,38 @@ fn shown_command(words: &[String]) -> String {
 const OPEN: &str = "<!-- results:";
 const CLOSE: &str = "<!-- /results:";
 
-/// `text` with every results block regenerated from `root`'s results files.
+/// Where the next marker that begins a line starts in `text` (a marker quoted inside a line is
+/// text, not a marker).
+fn next_marker(text: &str) -> Option<usize> {
+    let mut from = 0;
+    while let Some(k) = text[from..].find(OPEN) {
+        let at = from + k;
+        if at == 0 || text.as_bytes()[at - 1] == b'\n' {
+            return Some(at);
+        }
+        from = at + OPEN.len();
+    }
+    None
+}
+
+/// `text` with every results block (markers on lines of their own) regenerated from `root`'s
+/// results files.
 pub fn generate(text: &str, doc: &str, root: &Path) -> Result<String, ResultsError> {
     let mut out = String::with_capacity(text.len());
     let mut rest = text;
-    while let Some(at) = rest.find(OPEN) {
+    while let Some(at) = next_marker(rest) {
         let after = &rest[at + OPEN.len()..];
         let end = after
             .find("-->")
             .ok_or_else(|| ResultsError::Marker { doc: doc.into(), msg: "an unclosed marker".into() })?;
         let name = after[..end].trim().to_string();
-        let close = format!("{CLOSE}{name} -->");
+        let close = format!("\n{CLOSE}{name} -->");
         let body_start = at + OPEN.len() + end + 3;
-        let close_at = rest[body_start..].find(&close).ok_or_else(|| ResultsError::Marker {
-            doc: doc.into(),
-            msg: format!("`{OPEN}{name} -->` has no `{close}`"),
-        })? + body_start;
+        let close_at =
+            1 + rest[body_start..].find(&close).ok_or_else(|| ResultsError::Marker {
+                doc: doc.into(),
+                msg: format!("`{OPEN}{name} -->` has no `{}` on a line of its own", close.trim()),
+            })? + body_start;
         let file =
             ResultFile::load(root, &name).map_err(|e| ResultsError::Marker { doc: doc.into(), msg: e.to_string() })?;
         out.push_str(&rest[..body_start]);
@@ -329,7 +361,7 @@ pub fn regenerate(root: &Path, write: bool) -> Result<Vec<(PathBuf, String)>, Re
     let mut changed = Vec::new();
     for p in documents(root) {
         let text = std::fs::read_to_string(&p).map_err(io(&p))?;
-        if !text.contains(OPEN) {
+        if next_marker(&text).is_none() {
             continue;
         }
         let doc = p.strip_prefix(root).unwrap_or(&p).display().to_string();

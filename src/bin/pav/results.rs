@@ -23,6 +23,9 @@ pub enum Cmd {
         /// FORMAT `pct` or a number of decimals), comma-separated.
         #[arg(long, value_delimiter = ',', required = true)]
         columns: Vec<String>,
+        /// Keep only the CSV's rows where HEADING has VALUE (`HEADING=VALUE`, comma-separated).
+        #[arg(long = "where", value_delimiter = ',')]
+        rows_where: Vec<String>,
         /// What the table answers.
         #[arg(long)]
         title: String,
@@ -40,7 +43,7 @@ pub enum Cmd {
 pub fn run(c: &Cmd) -> Result<()> {
     let root = PathBuf::from(".");
     match c {
-        Cmd::Add { name, run, table, columns, title, note } => {
+        Cmd::Add { name, run, table, columns, rows_where, title, note } => {
             let record = if run.is_dir() { run.join("run.toml") } else { run.clone() };
             let r = Run::read(&record)
                 .map_err(anyhow::Error::msg)
@@ -48,7 +51,7 @@ pub fn run(c: &Cmd) -> Result<()> {
             if r.git_dirty {
                 eprintln!("warning: {} ran on a checkout with uncommitted changes", record.display());
             }
-            let mut file = ResultFile::from_run(&r, table, columns, title, &root)?;
+            let mut file = ResultFile::from_run(&r, table, columns, rows_where, title, &root)?;
             file.note = note.clone();
             let path = file.save(&root, name)?;
             println!(
