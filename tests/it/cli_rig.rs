@@ -275,15 +275,7 @@ fn capture_locks_the_cameras_controls_and_records_them() {
     let tmp = tempfile::tempdir().unwrap();
     let capture = |name: &str, extra: &[&str]| {
         let video = tmp.path().join(format!("{name}.mp4"));
-        let o = pav_rig()
-            .args(["capture", "--port", "sim", "--time-scale", "10", "--max-angle-error", "2", "--camera", "sim"])
-            .args(["--width", "160", "--height", "120", "--codec", "mp4v"])
-            .args(extra)
-            .arg("-o")
-            .arg(&video)
-            .env("RUST_BACKTRACE", "0")
-            .output()
-            .unwrap();
+        let o = sim_capture(&video, (160, 120), extra);
         (o.status.success(), common::output_text(&o), tmp.path().join(format!("{name}.run.toml")), video)
     };
     let (ok, out, record, _) = capture("locked", &["--exposure", "120", "--white-balance", "4000", "--focus", "30"]);
@@ -335,16 +327,8 @@ fn a_simulated_automatic_exposure_is_flagged_unless_the_exposure_is_locked() {
         )
         .unwrap();
         let video = tmp.path().join(format!("{name}.mp4"));
-        let o = pav_rig()
-            .args(["capture", "--port", "sim", "--time-scale", "10", "--max-angle-error", "2", "--camera", "sim"])
-            .args(["--width", "320", "--height", "180", "--codec", "mp4v", "--rig"])
-            .arg(&rig)
-            .args(extra)
-            .arg("-o")
-            .arg(&video)
-            .env("RUST_BACKTRACE", "0")
-            .output()
-            .unwrap();
+        let rig = rig.display().to_string();
+        let o = sim_capture(&video, (320, 180), &[&["--rig", rig.as_str()], extra].concat());
         assert!(o.status.success(), "{}", common::output_text(&o));
         evaluated(&video, &tmp.path().join(format!("{name}-eval")))
     };
@@ -356,6 +340,20 @@ fn a_simulated_automatic_exposure_is_flagged_unless_the_exposure_is_locked() {
     assert!(!flag, "a locked exposure does not follow the car: {luminance}");
     let (flag, luminance) = evaluated(&common::repo().join("fixtures/turntable.mp4"), &tmp.path().join("fixture"));
     assert!(!flag, "the turntable fixture: {luminance}");
+}
+
+/// A ten-times-fast capture of the simulated table by the simulated camera into `video`, at
+/// `size`, with `extra` arguments.
+fn sim_capture(video: &std::path::Path, size: (usize, usize), extra: &[&str]) -> std::process::Output {
+    pav_rig()
+        .args(["capture", "--port", "sim", "--time-scale", "10", "--max-angle-error", "2", "--camera", "sim"])
+        .args(["--width", &size.0.to_string(), "--height", &size.1.to_string(), "--codec", "mp4v"])
+        .args(extra)
+        .arg("-o")
+        .arg(video)
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .unwrap()
 }
 
 /// `evaluate`'s drift flag and luminance drift for `video` with YOLOX-Nano, as summary.csv has
