@@ -324,11 +324,24 @@ fn the_main_job_scores_the_turntable_fixture() {
     let out = tmp.path().join("out/evaluate");
     let video = Path::new(job.split_whitespace().nth(1).unwrap()).file_stem().unwrap().to_str().unwrap().to_string();
     assert_scored(&summary(&out.join("summary.csv")), &video, &common::output_text(&o));
-    // The README's first figure and its table are this run's, as it writes them today.
-    let figure = std::fs::read(out.join(format!("polar_{video}.png"))).unwrap();
+    // The README's first figure and its table are this run's, as it writes them today. Another
+    // CPU may move a score in its last digits, and a dot by a fraction of a pixel: the figure
+    // must match pixel for pixel but for a few edge pixels (an older clip moves hundreds).
+    let (fresh, shown) = (
+        pav::image::Rgb::load(&out.join(format!("polar_{video}.png"))).unwrap(),
+        pav::image::Rgb::load(&common::repo().join("docs/quickstart_polar.png")).unwrap(),
+    );
+    assert_eq!((fresh.width, fresh.height), (shown.width, shown.height));
+    let differ = fresh
+        .rgb
+        .chunks(3)
+        .zip(shown.rgb.chunks(3))
+        .filter(|(a, b)| a.iter().zip(*b).any(|(x, y)| (x - y).abs() > 8.0 / 255.0))
+        .count();
+    eprintln!("main job figure: {differ} pixels differ from docs/quickstart_polar.png");
     assert!(
-        figure == std::fs::read(common::repo().join("docs/quickstart_polar.png")).unwrap(),
-        "docs/quickstart_polar.png is not what the main job draws now: copy out/evaluate/polar_{video}.png over it"
+        differ * 1000 < fresh.width * fresh.height,
+        "docs/quickstart_polar.png is not what the main job draws now ({differ} pixels differ): copy out/evaluate/polar_{video}.png over it"
     );
     let recorded = pav::results::ResultFile::load(&common::repo(), "main-job").unwrap();
     let run = pav::provenance::Run::read(&out.join("run.toml")).unwrap();
