@@ -2,8 +2,8 @@
 //! under `results/`, with the command that made it, its commit and seeds, and the sha256 of
 //! every config and data file the run read. The documents' tables are generated from those
 //! files between markers (`<!-- results:NAME -->` … `<!-- /results:NAME -->`), so a number
-//! enters the documents only through a run. A table whose inputs have changed since its run is
-//! marked stale, with the command that reruns it; one copied from an older document rather than
+//! enters the documents only through a run. A table whose inputs have changed since its run (a
+//! TOML config in its values, not its comments) is marked stale, with the command that reruns it; one copied from an older document rather than
 //! made by its command says so.
 
 use crate::data::manifest::Manifest;
@@ -149,7 +149,14 @@ impl ResultFile {
             });
         let mut inputs = BTreeMap::new();
         for i in run.config.iter().chain(&run.inputs) {
-            inputs.insert(input_key(i, root), i.sha256.clone());
+            let key = input_key(i, root);
+            // A config still as the run read it is kept by its content, so that a comment
+            // edited later does not make the table stale.
+            let sha = match content_sha(&root.join(&key)) {
+                Some(c) if crate::provenance::describe(&root.join(&key)).is_some_and(|now| now.sha256 == i.sha256) => c,
+                _ => i.sha256.clone(),
+            };
+            inputs.insert(key, sha);
         }
         Ok(ResultFile {
             title: title.into(),
@@ -175,6 +182,7 @@ impl ResultFile {
             .filter_map(|(key, sha)| {
                 let now = match key.strip_prefix("data:") {
                     Some(name) => manifest.get(name).ok().map(|e| e.sha256.clone()),
+                    None if sha.starts_with(CONTENT) => content_sha(&root.join(key)),
                     None => crate::provenance::describe(&root.join(key)).map(|i| i.sha256),
                 };
                 match now {
@@ -264,6 +272,19 @@ impl Column {
         };
         self.at.iter().map(|&a| one(a)).collect::<Vec<_>>().join("–")
     }
+}
+
+/// The prefix of a TOML config's content hash (see [`content_sha`]).
+const CONTENT: &str = "toml:";
+
+/// For a TOML file, `toml:` and the sha256 of its values written out again: the same for any
+/// comments and layout. None for anything else.
+fn content_sha(path: &Path) -> Option<String> {
+    if path.extension().is_none_or(|e| e != "toml") {
+        return None;
+    }
+    let table: toml::Table = toml::from_str(&std::fs::read_to_string(path).ok()?).ok()?;
+    Some(format!("{CONTENT}{}", crate::data::store::sha256_hex(toml::to_string(&table).ok()?.as_bytes())))
 }
 
 /// An input as a results file names it: a data store entry as `data:NAME`, a file inside
