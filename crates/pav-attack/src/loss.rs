@@ -181,17 +181,14 @@ impl Predictions {
     /// Every prediction of `raw` (a detector's outputs, as its white box orders them): its
     /// values at `sites`, read as `rule` says, for `classes` classes.
     pub fn read(raw: &[&[f32]], sites: &[ScoreSite], rule: &ScoreRule, classes: usize) -> Result<Self, HeadShapeError> {
-        let col = |k: usize| match rule.background {
-            Some(bg) if k >= bg => k + 1,
-            _ => k,
-        };
+        let fits = rule.width > 0 && classes + usize::from(rule.background.is_some()) == rule.width;
         let mut p = Predictions::empty(classes, rule.clone());
         let mut logits = vec![0f32; rule.width];
         for site in sites {
             let (o, first, step) = site.scores;
             let out = raw.get(o).ok_or_else(|| HeadShapeError(format!("no output {o} among {}", raw.len())))?;
             let last = first + step * rule.width.saturating_sub(1);
-            if rule.width == 0 || last >= out.len() || classes + usize::from(rule.background.is_some()) != rule.width {
+            if !fits || last >= out.len() {
                 return Err(HeadShapeError(format!(
                     "{} values of output {o} do not hold {} class columns from {first} every {step}",
                     out.len(),
@@ -203,9 +200,9 @@ impl Predictions {
                 logits.iter_mut().enumerate().for_each(|(j, l)| *l = out[first + j * step]);
                 let m = logits.iter().copied().fold(f32::NEG_INFINITY, f32::max);
                 let z: f32 = logits.iter().map(|x| (x - m).exp()).sum();
-                p.cls.extend((0..classes).map(|k| (logits[col(k)] - m).exp() / z));
+                p.cls.extend((0..classes).map(|k| (logits[rule.column(k)] - m).exp() / z));
             } else {
-                p.cls.extend((0..classes).map(|k| activate(rule.activation, out[first + col(k) * step]).0));
+                p.cls.extend((0..classes).map(|k| activate(rule.activation, out[first + rule.column(k) * step]).0));
             }
             // The class holding objectness when there is none: ties to the first (every
             // activation keeps the order of a row's values).
@@ -319,11 +316,7 @@ impl Predictions {
     /// Where class `k` of prediction `i` sits: (output, index).
     fn class_at(&self, i: usize, k: usize) -> (usize, usize) {
         let (o, first, step) = self.at[i].scores;
-        let col = match self.rule.background {
-            Some(bg) if k >= bg => k + 1,
-            _ => k,
-        };
-        (o, first + col * step)
+        (o, first + self.rule.column(k) * step)
     }
 
     /// The gradient with respect to the raw outputs `raw` of a loss whose gradients with respect

@@ -11,8 +11,9 @@
 
 use pav_detect::decode::{part_outputs, LayoutError, RawOutput};
 use pav_detect::layout::{Arrange, Description, Role};
-use pav_onnx::autodiff::{output_shapes, AutodiffError};
+use pav_onnx::autodiff::{output_shapes, value_shapes, AutodiffError};
 use pav_onnx::proto::{Attr, Model, ValueInfo, FLOAT};
+use std::collections::HashMap;
 
 /// Where one of the description's tensors comes from.
 #[derive(Clone, Debug)]
@@ -64,7 +65,7 @@ enum Use {
 }
 
 /// Outputs of these names and shapes, without values: what a description is located among.
-pub fn as_outputs(shapes: &[(String, Vec<i64>)]) -> Vec<RawOutput> {
+fn as_outputs(shapes: &[(String, Vec<i64>)]) -> Vec<RawOutput> {
     shapes
         .iter()
         .map(|(n, s)| RawOutput {
@@ -87,8 +88,8 @@ impl Plan {
         boxes: bool,
         box_gradient: bool,
     ) -> Result<Plan, PlanError> {
-        let x = [1, 3, side as i64, side as i64];
-        let shapes = output_shapes(model, &x)?;
+        let values = value_shapes(model, &[1, 3, side as i64, side as i64])?;
+        let shapes = output_shapes(model, &values)?;
         let [box_outs, score_outs, obj_outs] = part_outputs(d, &as_outputs(&shapes), side, side, classes, boxes)?;
         let box_use = if box_gradient { Use::Seeded } else { Use::Forward };
         // Per graph output, the roles that read it and what the loss does with each.
@@ -113,7 +114,7 @@ impl Plan {
         for (k, (name, shape)) in shapes.iter().enumerate() {
             let read = roles(k);
             let Some(whole) = read.iter().map(|r| r.1).max() else { continue };
-            let split = concat_pieces(model, name, shape, d, &read, classes, &x);
+            let split = concat_pieces(model, &values, name, shape, d, &read, classes);
             let (axis, parts) = match split {
                 Some((axis, pieces)) if pieces.iter().any(|p| p.1 != whole) => {
                     let outer = shape[..axis].iter().product::<i64>() as usize;
@@ -157,6 +158,20 @@ impl Plan {
             graph_outputs.iter().map(|n| ValueInfo { name: n.clone(), elem_type: FLOAT, dims: vec![] }).collect();
         model.prune();
         Ok(Plan { tensors, sources, graph_outputs, seeded: seeded.len() })
+    }
+
+    /// The description's tensors without values: what its parts are located among.
+    pub fn located(&self) -> Vec<RawOutput> {
+        self.raw(self.tensors.iter().map(|_| Vec::new()).collect())
+    }
+
+    /// The description's tensors holding `data` (one per tensor, as [`Plan::assemble`] gives them).
+    pub fn raw(&self, data: Vec<Vec<f32>>) -> Vec<RawOutput> {
+        self.tensors
+            .iter()
+            .zip(data)
+            .map(|((name, shape), data)| RawOutput { name: name.clone(), shape: shape.clone(), data })
+            .collect()
     }
 
     /// The description's tensors from the graph outputs `outs` (in [`Plan::graph_outputs`] order).
@@ -211,15 +226,15 @@ impl Plan {
 
 /// When graph output `name` (of `shape`) is a Concat along the width of the rows its readers
 /// take it as, each piece's value, what the loss does with it, and its size along that axis,
-/// with the axis.
+/// with the axis; `values` are the graph's value shapes.
 fn concat_pieces(
     model: &Model,
+    values: &HashMap<String, Vec<i64>>,
     name: &str,
     shape: &[i64],
     d: &Description,
     read: &[(Role, Use)],
     classes: usize,
-    x: &[i64],
 ) -> Option<(usize, Vec<Piece>)> {
     let node = model.nodes.iter().find(|n| n.outputs.first().is_some_and(|o| o == name) && n.op_type == "Concat")?;
     let rank = shape.len() as i64;
@@ -237,16 +252,9 @@ fn concat_pieces(
     if axis != width_axis || arranged.iter().any(|a| *a != arranged[0]) {
         return None;
     }
-    let mut probe = model.clone();
-    probe.outputs = node.inputs.iter().map(|n| ValueInfo { name: n.clone(), elem_type: FLOAT, dims: vec![] }).collect();
-    let sizes: Vec<usize> = output_shapes(&probe, x)
-        .ok()?
-        .iter()
-        .map(|(_, s)| s.get(axis).copied())
-        .collect::<Option<Vec<i64>>>()?
-        .iter()
-        .map(|&v| v as usize)
-        .collect();
+    // A piece the nodes do not compute (a constant) leaves the output whole.
+    let sizes: Vec<usize> =
+        node.inputs.iter().map(|v| values.get(v)?.get(axis).map(|&s| s as usize)).collect::<Option<_>>()?;
     let mut at = 0;
     let pieces = node
         .inputs

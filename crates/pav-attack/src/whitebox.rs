@@ -17,13 +17,13 @@
 use super::config::OptimizeConfig;
 use super::defended::Defended;
 use super::loss::{DetectionLoss, HeadShapeError, Predictions};
-use super::outputs::{as_outputs, Plan, PlanError};
+use super::outputs::{Plan, PlanError};
 use pav_core::image::resize::Resampler;
 use pav_core::rng::Rng;
 use pav_core::step::{Chain, ChainTape, Step};
 use pav_detect::config::{ChannelOrder, DetectorConfig, ExtraInput, ExtraValue};
 use pav_detect::decode::{
-    box_jacobians_described, decode_described, score_sites, BoxTerm, LayoutError, RawOutput, ScoreRule, ScoreSite,
+    box_jacobians_described, decode_described, score_sites, BoxTerm, LayoutError, ScoreRule, ScoreSite,
 };
 use pav_detect::defence::{Defence, DefenceError};
 use pav_detect::layout::{Description, Role};
@@ -255,9 +255,7 @@ impl WhiteBox {
         // `loss.box_gradient`), then those it reads forward only (the boxes under `loss.iou`).
         let plan = Plan::new(&mut model, &description, side, classes, loss.iou, loss.box_gradient)?;
         let d = differentiate_first(&model, &[1, 3, side as i64, side as i64], Kernels::Fused, plan.seeded)?;
-        let shapes: Vec<(String, Vec<i64>)> =
-            plan.tensors.iter().map(|(n, s)| (n.clone(), s.iter().map(|&v| v as i64).collect())).collect();
-        let sites = score_sites(&description, &as_outputs(&shapes), side, side, classes)?;
+        let sites = score_sites(&description, &plan.located(), side, side, classes)?;
         let session = GradSession::new(&format!("{} (white-box)", cfg.name), d, o.threads)?;
         let channel = match i.channels {
             ChannelOrder::Rgb => [0, 1, 2],
@@ -338,13 +336,7 @@ impl WhiteBox {
         let k = self.input as f32 / self.composite as f32;
         let c = self.composite as f32;
         let map = InputMap { scale_x: k, scale_y: k, pad_x: 0.0, pad_y: 0.0, frame_w: c, frame_h: c };
-        let raw: Vec<RawOutput> = self
-            .plan
-            .tensors
-            .iter()
-            .zip(outs)
-            .map(|((name, shape), data)| RawOutput { name: name.clone(), shape: shape.clone(), data: data.clone() })
-            .collect();
+        let raw = self.plan.raw(outs.to_vec());
         let (d, side) = (&self.description, self.input);
         Ok(if grad {
             box_jacobians_described(d, &raw, side, side, self.classes, &map)?

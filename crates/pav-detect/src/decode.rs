@@ -716,6 +716,14 @@ pub struct ScoreSite {
 }
 
 impl ScoreRule {
+    /// The column (from the first score column) of class `k`: past a background column, one on.
+    pub fn column(&self, k: usize) -> usize {
+        match self.background {
+            Some(bg) if k >= bg => k + 1,
+            _ => k,
+        }
+    }
+
     /// The rule of `d` for `classes` classes.
     pub fn of(d: &Description, classes: usize) -> Self {
         let power = |p: Option<f32>| p.unwrap_or(1.0);

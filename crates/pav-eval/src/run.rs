@@ -685,15 +685,16 @@ fn close_video(
 
 /// Each scored frame's light outside the boxes any detector found the car in on it.
 fn frame_lights(lights: &[(usize, Light)], recs: &[FrameRecord]) -> Vec<FrameLight> {
+    let mut boxes: HashMap<usize, Vec<[f32; 4]>> = HashMap::new();
+    for r in recs.iter().filter(|r| r.detected) {
+        if let (Some(x1), Some(y1), Some(x2), Some(y2)) = (r.x1, r.y1, r.x2, r.y2) {
+            boxes.entry(r.frame).or_default().push([x1, y1, x2, y2]);
+        }
+    }
     lights
         .iter()
         .map(|(frame, light)| {
-            let boxes: Vec<[f32; 4]> = recs
-                .iter()
-                .filter(|r| r.frame == *frame && r.detected)
-                .filter_map(|r| Some([r.x1?, r.y1?, r.x2?, r.y2?]))
-                .collect();
-            let (luminance, r, b) = light.outside(&boxes);
+            let (luminance, r, b) = light.outside(boxes.get(frame).map_or(&[][..], Vec::as_slice));
             FrameLight { frame: *frame, luminance, r, b }
         })
         .collect()

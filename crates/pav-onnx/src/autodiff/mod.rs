@@ -177,15 +177,23 @@ fn values(model: &Model, input_shape: &[i64]) -> Result<Values, AutodiffError> {
     Ok(Values { input, shape, live, elem })
 }
 
-/// The shapes of `model`'s outputs for an input of `input_shape` (batch 1), as differentiation
-/// fixes them: what a caller reads to choose the outputs to differentiate.
-pub fn output_shapes(model: &Model, input_shape: &[i64]) -> Result<Vec<(String, Vec<i64>)>, AutodiffError> {
-    let v = values(model, input_shape)?;
+/// The shape of every value `model`'s nodes compute for an input of `input_shape` (batch 1), the
+/// input's included, as differentiation fixes them: what a caller reads to choose the outputs to
+/// differentiate.
+pub fn value_shapes(model: &Model, input_shape: &[i64]) -> Result<HashMap<String, Vec<i64>>, AutodiffError> {
+    Ok(values(model, input_shape)?.shape)
+}
+
+/// The shapes of `model`'s outputs, in order, among `shapes` ([`value_shapes`]).
+pub fn output_shapes(
+    model: &Model,
+    shapes: &HashMap<String, Vec<i64>>,
+) -> Result<Vec<(String, Vec<i64>)>, AutodiffError> {
     model
         .outputs
         .iter()
         .map(|o| {
-            let s = v.shape.get(&o.name).cloned();
+            let s = shapes.get(&o.name).cloned();
             s.map(|s| (o.name.clone(), s)).ok_or_else(|| AutodiffError::Graph(format!("unknown output {}", o.name)))
         })
         .collect()
