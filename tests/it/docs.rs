@@ -348,8 +348,7 @@ fn the_main_job_scores_the_turntable_fixture() {
     let fresh = pav::results::ResultFile::from_run(
         &run,
         &out.join("summary.csv"),
-        &recorded.from_columns,
-        &recorded.from_rows,
+        &recorded.shape(),
         &recorded.title,
         tmp.path(),
     )

@@ -5,7 +5,7 @@
 
 use crate::common;
 
-use pav::results::{documents, regenerate, ResultFile, DIR};
+use pav::results::{documents, regenerate, ResultFile, Shape, DIR};
 use std::path::Path;
 
 #[test]
@@ -36,7 +36,7 @@ fn copy_root() -> tempfile::TempDir {
         copy_dir(&root.join(d), &tmp.path().join(d));
     }
     std::fs::copy(root.join("README.md"), tmp.path().join("README.md")).unwrap();
-    for d in ["fixtures", ".deps", "data"] {
+    for d in ["fixtures", ".deps", "data", "bench"] {
         std::os::unix::fs::symlink(root.join(d), tmp.path().join(d)).unwrap();
     }
     tmp
@@ -99,4 +99,47 @@ fn a_changed_config_marks_its_table_stale() {
     // Written, the mark stays until the run is recorded again; the check then passes on it.
     regenerate(tmp.path(), true).unwrap();
     assert!(regenerate(tmp.path(), false).unwrap().is_empty());
+}
+
+/// A benchmark's table is its committed CSV made wide (one column per tool, the fastest of the
+/// repeated rounds) with ratios between columns; taken again from the CSV it gives the recorded
+/// rows, and a rerun that rewrites the CSV marks it stale.
+#[test]
+fn a_benchmark_table_is_its_csv_pivoted_and_goes_stale_with_it() {
+    common::real_data();
+    let root = common::repo();
+    let recorded = ResultFile::load(&root, "evaluate-vs-python").unwrap();
+    let csv = root.join("bench/vs_python_turntable.csv");
+    let mut run = pav::provenance::Run::start().inputs([csv.as_path()]);
+    run.command = vec![recorded.command.clone()];
+    let fresh = ResultFile::from_run(&run, &csv, &recorded.shape(), &recorded.title, &root).unwrap();
+    assert_eq!(fresh.rows, recorded.rows);
+    assert_eq!(fresh.inputs, recorded.inputs);
+    // The cells by hand: the fastest of each tool's rounds, and pav's over Python's.
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let fastest = |tool: &str, det: &str| {
+        text.lines()
+            .filter_map(|l| {
+                let f: Vec<&str> = l.split(',').collect();
+                (f[0] == tool && f[1] == det).then(|| f[3].parse::<f64>().unwrap())
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let row = fresh.rows.iter().find(|r| r[0] == "yolox_nano").unwrap();
+    let (py, pav) = (fastest("python", "yolox_nano"), fastest("pav", "yolox_nano"));
+    assert_eq!(row[1], format!("{py:.2}"));
+    assert_eq!(row[2], format!("{pav:.2}"));
+    assert_eq!(row[4], format!("{:.2}", pav / py));
+    // A bad pivot is refused with the columns there are.
+    let bad = Shape { pivot: Some("tool=seconds".into()), ..recorded.shape() };
+    let e = ResultFile::from_run(&run, &csv, &bad, "t", &root).unwrap_err().to_string();
+    assert!(e.contains("no column `seconds`") && e.contains("wall_s"), "{e}");
+    // Rewritten by a rerun, the CSV makes its table stale.
+    let tmp = copy_root();
+    std::fs::remove_file(tmp.path().join("bench")).unwrap();
+    copy_dir(&root.join("bench"), &tmp.path().join("bench"));
+    std::fs::write(tmp.path().join("bench/vs_python_turntable.csv"), text.replacen("20.467", "19.9", 1)).unwrap();
+    let differ = regenerate(tmp.path(), false).unwrap();
+    let (_, new) = differ.iter().find(|(p, _)| p.ends_with("docs/reports/speed.md")).expect("speed.md's table");
+    assert!(new.contains("bench/vs_python_turntable.csv changed"), "{new}");
 }

@@ -42,6 +42,9 @@ pub struct ResultFile {
     /// The rows of the run's CSV the table keeps, as `HEADING=VALUE` conditions (none: all).
     #[serde(default)]
     pub from_rows: Vec<String>,
+    /// `KEY=VALUE` when the CSV's long rows were turned wide (see [`Shape::pivot`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub from_pivot: Option<String>,
     /// Rows of cells, as the table shows them (intervals included).
     pub rows: Vec<Vec<String>>,
     /// A sentence printed under the table.
@@ -111,38 +114,35 @@ impl ResultFile {
     }
 
     /// The table `title` of the CSV `table` written by the run recorded in `run` (its
-    /// `run.toml`), with the run's command, commit, seeds and inputs (paths made relative to
-    /// `root`), keeping the rows that meet every `HEADING=VALUE` of `rows_where`. Each of
-    /// `columns` is `HEADING[+HEADING][=SHOWN][:FORMAT]`: one CSV column, or two
-    /// shown as an interval `a–b`, under the heading SHOWN, formatted as `pct` (× 100, one
-    /// decimal) or with a number of decimals.
+    /// `run.toml`), shaped by `shape`, with the run's command, commit, seeds and inputs (paths
+    /// made relative to `root`).
     pub fn from_run(
         run: &Run,
         table: &Path,
-        columns: &[String],
-        rows_where: &[String],
+        shape: &Shape,
         title: &str,
         root: &Path,
     ) -> Result<ResultFile, ResultsError> {
-        let mut rd = csv::Reader::from_path(table)
-            .map_err(|e| ResultsError::Parse { path: table.into(), msg: e.to_string() })?;
-        let head = rd.headers().map_err(|e| ResultsError::Parse { path: table.into(), msg: e.to_string() })?.clone();
-        let picks: Vec<Column> = columns.iter().map(|c| Column::parse(c, &head, table)).collect::<Result<_, _>>()?;
-        let conditions: Vec<(usize, &str)> = rows_where
+        let parse = |e: csv::Error| ResultsError::Parse { path: table.into(), msg: e.to_string() };
+        let mut rd = csv::Reader::from_path(table).map_err(parse)?;
+        let head = rd.headers().map_err(parse)?.clone();
+        let records: Vec<csv::StringRecord> = rd.records().collect::<Result<_, _>>().map_err(parse)?;
+        let conditions: Vec<(usize, &str)> = shape
+            .rows_where
             .iter()
             .map(|w| {
                 let (k, v) = w.split_once('=').unwrap_or((w, ""));
-                let c = Column::parse(k, &head, table)?;
-                Ok((c.at[0], v))
+                Ok((position(&head, k, table)?, v))
             })
             .collect::<Result<_, ResultsError>>()?;
-        let mut rows = Vec::new();
-        for r in rd.records() {
-            let r = r.map_err(|e| ResultsError::Parse { path: table.into(), msg: e.to_string() })?;
-            if conditions.iter().all(|(at, v)| r.get(*at) == Some(*v)) {
-                rows.push(picks.iter().map(|c| c.cell(&r)).collect());
-            }
-        }
+        let kept = records.into_iter().filter(|r| conditions.iter().all(|(at, v)| r.get(*at) == Some(*v)));
+        let (head, records) = match &shape.pivot {
+            Some(p) => pivot(&head, kept, p, &shape.columns, table)?,
+            None => (head.clone(), kept.collect()),
+        };
+        let picks: Vec<Column> =
+            shape.columns.iter().map(|c| Column::parse(c, &head, table)).collect::<Result<_, _>>()?;
+        let rows = records.iter().map(|r| picks.iter().map(|c| c.cell(r)).collect()).collect();
         let seeds =
             run.settings.get("seeds").or(run.settings.get("seed")).map_or(Vec::new(), |s| {
                 s.split(|c: char| !c.is_ascii_digit()).filter_map(|v| v.parse().ok()).collect()
@@ -166,11 +166,17 @@ impl ResultFile {
             inputs,
             transcribed: None,
             columns: picks.into_iter().map(|p| p.shown).collect(),
-            from_columns: columns.to_vec(),
-            from_rows: rows_where.to_vec(),
+            from_columns: shape.columns.clone(),
+            from_rows: shape.rows_where.clone(),
+            from_pivot: shape.pivot.clone(),
             rows,
             note: None,
         })
+    }
+
+    /// How this table was taken from its CSV, to take it again from a fresh run.
+    pub fn shape(&self) -> Shape {
+        Shape { columns: self.from_columns.clone(), rows_where: self.from_rows.clone(), pivot: self.from_pivot.clone() }
     }
 
     /// The inputs whose sha256 under `root` (or in the data manifest) is no longer the one the
@@ -197,7 +203,21 @@ impl ResultFile {
     /// The Markdown block of this table as results file `name` under `root`: the table, its
     /// note, where it came from, and a stale or transcribed mark.
     pub fn render(&self, name: &str, root: &Path) -> String {
-        let mut md = format!("| {} |\n|{}\n", self.columns.join(" | "), "---|".repeat(self.columns.len()));
+        // Numbers align right, as a reader compares them digit by digit.
+        let align: String = (0..self.columns.len())
+            .map(|c| {
+                let mut cells = self.rows.iter().filter_map(|r| r.get(c)).filter(|v| !v.is_empty() && *v != "n/a");
+                let numeric = |v: &String| {
+                    v.trim_start_matches("**").starts_with(|ch: char| ch.is_ascii_digit() || "+-−.".contains(ch))
+                };
+                if cells.clone().next().is_some() && cells.all(numeric) {
+                    "---:|"
+                } else {
+                    "---|"
+                }
+            })
+            .collect();
+        let mut md = format!("| {} |\n|{align}\n", self.columns.join(" | "));
         for r in &self.rows {
             md.push_str(&format!("| {} |\n", r.join(" | ")));
         }
@@ -232,45 +252,136 @@ impl ResultFile {
     }
 }
 
+/// How a results table is taken from a run's CSV.
+#[derive(Clone, Debug, Default)]
+pub struct Shape {
+    /// `HEADING[+HEADING|/HEADING][=SHOWN][:FORMAT]` each: one CSV column, two shown as an
+    /// interval `a–b` (`+`) or as their ratio (`/`), under the heading SHOWN, formatted as `pct`
+    /// (× 100, one decimal) or with a number of decimals.
+    pub columns: Vec<String>,
+    /// Keep only the rows where every `HEADING=VALUE` holds (none: all).
+    pub rows_where: Vec<String>,
+    /// `KEY=VALUE`: long rows made wide, each distinct KEY becoming a column holding VALUE,
+    /// one row per combination of the other columns the table shows; a cell met by several
+    /// rows (repeated timings) keeps the smallest value.
+    pub pivot: Option<String>,
+}
+
+/// Where `key` stands in `head`.
+fn position(head: &csv::StringRecord, key: &str, table: &Path) -> Result<usize, ResultsError> {
+    head.iter().position(|h| h == key).ok_or_else(|| ResultsError::Parse {
+        path: table.into(),
+        msg: format!("no column `{key}` (columns: {})", head.iter().collect::<Vec<_>>().join(", ")),
+    })
+}
+
+/// The rows `records` (under `head`) made wide by `spec` (`KEY=VALUE`), grouped by the other
+/// columns that `columns` names, in the order they first appear.
+fn pivot(
+    head: &csv::StringRecord,
+    records: impl Iterator<Item = csv::StringRecord>,
+    spec: &str,
+    columns: &[String],
+    table: &Path,
+) -> Result<(csv::StringRecord, Vec<csv::StringRecord>), ResultsError> {
+    let bad = |msg: String| ResultsError::Parse { path: table.into(), msg };
+    let (key, value) = spec.split_once('=').ok_or_else(|| bad(format!("a pivot is KEY=VALUE, not `{spec}`")))?;
+    let (key, value) = (position(head, key, table)?, position(head, value, table)?);
+    let named: Vec<&str> = columns.iter().flat_map(|c| Column::keys(c)).collect();
+    let group: Vec<usize> = (0..head.len()).filter(|&i| i != key && i != value && named.contains(&&head[i])).collect();
+    let mut wide: Vec<String> = Vec::new();
+    let mut cells: Vec<(Vec<String>, BTreeMap<String, f64>)> = Vec::new();
+    for r in records {
+        let k = r.get(key).unwrap_or_default().to_string();
+        let v: f64 = r.get(value).unwrap_or_default().parse().map_err(|_| {
+            bad(format!(
+                "`{}` is not a number in the pivot's column {}",
+                r.get(value).unwrap_or_default(),
+                &head[value]
+            ))
+        })?;
+        if !wide.contains(&k) {
+            wide.push(k.clone());
+        }
+        let id: Vec<String> = group.iter().map(|&g| r.get(g).unwrap_or_default().to_string()).collect();
+        let at = match cells.iter().position(|(g, _)| *g == id) {
+            Some(at) => at,
+            None => {
+                cells.push((id, BTreeMap::new()));
+                cells.len() - 1
+            }
+        };
+        let cell = cells[at].1.entry(k).or_insert(v);
+        *cell = cell.min(v);
+    }
+    let mut new_head: csv::StringRecord = group.iter().map(|&g| &head[g]).collect();
+    for w in &wide {
+        new_head.push_field(w);
+    }
+    let rows = cells
+        .into_iter()
+        .map(|(id, vals)| {
+            let mut r: csv::StringRecord = id.iter().collect();
+            for w in &wide {
+                r.push_field(&vals.get(w).map_or(String::new(), |v| v.to_string()));
+            }
+            r
+        })
+        .collect();
+    Ok((new_head, rows))
+}
+
 /// A column of a results table taken from a CSV: its positions, heading and format.
 struct Column {
     at: Vec<usize>,
+    ratio: bool,
     shown: String,
     format: Option<String>,
 }
 
 impl Column {
-    /// `HEADING[+HEADING][=SHOWN][:FORMAT]` against the CSV's `head`.
-    fn parse(spec: &str, head: &csv::StringRecord, table: &Path) -> Result<Column, ResultsError> {
+    /// The spec split into its CSV headings and the rest (`=SHOWN`, `:FORMAT`).
+    fn split(spec: &str) -> (&str, &str, Option<&str>) {
         let (rest, format) = match spec.rsplit_once(':') {
-            Some((r, f)) if f == "pct" || f.parse::<usize>().is_ok() => (r, Some(f.to_string())),
+            Some((r, f)) if f == "pct" || f.parse::<usize>().is_ok() => (r, Some(f)),
             _ => (spec, None),
         };
         let (keys, shown) = rest.split_once('=').unwrap_or((rest, rest));
-        let at = keys
-            .split('+')
-            .map(|k| {
-                head.iter().position(|h| h == k).ok_or_else(|| ResultsError::Parse {
-                    path: table.into(),
-                    msg: format!("no column `{k}` (columns: {})", head.iter().collect::<Vec<_>>().join(", ")),
-                })
-            })
-            .collect::<Result<_, _>>()?;
-        Ok(Column { at, shown: shown.to_string(), format })
+        (keys, shown, format)
     }
 
-    /// Its cell in `row`: the values formatted, two of them as an interval.
+    /// The CSV headings a spec reads.
+    fn keys(spec: &str) -> impl Iterator<Item = &str> {
+        Column::split(spec).0.split(['+', '/'])
+    }
+
+    /// `HEADING[+HEADING|/HEADING][=SHOWN][:FORMAT]` against the CSV's `head`.
+    fn parse(spec: &str, head: &csv::StringRecord, table: &Path) -> Result<Column, ResultsError> {
+        let (keys, shown, format) = Column::split(spec);
+        let at = Column::keys(spec).map(|k| position(head, k, table)).collect::<Result<Vec<_>, _>>()?;
+        let ratio = keys.contains('/');
+        if ratio && at.len() != 2 {
+            return Err(ResultsError::Parse { path: table.into(), msg: format!("a ratio is A/B, not `{keys}`") });
+        }
+        Ok(Column { at, ratio, shown: shown.to_string(), format: format.map(str::to_string) })
+    }
+
+    /// Its cell in `row`: the values formatted, two of them as an interval or a ratio.
     fn cell(&self, row: &csv::StringRecord) -> String {
-        let one = |at: usize| {
-            let v = row.get(at).unwrap_or_default();
-            match (self.format.as_deref(), v.parse::<f64>()) {
-                (_, _) if v.is_empty() => "n/a".to_string(),
-                (Some("pct"), Ok(x)) => format!("{:.1}", 100.0 * x),
-                (Some(d), Ok(x)) => format!("{x:.*}", d.parse().unwrap_or(3)),
-                _ => v.to_string(),
-            }
+        let shown = |v: &str| match (self.format.as_deref(), v.parse::<f64>()) {
+            (_, _) if v.is_empty() => "n/a".to_string(),
+            (Some("pct"), Ok(x)) => format!("{:.1}", 100.0 * x),
+            (Some(d), Ok(x)) => format!("{x:.*}", d.parse().unwrap_or(3)),
+            _ => v.to_string(),
         };
-        self.at.iter().map(|&a| one(a)).collect::<Vec<_>>().join("–")
+        let get = |at: usize| row.get(at).unwrap_or_default();
+        if self.ratio {
+            return match (get(self.at[0]).parse::<f64>(), get(self.at[1]).parse::<f64>()) {
+                (Ok(a), Ok(b)) if b != 0.0 => shown(&(a / b).to_string()),
+                _ => "n/a".to_string(),
+            };
+        }
+        self.at.iter().map(|&a| shown(get(a))).collect::<Vec<_>>().join("–")
     }
 }
 

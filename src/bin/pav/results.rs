@@ -2,7 +2,7 @@
 
 use anyhow::{bail, Context, Result};
 use pav::provenance::Run;
-use pav::results::{regenerate, ResultFile};
+use pav::results::{regenerate, ResultFile, Shape};
 use std::path::PathBuf;
 
 #[derive(clap::Subcommand)]
@@ -14,18 +14,26 @@ pub enum Cmd {
         /// `<!-- results:NAME -->` and `<!-- /results:NAME -->`).
         name: String,
         /// The run's output folder (holding its run.toml) or the run.toml itself.
-        #[arg(long)]
-        run: PathBuf,
+        #[arg(long, required_unless_present = "bench")]
+        run: Option<PathBuf>,
+        /// Instead of a run: the benchmark command that wrote `--table` (a CSV committed under
+        /// bench/, which becomes the table's input, so that rewriting it marks the table stale).
+        #[arg(long, conflicts_with = "run")]
+        bench: Option<String>,
         /// The CSV the run wrote, whose rows the table shows.
         #[arg(long)]
         table: PathBuf,
-        /// Columns: `HEADING[+HEADING][=SHOWN][:FORMAT]` (two headings make an interval `a–b`;
-        /// FORMAT `pct` or a number of decimals), comma-separated.
+        /// Columns: `HEADING[+HEADING|/HEADING][=SHOWN][:FORMAT]` (two headings make an interval
+        /// `a–b` or a ratio; FORMAT `pct` or a number of decimals), comma-separated.
         #[arg(long, value_delimiter = ',', required = true)]
         columns: Vec<String>,
         /// Keep only the CSV's rows where HEADING has VALUE (`HEADING=VALUE`, comma-separated).
         #[arg(long = "where", value_delimiter = ',')]
         rows_where: Vec<String>,
+        /// `KEY=VALUE`: each distinct KEY becomes a column holding VALUE (the smallest, where
+        /// rows repeat, as for repeated timings).
+        #[arg(long)]
+        pivot: Option<String>,
         /// What the table answers.
         #[arg(long)]
         title: String,
@@ -43,15 +51,33 @@ pub enum Cmd {
 pub fn run(c: &Cmd) -> Result<()> {
     let root = PathBuf::from(".");
     match c {
-        Cmd::Add { name, run, table, columns, rows_where, title, note } => {
-            let record = if run.is_dir() { run.join("run.toml") } else { run.clone() };
-            let r = Run::read(&record)
-                .map_err(anyhow::Error::msg)
-                .with_context(|| format!("reading {}", record.display()))?;
-            if r.git_dirty {
-                eprintln!("warning: {} ran on a checkout with uncommitted changes", record.display());
+        Cmd::Add { name, run, bench, table, columns, rows_where, pivot, title, note } => {
+            let r = match (run, bench) {
+                (Some(run), _) => {
+                    let record = if run.is_dir() { run.join("run.toml") } else { run.clone() };
+                    let r = Run::read(&record)
+                        .map_err(anyhow::Error::msg)
+                        .with_context(|| format!("reading {}", record.display()))?;
+                    if r.git_dirty {
+                        eprintln!("warning: {} ran on a checkout with uncommitted changes", record.display());
+                    }
+                    r
+                }
+                (None, Some(cmd)) => {
+                    let mut r = Run::start().inputs([table.as_path()]);
+                    r.command = vec![cmd.clone()];
+                    if let Some(c) = last_commit(table) {
+                        r.git_commit = c;
+                    }
+                    r
+                }
+                (None, None) => bail!("give --run or --bench"),
+            };
+            let shape = Shape { columns: columns.clone(), rows_where: rows_where.clone(), pivot: pivot.clone() };
+            let mut file = ResultFile::from_run(&r, table, &shape, title, &root)?;
+            if let Some(cmd) = bench {
+                file.command = cmd.clone();
             }
-            let mut file = ResultFile::from_run(&r, table, columns, rows_where, title, &root)?;
             file.note = note.clone();
             let path = file.save(&root, name)?;
             println!(
@@ -75,4 +101,17 @@ pub fn run(c: &Cmd) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The commit that last wrote `file`, when it is committed as it stands (a benchmark's CSV was
+/// measured with the binaries of that commit, not of today's).
+fn last_commit(file: &std::path::Path) -> Option<String> {
+    let git = |args: &[&std::ffi::OsStr]| std::process::Command::new("git").args(args).output().ok();
+    let clean = git(&["diff".as_ref(), "--quiet".as_ref(), "HEAD".as_ref(), "--".as_ref(), file.as_os_str()])?;
+    if !clean.status.success() {
+        return None;
+    }
+    let log = git(&["log".as_ref(), "-1".as_ref(), "--format=%H".as_ref(), "--".as_ref(), file.as_os_str()])?;
+    let c = String::from_utf8_lossy(&log.stdout).trim().to_string();
+    (!c.is_empty()).then_some(c)
 }
