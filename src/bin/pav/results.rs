@@ -9,38 +9,7 @@ use std::path::PathBuf;
 pub enum Cmd {
     /// Record a headline table from a finished run as results/NAME.json: columns of a CSV it
     /// wrote, with the command, commit, seeds and input hashes of its run.toml.
-    Add {
-        /// The table's name (its file is results/NAME.json; a document shows it between
-        /// `<!-- results:NAME -->` and `<!-- /results:NAME -->`).
-        name: String,
-        /// The run's output folder (holding its run.toml) or the run.toml itself.
-        #[arg(long, required_unless_present = "bench")]
-        run: Option<PathBuf>,
-        /// Instead of a run: the benchmark command that wrote `--table` (a CSV committed under
-        /// bench/, which becomes the table's input, so that rewriting it marks the table stale).
-        #[arg(long, conflicts_with = "run")]
-        bench: Option<String>,
-        /// The CSV the run wrote, whose rows the table shows.
-        #[arg(long)]
-        table: PathBuf,
-        /// Columns: `HEADING[+HEADING|/HEADING][=SHOWN][:FORMAT]` (two headings make an interval
-        /// `a–b` or a ratio; FORMAT `pct` or a number of decimals), comma-separated.
-        #[arg(long, value_delimiter = ',', required = true)]
-        columns: Vec<String>,
-        /// Keep only the CSV's rows where HEADING has VALUE (`HEADING=VALUE`, comma-separated).
-        #[arg(long = "where", value_delimiter = ',')]
-        rows_where: Vec<String>,
-        /// `KEY=VALUE`: each distinct KEY becomes a column holding VALUE (the smallest, where
-        /// rows repeat, as for repeated timings).
-        #[arg(long)]
-        pivot: Option<String>,
-        /// What the table answers.
-        #[arg(long)]
-        title: String,
-        /// A sentence printed under the table.
-        #[arg(long)]
-        note: Option<String>,
-    },
+    Add(Box<AddArgs>),
     /// Regenerate every results block in README.md and docs/ from results/.
     Write,
     /// Fail, naming each document whose results blocks differ from what `pav results write`
@@ -48,10 +17,46 @@ pub enum Cmd {
     Check,
 }
 
+/// `pav results add`.
+#[derive(clap::Args)]
+pub struct AddArgs {
+    /// The table's name (its file is results/NAME.json; a document shows it between
+    /// `<!-- results:NAME -->` and `<!-- /results:NAME -->`).
+    name: String,
+    /// The run's output folder (holding its run.toml) or the run.toml itself.
+    #[arg(long, required_unless_present = "bench")]
+    run: Option<PathBuf>,
+    /// Instead of a run: the benchmark command that wrote `--table` (a CSV committed under
+    /// bench/, which becomes the table's input, so that rewriting it marks the table stale).
+    #[arg(long, conflicts_with = "run")]
+    bench: Option<String>,
+    /// The CSV the run wrote, whose rows the table shows.
+    #[arg(long)]
+    table: PathBuf,
+    /// Columns: `HEADING[+HEADING|/HEADING][=SHOWN][:FORMAT]` (two headings make an interval
+    /// `a–b` or a ratio; FORMAT `pct` or a number of decimals), comma-separated.
+    #[arg(long, value_delimiter = ',', required = true)]
+    columns: Vec<String>,
+    /// Keep only the CSV's rows where HEADING has VALUE (`HEADING=VALUE`, comma-separated).
+    #[arg(long = "where", value_delimiter = ',')]
+    rows_where: Vec<String>,
+    /// `KEY=VALUE`: each distinct KEY becomes a column holding VALUE (the smallest, where
+    /// rows repeat, as for repeated timings).
+    #[arg(long)]
+    pivot: Option<String>,
+    /// What the table answers.
+    #[arg(long)]
+    title: String,
+    /// A sentence printed under the table.
+    #[arg(long)]
+    note: Option<String>,
+}
+
 pub fn run(c: &Cmd) -> Result<()> {
     let root = PathBuf::from(".");
     match c {
-        Cmd::Add { name, run, bench, table, columns, rows_where, pivot, title, note } => {
+        Cmd::Add(a) => {
+            let AddArgs { name, run, bench, table, columns, rows_where, pivot, title, note } = a.as_ref();
             let r = match (run, bench) {
                 (Some(run), _) => {
                     let record = if run.is_dir() { run.join("run.toml") } else { run.clone() };
