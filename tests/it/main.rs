@@ -34,6 +34,8 @@ mod docs;
 mod evaluate_fixture;
 mod firmware_qemu;
 mod layers;
+#[cfg(feature = "optimize")]
+mod lofo;
 #[cfg(feature = "eval")]
 mod model_inspect;
 #[cfg(feature = "eval")]

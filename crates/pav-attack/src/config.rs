@@ -207,6 +207,11 @@ pub struct OptimizerConfig {
     /// gain on the held-out detector). Absent: the last texture.
     #[serde(default)]
     pub average: Option<AverageConfig>,
+    /// ONNX Runtime threads per white-box pass (0, the default: the runtime's, one per physical
+    /// core). The sums a pass splits over threads round differently with another count, so a
+    /// run is repeated bit for bit only at the same count on the same kind of CPU.
+    #[serde(default)]
+    pub threads: usize,
 }
 
 /// `optimizer.average`: which iterates the output texture averages.

@@ -461,7 +461,12 @@ impl Ensemble {
                     iou: cfg.loss.iou,
                     box_gradient: cfg.loss.box_gradient,
                 };
-                let o = WhiteBoxOptions { composite: size, input: None, threads: 0, surrogate: e.surrogate };
+                let o = WhiteBoxOptions {
+                    composite: size,
+                    input: None,
+                    threads: cfg.optimizer.threads,
+                    surrogate: e.surrogate,
+                };
                 Ok((WhiteBox::with_options(&d, loss, o)?, e.weight))
             })
             .collect::<Result<_, WhiteBoxError>>()?;

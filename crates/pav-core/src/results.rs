@@ -30,6 +30,11 @@ pub struct ResultFile {
     /// Every config and data file it read, by path (repository-relative) or data store entry
     /// (`data:NAME`), with its sha256 then.
     pub inputs: BTreeMap<String, String>,
+    /// What it read that pav made and the repository does not hold (rendered views under
+    /// `out/`), with its sha256 then: kept so that runs on two machines can be compared input by
+    /// input, but never checked, as a fresh clone has not made them yet.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub generated: BTreeMap<String, String>,
     /// Set when the numbers were copied from an older document, not made by the command here.
     #[serde(default)]
     pub transcribed: Option<Transcribed>,
@@ -147,9 +152,13 @@ impl ResultFile {
             run.settings.get("seeds").or(run.settings.get("seed")).map_or(Vec::new(), |s| {
                 s.split(|c: char| !c.is_ascii_digit()).filter_map(|v| v.parse().ok()).collect()
             });
-        let mut inputs = BTreeMap::new();
+        let (mut inputs, mut generated) = (BTreeMap::new(), BTreeMap::new());
         for i in run.config.iter().chain(&run.inputs) {
             let key = input_key(i, root);
+            if key.starts_with(GENERATED) {
+                generated.insert(key, i.sha256.clone());
+                continue;
+            }
             // A config still as the run read it is kept by its content, so that a comment
             // edited later does not make the table stale.
             let sha = match content_sha(&root.join(&key)) {
@@ -164,6 +173,7 @@ impl ResultFile {
             commit: run.git_commit.chars().take(7).collect(),
             seeds,
             inputs,
+            generated,
             transcribed: None,
             columns: picks.into_iter().map(|p| p.shown).collect(),
             from_columns: shape.columns.clone(),
@@ -384,6 +394,9 @@ impl Column {
         self.at.iter().map(|&a| shown(get(a))).collect::<Vec<_>>().join("–")
     }
 }
+
+/// Where pav writes what it makes (rendered views, runs): inputs there are recorded, not checked.
+const GENERATED: &str = "out/";
 
 /// The prefix of a TOML config's content hash (see [`content_sha`]).
 const CONTENT: &str = "toml:";

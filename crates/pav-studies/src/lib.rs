@@ -5,6 +5,7 @@ pub mod advtrain;
 pub mod boxes;
 pub mod crossval;
 pub mod curve;
+pub mod lofo;
 pub mod outputs;
 pub mod per_view;
 pub mod table1;

@@ -18,6 +18,8 @@ mod data;
 #[cfg(feature = "optimize")]
 mod eval_digital;
 #[cfg(feature = "optimize")]
+mod lofo;
+#[cfg(feature = "optimize")]
 mod optimize;
 mod paint;
 mod print;
@@ -53,6 +55,11 @@ enum Cmd {
     /// photo and several random textures (a Table II in which no texture has seen its test views).
     #[cfg(feature = "optimize")]
     Crossval(crossval::Args),
+    /// Leave one family out: each arm trains the recipe against every detector family but one
+    /// over several seeds; the family left out scores it on the held-out set, paired view by
+    /// view against a peer's texture and random blocks with intervals over seeds and views.
+    #[cfg(feature = "optimize")]
+    Lofo(lofo::Args),
     /// The paper's Table I from crossval runs: held-out car score and P@0.5 per texture and
     /// detector, and each run against every baseline with paired 95 % intervals.
     #[cfg(feature = "optimize")]
@@ -155,6 +162,8 @@ fn main() -> Result<()> {
         Cmd::EvalDigital(a) => eval_digital::run(&a),
         #[cfg(feature = "optimize")]
         Cmd::Crossval(a) => crossval::run(&a),
+        #[cfg(feature = "optimize")]
+        Cmd::Lofo(a) => lofo::run(&a),
         #[cfg(feature = "optimize")]
         Cmd::Table1(a) => table1::run(&a),
         #[cfg(feature = "optimize")]

@@ -1,0 +1,385 @@
+//! `pav lofo`: leave one family out. Transfer is the claim that a texture hides the car from
+//! detectors it never trained against; held out by family, each detector family in turn is left
+//! out of the white boxes, the recipe is trained against all the others over several seeds, and
+//! the family left out scores the texture on a held-out set beside a peer's published texture and
+//! random colour blocks, paired view by view.
+
+use super::outputs::{optimize_and_report, OptimizeRun, Prepared};
+use super::per_view::ViewRecord;
+use super::table2::{eval_digital, texture_seeds};
+use super::{create_dir, write_markdown, ExperimentError, Scoring};
+use pav_attack::config::OptimizeConfig;
+use pav_attack::export::PrintSpec;
+use pav_attack::optimize::Finish;
+use pav_core::progress::Progress;
+use pav_core::provenance::{Run, FILE};
+use pav_core::table::write_csv;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+
+/// One arm: a recipe config whose white boxes are every family but one.
+#[derive(Clone, Debug)]
+pub struct Arm {
+    /// The config trained.
+    pub config: PathBuf,
+    /// The family it leaves out, by its detector's name.
+    pub held_out: String,
+    /// That detector's config, as another arm trains against it (scored as it ships: an int8
+    /// model by itself, not by its float surrogate).
+    pub detector: PathBuf,
+}
+
+impl Arm {
+    /// Its folder in the output: `without-NAME`, holding `seed<S>/` per seed.
+    pub fn dir(&self) -> String {
+        format!("without-{}", self.held_out)
+    }
+}
+
+/// The arms of `configs`: each must leave out exactly one of the families the configs train
+/// against together.
+pub fn arms(configs: &[PathBuf]) -> Result<Vec<Arm>, ExperimentError> {
+    let mut members: Vec<(PathBuf, Vec<(String, PathBuf)>)> = Vec::new();
+    for c in configs {
+        let cfg = OptimizeConfig::load(c)?;
+        let names = cfg.white_box_names()?;
+        members.push((c.clone(), names.into_iter().zip(cfg.white_box.iter().map(|w| w.detector.clone())).collect()));
+    }
+    let mut all: BTreeMap<String, PathBuf> = BTreeMap::new();
+    for (_, m) in &members {
+        for (name, det) in m {
+            all.entry(name.clone()).or_insert_with(|| det.clone());
+        }
+    }
+    let mut out = Vec::new();
+    for (config, m) in &members {
+        let missing: Vec<&String> = all.keys().filter(|n| !m.iter().any(|(k, _)| k == *n)).collect();
+        let [held_out] = missing.as_slice() else {
+            return Err(ExperimentError::Invalid(format!(
+                "{}: an arm leaves out exactly one of the families the configs train against together ({}); it leaves out {}",
+                config.display(),
+                all.keys().cloned().collect::<Vec<_>>().join(", "),
+                if missing.is_empty() { "none".to_string() } else { missing.iter().map(|s| s.as_str()).collect::<Vec<_>>().join(", ") }
+            )));
+        };
+        if out.iter().any(|a: &Arm| &a.held_out == *held_out) {
+            return Err(ExperimentError::Invalid(format!("two configs leave out {held_out}")));
+        }
+        out.push(Arm { config: config.clone(), held_out: (*held_out).clone(), detector: all[*held_out].clone() });
+    }
+    Ok(out)
+}
+
+/// The training units: every arm at every seed, in a fixed order (a shard's share is cut from it).
+pub fn units(arms: &[Arm], seeds: &[u64]) -> Vec<(usize, u64)> {
+    (0..arms.len()).flat_map(|a| seeds.iter().map(move |&s| (a, s))).collect()
+}
+
+/// A unit's folder, relative to the output folder.
+pub fn unit_dir(arm: &Arm, seed: u64) -> PathBuf {
+    Path::new(&arm.dir()).join(format!("seed{seed}"))
+}
+
+/// The result key a unit's run.toml gets once its texture is written.
+const FINISHED: &str = "finished";
+
+/// Whether the unit in `dir` finished (a killed one resumes from its checkpoint).
+pub fn finished(dir: &Path) -> bool {
+    Run::read(&dir.join(FILE)).is_ok_and(|r| r.result.get(FINISHED).is_some_and(|v| v == "yes"))
+}
+
+/// Trains `arm` at `seed` into `dir`, unless it finished there before; a run stopped part way
+/// resumes from its checkpoint. Returns whether it trained now.
+pub fn train(
+    arm: &Arm,
+    seed: u64,
+    dir: &Path,
+    progress: &dyn Progress,
+    stop: &AtomicBool,
+) -> Result<bool, ExperimentError> {
+    if finished(dir) {
+        return Ok(false);
+    }
+    let mut p = Prepared::load(&arm.config, None)?;
+    p.cfg.optimizer.seed = seed;
+    create_dir(dir)?;
+    let record = Run::start()
+        .config(&arm.config)
+        .inputs(p.cfg.inputs().iter().map(|p| p.as_path()))
+        .setting("seed", seed)
+        .setting("held_out", &arm.held_out);
+    let write =
+        |r: &Run| r.write(&dir.join(FILE)).map_err(|source| ExperimentError::Io { path: dir.join(FILE), source });
+    write(&record)?;
+    let run = OptimizeRun {
+        out: dir.to_path_buf(),
+        resume: dir.join("checkpoint.bin").is_file(),
+        epochs: None,
+        snapshot_every: 0,
+        print: PrintSpec { scale: 20.0, dpi: 300.0 },
+    };
+    if matches!(optimize_and_report(&p, &run, progress, stop)?.finish, Finish::Stopped) {
+        return Err(ExperimentError::Stopped(dir.to_path_buf()));
+    }
+    let mut record = record;
+    record.result(FINISHED, "yes");
+    write(&record)?;
+    Ok(true)
+}
+
+/// The trained texture of an arm against one other texture, for the family it left out, on the
+/// held-out views: mean best car scores and their difference over (seed, view) pairs.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct LofoRow {
+    /// The family left out, scoring.
+    pub held_out: String,
+    /// The other texture.
+    pub against: String,
+    /// Mean best car score of the arm's textures (over seeds and views).
+    pub score: f64,
+    /// The other texture's (a random kind: each view's mean over its seeds).
+    pub other: f64,
+    /// Share of (seed, view) pairs the arm's texture leaves detected at the threshold.
+    pub detected: f64,
+    /// The other texture's share.
+    pub other_detected: f64,
+    /// score − other.
+    pub diff: f64,
+    /// 95 % interval of the difference, low end, resampling seeds and views.
+    pub lo: f64,
+    /// High end.
+    pub hi: f64,
+    /// Half the interval's width.
+    pub half_width: f64,
+    /// The lowest of the per-seed mean differences.
+    pub seed_min: f64,
+    /// The highest.
+    pub seed_max: f64,
+    /// Seeds.
+    pub seeds: usize,
+    /// Held-out views.
+    pub views: usize,
+}
+
+/// The mean of `d[seed][view]` with a 95 % percentile interval from `resamples` two-level
+/// bootstrap resamples: seeds drawn with replacement, and views drawn with replacement, so that
+/// the interval carries both the spread between seeds and the spread between views.
+pub fn two_level_bootstrap(d: &[Vec<f64>], resamples: usize, seed: u64) -> Option<(f64, f64, f64)> {
+    let (s, v) = (d.len(), d.first()?.len());
+    if v == 0 || d.iter().any(|r| r.len() != v) {
+        return None;
+    }
+    let mut rng = pav_core::rng::Rng::new(seed);
+    let mut means: Vec<f64> = (0..resamples.max(1))
+        .map(|_| {
+            let seeds: Vec<usize> = (0..s).map(|_| (rng.next_u64() % s as u64) as usize).collect();
+            let mut sum = 0.0;
+            for _ in 0..v {
+                let at = (rng.next_u64() % v as u64) as usize;
+                sum += seeds.iter().map(|&k| d[k][at]).sum::<f64>();
+            }
+            sum / (s * v) as f64
+        })
+        .collect();
+    means.sort_by(f64::total_cmp);
+    let at = |q: f64| means[((q * (means.len() - 1) as f64).round() as usize).min(means.len() - 1)];
+    let mean = d.iter().flatten().sum::<f64>() / (s * v) as f64;
+    Some((mean, at(0.025), at(0.975)))
+}
+
+/// A texture's scores of one detector: view → (seed, best car score) over its seeds.
+type SeedScores<'a> = BTreeMap<&'a str, Vec<(u64, f64)>>;
+
+/// The rows of one arm from its held-out `records` (as `pav eval-digital` writes them):
+/// `mine` (one record per seed and view) against each other texture but the original paint.
+pub fn compare(records: &[ViewRecord], held_out: &str, mine: &str, threshold: f32) -> Vec<LofoRow> {
+    let held: Vec<&ViewRecord> = records.iter().filter(|r| r.role == "held-out" && r.detector == held_out).collect();
+    let mut views: Vec<&str> = held.iter().map(|r| r.view.as_str()).collect();
+    views.sort_unstable();
+    views.dedup();
+    let mut by: BTreeMap<&str, SeedScores> = BTreeMap::new();
+    for r in &held {
+        by.entry(r.texture.as_str()).or_default().entry(r.view.as_str()).or_default().push((r.seed, r.score as f64));
+    }
+    let Some(own) = by.get(mine) else { return Vec::new() };
+    let mut seeds: Vec<u64> = own.values().flatten().map(|(s, _)| *s).collect();
+    seeds.sort_unstable();
+    seeds.dedup();
+    let grid: Vec<Vec<f64>> = seeds
+        .iter()
+        .map(|s| views.iter().map(|v| own[v].iter().find(|(k, _)| k == s).map_or(f64::NAN, |(_, x)| *x)).collect())
+        .collect();
+    let hit = |x: f64| if x >= threshold as f64 { 1.0 } else { 0.0 };
+    let mean = |xs: &[f64]| xs.iter().sum::<f64>() / xs.len().max(1) as f64;
+    let mut out = Vec::new();
+    for (other, theirs) in &by {
+        if *other == mine || *other == "original" || views.iter().any(|v| !theirs.contains_key(v)) {
+            continue;
+        }
+        let per_view: Vec<f64> =
+            views.iter().map(|v| mean(&theirs[v].iter().map(|p| p.1).collect::<Vec<_>>())).collect();
+        let seen: Vec<f64> =
+            views.iter().map(|v| mean(&theirs[v].iter().map(|p| hit(p.1)).collect::<Vec<_>>())).collect();
+        let d: Vec<Vec<f64>> = grid.iter().map(|row| row.iter().zip(&per_view).map(|(a, b)| a - b).collect()).collect();
+        if d.iter().flatten().any(|x| x.is_nan()) {
+            continue;
+        }
+        let Some((diff, lo, hi)) = two_level_bootstrap(&d, 10_000, 7) else { continue };
+        let per_seed: Vec<f64> = d.iter().map(|r| mean(r)).collect();
+        let flat: Vec<f64> = grid.iter().flatten().copied().collect();
+        out.push(LofoRow {
+            held_out: held_out.into(),
+            against: (*other).into(),
+            score: mean(&flat),
+            other: mean(&per_view),
+            detected: mean(&flat.iter().map(|&x| hit(x)).collect::<Vec<_>>()),
+            other_detected: mean(&seen),
+            diff,
+            lo,
+            hi,
+            half_width: (hi - lo) / 2.0,
+            seed_min: per_seed.iter().copied().fold(f64::INFINITY, f64::min),
+            seed_max: per_seed.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            seeds: seeds.len(),
+            views: views.len(),
+        });
+    }
+    out
+}
+
+/// Scores every arm's seeds (trained into `out`) on the held-out views of `heldout` by the
+/// family it left out, beside `references` and `random_seeds` random textures of each kind, and
+/// writes each arm's `pav eval-digital` outputs into `out/without-NAME/heldout/`, then
+/// `lofo.csv` and `lofo.md` into `out`.
+pub fn score(
+    arms: &[Arm],
+    heldout: &Path,
+    references: &[PathBuf],
+    random_seeds: u64,
+    threshold: f32,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<Vec<LofoRow>, ExperimentError> {
+    let mut rows = Vec::new();
+    for arm in arms {
+        let trained = out.join(arm.dir());
+        let (mine, runs) = texture_seeds(&trained)?;
+        let dir = trained.join("heldout");
+        let scoring = Scoring { detectors: vec![arm.detector.clone()], threshold, print: None, defences: Vec::new() };
+        let textures: Vec<PathBuf> = std::iter::once(trained.clone()).chain(references.iter().cloned()).collect();
+        eval_digital(heldout, &textures, random_seeds, &scoring, None, &dir, progress)?;
+        let mut rd = csv::Reader::from_path(dir.join("digital_views.csv"))
+            .map_err(|e| ExperimentError::Invalid(format!("{}: {e}", dir.join("digital_views.csv").display())))?;
+        let records: Vec<ViewRecord> = rd
+            .deserialize()
+            .collect::<Result<_, _>>()
+            .map_err(|e| ExperimentError::Invalid(format!("{}: {e}", dir.join("digital_views.csv").display())))?;
+        let arm_rows = compare(&records, &arm.held_out, &mine, threshold);
+        if arm_rows.first().is_some_and(|r| r.seeds != runs.len()) {
+            return Err(ExperimentError::Invalid(format!(
+                "{}: seeds scored differ from seeds trained",
+                trained.display()
+            )));
+        }
+        rows.extend(arm_rows);
+    }
+    write_csv(&out.join("lofo.csv"), &rows)?;
+    write_markdown(out, "lofo.md", &markdown(&rows))?;
+    Ok(rows)
+}
+
+/// The rows as a Markdown table.
+pub fn markdown(rows: &[LofoRow]) -> String {
+    let mut md = String::from(
+        "# Leave one family out\n\nEach row: the recipe trained without the family left out, scored by it on the held-out views, against another texture. Mean best car score (detected at the threshold, %); difference over (seed, view) pairs with a 95 % interval resampling seeds and views (below zero: the trained texture hides the car better).\n\n| held out | against | trained | other | difference [95 %] | ± | per seed | seeds | views |\n|---|---|---:|---:|---:|---:|---:|---:|---:|\n",
+    );
+    for r in rows {
+        md.push_str(&format!(
+            "| {} | {} | {:.3} ({:.0} %) | {:.3} ({:.0} %) | {:+.3} [{:+.3}, {:+.3}] | {:.3} | {:+.3} … {:+.3} | {} | {} |\n",
+            r.held_out,
+            r.against,
+            r.score,
+            100.0 * r.detected,
+            r.other,
+            100.0 * r.other_detected,
+            r.diff,
+            r.lo,
+            r.hi,
+            r.half_width,
+            r.seed_min,
+            r.seed_max,
+            r.seeds,
+            r.views
+        ));
+    }
+    md
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_two_level_interval_carries_the_spread_between_seeds() {
+        // Two seeds whose views agree with each other but whose levels differ: a view-only
+        // bootstrap would give a narrow interval; resampling seeds widens it to their spread.
+        let views = 210;
+        let d: Vec<Vec<f64>> = [-0.10, 0.10]
+            .iter()
+            .map(|level| (0..views).map(|v| level + 0.01 * ((v % 7) as f64 - 3.0)).collect())
+            .collect();
+        let (mean, lo, hi) = two_level_bootstrap(&d, 4000, 1).unwrap();
+        assert!(mean.abs() < 1e-9);
+        assert!(lo < -0.09 && hi > 0.09, "{lo} {hi}");
+        let flat: Vec<f64> = d.iter().flatten().copied().collect();
+        let one = pav_eval::digital::paired_bootstrap(&flat, 4000, 1).unwrap();
+        assert!(one.hi - one.lo < 0.05, "the view bootstrap alone: {} {}", one.lo, one.hi);
+        // One seed: the views' spread alone, as the paired bootstrap gives it.
+        let (_, lo1, hi1) = two_level_bootstrap(&d[..1], 4000, 1).unwrap();
+        assert!(hi1 - lo1 < 0.01 && lo1 < -0.1 && hi1 > -0.1, "{lo1} {hi1}");
+        assert!(two_level_bootstrap(&[], 10, 1).is_none());
+        assert!(two_level_bootstrap(&[vec![1.0], vec![]], 10, 1).is_none());
+    }
+
+    fn record(texture: &str, seed: u64, view: &str, score: f32) -> ViewRecord {
+        ViewRecord {
+            fold: 0,
+            role: "held-out",
+            view: view.into(),
+            texture: texture.into(),
+            seed,
+            detector: "yolox_nano".into(),
+            score,
+        }
+    }
+
+    #[test]
+    fn an_arm_is_compared_with_each_other_texture_view_by_view() {
+        let mut r = Vec::new();
+        for (v, base) in [("a", 0.8f32), ("b", 0.6), ("c", 0.2)] {
+            r.push(record("original", 0, v, base));
+            r.push(record("rauca-e2e", 0, v, base - 0.1));
+            for s in 1..=2 {
+                r.push(record("random", s, v, base + 0.01 * s as f32));
+            }
+            for s in 0..3 {
+                r.push(record("without-yolox_nano", s, v, base - 0.2 + 0.05 * s as f32));
+            }
+        }
+        r.push(record("other-family", 0, "a", 0.9));
+        let rows = compare(&r, "yolox_nano", "without-yolox_nano", 0.5);
+        let against: Vec<&str> = rows.iter().map(|r| r.against.as_str()).collect();
+        // The original is no reference, and a texture missing views is skipped.
+        assert_eq!(against, ["random", "rauca-e2e"]);
+        let rauca = &rows[1];
+        // Each view: −0.2 + 0.05·s against −0.1, seeds 0..3: mean −0.05.
+        assert!((rauca.diff + 0.05).abs() < 1e-6, "{rauca:?}");
+        assert!((rauca.seed_min + 0.1).abs() < 1e-6 && rauca.seed_max.abs() < 1e-6, "{rauca:?}");
+        assert_eq!((rauca.seeds, rauca.views), (3, 3));
+        // Detected at 0.5: of the trained, views a (0.6, 0.65, 0.7) and b's seed 2 (0.5).
+        assert!((rauca.detected - 4.0 / 9.0).abs() < 1e-9, "{}", rauca.detected);
+        let random = &rows[0];
+        assert!((random.other - (0.8 + 0.6 + 0.2 + 3.0 * 0.015) / 3.0).abs() < 1e-6, "{random:?}");
+    }
+}

@@ -1,0 +1,117 @@
+//! `pav lofo` as a user runs it, on FCA's photos at one short epoch: each arm leaves out one
+//! family and is scored by it, paired against RAUCA-E2E's texture and random blocks over seeds and
+//! views; shards and a merge give what one process gives, and a finished unit is not trained again.
+
+use crate::common;
+
+use std::path::Path;
+use std::process::Command;
+
+fn pav() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_pav"));
+    c.current_dir(common::repo()).env("RUST_BACKTRACE", "0");
+    c
+}
+
+/// A recipe on half.toml's region training against `boxes`, two photos, one epoch.
+fn arm(dir: &Path, name: &str, boxes: &[&str]) -> std::path::PathBuf {
+    let repo = common::repo();
+    let list: Vec<String> = boxes
+        .iter()
+        .map(|b| format!("  {{ detector = \"{}\" }},", repo.join("configs/detectors").join(b).display()))
+        .collect();
+    let path = dir.join(format!("{name}.toml"));
+    std::fs::write(
+        &path,
+        format!(
+            "extends = \"{}\"\nwhite_box = [\n{}\n]\n\n[views]\ntrain = [\"data:fca/carla_dataset/test/data12501.npz\", \"data:fca/carla_dataset/test/data12503.npz\"]\n\n[optimizer]\nepochs = 1\n",
+            repo.join("configs/studies/half.toml").display(),
+            list.join("\n")
+        ),
+    )
+    .unwrap();
+    path
+}
+
+#[test]
+fn each_family_left_out_scores_its_arm_and_shards_give_the_whole_run() {
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let a = arm(tmp.path(), "a", &["yolov3-tiny.toml"]);
+    let b = arm(tmp.path(), "b", &["yolox_nano.toml"]);
+    let held = tmp.path().join("held.toml");
+    std::fs::write(
+        &held,
+        format!(
+            "extends = \"{}\"\n\n[views]\ntest = [\"data:fca/carla_dataset/test/data12502.npz\", \"data:fca/carla_dataset/test/data12504.npz\", \"data:fca/carla_dataset/test/data12506.npz\"]\n",
+            common::repo().join("configs/studies/half.toml").display()
+        ),
+    )
+    .unwrap();
+    let run = |out: &Path, extra: &[&str]| {
+        let o = pav()
+            .arg("lofo")
+            .args([&a, &b])
+            .args(["--seeds", "0,1", "--random-seeds", "1", "--heldout"])
+            .arg(&held)
+            .arg("-o")
+            .arg(out)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", common::output_text(&o));
+        common::output_text(&o)
+    };
+    let whole = tmp.path().join("whole");
+    run(&whole, &[]);
+    let csv = std::fs::read_to_string(whole.join("lofo.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    // Arm a trains against YOLOv3-tiny and is scored by YOLOX-Nano, b the other way round; each
+    // against RAUCA-E2E's texture and both kinds of random blocks, over 2 seeds × 3 photos.
+    let pairs: Vec<(&str, &str)> = rows.iter().map(|r| (r[0], r[1])).collect();
+    assert_eq!(
+        pairs,
+        [
+            ("yolox_nano", "random"),
+            ("yolox_nano", "random32"),
+            ("yolox_nano", "rauca-e2e"),
+            ("yolov3-tiny", "random"),
+            ("yolov3-tiny", "random32"),
+            ("yolov3-tiny", "rauca-e2e"),
+        ],
+        "{csv}"
+    );
+    for r in &rows {
+        let x: Vec<f64> = r[2..].iter().map(|v| v.parse().unwrap()).collect();
+        let (score, other, diff, lo, hi) = (x[0], x[1], x[4], x[5], x[6]);
+        assert!((diff - (score - other)).abs() < 1e-9 && lo <= diff && diff <= hi, "{r:?}");
+        assert!(x[8] <= diff && diff <= x[9], "the mean lies between the seeds' means: {r:?}");
+        assert_eq!((r[12], r[13]), ("2", "3"), "{r:?}");
+    }
+    // Each arm's scores are those of eval-digital on the held-out photos by the family left out.
+    let views = std::fs::read_to_string(whole.join("without-yolox_nano/heldout/digital_views.csv")).unwrap();
+    assert!(views.lines().skip(1).all(|l| l.contains(",yolox_nano,")), "{views}");
+    assert!(whole.join("without-yolox_nano/seed1/texture.png").is_file());
+    // Run again: nothing is trained again, and the table is the same.
+    let stamp =
+        |p: &Path| std::fs::metadata(p.join("without-yolov3-tiny/seed0/texture.png")).unwrap().modified().unwrap();
+    let before = stamp(&whole);
+    run(&whole, &[]);
+    assert_eq!(stamp(&whole), before);
+    assert_eq!(std::fs::read_to_string(whole.join("lofo.csv")).unwrap(), csv);
+    // Two shards and their merge: the same table.
+    let cut = tmp.path().join("cut");
+    run(&cut, &["--shard", "1/2"]);
+    run(&cut, &["--shard", "2/2"]);
+    assert!(cut.join("shard-2-of-2/without-yolox_nano/seed1/texture.png").is_file());
+    run(&cut, &["--merge"]);
+    assert_eq!(std::fs::read_to_string(cut.join("lofo.csv")).unwrap(), csv);
+    // An arm that leaves out no family, or two, is refused by name.
+    let both = arm(tmp.path(), "both", &["yolov3-tiny.toml", "yolox_nano.toml"]);
+    let o = pav().arg("lofo").args([&a, &both]).arg("--heldout").arg(&held).output().unwrap();
+    let text = common::output_text(&o);
+    assert!(
+        !o.status.success() && text.contains("both.toml: an arm leaves out exactly one") && text.contains("none"),
+        "{text}"
+    );
+}
