@@ -103,7 +103,7 @@ fn each_family_left_out_scores_its_arm_and_shards_give_the_whole_run() {
     let cut = tmp.path().join("cut");
     run(&cut, &["--shard", "1/2"]);
     run(&cut, &["--shard", "2/2"]);
-    assert!(cut.join("shard-2-of-2/without-yolox_nano/seed1/texture.png").is_file());
+    assert!(cut.join("shard-2-of-2/without-yolov3-tiny/seed1/texture.png").is_file());
     run(&cut, &["--merge"]);
     assert_eq!(std::fs::read_to_string(cut.join("lofo.csv")).unwrap(), csv);
     // An arm that leaves out no family, or two, is refused by name.

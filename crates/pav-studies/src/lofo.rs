@@ -71,9 +71,10 @@ pub fn arms(configs: &[PathBuf]) -> Result<Vec<Arm>, ExperimentError> {
     Ok(out)
 }
 
-/// The training units: every arm at every seed, in a fixed order (a shard's share is cut from it).
+/// The training units: every arm at every seed, in a fixed order (a shard's share is cut from
+/// it). Seed by seed, so that a run stopped part way has every arm at its first seeds.
 pub fn units(arms: &[Arm], seeds: &[u64]) -> Vec<(usize, u64)> {
-    (0..arms.len()).flat_map(|a| seeds.iter().map(move |&s| (a, s))).collect()
+    seeds.iter().flat_map(|&s| (0..arms.len()).map(move |a| (a, s))).collect()
 }
 
 /// A unit's folder, relative to the output folder.
