@@ -208,8 +208,8 @@ pub struct OptimizerConfig {
     #[serde(default)]
     pub average: Option<AverageConfig>,
     /// ONNX Runtime threads per white-box pass (0, the default: the runtime's, one per physical
-    /// core). The sums a pass splits over threads round differently with another count, so a
-    /// run is repeated bit for bit only at the same count on the same kind of CPU.
+    /// core), to leave cores to other jobs. The texture does not depend on it: the recommended
+    /// recipe trained the same bytes at 1 and 2 threads (docs/reports/lofo.md).
     #[serde(default)]
     pub threads: usize,
 }
