@@ -109,7 +109,9 @@ pub fn train(
         .config(&arm.config)
         .inputs(p.cfg.inputs().iter().map(|p| p.as_path()))
         .setting("seed", seed)
-        .setting("held_out", &arm.held_out);
+        .setting("held_out", &arm.held_out)
+        .setting("training_views", p.setup.training_views().len())
+        .setting("pbr_kept", p.pbr_kept.as_ref().map_or("all".to_string(), |k| k.to_string()));
     let write =
         |r: &Run| r.write(&dir.join(FILE)).map_err(|source| ExperimentError::Io { path: dir.join(FILE), source });
     write(&record)?;
