@@ -218,7 +218,7 @@ impl ResultFile {
             .map(|c| {
                 let mut cells = self.rows.iter().filter_map(|r| r.get(c)).filter(|v| !v.is_empty() && *v != "n/a");
                 let numeric = |v: &String| {
-                    v.trim_start_matches("**").starts_with(|ch: char| ch.is_ascii_digit() || "+-−.".contains(ch))
+                    v.trim_start_matches(['*', '[']).starts_with(|ch: char| ch.is_ascii_digit() || "+-−.".contains(ch))
                 };
                 if cells.clone().next().is_some() && cells.all(numeric) {
                     "---:|"
@@ -267,7 +267,8 @@ impl ResultFile {
 pub struct Shape {
     /// `HEADING[+HEADING|/HEADING][=SHOWN][:FORMAT]` each: one CSV column, two shown as an
     /// interval `a–b` (`+`) or as their ratio (`/`), under the heading SHOWN, formatted as `pct`
-    /// (× 100, one decimal) or with a number of decimals.
+    /// (× 100, one decimal), with a number of decimals, or signed with `+` before that number
+    /// (a difference; an interval of differences then reads `[−a, +b]`).
     pub columns: Vec<String>,
     /// Keep only the rows where every `HEADING=VALUE` holds (none: all).
     pub rows_where: Vec<String>,
@@ -353,7 +354,7 @@ impl Column {
     /// The spec split into its CSV headings and the rest (`=SHOWN`, `:FORMAT`).
     fn split(spec: &str) -> (&str, &str, Option<&str>) {
         let (rest, format) = match spec.rsplit_once(':') {
-            Some((r, f)) if f == "pct" || f.parse::<usize>().is_ok() => (r, Some(f)),
+            Some((r, f)) if f == "pct" || f.trim_start_matches('+').parse::<usize>().is_ok() => (r, Some(f)),
             _ => (spec, None),
         };
         let (keys, shown) = rest.split_once('=').unwrap_or((rest, rest));
@@ -378,9 +379,12 @@ impl Column {
 
     /// Its cell in `row`: the values formatted, two of them as an interval or a ratio.
     fn cell(&self, row: &csv::StringRecord) -> String {
+        let signed = self.format.as_deref().is_some_and(|f| f.starts_with('+'));
         let shown = |v: &str| match (self.format.as_deref(), v.parse::<f64>()) {
             (_, _) if v.is_empty() => "n/a".to_string(),
             (Some("pct"), Ok(x)) => format!("{:.1}", 100.0 * x),
+            // A difference shows its sign, with a true minus.
+            (Some(d), Ok(x)) if signed => format!("{x:+.*}", d[1..].parse().unwrap_or(3)).replace('-', "−"),
             (Some(d), Ok(x)) => format!("{x:.*}", d.parse().unwrap_or(3)),
             _ => v.to_string(),
         };
@@ -391,7 +395,12 @@ impl Column {
                 _ => "n/a".to_string(),
             };
         }
-        self.at.iter().map(|&a| shown(get(a))).collect::<Vec<_>>().join("–")
+        let cells: Vec<String> = self.at.iter().map(|&a| shown(get(a))).collect();
+        match cells.as_slice() {
+            // Signed ends would run into the dash: bracketed, as intervals of differences are.
+            [lo, hi] if signed => format!("[{lo}, {hi}]"),
+            _ => cells.join("–"),
+        }
     }
 }
 
@@ -519,4 +528,24 @@ pub fn regenerate(root: &Path, write: bool) -> Result<Vec<(PathBuf, String)>, Re
         }
     }
     Ok(changed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn columns_format_intervals_ratios_and_signed_differences() {
+        let head = csv::StringRecord::from(vec!["d", "lo", "hi", "a", "b"]);
+        let row = csv::StringRecord::from(vec!["-0.0044", "-0.0116", "0.0028", "3", "4"]);
+        let cell = |spec: &str| Column::parse(spec, &head, Path::new("t.csv")).unwrap().cell(&row);
+        assert_eq!(cell("d:+3"), "−0.004");
+        assert_eq!(cell("lo+hi:+3"), "[−0.012, +0.003]");
+        assert_eq!(cell("lo+hi:3"), "-0.012–0.003");
+        assert_eq!(cell("a/b=ratio:2"), "0.75");
+        assert_eq!(cell("a:pct"), "300.0");
+        assert!(Column::parse("a/b/d", &head, Path::new("t.csv")).is_err());
+        let e = Column::parse("nope", &head, Path::new("t.csv")).err().unwrap().to_string();
+        assert!(e.contains("no column `nope`") && e.contains("d, lo, hi, a, b"), "{e}");
+    }
 }

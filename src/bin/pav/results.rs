@@ -30,11 +30,16 @@ pub struct AddArgs {
     /// bench/, which becomes the table's input, so that rewriting it marks the table stale).
     #[arg(long, conflicts_with = "run")]
     bench: Option<String>,
+    /// The command a reader reruns, when it is not the run's own (a script that made the run
+    /// among others).
+    #[arg(long, conflicts_with = "bench")]
+    command: Option<String>,
     /// The CSV the run wrote, whose rows the table shows.
     #[arg(long)]
     table: PathBuf,
     /// Columns: `HEADING[+HEADING|/HEADING][=SHOWN][:FORMAT]` (two headings make an interval
-    /// `a–b` or a ratio; FORMAT `pct` or a number of decimals), comma-separated.
+    /// `a–b` or a ratio; FORMAT `pct`, a number of decimals, or `+` and one for a signed
+    /// difference), comma-separated.
     #[arg(long, value_delimiter = ',', required = true)]
     columns: Vec<String>,
     /// Keep only the CSV's rows where HEADING has VALUE (`HEADING=VALUE`, comma-separated).
@@ -56,7 +61,7 @@ pub fn run(c: &Cmd) -> Result<()> {
     let root = PathBuf::from(".");
     match c {
         Cmd::Add(a) => {
-            let AddArgs { name, run, bench, table, columns, rows_where, pivot, title, note } = a.as_ref();
+            let AddArgs { name, run, bench, command, table, columns, rows_where, pivot, title, note } = a.as_ref();
             let r = match (run, bench) {
                 (Some(run), _) => {
                     let record = if run.is_dir() { run.join("run.toml") } else { run.clone() };
@@ -80,7 +85,7 @@ pub fn run(c: &Cmd) -> Result<()> {
             };
             let shape = Shape { columns: columns.clone(), rows_where: rows_where.clone(), pivot: pivot.clone() };
             let mut file = ResultFile::from_run(&r, table, &shape, title, &root)?;
-            if let Some(cmd) = bench {
+            if let Some(cmd) = bench.as_ref().or(command.as_ref()) {
                 file.command = cmd.clone();
             }
             file.note = note.clone();
