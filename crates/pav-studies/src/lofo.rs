@@ -251,12 +251,43 @@ pub fn compare(records: &[ViewRecord], held_out: &str, mine: &str, threshold: f3
     out
 }
 
-/// Scores every arm's seeds (trained into `out`) on the held-out views of `heldout` by the
+/// The textures of `arm` at `seeds`, trained into `out`, linked into `pool/NAME/seed<S>/` so
+/// that they are scored as one texture under the arm's name (a run training later seeds in the
+/// same folder meanwhile is not read). Every unit must have finished.
+fn pool(arm: &Arm, seeds: &[u64], out: &Path, pool: &Path) -> Result<PathBuf, ExperimentError> {
+    let dir = pool.join(arm.dir());
+    if dir.exists() {
+        std::fs::remove_dir_all(&dir).map_err(|source| ExperimentError::Io { path: dir.clone(), source })?;
+    }
+    for &seed in seeds {
+        let unit = out.join(unit_dir(arm, seed));
+        if !finished(&unit) {
+            return Err(ExperimentError::Invalid(format!(
+                "{}: seed {seed} without {} has not finished training; run `pav lofo` with the same arms and seeds to train it",
+                unit.display(),
+                arm.held_out
+            )));
+        }
+        let to = dir.join(format!("seed{seed}"));
+        create_dir(&to)?;
+        for f in ["texture.png", FILE] {
+            let (a, b) = (unit.join(f), to.join(f));
+            std::fs::hard_link(&a, &b)
+                .or_else(|_| std::fs::copy(&a, &b).map(|_| ()))
+                .map_err(|source| ExperimentError::Io { path: b.clone(), source })?;
+        }
+    }
+    Ok(dir)
+}
+
+/// Scores every arm's `seeds` (trained into `out`) on the held-out views of `heldout` by the
 /// family it left out, beside `references` and `random_seeds` random textures of each kind, and
 /// writes each arm's `pav eval-digital` outputs into `out/without-NAME/heldout/`, then
 /// `lofo.csv` and `lofo.md` into `out`.
+#[allow(clippy::too_many_arguments)]
 pub fn score(
     arms: &[Arm],
+    seeds: &[u64],
     heldout: &Path,
     references: &[PathBuf],
     random_seeds: u64,
@@ -266,9 +297,9 @@ pub fn score(
 ) -> Result<Vec<LofoRow>, ExperimentError> {
     let mut rows = Vec::new();
     for arm in arms {
-        let trained = out.join(arm.dir());
+        let dir = out.join(arm.dir()).join("heldout");
+        let trained = pool(arm, seeds, out, &dir.join("pool"))?;
         let (mine, runs) = texture_seeds(&trained)?;
-        let dir = trained.join("heldout");
         let scoring = Scoring { detectors: vec![arm.detector.clone()], threshold, print: None, defences: Vec::new() };
         let textures: Vec<PathBuf> = std::iter::once(trained.clone()).chain(references.iter().cloned()).collect();
         eval_digital(heldout, &textures, random_seeds, &scoring, None, &dir, progress)?;

@@ -83,7 +83,7 @@ pub fn run(a: &Args) -> Result<()> {
             return Ok(());
         }
     }
-    let rows = score(&arms, &a.heldout, &a.references, a.random_seeds, a.threshold, &a.out, &Bar::default())?;
+    let rows = score(&arms, &a.seeds, &a.heldout, &a.references, a.random_seeds, a.threshold, &a.out, &Bar::default())?;
     println!("{}", pav::studies::lofo::markdown(&rows));
     let path = a.out.join(pav::provenance::FILE);
     record.write(&path).with_context(|| format!("writing {}", path.display()))?;
