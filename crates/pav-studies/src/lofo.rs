@@ -6,7 +6,7 @@
 
 use super::outputs::{optimize_and_report, OptimizeRun, Prepared};
 use super::per_view::ViewRecord;
-use super::table2::{eval_digital, texture_seeds};
+use super::table2::eval_digital;
 use super::{create_dir, write_markdown, ExperimentError, Scoring};
 use pav_attack::config::OptimizeConfig;
 use pav_attack::export::PrintSpec;
@@ -28,6 +28,8 @@ pub struct Arm {
     /// That detector's config, as another arm trains against it (scored as it ships: an int8
     /// model by itself, not by its float surrogate).
     pub detector: PathBuf,
+    /// Every file the config reads (`OptimizeConfig::inputs`), for a run's record.
+    pub inputs: Vec<PathBuf>,
 }
 
 impl Arm {
@@ -40,21 +42,24 @@ impl Arm {
 /// The arms of `configs`: each must leave out exactly one of the families the configs train
 /// against together.
 pub fn arms(configs: &[PathBuf]) -> Result<Vec<Arm>, ExperimentError> {
-    let mut members: Vec<(PathBuf, Vec<(String, PathBuf)>)> = Vec::new();
-    for c in configs {
-        let cfg = OptimizeConfig::load(c)?;
-        let names = cfg.white_box_names()?;
-        members.push((c.clone(), names.into_iter().zip(cfg.white_box.iter().map(|w| w.detector.clone())).collect()));
-    }
+    // Each config with its white boxes' names.
+    let loaded: Vec<(OptimizeConfig, Vec<String>)> = configs
+        .iter()
+        .map(|c| {
+            let cfg = OptimizeConfig::load(c)?;
+            let names = cfg.white_box_names()?;
+            Ok((cfg, names))
+        })
+        .collect::<Result<_, ExperimentError>>()?;
     let mut all: BTreeMap<String, PathBuf> = BTreeMap::new();
-    for (_, m) in &members {
-        for (name, det) in m {
-            all.entry(name.clone()).or_insert_with(|| det.clone());
+    for (cfg, names) in &loaded {
+        for (name, w) in names.iter().zip(&cfg.white_box) {
+            all.entry(name.clone()).or_insert_with(|| w.detector.clone());
         }
     }
     let mut out = Vec::new();
-    for (config, m) in &members {
-        let missing: Vec<&String> = all.keys().filter(|n| !m.iter().any(|(k, _)| k == *n)).collect();
+    for (config, (cfg, names)) in configs.iter().zip(loaded) {
+        let missing: Vec<&String> = all.keys().filter(|n| !names.contains(n)).collect();
         let [held_out] = missing.as_slice() else {
             return Err(ExperimentError::Invalid(format!(
                 "{}: an arm leaves out exactly one of the families the configs train against together ({}); it leaves out {}",
@@ -66,7 +71,12 @@ pub fn arms(configs: &[PathBuf]) -> Result<Vec<Arm>, ExperimentError> {
         if out.iter().any(|a: &Arm| &a.held_out == *held_out) {
             return Err(ExperimentError::Invalid(format!("two configs leave out {held_out}")));
         }
-        out.push(Arm { config: config.clone(), held_out: (*held_out).clone(), detector: all[*held_out].clone() });
+        out.push(Arm {
+            config: config.clone(),
+            held_out: (*held_out).clone(),
+            detector: all[*held_out].clone(),
+            inputs: cfg.inputs(),
+        });
     }
     Ok(out)
 }
@@ -299,18 +309,11 @@ pub fn score(
     for arm in arms {
         let dir = out.join(arm.dir()).join("heldout");
         let trained = pool(arm, seeds, out, &dir.join("pool"))?;
-        let (mine, runs) = texture_seeds(&trained)?;
         let scoring = Scoring { detectors: vec![arm.detector.clone()], threshold, print: None, defences: Vec::new() };
         let textures: Vec<PathBuf> = std::iter::once(trained.clone()).chain(references.iter().cloned()).collect();
-        eval_digital(heldout, &textures, random_seeds, &scoring, None, &dir, progress)?;
-        let mut rd = csv::Reader::from_path(dir.join("digital_views.csv"))
-            .map_err(|e| ExperimentError::Invalid(format!("{}: {e}", dir.join("digital_views.csv").display())))?;
-        let records: Vec<ViewRecord> = rd
-            .deserialize()
-            .collect::<Result<_, _>>()
-            .map_err(|e| ExperimentError::Invalid(format!("{}: {e}", dir.join("digital_views.csv").display())))?;
-        let arm_rows = compare(&records, &arm.held_out, &mine, threshold);
-        if arm_rows.first().is_some_and(|r| r.seeds != runs.len()) {
+        let (_, records) = eval_digital(heldout, &textures, random_seeds, &scoring, None, &dir, progress)?;
+        let arm_rows = compare(&records, &arm.held_out, &arm.dir(), threshold);
+        if arm_rows.first().is_some_and(|r| r.seeds != seeds.len()) {
             return Err(ExperimentError::Invalid(format!(
                 "{}: seeds scored differ from seeds trained",
                 trained.display()

@@ -248,7 +248,8 @@ pub fn texture_seeds(t: &Path) -> Result<(String, Vec<(u64, PathBuf)>), Experime
 /// texture of `textures` (a PNG named by its folder, or a `--seeds` run's folder with its seeds
 /// pooled, [`texture_seeds`]) on the views of `config`; writes
 /// `digital.csv`, every view's scores (`digital_views.csv`), each file's paired comparisons on
-/// held-out views (`digital_paired.csv`) and `digital.md` into `out`, and returns the Markdown.
+/// held-out views (`digital_paired.csv`) and `digital.md` into `out`, and returns the Markdown
+/// with every view's scores.
 #[allow(clippy::too_many_arguments)]
 pub fn eval_digital(
     config: &Path,
@@ -258,7 +259,7 @@ pub fn eval_digital(
     squeeze: Option<f64>,
     out: &Path,
     progress: &dyn Progress,
-) -> Result<String, ExperimentError> {
+) -> Result<(String, Vec<ViewRecord>), ExperimentError> {
     let threshold = scoring.threshold;
     let cfg = OptimizeConfig::load(config)?;
     let mut setup = Setup::load_photos(&cfg, None)?;
@@ -337,7 +338,7 @@ pub fn eval_digital(
         md.push_str(&squeeze_section(&records, false_flags, out)?);
     }
     write_markdown(out, "digital.md", &md)?;
-    Ok(md)
+    Ok((md, records))
 }
 
 /// One view's squeeze gap under one texture, as `digital_squeeze.csv` lists it.

@@ -55,7 +55,7 @@ pub fn run(a: &Args) -> Result<()> {
     record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
     let squeeze = a.squeeze.then_some(a.squeeze_false_flags);
     let scoring = a.scoring.to_lib(&a.config)?;
-    let md = eval_digital(&a.config, &a.textures, a.random_seeds, &scoring, squeeze, &a.out, &Bar::default())?;
+    let (md, _) = eval_digital(&a.config, &a.textures, a.random_seeds, &scoring, squeeze, &a.out, &Bar::default())?;
     println!("{md}");
     eprintln!("wrote {}/digital.csv, digital_views.csv, digital_paired.csv and digital.md", a.out.display());
     Ok(())

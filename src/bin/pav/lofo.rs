@@ -44,17 +44,14 @@ pub fn run(a: &Args) -> Result<()> {
     if a.seeds.is_empty() {
         bail!("--seeds: give at least one");
     }
-    let mut record = pav::provenance::Run::start()
+    let record = pav::provenance::Run::start()
         .inputs(a.configs.iter().chain([&a.heldout]).chain(&a.references).map(|p| p.as_path()))
         .setting("seeds", a.seeds.iter().map(u64::to_string).collect::<Vec<_>>().join(", "))
         .setting("held_out", arms.iter().map(|a| a.held_out.clone()).collect::<Vec<_>>().join(", "))
         .setting("random_seeds", a.random_seeds)
         .setting("threshold", a.threshold)
-        .tool("onnxruntime", pav_onnx::runtime::runtime_version());
-    for arm in &arms {
-        let cfg = OptimizeConfig::load(&arm.config)?;
-        record = record.inputs(cfg.inputs().iter().map(|p| p.as_path()));
-    }
+        .tool("onnxruntime", pav_onnx::runtime::runtime_version())
+        .inputs(arms.iter().flat_map(|a| &a.inputs).map(|p| p.as_path()));
     let units = units(&arms, &a.seeds);
     let shards = a.shard.write_record(record.clone(), &a.out)?;
     if let Some(shards) = shards {
