@@ -224,7 +224,7 @@ fn render_etron(dir: &std::path::Path) {
     )
     .unwrap();
     let cfg = ViewsConfig::load(&cfg_path).unwrap();
-    let s = render_views(&cfg, dir, None, &Blender::find().unwrap(), &pav::progress::Silent).unwrap();
+    let s = render_views(&cfg, dir, None, Some(&Blender::find().unwrap()), &pav::progress::Silent).unwrap();
     assert_eq!(s.rendered, 3);
 }
 
@@ -339,7 +339,10 @@ fn rendered_views_whose_car_goes_unseen_are_dropped() {
     )
     .unwrap();
     let vc = ViewsConfig::load(&cfg_path).unwrap();
-    assert_eq!(render_views(&vc, &dir, None, &Blender::find().unwrap(), &pav::progress::Silent).unwrap().rendered, 2);
+    assert_eq!(
+        render_views(&vc, &dir, None, Some(&Blender::find().unwrap()), &pav::progress::Silent).unwrap().rendered,
+        2
+    );
     let path = common::repo().join("configs/optimize/paper.toml");
     let mut cfg = OptimizeConfig::load(&path).unwrap();
     cfg.views.train = cfg.views.train[1..2].to_vec();
@@ -419,7 +422,7 @@ fn on_a_turntable_the_room_stays_put_and_the_videos_carry_the_angles() {
         std::fs::write(&path, cfg_text(turntable)).unwrap();
         let cfg = ViewsConfig::load(&path).unwrap();
         let dir = tmp.path().join(format!("views_{turntable}"));
-        render_views(&cfg, &dir, None, &blender, &pav::progress::Silent).unwrap();
+        render_views(&cfg, &dir, None, Some(&blender), &pav::progress::Silent).unwrap();
         let names: Vec<String> = cfg.views().iter().map(|v| v.name.clone()).collect();
         let d: Vec<(f64, usize)> = names[1..].iter().map(|n| background_difference(&dir, &names[0], n)).collect();
         eprintln!("turntable {turntable}: background differences {d:?}");
@@ -608,8 +611,15 @@ fn a_rig_films_the_model_on_its_table_before_its_backdrop_at_its_frame_size() {
 fn every_shipped_views_config_loads() {
     common::shared_data();
     let mut n = 0;
-    for e in std::fs::read_dir(common::repo().join("configs/views")).unwrap() {
+    let root = common::repo().join("configs/views");
+    let mut files: Vec<std::path::PathBuf> = Vec::new();
+    for e in std::fs::read_dir(&root).unwrap().chain(std::fs::read_dir(root.join("fidelity")).unwrap()) {
         let p = e.unwrap().path();
+        if p.is_file() {
+            files.push(p);
+        }
+    }
+    for p in files {
         let cfg = ViewsConfig::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
         let views = cfg.views();
         assert!(!views.is_empty(), "{}", p.display());
@@ -852,5 +862,78 @@ fn a_rigs_landscape_renders_train_where_the_rasterizer_puts_the_car() {
         // Above and below the rendered rows the view shows the backdrop, not black.
         let top = &v.photo[..3 * v.size];
         assert!(top.iter().all(|c| *c > 0.3), "{}: the rows outside the render are dark", v.name);
+    }
+}
+
+/// The rasterizer draws a views config without Blender: plate views are the photo's plate
+/// outside the car's silhouette (the same pixels at every turn), the shaded car inside it; grid
+/// views stand on a grey backdrop; the manifest says 0 samples. Settings only Cycles has, and
+/// environments it would draw alike, are refused by name.
+#[test]
+fn the_rasterizer_draws_views_without_blender() {
+    common::shared_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let n = 128;
+    let config = |extra: &str| {
+        format!(
+            "[mesh]\nobj = \"data:rauca-e2e/pytorch3d_Etron.obj\"\nnormalize = \"bbox\"\nup = \"+z\"\n\
+             [render]\nsize = {n}\nrenderer = \"rasterizer\"\n{extra}[[environments]]\nname = \"city\"\n\
+             [[poses]]\ndistances = [2.2]\nelevations = [15]\nazimuths = [30]\n\
+             [plates]\nphotos = [\"data:fca/carla_dataset/test/data12501.npz\"]\ncamera = \"fca\"\nturns = [0, 40]\n"
+        )
+    };
+    let cfg = tmp.path().join("r.toml");
+    std::fs::write(&cfg, config("")).unwrap();
+    let out = tmp.path().join("out");
+    run_ok(pav().args(["views", "render"]).arg(&cfg).arg("-o").arg(&out).env("PAV_BLENDER", "/nonexistent/blender"));
+    let rows = pav::scene::views::read_manifest(&out.join("manifest.csv")).unwrap();
+    assert_eq!(rows.len(), 3);
+    assert!(rows.iter().all(|r| r.samples == 0 && r.size == n));
+    let load = |name: &str| {
+        let v = out.join("views");
+        let img = image::open(v.join(format!("{name}.png"))).unwrap().to_rgb8();
+        let mask: Vec<bool> =
+            image::open(v.join(format!("{name}_mask.png"))).unwrap().to_luma8().pixels().map(|p| p[0] > 127).collect();
+        (img, mask)
+    };
+    let (a, ma) = load("city_data12501_t+0");
+    let (b, mb) = load("city_data12501_t+40");
+    // Away from both silhouettes (an edge pixel is blended), the plate is all there is.
+    let near = |m: &[bool], i: usize| {
+        let (x, y) = ((i % n) as i64, (i / n) as i64);
+        (-2..=2).any(|dy| {
+            (-2..=2).any(|dx| {
+                let (u, v) = (x + dx, y + dy);
+                (0..n as i64).contains(&u) && (0..n as i64).contains(&v) && m[v as usize * n + u as usize]
+            })
+        })
+    };
+    let (mut outside, mut inside_differs) = (0, 0);
+    for i in 0..n * n {
+        let (pa, pb) = (a.get_pixel((i % n) as u32, (i / n) as u32), b.get_pixel((i % n) as u32, (i / n) as u32));
+        if !near(&ma, i) && !near(&mb, i) {
+            assert_eq!(pa, pb, "pixel {i} outside the car differs between turns");
+            outside += 1;
+        } else if ma[i] && !mb[i] && pa.0.iter().zip(pb.0).map(|(x, y)| (*x as i32 - y as i32).abs()).sum::<i32>() > 30
+        {
+            inside_differs += 1;
+        }
+    }
+    let only_a = (0..n * n).filter(|&i| ma[i] && !mb[i]).count();
+    assert!(outside > n * n / 2, "{outside}");
+    assert!(inside_differs * 2 > only_a, "the car was not drawn: {inside_differs} of {only_a}");
+    // A grid view has no plate: its corner is the grey backdrop.
+    let (g, gm) = load("city_d2.20_e15_a030.0");
+    assert!(!gm[0] && g.get_pixel(0, 0).0 == [115, 115, 115], "{:?}", g.get_pixel(0, 0));
+    for (extra, env, says) in [
+        ("samples = 16\n", "", "takes no samples"),
+        ("effects = [\"shadows\"]\n", "", "simulates none of them"),
+        ("", "[[environments]]\nname = \"forest\"\n", "list one"),
+    ] {
+        let bad = tmp.path().join("bad.toml");
+        std::fs::write(&bad, config(extra) + env).unwrap();
+        let o = pav().args(["views", "render"]).arg(&bad).arg("-o").arg(tmp.path().join("bad")).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(says), "{says}: {err}");
     }
 }

@@ -58,7 +58,9 @@
 //! ```
 
 use super::blender::TableTop;
-use super::views::{Environment, PbrEffect, PoseGrid, RenderSettings, RigScene, ViewMesh, ViewsConfig, ViewsError};
+use super::views::{
+    Environment, PbrEffect, PoseGrid, RenderSettings, Renderer, RigScene, ViewMesh, ViewsConfig, ViewsError,
+};
 use pav_core::geometry::camera::Camera;
 use pav_core::geometry::mesh::Mesh;
 use serde::{Deserialize, Serialize};
@@ -550,6 +552,7 @@ impl RigConfig {
                 samples: self.render.samples,
                 effects: vec![PbrEffect::Shadows],
                 turntable: true,
+                renderer: Renderer::Cycles,
             },
             environments: vec![Environment { name: self.room.environment.clone(), strength: self.room.strength }],
             poses: Vec::new(),

@@ -237,9 +237,27 @@ pub struct CarScene {
     rig: Option<(Box<RigConfig>, Shot)>,
 }
 
+/// The textured `mesh` as `cam` sees it at `size × size`, Phong-shaded under `lights` (RGB in
+/// [0, 1] where the car is, 0 elsewhere), with the G-buffer that says which pixels it covers.
+pub(crate) fn draw_textured(
+    mesh: &Mesh,
+    normals: &[[f32; 3]],
+    texture: &Rgb,
+    cam: &Camera,
+    lights: &Lights,
+    size: usize,
+) -> (GBuffer, Vec<f32>) {
+    let g = GBuffer::render(mesh, cam, size);
+    let mut rgb = vec![0.0f32; size * size * 3];
+    Gather::new(g.uv_samples(mesh), texture.width, texture.height).apply(&texture.rgb, 3, &mut rgb);
+    Shading::new(&g, mesh, normals, cam, lights).apply(&mut rgb, 3);
+    (g, rgb)
+}
+
 /// Room light: a key light from above the camera's left shoulder and some ambient. Of the few
 /// settings tried, this one's contrast got the rasterized car detected most (docs/reports/simulated-turntable.md).
-const ROOM: Lights = Lights { ambient: 0.35, diffuse: 0.8, specular: 0.3, direction: [0.6, 1.0, 0.8], shininess: 32.0 };
+pub(crate) const ROOM: Lights =
+    Lights { ambient: 0.35, diffuse: 0.8, specular: 0.3, direction: [0.6, 1.0, 0.8], shininess: 32.0 };
 
 impl CarScene {
     /// The car of a views config, painted with `texture` (else the config's), filmed from the
@@ -311,17 +329,10 @@ impl CarScene {
     /// the angle and the room's light with it.
     pub fn render(&self, angle_deg: f32, size: usize) -> Vec<f32> {
         let cam = self.camera(angle_deg);
-        let g = GBuffer::render(&self.mesh, &cam, size);
-        let mut rgb = vec![0.0f32; size * size * 3];
-        Gather::new(g.uv_samples(&self.mesh), self.texture.width, self.texture.height).apply(
-            &self.texture.rgb,
-            3,
-            &mut rgb,
-        );
         let (s, c) = angle_deg.to_radians().sin_cos();
         let [x, y, z] = self.lights.direction;
         let lights = Lights { direction: [x * c + z * s, y, -x * s + z * c], ..self.lights };
-        Shading::new(&g, &self.mesh, &self.normals, &cam, &lights).apply(&mut rgb, 3);
+        let (g, mut rgb) = draw_textured(&self.mesh, &self.normals, &self.texture, &cam, &lights, size);
         // The table top, lit as a matte surface facing up by the same light.
         let l = lights.direction;
         let up = l[1] / (l[0] * l[0] + l[1] * l[1] + l[2] * l[2]).sqrt();

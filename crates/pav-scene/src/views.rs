@@ -38,10 +38,11 @@
 //! environment then only lights the car; the photo's own car shadow stays on the plate.
 
 use super::blender::{Blender, BlenderError, Job, JobView, Mode, TableTop};
+use super::turntable::{draw_textured, ROOM};
 use pav_core::geometry::camera::{moved_away, spherical, Camera, CameraConvention};
 use pav_core::geometry::mesh::{Mesh, MeshError};
 use pav_core::image::resize::{resize, Interpolation};
-use pav_core::image::Frame;
+use pav_core::image::{halve, Frame, Rgb};
 use pav_core::progress::Progress;
 use pav_core::shard::{Shard, ShardError};
 use pav_render::bake::Plate;
@@ -150,7 +151,8 @@ pub enum PbrEffect {
 pub struct RenderSettings {
     /// Image side in pixels (square).
     pub size: usize,
-    /// Cycles samples per pixel.
+    /// Cycles samples per pixel (the rasterizer takes none).
+    #[serde(default)]
     pub samples: u32,
     /// Effects to simulate.
     #[serde(default)]
@@ -159,6 +161,22 @@ pub struct RenderSettings {
     /// in a fixed room, the table's angle being the view's azimuth (`pav views turntable`).
     #[serde(default)]
     pub turntable: bool,
+    /// What draws the views.
+    #[serde(default)]
+    pub renderer: Renderer,
+}
+
+/// What draws a view set.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Renderer {
+    /// Blender Cycles: path-traced under the environment, with the listed effects.
+    #[default]
+    Cycles,
+    /// pav's rasterizer: the body texture Phong-shaded under one room light and drawn at twice
+    /// the size then averaged down; no environment light and no effects, but no Blender either
+    /// and milliseconds a view (the low end of what a training view's fidelity costs).
+    Rasterizer,
 }
 
 /// A lighting environment.
@@ -330,11 +348,40 @@ impl ViewsConfig {
 
     /// Refuses configs that would render nothing or something else than asked.
     pub fn check(&self) -> Result<(), String> {
-        if self.render.size < 8 || self.render.samples == 0 {
-            return Err(format!(
-                "render: size {} and samples {}: need size ≥ 8 and samples ≥ 1",
-                self.render.size, self.render.samples
-            ));
+        let r = &self.render;
+        match r.renderer {
+            Renderer::Cycles if r.size < 8 || r.samples == 0 => {
+                return Err(format!(
+                    "render: size {} and samples {}: need size ≥ 8 and samples ≥ 1",
+                    r.size, r.samples
+                ));
+            }
+            Renderer::Cycles => {}
+            Renderer::Rasterizer => {
+                if r.size < 8 {
+                    return Err(format!("render: size {}: need size ≥ 8", r.size));
+                }
+                if r.samples != 0 {
+                    return Err("render.samples: the rasterizer takes no samples (it draws at twice the size and averages down)".into());
+                }
+                if !r.effects.is_empty() {
+                    return Err(format!(
+                        "render.effects {:?}: the rasterizer simulates none of them; drop them, or render with Cycles",
+                        r.effects
+                    ));
+                }
+                if r.turntable || self.rig.is_some() {
+                    return Err(
+                        "the rasterizer draws no turntable here: `pav views turntable --rasterizer` does".into()
+                    );
+                }
+                if self.environments.len() != 1 {
+                    return Err(format!(
+                        "the rasterizer lights the car with one room light whatever the environment, so {} environments would draw the same views: list one (it names the views)",
+                        self.environments.len()
+                    ));
+                }
+            }
         }
         if self.environments.is_empty() || (self.poses.is_empty() && self.plates.is_none()) {
             return Err("list at least one [[environments]] and one [[poses]] or [plates]".into());
@@ -577,9 +624,9 @@ pub struct ViewRecord {
     pub fov_deg: f32,
     /// Image side.
     pub size: usize,
-    /// Cycles samples.
+    /// Cycles samples (0: drawn by pav's rasterizer).
     pub samples: u32,
-    /// Blender's render time, seconds.
+    /// The view's render time, seconds (Blender's, or the rasterizer's).
     pub seconds: f64,
     /// The photo whose background plate the car is laid over; empty over the environment
     /// (manifests written before plates lack the column).
@@ -727,23 +774,20 @@ pub struct RenderSummary {
 }
 
 /// Renders the config's views (only a shard's, when given) into `dir`: per view
-/// `views/<name>.png` (Cycles) and `views/<name>_mask.png` (the car's silhouette from pav's
-/// rasterizer, which the alignment test ties to Blender's), and a manifest row written as
-/// each view finishes, so a crash loses at most the view in progress and a rerun resumes.
+/// `views/<name>.png` (by Cycles through `blender`, or by pav's rasterizer when the config says
+/// so) and `views/<name>_mask.png` (the car's silhouette from pav's rasterizer, which the
+/// alignment test ties to Blender's), and a manifest row written as each view finishes, so a
+/// crash loses at most the view in progress and a rerun resumes.
 pub fn render_views(
     cfg: &ViewsConfig,
     dir: &Path,
     shard: Option<Shard>,
-    blender: &Blender,
+    blender: Option<&Blender>,
     progress: &dyn Progress,
 ) -> Result<RenderSummary, ViewsError> {
     let mesh = cfg.load_mesh()?;
     let texture = cfg.texture(&mesh)?;
     let tex = pav_core::image::Rgb::load(&texture)?;
-    let envs: Vec<PathBuf> = (0..cfg.environments.len())
-        .map(|i| cfg.environment_path(i))
-        .collect::<Result<_, _>>()
-        .map_err(|msg| ViewsError::Config { path: dir.into(), msg })?;
     let views_dir = dir.join("views");
     std::fs::create_dir_all(&views_dir).map_err(io(&views_dir))?;
     let obj = dir.join("mesh.obj");
@@ -810,120 +854,196 @@ pub fn render_views(
     let resumed = mine.iter().filter(|v| done.contains(&v.name)).count();
     progress.begin("rendering views", total as u64);
     progress.set_position(resumed as u64);
-    let ground_y = mesh.bounds().0[1];
-    let effects: HashSet<PbrEffect> = cfg.render.effects.iter().copied().collect();
-    let n = cfg.render.size;
-    let mut plates: HashMap<usize, Frame> = HashMap::new();
+    let mut writer =
+        ViewWriter { cfg, mesh: &mesh, rot, views_dir: &views_dir, manifest: &manifest, plates: HashMap::new() };
     let mut rendered_now = 0;
-    for (ei, env) in envs.iter().enumerate() {
-        // Grid views over the environment, then plate views on a transparent film.
-        for on_plates in [false, true] {
-            let todo: Vec<&&View> = mine
-                .iter()
-                .filter(|v| v.environment == ei && v.plate.is_some() == on_plates && !done.contains(&v.name))
-                .collect();
-            if todo.is_empty() {
-                continue;
-            }
-            let mut job = Job::new(Mode::Pbr, obj.clone(), n, cfg.render.samples, ground_y);
-            job.texture = Some(std::fs::canonicalize(&texture).map_err(io(&texture))?);
-            job.tex_size = [tex.width, tex.height];
-            job.environment = Some(env.clone());
-            job.env_strength = cfg.environments[ei].strength;
-            job.shadows = effects.contains(&PbrEffect::Shadows);
-            job.transparent = on_plates;
-            if effects.contains(&PbrEffect::Reflections) {
-                (job.metallic, job.roughness, job.clearcoat) = (0.3, 0.35, 0.5);
-            }
-            if let Some(rig) = &cfg.rig {
-                let [roughness, specular, clearcoat] = rig.surface;
-                (job.metallic, job.roughness, job.clearcoat, job.specular) = (0.0, roughness, clearcoat, specular);
-                job.backdrop = Some(rig.backdrop);
-                job.table = Some(rig.table);
-                job.shadows = false;
-                job.rows = (rig.rows < n).then_some(rig.rows);
-            }
-            let out_name = |v: &View| if on_plates { format!("{}_car.png", v.name) } else { format!("{}.png", v.name) };
-            job.views = todo
-                .iter()
-                .map(|v| JobView {
-                    env_turn_deg: v.env_turn_deg,
-                    ..JobView::new(&v.name, &v.camera, views_dir.join(out_name(v)))
-                })
-                .collect();
-            let mut failure = None;
-            blender.run(&job, dir, |name, secs| {
-                let Some(v) = todo.iter().find(|v| v.name == name) else { return };
-                let mut done_one = || -> Result<(), ViewsError> {
-                    if let Some(pi) = v.plate {
-                        let plate = match plates.entry(pi) {
-                            std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
-                            std::collections::hash_map::Entry::Vacant(e) => e.insert(plate_frame(cfg, &mesh, pi)?),
-                        };
-                        let car = views_dir.join(out_name(v));
-                        let (rgb, alpha) = pav_core::image::load_rgba(&car)?;
-                        let out = pav_core::image::over(&rgb, &alpha, plate);
-                        let path = views_dir.join(format!("{name}.png"));
-                        out.save_png(&path)?;
-                    }
-                    let g = GBuffer::render(&mesh, &v.camera, n);
-                    let mask: Vec<f32> = g.face.iter().flat_map(|f| [if *f == EMPTY { 0.0 } else { 1.0 }; 3]).collect();
-                    // A rig's mask is cut as its view is: the centre rows of the square.
-                    let rows = cfg.rig.as_ref().map_or(n, |r| r.rows.min(n));
-                    let y0 = (n - rows) / 2;
-                    let mask = &mask[3 * n * y0..3 * n * (y0 + rows)];
-                    pav_core::image::save_rgb(&views_dir.join(format!("{name}_mask.png")), n, rows, mask)?;
-                    let [d, e, a] = v.pose;
-                    let up = if v.plate.is_some() { v.camera.axes[1] } else { [0.0, 1.0, 0.0] };
-                    let (eye, target, up) =
-                        (unrotate(&rot, v.camera.eye), unrotate(&rot, v.target), unrotate(&rot, up));
-                    let row = ViewRecord {
-                        name: name.into(),
-                        environment: cfg.environment_name(ei),
-                        image: format!("views/{name}.png").into(),
-                        mask: format!("views/{name}_mask.png").into(),
-                        distance: d,
-                        elevation_deg: e,
-                        azimuth_deg: a,
-                        eye_x: eye[0],
-                        eye_y: eye[1],
-                        eye_z: eye[2],
-                        target_x: target[0],
-                        target_y: target[1],
-                        target_z: target[2],
-                        up_x: up[0],
-                        up_y: up[1],
-                        up_z: up[2],
-                        fov_deg: v.camera.fov_deg,
-                        size: n,
-                        samples: cfg.render.samples,
-                        seconds: (secs * 1000.0).round() / 1000.0,
-                        plate: v.plate.map_or_else(String::new, |pi| {
-                            let pl = cfg.plates.as_ref().expect("a plate view has plates");
-                            pl.sources.get(pi).cloned().unwrap_or_else(|| pl.photos[pi].display().to_string())
-                        }),
-                    };
-                    append_row(&manifest, &row)
-                };
-                match done_one() {
-                    Ok(()) => {
-                        rendered_now += 1;
-                        progress.advance(1);
-                        progress.status(&format!("{name}: {secs:.1} s"));
-                    }
-                    Err(e) => {
-                        failure.get_or_insert(e);
+    let mut advance = |name: &str, secs: f64| {
+        rendered_now += 1;
+        progress.advance(1);
+        progress.status(&format!("{name}: {secs:.1} s"));
+    };
+    let todo: Vec<&View> = mine.iter().copied().filter(|v| !done.contains(&v.name)).collect();
+    match (cfg.render.renderer, blender) {
+        (Renderer::Rasterizer, _) => {
+            let normals = pav_render::shade::vertex_normals(&mesh);
+            let n = cfg.render.size;
+            for v in todo {
+                let t = std::time::Instant::now();
+                let (g, mut rgb) = draw_textured(&mesh, &normals, &tex, &v.camera, &ROOM, 2 * n);
+                let mut cover = vec![0f32; rgb.len()];
+                for (i, f) in g.face.iter().enumerate() {
+                    if *f != EMPTY {
+                        cover[3 * i..3 * i + 3].fill(1.0);
+                        rgb[3 * i..3 * i + 3].iter_mut().for_each(|c| *c = c.clamp(0.0, 1.0));
                     }
                 }
-            })?;
-            if let Some(e) = failure {
-                return Err(e);
+                // Averaged down, an edge pixel holds the car's share of it: the colour is
+                // un-premultiplied so that `over` blends it with the background once.
+                let (rgb, cover) = (halve(&rgb, 2 * n, 2 * n), halve(&cover, 2 * n, 2 * n));
+                let alpha: Vec<f32> = cover.iter().step_by(3).copied().collect();
+                let car = Rgb {
+                    width: n,
+                    height: n,
+                    rgb: rgb.iter().zip(&cover).map(|(c, a)| if *a > 0.0 { c / a } else { 0.0 }).collect(),
+                };
+                writer.lay_over(v, &car, &alpha)?;
+                let secs = t.elapsed().as_secs_f64();
+                writer.record(v, v.environment, secs)?;
+                advance(&v.name, secs);
+            }
+        }
+        (Renderer::Cycles, None) => {
+            return Err(ViewsError::Config { path: dir.into(), msg: "Cycles views need Blender".into() });
+        }
+        (Renderer::Cycles, Some(blender)) => {
+            let envs: Vec<PathBuf> = (0..cfg.environments.len())
+                .map(|i| cfg.environment_path(i))
+                .collect::<Result<_, _>>()
+                .map_err(|msg| ViewsError::Config { path: dir.into(), msg })?;
+            let ground_y = mesh.bounds().0[1];
+            let effects: HashSet<PbrEffect> = cfg.render.effects.iter().copied().collect();
+            let n = cfg.render.size;
+            for (ei, env) in envs.iter().enumerate() {
+                // Grid views over the environment, then plate views on a transparent film.
+                for on_plates in [false, true] {
+                    let todo: Vec<&View> = todo
+                        .iter()
+                        .copied()
+                        .filter(|v| v.environment == ei && v.plate.is_some() == on_plates)
+                        .collect();
+                    if todo.is_empty() {
+                        continue;
+                    }
+                    let mut job = Job::new(Mode::Pbr, obj.clone(), n, cfg.render.samples, ground_y);
+                    job.texture = Some(std::fs::canonicalize(&texture).map_err(io(&texture))?);
+                    job.tex_size = [tex.width, tex.height];
+                    job.environment = Some(env.clone());
+                    job.env_strength = cfg.environments[ei].strength;
+                    job.shadows = effects.contains(&PbrEffect::Shadows);
+                    job.transparent = on_plates;
+                    if effects.contains(&PbrEffect::Reflections) {
+                        (job.metallic, job.roughness, job.clearcoat) = (0.3, 0.35, 0.5);
+                    }
+                    if let Some(rig) = &cfg.rig {
+                        let [roughness, specular, clearcoat] = rig.surface;
+                        (job.metallic, job.roughness, job.clearcoat, job.specular) =
+                            (0.0, roughness, clearcoat, specular);
+                        job.backdrop = Some(rig.backdrop);
+                        job.table = Some(rig.table);
+                        job.shadows = false;
+                        job.rows = (rig.rows < n).then_some(rig.rows);
+                    }
+                    let out_name =
+                        |v: &View| if on_plates { format!("{}_car.png", v.name) } else { format!("{}.png", v.name) };
+                    job.views = todo
+                        .iter()
+                        .map(|v| JobView {
+                            env_turn_deg: v.env_turn_deg,
+                            ..JobView::new(&v.name, &v.camera, views_dir.join(out_name(v)))
+                        })
+                        .collect();
+                    let mut failure = None;
+                    blender.run(&job, dir, |name, secs| {
+                        let Some(v) = todo.iter().find(|v| v.name == name) else { return };
+                        let mut done_one = || -> Result<(), ViewsError> {
+                            if v.plate.is_some() {
+                                let (rgb, alpha) = pav_core::image::load_rgba(&views_dir.join(out_name(v)))?;
+                                writer.lay_over(v, &rgb, &alpha)?;
+                            }
+                            writer.record(v, ei, secs)
+                        };
+                        match done_one() {
+                            Ok(()) => advance(name, secs),
+                            Err(e) => {
+                                failure.get_or_insert(e);
+                            }
+                        }
+                    })?;
+                    if let Some(e) = failure {
+                        return Err(e);
+                    }
+                }
             }
         }
     }
     std::fs::remove_file(&unfinished).map_err(io(&unfinished))?;
     progress.end(None);
     Ok(RenderSummary { total, resumed, rendered: rendered_now, manifest })
+}
+
+/// Writes a drawn view's image, silhouette mask and manifest row.
+struct ViewWriter<'a> {
+    cfg: &'a ViewsConfig,
+    mesh: &'a Mesh,
+    rot: [[f32; 3]; 3],
+    views_dir: &'a Path,
+    manifest: &'a Path,
+    /// Plates by index, each painted out once.
+    plates: HashMap<usize, Frame>,
+}
+
+impl ViewWriter<'_> {
+    /// Writes `views/<name>.png`: the car (`rgb`, covering each pixel by `alpha`) over the view's
+    /// plate, or over a grey backdrop when it has none.
+    fn lay_over(&mut self, v: &View, rgb: &Rgb, alpha: &[f32]) -> Result<(), ViewsError> {
+        let n = self.cfg.render.size;
+        let backdrop;
+        let under = match v.plate {
+            Some(pi) => match self.plates.entry(pi) {
+                std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+                std::collections::hash_map::Entry::Vacant(e) => e.insert(plate_frame(self.cfg, self.mesh, pi)?),
+            },
+            None => {
+                backdrop = Frame { width: n, height: n, bgr: vec![115; n * n * 3] };
+                &backdrop
+            }
+        };
+        pav_core::image::over(rgb, alpha, under).save_png(&self.views_dir.join(format!("{}.png", v.name)))?;
+        Ok(())
+    }
+
+    /// Writes the view's silhouette mask and appends its manifest row (`secs` to draw it).
+    fn record(&self, v: &View, ei: usize, secs: f64) -> Result<(), ViewsError> {
+        let (cfg, n, name) = (self.cfg, self.cfg.render.size, &v.name);
+        let g = GBuffer::render(self.mesh, &v.camera, n);
+        let mask: Vec<f32> = g.face.iter().flat_map(|f| [if *f == EMPTY { 0.0 } else { 1.0 }; 3]).collect();
+        // A rig's mask is cut as its view is: the centre rows of the square.
+        let rows = cfg.rig.as_ref().map_or(n, |r| r.rows.min(n));
+        let y0 = (n - rows) / 2;
+        let mask = &mask[3 * n * y0..3 * n * (y0 + rows)];
+        pav_core::image::save_rgb(&self.views_dir.join(format!("{name}_mask.png")), n, rows, mask)?;
+        let [d, e, a] = v.pose;
+        let up = if v.plate.is_some() { v.camera.axes[1] } else { [0.0, 1.0, 0.0] };
+        let rot = &self.rot;
+        let (eye, target, up) = (unrotate(rot, v.camera.eye), unrotate(rot, v.target), unrotate(rot, up));
+        let row = ViewRecord {
+            name: name.clone(),
+            environment: cfg.environment_name(ei),
+            image: format!("views/{name}.png").into(),
+            mask: format!("views/{name}_mask.png").into(),
+            distance: d,
+            elevation_deg: e,
+            azimuth_deg: a,
+            eye_x: eye[0],
+            eye_y: eye[1],
+            eye_z: eye[2],
+            target_x: target[0],
+            target_y: target[1],
+            target_z: target[2],
+            up_x: up[0],
+            up_y: up[1],
+            up_z: up[2],
+            fov_deg: v.camera.fov_deg,
+            size: n,
+            samples: cfg.render.samples,
+            seconds: (secs * 1000.0).round() / 1000.0,
+            plate: v.plate.map_or_else(String::new, |pi| {
+                let pl = cfg.plates.as_ref().expect("a plate view has plates");
+                pl.sources.get(pi).cloned().unwrap_or_else(|| pl.photos[pi].display().to_string())
+            }),
+        };
+        append_row(self.manifest, &row)
+    }
 }
 
 /// Plate `pi` of the config at the render size: the photo, resized if it is not already, with

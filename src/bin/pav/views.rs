@@ -9,7 +9,7 @@ use pav::scene::blender::Blender;
 use pav::scene::rig::RigConfig;
 #[cfg(feature = "video")]
 use pav::scene::turntable::{write_raster_videos, write_videos};
-use pav::scene::views::{contact_sheet, merge_shards, render_views, ViewsConfig};
+use pav::scene::views::{contact_sheet, merge_shards, render_views, Renderer, ViewsConfig};
 use std::path::PathBuf;
 
 #[derive(clap::Subcommand)]
@@ -79,20 +79,27 @@ pub fn render_config(config: &std::path::Path, out: &std::path::Path) -> Result<
 /// Renders `cfg` into `out` with provenance, printing the summary: the whole set, one shard of
 /// it into its folder, or the merge of the shards. Returns whether `out` now holds every view.
 fn render(cfg: &ViewsConfig, config: &std::path::Path, out: &std::path::Path, shard: &ShardArgs) -> Result<bool> {
-    let blender = Blender::find()?;
+    // The rasterizer draws without Blender, so a machine without it can still make its views.
+    let blender = match cfg.render.renderer {
+        Renderer::Cycles => Some(Blender::find()?),
+        Renderer::Rasterizer => None,
+    };
     let mut inputs = vec![cfg.mesh.obj.clone()];
     inputs.extend(cfg.mesh.texture.clone());
-    let record = pav::provenance::Run::start()
+    let mut record = pav::provenance::Run::start()
         .config(config)
         .inputs(inputs.iter().map(|p| p.as_path()))
         .setting("turntable", cfg.render.turntable)
         .setting("rig", cfg.rig.is_some())
-        .tool("blender", blender.version());
+        .setting("renderer", format!("{:?}", cfg.render.renderer).to_lowercase());
+    if let Some(b) = &blender {
+        record = record.tool("blender", b.version());
+    }
     if let Some(shards) = shard.write_record(record, out)? {
         let n = merge_shards(cfg, &shards, out)?;
         println!("{n} views from {} shards; manifest {}", shards.len(), out.join("manifest.csv").display());
     } else {
-        let s = render_views(cfg, &shard.record_dir(out), shard.shard, &blender, &Bar::default())?;
+        let s = render_views(cfg, &shard.record_dir(out), shard.shard, blender.as_ref(), &Bar::default())?;
         println!(
             "{} views: {} rendered now, {} from an earlier run; manifest {}",
             s.total,
