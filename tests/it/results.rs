@@ -143,3 +143,67 @@ fn a_benchmark_table_is_its_csv_pivoted_and_goes_stale_with_it() {
     let (_, new) = differ.iter().find(|(p, _)| p.ends_with("docs/reports/speed.md")).expect("speed.md's table");
     assert!(new.contains("bench/vs_python_turntable.csv changed"), "{new}");
 }
+
+fn pav_in(dir: &Path) -> std::process::Command {
+    let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_pav"));
+    c.current_dir(dir).env("RUST_BACKTRACE", "0");
+    c
+}
+
+/// A table one script made from several runs records every run's inputs (and is refused
+/// without the script to rerun); its plot is drawn from the recorded cells, one colour per
+/// series, and a column it does not have is refused by name.
+#[test]
+fn a_table_from_several_runs_keeps_their_inputs_and_plots_its_cells() {
+    common::real_data();
+    let tmp = copy_root();
+    let root = tmp.path();
+    let (a, b) = (root.join("out/a"), root.join("out/b"));
+    for (dir, config) in [(&a, "configs/views/fidelity/cycles4.toml"), (&b, "configs/views/fidelity/rasterizer.toml")] {
+        std::fs::create_dir_all(dir).unwrap();
+        pav::provenance::Run::start().config(&root.join(config)).write(&dir.join("run.toml")).unwrap();
+    }
+    let table = root.join("out/cost.csv");
+    std::fs::write(
+        &table,
+        "level,s,family,d,lo,hi\nc4,1.5,x,0.01,-0.01,0.02\nr,0.05,x,0.03,0.02,0.04\nc4,1.5,y,-0.02,-0.03,-0.01\n",
+    )
+    .unwrap();
+    let add = |extra: &[&str]| {
+        let mut c = pav_in(root);
+        c.args(["results", "add", "cost", "--run", "out/a", "--run", "out/b", "--table", "out/cost.csv"])
+            .args(["--columns", "level,s=s/view:2,family,d=difference:+3,lo+hi=interval:+3", "--title", "Cost"])
+            .args(extra);
+        c.output().unwrap()
+    };
+    let o = add(&[]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("needs --command"));
+    let o = add(&["--command", "bash docs/reports/scripts/fidelity.sh"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let file = ResultFile::load(root, "cost").unwrap();
+    assert_eq!(file.command, "bash docs/reports/scripts/fidelity.sh");
+    for config in ["configs/views/fidelity/cycles4.toml", "configs/views/fidelity/rasterizer.toml"] {
+        assert!(file.inputs.contains_key(config), "{:?}", file.inputs.keys());
+    }
+    assert_eq!(file.rows[1], ["r", "0.05", "x", "+0.030", "[+0.020, +0.040]"]);
+    let png = root.join("cost.png");
+    let plot = |x: &str| {
+        pav_in(root)
+            .args(["results", "plot", "cost", "--x", x, "--y", "difference", "--interval", "interval"])
+            .args(["--series", "family", "--label", "level", "--log-x", "-o"])
+            .arg(&png)
+            .output()
+            .unwrap()
+    };
+    let o = plot("s/view");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let img = image::open(&png).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (900, 560));
+    // The first two colours of the palette: one per family.
+    for colour in [[31u8, 119, 180], [214, 39, 40]] {
+        assert!(img.pixels().filter(|p| p.0 == colour).count() > 50, "{colour:?} not drawn");
+    }
+    let o = plot("seconds");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("no column `seconds`") && err.contains("s/view"), "{err}");
+}

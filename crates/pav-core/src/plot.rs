@@ -339,6 +339,97 @@ pub fn loss_curve(
     )
 }
 
+/// One point of an [`IntervalSeries`].
+pub struct IntervalPoint {
+    /// Where on the x axis.
+    pub x: f64,
+    /// The value.
+    pub y: f64,
+    /// Its interval (low, high), drawn as a whisker.
+    pub interval: Option<(f64, f64)>,
+    /// A text beside the point (empty: none).
+    pub label: String,
+}
+
+/// One colour of [`intervals`]: points joined in x order.
+pub struct IntervalSeries {
+    /// Legend label.
+    pub name: String,
+    /// Its points.
+    pub points: Vec<IntervalPoint>,
+}
+
+/// Values with their intervals against x, one colour per series, on a y axis that takes in
+/// every whisker and zero (drawn dashed: a difference's sign is what one reads); with `log_x`
+/// the x axis is logarithmic (its ticks still read in x's units), for costs spread over decades.
+pub fn intervals(
+    path: &Path,
+    caption: &str,
+    (x_desc, y_desc): (&str, &str),
+    log_x: bool,
+    series: &[IntervalSeries],
+) -> Result<(), PlotError> {
+    fonts();
+    let fx = |x: f64| if log_x { x.max(1e-12).log10() } else { x };
+    let all = || series.iter().flat_map(|s| &s.points);
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, 0f64, 0f64);
+    for p in all() {
+        (x0, x1) = (x0.min(fx(p.x)), x1.max(fx(p.x)));
+        let (lo, hi) = p.interval.unwrap_or((p.y, p.y));
+        (y0, y1) = (y0.min(lo.min(p.y)), y1.max(hi.max(p.y)));
+    }
+    if !x0.is_finite() {
+        (x0, x1) = (0.0, 1.0);
+    }
+    let (dx, dy) = ((x1 - x0).max(1e-9) * 0.08, (y1 - y0).max(1e-9) * 0.08);
+    wrap(
+        path,
+        (|| -> R<()> {
+            let root = BitMapBackend::new(path, (900, 560)).into_drawing_area();
+            root.fill(&WHITE)?;
+            let mut ch = ChartBuilder::on(&root)
+                .caption(caption, ("sans-serif", 22))
+                .margin(15)
+                .x_label_area_size(45)
+                .y_label_area_size(70)
+                .build_cartesian_2d((x0 - dx)..(x1 + dx), (y0 - dy)..(y1 + dy))?;
+            let tick = |v: &f64| {
+                let x = if log_x { 10f64.powf(*v) } else { *v };
+                if x >= 10.0 {
+                    format!("{x:.0}")
+                } else if x >= 0.1 {
+                    format!("{x:.2}")
+                } else {
+                    format!("{x:.3}")
+                }
+            };
+            ch.configure_mesh().x_desc(x_desc).y_desc(y_desc).x_label_formatter(&tick).draw()?;
+            ch.draw_series(DashedLineSeries::new([(x0 - dx, 0.0), (x1 + dx, 0.0)], 6, 4, BLACK.stroke_width(1)))?;
+            for (i, s) in series.iter().enumerate() {
+                let c = colour(i);
+                let mut pts: Vec<&IntervalPoint> = s.points.iter().collect();
+                pts.sort_by(|a, b| a.x.total_cmp(&b.x));
+                ch.draw_series(LineSeries::new(pts.iter().map(|p| (fx(p.x), p.y)), c.stroke_width(2)))?
+                    .label(s.name.clone())
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+                for p in pts {
+                    let at = (fx(p.x), p.y);
+                    if let Some((lo, hi)) = p.interval {
+                        ch.draw_series(LineSeries::new([(at.0, lo), (at.0, hi)], c.stroke_width(1)))?;
+                    }
+                    ch.draw_series(std::iter::once(Circle::new(at, 4, c.filled())))?;
+                    if !p.label.is_empty() {
+                        // Beside the dot rather than on it.
+                        let text = EmptyElement::at(at) + Text::new(p.label.clone(), (7, -16), ("sans-serif", 14));
+                        ch.draw_series(std::iter::once(text))?;
+                    }
+                }
+            }
+            finish(&mut ch, &root, SeriesLabelPosition::UpperRight)
+        })(),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -86,6 +86,10 @@ pub enum ResultsError {
         /// Why.
         msg: String,
     },
+    /// A plot that could not be drawn.
+    #[cfg(feature = "plot")]
+    #[error(transparent)]
+    Plot(#[from] crate::plot::PlotError),
     /// A marker without its end, or naming no results file.
     #[error("{doc}: {msg}")]
     Marker {
@@ -182,6 +186,64 @@ impl ResultFile {
             rows,
             note: None,
         })
+    }
+
+    /// The table's rows as points, grouped by the `spec.series` column's values in the order
+    /// they first come (one group, named after y, without it). A row whose x or y is not a
+    /// number ("n/a", text) is left out; a column not in the table is refused by name.
+    pub fn points(&self, spec: &PlotSpec, name: &str) -> Result<Vec<(String, Vec<Point>)>, ResultsError> {
+        let at = |heading: &str| {
+            self.columns.iter().position(|c| c == heading).ok_or_else(|| ResultsError::Parse {
+                path: Path::new(DIR).join(format!("{name}.json")),
+                msg: format!("no column `{heading}`; it has {}", self.columns.join(", ")),
+            })
+        };
+        let (x, y) = (at(&spec.x)?, at(&spec.y)?);
+        let interval = spec.interval.as_deref().map(at).transpose()?;
+        let series = spec.series.as_deref().map(at).transpose()?;
+        let label = spec.label.as_deref().map(at).transpose()?;
+        let conditions: Vec<(usize, &str)> = spec
+            .rows_where
+            .iter()
+            .map(|w| {
+                let (k, v) = w.split_once('=').unwrap_or((w, ""));
+                Ok((at(k)?, v))
+            })
+            .collect::<Result<_, ResultsError>>()?;
+        let mut out: Vec<(String, Vec<Point>)> = Vec::new();
+        for row in self.rows.iter().filter(|r| conditions.iter().all(|(c, v)| r[*c] == *v)) {
+            let (Some(px), Some(py)) = (cell_number(&row[x]), cell_number(&row[y])) else { continue };
+            let group = series.map_or_else(|| spec.y.clone(), |s| row[s].clone());
+            let point = Point {
+                x: px,
+                y: py,
+                interval: interval.and_then(|i| cell_interval(&row[i])),
+                label: label.map_or_else(String::new, |l| row[l].clone()),
+            };
+            match out.iter_mut().find(|(g, _)| *g == group) {
+                Some((_, pts)) => pts.push(point),
+                None => out.push((group, vec![point])),
+            }
+        }
+        Ok(out)
+    }
+
+    /// Draws [`ResultFile::points`] as a PNG at `path`: each group a line of points with their
+    /// intervals, titled with the table's title.
+    #[cfg(feature = "plot")]
+    pub fn plot(&self, spec: &PlotSpec, name: &str, log_x: bool, path: &Path) -> Result<(), ResultsError> {
+        let series: Vec<crate::plot::IntervalSeries> = self
+            .points(spec, name)?
+            .into_iter()
+            .map(|(name, pts)| crate::plot::IntervalSeries {
+                name,
+                points: pts
+                    .into_iter()
+                    .map(|p| crate::plot::IntervalPoint { x: p.x, y: p.y, interval: p.interval, label: p.label })
+                    .collect(),
+            })
+            .collect();
+        Ok(crate::plot::intervals(path, &self.title, (&spec.x, &spec.y), log_x, &series)?)
     }
 
     /// How this table was taken from its CSV, to take it again from a fresh run.
@@ -340,6 +402,54 @@ fn pivot(
         })
         .collect();
     Ok((new_head, rows))
+}
+
+/// Which columns of a results table [`ResultFile::points`] reads, by their shown headings.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PlotSpec {
+    /// The x axis.
+    pub x: String,
+    /// The y axis.
+    pub y: String,
+    /// The y values' intervals (`[a, b]` or `a–b` cells).
+    pub interval: Option<String>,
+    /// One line per distinct value of this column.
+    pub series: Option<String>,
+    /// A text beside each point.
+    pub label: Option<String>,
+    /// Only rows where HEADING has VALUE (`HEADING=VALUE`).
+    pub rows_where: Vec<String>,
+}
+
+/// One row of a results table as a point.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Point {
+    /// x.
+    pub x: f64,
+    /// y.
+    pub y: f64,
+    /// y's interval.
+    pub interval: Option<(f64, f64)>,
+    /// Its label.
+    pub label: String,
+}
+
+/// A shown cell read back as a number: the true minus of a signed difference, a leading `+`,
+/// and a trailing `%` or `×` are understood; None for text, "n/a" and intervals.
+pub fn cell_number(cell: &str) -> Option<f64> {
+    let t = cell.trim().replace('−', "-");
+    let t = t.trim_end_matches(['%', '×']).trim();
+    t.parse::<f64>().ok().filter(|v| v.is_finite())
+}
+
+/// A shown interval, `[a, b]` (signed ends) or `a–b`, read back as its ends.
+pub fn cell_interval(cell: &str) -> Option<(f64, f64)> {
+    let t = cell.trim();
+    let (a, b) = match t.strip_prefix('[').and_then(|t| t.strip_suffix(']')) {
+        Some(inner) => inner.split_once(',')?,
+        None => t.split_once('–')?,
+    };
+    Some((cell_number(a)?, cell_number(b)?))
 }
 
 /// A column of a results table taken from a CSV: its positions, heading and format.
@@ -547,5 +657,62 @@ mod tests {
         assert!(Column::parse("a/b/d", &head, Path::new("t.csv")).is_err());
         let e = Column::parse("nope", &head, Path::new("t.csv")).err().unwrap().to_string();
         assert!(e.contains("no column `nope`") && e.contains("d, lo, hi, a, b"), "{e}");
+    }
+
+    #[test]
+    fn shown_cells_read_back_as_the_numbers_they_show() {
+        assert_eq!(cell_number("−0.004"), Some(-0.004));
+        assert_eq!(cell_number("+0.017"), Some(0.017));
+        assert_eq!(cell_number("24.5 %"), Some(24.5));
+        assert_eq!(cell_number("0.80×"), Some(0.8));
+        for text in ["n/a", "yolox_nano", "[−0.012, +0.003]", "", "NaN"] {
+            assert_eq!(cell_number(text), None, "{text}");
+        }
+        assert_eq!(cell_interval("[−0.012, +0.003]"), Some((-0.012, 0.003)));
+        assert_eq!(cell_interval("−0.5–1.5"), Some((-0.5, 1.5)));
+        assert_eq!(cell_interval("0.3"), None);
+    }
+
+    #[test]
+    fn rows_become_points_grouped_by_series_in_the_order_they_come() {
+        let cells = |r: &[&str]| r.iter().map(|c| c.to_string()).collect::<Vec<_>>();
+        let file = ResultFile {
+            title: "t".into(),
+            command: "c".into(),
+            commit: "0".into(),
+            seeds: vec![],
+            inputs: BTreeMap::new(),
+            generated: BTreeMap::new(),
+            transcribed: None,
+            columns: cells(&["level", "s/view", "family", "against", "difference", "interval"]),
+            from_columns: vec![],
+            from_rows: vec![],
+            from_pivot: None,
+            rows: vec![
+                cells(&["c64", "14.1", "yolox", "rauca", "−0.010", "[−0.020, +0.001]"]),
+                cells(&["c4", "1.2", "yolox", "rauca", "+0.004", "[−0.006, +0.013]"]),
+                cells(&["c4", "1.2", "nanodet", "rauca", "+0.020", "[+0.010, +0.031]"]),
+                cells(&["c4", "1.2", "nanodet", "random", "−0.030", "[−0.040, −0.020]"]),
+                cells(&["c16", "n/a", "nanodet", "rauca", "+0.011", "[+0.001, +0.021]"]),
+            ],
+            note: None,
+        };
+        let spec = PlotSpec {
+            x: "s/view".into(),
+            y: "difference".into(),
+            interval: Some("interval".into()),
+            series: Some("family".into()),
+            label: Some("level".into()),
+            rows_where: vec!["against=rauca".into()],
+        };
+        let groups = file.points(&spec, "t").unwrap();
+        let names: Vec<&str> = groups.iter().map(|(g, _)| g.as_str()).collect();
+        assert_eq!(names, ["yolox", "nanodet"]);
+        // The random row is filtered out, and the row without a cost has no x to stand at.
+        assert_eq!(groups[1].1, [Point { x: 1.2, y: 0.02, interval: Some((0.01, 0.031)), label: "c4".into() }]);
+        assert_eq!(groups[0].1.iter().map(|p| p.x).collect::<Vec<_>>(), [14.1, 1.2]);
+        let bad = PlotSpec { series: Some("famliy".into()), ..spec };
+        let e = file.points(&bad, "t").unwrap_err().to_string();
+        assert!(e.contains("no column `famliy`") && e.contains("results/t.json"), "{e}");
     }
 }

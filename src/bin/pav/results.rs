@@ -2,6 +2,8 @@
 
 use anyhow::{bail, Context, Result};
 use pav::provenance::Run;
+#[cfg(feature = "plot")]
+use pav::results::PlotSpec;
 use pav::results::{regenerate, ResultFile, Shape};
 use std::path::PathBuf;
 
@@ -12,6 +14,10 @@ pub enum Cmd {
     Add(Box<AddArgs>),
     /// Regenerate every results block in README.md and docs/ from results/.
     Write,
+    /// Draw a results table as a PNG: one column against another, one line per value of a
+    /// third, each point with its interval, so that a figure shows the recorded numbers only.
+    #[cfg(feature = "plot")]
+    Plot(PlotArgs),
     /// Fail, naming each document whose results blocks differ from what `pav results write`
     /// makes now (a number edited by hand, a table gone stale).
     Check,
@@ -23,9 +29,11 @@ pub struct AddArgs {
     /// The table's name (its file is results/NAME.json; a document shows it between
     /// `<!-- results:NAME -->` and `<!-- /results:NAME -->`).
     name: String,
-    /// The run's output folder (holding its run.toml) or the run.toml itself.
+    /// The run's output folder (holding its run.toml) or the run.toml itself. Repeatable, for a
+    /// table a script made from several runs (give `--command`): the table keeps every run's
+    /// inputs, and the first run's commit and seeds.
     #[arg(long, required_unless_present = "bench")]
-    run: Option<PathBuf>,
+    run: Vec<PathBuf>,
     /// Instead of a run: the benchmark command that wrote `--table` (a CSV committed under
     /// bench/, which becomes the table's input, so that rewriting it marks the table stale).
     #[arg(long, conflicts_with = "run")]
@@ -57,23 +65,64 @@ pub struct AddArgs {
     note: Option<String>,
 }
 
+/// `pav results plot`.
+#[cfg(feature = "plot")]
+#[derive(clap::Args)]
+pub struct PlotArgs {
+    /// The table's name (results/NAME.json).
+    name: String,
+    /// The column on the x axis (as the table heads it).
+    #[arg(long)]
+    x: String,
+    /// The column on the y axis.
+    #[arg(long)]
+    y: String,
+    /// The column holding y's intervals (`[a, b]` or `a–b`), drawn as whiskers.
+    #[arg(long)]
+    interval: Option<String>,
+    /// One line per distinct value of this column.
+    #[arg(long)]
+    series: Option<String>,
+    /// A text beside each point, from this column.
+    #[arg(long)]
+    label: Option<String>,
+    /// Keep only rows where HEADING has VALUE (`HEADING=VALUE`, comma-separated).
+    #[arg(long = "where", value_delimiter = ',')]
+    rows_where: Vec<String>,
+    /// A logarithmic x axis (for costs that span decades).
+    #[arg(long)]
+    log_x: bool,
+    /// The PNG to write.
+    #[arg(long, short = 'o')]
+    out: PathBuf,
+}
+
 pub fn run(c: &Cmd) -> Result<()> {
     let root = PathBuf::from(".");
     match c {
         Cmd::Add(a) => {
             let AddArgs { name, run, bench, command, table, columns, rows_where, pivot, title, note } = a.as_ref();
-            let r = match (run, bench) {
-                (Some(run), _) => {
-                    let record = if run.is_dir() { run.join("run.toml") } else { run.clone() };
-                    let r = Run::read(&record)
-                        .map_err(anyhow::Error::msg)
-                        .with_context(|| format!("reading {}", record.display()))?;
-                    if r.git_dirty {
-                        eprintln!("warning: {} ran on a checkout with uncommitted changes", record.display());
+            let r = match (run.as_slice(), bench) {
+                ([_, _, ..], _) if command.is_none() => {
+                    bail!("a table from several runs needs --command: the script a reader reruns to make them all")
+                }
+                ([first, rest @ ..], _) => {
+                    let mut r = read_run(first)?;
+                    for other in rest {
+                        let o = read_run(other)?;
+                        if o.git_commit != r.git_commit {
+                            eprintln!(
+                                "warning: {} ran at commit {:.7}, the table records the first run's {:.7}",
+                                other.display(),
+                                o.git_commit,
+                                r.git_commit
+                            );
+                        }
+                        r = r.with_inputs_of(&o);
                     }
                     r
                 }
-                (None, Some(cmd)) => {
+                ([], Some(cmd)) => {
                     let mut r = Run::start().inputs([table.as_path()]);
                     r.command = vec![cmd.clone()];
                     if let Some(c) = last_commit(table) {
@@ -81,7 +130,7 @@ pub fn run(c: &Cmd) -> Result<()> {
                     }
                     r
                 }
-                (None, None) => bail!("give --run or --bench"),
+                ([], None) => bail!("give --run or --bench"),
             };
             let shape = Shape { columns: columns.clone(), rows_where: rows_where.clone(), pivot: pivot.clone() };
             let mut file = ResultFile::from_run(&r, table, &shape, title, &root)?;
@@ -101,6 +150,20 @@ pub fn run(c: &Cmd) -> Result<()> {
                 println!("regenerated {}", p.display());
             }
         }
+        #[cfg(feature = "plot")]
+        Cmd::Plot(a) => {
+            let file = ResultFile::load(&root, &a.name)?;
+            let spec = PlotSpec {
+                x: a.x.clone(),
+                y: a.y.clone(),
+                interval: a.interval.clone(),
+                series: a.series.clone(),
+                label: a.label.clone(),
+                rows_where: a.rows_where.clone(),
+            };
+            file.plot(&spec, &a.name, a.log_x, &a.out)?;
+            println!("wrote {}", a.out.display());
+        }
         Cmd::Check => {
             let stale = regenerate(&root, false)?;
             if !stale.is_empty() {
@@ -111,6 +174,16 @@ pub fn run(c: &Cmd) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The record of a run: its output folder's run.toml, or the file itself.
+fn read_run(run: &std::path::Path) -> Result<Run> {
+    let record = if run.is_dir() { run.join("run.toml") } else { run.to_path_buf() };
+    let r = Run::read(&record).map_err(anyhow::Error::msg).with_context(|| format!("reading {}", record.display()))?;
+    if r.git_dirty {
+        eprintln!("warning: {} ran on a checkout with uncommitted changes", record.display());
+    }
+    Ok(r)
 }
 
 /// The commit that last wrote `file`, when it is committed as it stands (a benchmark's CSV was
