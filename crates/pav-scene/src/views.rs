@@ -788,6 +788,19 @@ pub fn render_views(
     let mesh = cfg.load_mesh()?;
     let texture = cfg.texture(&mesh)?;
     let tex = pav_core::image::Rgb::load(&texture)?;
+    // Cycles' environments are found before anything is written.
+    let cycles = match cfg.render.renderer {
+        Renderer::Cycles => {
+            let blender = blender
+                .ok_or_else(|| ViewsError::Config { path: dir.into(), msg: "Cycles views need Blender".into() })?;
+            let envs: Vec<PathBuf> = (0..cfg.environments.len())
+                .map(|i| cfg.environment_path(i))
+                .collect::<Result<_, _>>()
+                .map_err(|msg| ViewsError::Config { path: dir.into(), msg })?;
+            Some((blender, envs))
+        }
+        Renderer::Rasterizer => None,
+    };
     let views_dir = dir.join("views");
     std::fs::create_dir_all(&views_dir).map_err(io(&views_dir))?;
     let obj = dir.join("mesh.obj");
@@ -863,8 +876,8 @@ pub fn render_views(
         progress.status(&format!("{name}: {secs:.1} s"));
     };
     let todo: Vec<&View> = mine.iter().copied().filter(|v| !done.contains(&v.name)).collect();
-    match (cfg.render.renderer, blender) {
-        (Renderer::Rasterizer, _) => {
+    match cycles {
+        None => {
             let normals = pav_render::shade::vertex_normals(&mesh);
             let n = cfg.render.size;
             for v in todo {
@@ -892,14 +905,7 @@ pub fn render_views(
                 advance(&v.name, secs);
             }
         }
-        (Renderer::Cycles, None) => {
-            return Err(ViewsError::Config { path: dir.into(), msg: "Cycles views need Blender".into() });
-        }
-        (Renderer::Cycles, Some(blender)) => {
-            let envs: Vec<PathBuf> = (0..cfg.environments.len())
-                .map(|i| cfg.environment_path(i))
-                .collect::<Result<_, _>>()
-                .map_err(|msg| ViewsError::Config { path: dir.into(), msg })?;
+        Some((blender, envs)) => {
             let ground_y = mesh.bounds().0[1];
             let effects: HashSet<PbrEffect> = cfg.render.effects.iter().copied().collect();
             let n = cfg.render.size;
