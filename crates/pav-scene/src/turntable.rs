@@ -19,9 +19,8 @@ use pav_core::image::{Frame, Rgb};
 use pav_core::sidecar::{self, AngleSample};
 #[cfg(feature = "video")]
 use pav_core::video::VideoWriter;
-use pav_render::raster::{GBuffer, EMPTY};
-use pav_render::shade::{vertex_normals, Lights, Shading};
-use pav_render::texture::Gather;
+use pav_render::raster::EMPTY;
+use pav_render::shade::{draw_textured, vertex_normals, Lights};
 use std::path::Path;
 #[cfg(feature = "video")]
 use std::path::PathBuf;
@@ -237,28 +236,6 @@ pub struct CarScene {
     rig: Option<(Box<RigConfig>, Shot)>,
 }
 
-/// The textured `mesh` as `cam` sees it at `size × size`, Phong-shaded under `lights` (RGB in
-/// [0, 1] where the car is, 0 elsewhere), with the G-buffer that says which pixels it covers.
-pub(crate) fn draw_textured(
-    mesh: &Mesh,
-    normals: &[[f32; 3]],
-    texture: &Rgb,
-    cam: &Camera,
-    lights: &Lights,
-    size: usize,
-) -> (GBuffer, Vec<f32>) {
-    let g = GBuffer::render(mesh, cam, size);
-    let mut rgb = vec![0.0f32; size * size * 3];
-    Gather::new(g.uv_samples(mesh), texture.width, texture.height).apply(&texture.rgb, 3, &mut rgb);
-    Shading::new(&g, mesh, normals, cam, lights).apply(&mut rgb, 3);
-    (g, rgb)
-}
-
-/// Room light: a key light from above the camera's left shoulder and some ambient. Of the few
-/// settings tried, this one's contrast got the rasterized car detected most (docs/reports/simulated-turntable.md).
-pub(crate) const ROOM: Lights =
-    Lights { ambient: 0.35, diffuse: 0.8, specular: 0.3, direction: [0.6, 1.0, 0.8], shininess: 32.0 };
-
 impl CarScene {
     /// The car of a views config, painted with `texture` (else the config's), filmed from the
     /// config's first pose grid at its first distance and at `elevation_deg` (else its first).
@@ -281,7 +258,7 @@ impl CarScene {
             elevation_deg,
             fov_deg: g.fov_deg,
             target: g.target,
-            lights: ROOM,
+            lights: Lights::ROOM,
             background: [0.45, 0.45, 0.45],
             rig: None,
         })
@@ -311,7 +288,7 @@ impl CarScene {
             elevation_deg,
             fov_deg: shot.fov_deg,
             target: shot.target,
-            lights: ROOM,
+            lights: Lights::ROOM,
             background: rig.room.backdrop,
             rig: Some((Box::new(rig.clone()), shot)),
         })

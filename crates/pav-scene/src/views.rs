@@ -38,7 +38,6 @@
 //! environment then only lights the car; the photo's own car shadow stays on the plate.
 
 use super::blender::{Blender, BlenderError, Job, JobView, Mode, TableTop};
-use super::turntable::{draw_textured, ROOM};
 use pav_core::geometry::camera::{moved_away, spherical, Camera, CameraConvention};
 use pav_core::geometry::mesh::{Mesh, MeshError};
 use pav_core::image::resize::{resize, Interpolation};
@@ -47,6 +46,7 @@ use pav_core::progress::Progress;
 use pav_core::shard::{Shard, ShardError};
 use pav_render::bake::Plate;
 use pav_render::raster::{GBuffer, EMPTY};
+use pav_render::shade::{draw_textured, Lights};
 use serde::Deserialize;
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -882,7 +882,7 @@ pub fn render_views(
             let n = cfg.render.size;
             for v in todo {
                 let t = std::time::Instant::now();
-                let (g, mut rgb) = draw_textured(&mesh, &normals, &tex, &v.camera, &ROOM, 2 * n);
+                let (g, mut rgb) = draw_textured(&mesh, &normals, &tex, &v.camera, &Lights::ROOM, 2 * n);
                 let mut cover = vec![0f32; rgb.len()];
                 for (i, f) in g.face.iter().enumerate() {
                     if *f != EMPTY {
