@@ -136,14 +136,7 @@ impl ResultFile {
         let mut rd = csv::Reader::from_path(table).map_err(parse)?;
         let head = rd.headers().map_err(parse)?.clone();
         let records: Vec<csv::StringRecord> = rd.records().collect::<Result<_, _>>().map_err(parse)?;
-        let conditions: Vec<(usize, &str)> = shape
-            .rows_where
-            .iter()
-            .map(|w| {
-                let (k, v) = w.split_once('=').unwrap_or((w, ""));
-                Ok((position(&head, k, table)?, v))
-            })
-            .collect::<Result<_, ResultsError>>()?;
+        let conditions = conditions(&shape.rows_where, &head, table)?;
         let kept = records.into_iter().filter(|r| conditions.iter().all(|(at, v)| r.get(*at) == Some(*v)));
         let (head, records) = match &shape.pivot {
             Some(p) => pivot(&head, kept, p, &shape.columns, table)?,
@@ -192,24 +185,13 @@ impl ResultFile {
     /// they first come (one group, named after y, without it). A row whose x or y is not a
     /// number ("n/a", text) is left out; a column not in the table is refused by name.
     pub fn points(&self, spec: &PlotSpec, name: &str) -> Result<Vec<(String, Vec<Point>)>, ResultsError> {
-        let at = |heading: &str| {
-            self.columns.iter().position(|c| c == heading).ok_or_else(|| ResultsError::Parse {
-                path: Path::new(DIR).join(format!("{name}.json")),
-                msg: format!("no column `{heading}`; it has {}", self.columns.join(", ")),
-            })
-        };
+        let (head, file) = (csv::StringRecord::from(self.columns.clone()), Path::new(DIR).join(format!("{name}.json")));
+        let at = |heading: &str| position(&head, heading, &file);
         let (x, y) = (at(&spec.x)?, at(&spec.y)?);
         let interval = spec.interval.as_deref().map(at).transpose()?;
         let series = spec.series.as_deref().map(at).transpose()?;
         let label = spec.label.as_deref().map(at).transpose()?;
-        let conditions: Vec<(usize, &str)> = spec
-            .rows_where
-            .iter()
-            .map(|w| {
-                let (k, v) = w.split_once('=').unwrap_or((w, ""));
-                Ok((at(k)?, v))
-            })
-            .collect::<Result<_, ResultsError>>()?;
+        let conditions = conditions(&spec.rows_where, &head, &file)?;
         let mut out: Vec<(String, Vec<Point>)> = Vec::new();
         for row in self.rows.iter().filter(|r| conditions.iter().all(|(c, v)| r[*c] == *v)) {
             let (Some(px), Some(py)) = (cell_number(&row[x]), cell_number(&row[y])) else { continue };
@@ -346,6 +328,21 @@ fn position(head: &csv::StringRecord, key: &str, table: &Path) -> Result<usize, 
         path: table.into(),
         msg: format!("no column `{key}` (columns: {})", head.iter().collect::<Vec<_>>().join(", ")),
     })
+}
+
+/// `HEADING=VALUE` conditions on rows as (the heading's position in `head`, the value).
+fn conditions<'a>(
+    rows_where: &'a [String],
+    head: &csv::StringRecord,
+    table: &Path,
+) -> Result<Vec<(usize, &'a str)>, ResultsError> {
+    rows_where
+        .iter()
+        .map(|w| {
+            let (k, v) = w.split_once('=').unwrap_or((w, ""));
+            Ok((position(head, k, table)?, v))
+        })
+        .collect()
 }
 
 /// The rows `records` (under `head`) made wide by `spec` (`KEY=VALUE`), grouped by the other
