@@ -50,6 +50,24 @@ fn wrap(path: &Path, r: R<()>) -> Result<(), PlotError> {
 
 type Chart<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
+/// A white chart on `root` titled `caption`, with label areas of (x, y) pixels under and left
+/// of the axes, over the ranges `x` and `y`.
+fn chart<'a, 'b: 'a>(
+    root: &'a DrawingArea<BitMapBackend<'b>, Shift>,
+    caption: &str,
+    (x_area, y_area): (u32, u32),
+    x: std::ops::Range<f64>,
+    y: std::ops::Range<f64>,
+) -> R<Chart<'a, 'b>> {
+    root.fill(&WHITE)?;
+    Ok(ChartBuilder::on(root)
+        .caption(caption, ("sans-serif", 22))
+        .margin(15)
+        .x_label_area_size(x_area)
+        .y_label_area_size(y_area)
+        .build_cartesian_2d(x, y)?)
+}
+
 /// Draws the legend box at `pos` and writes the image.
 fn finish<'a, 'b: 'a>(
     ch: &mut Chart<'a, 'b>,
@@ -149,14 +167,8 @@ pub fn grouped_bars(
         (|| -> R<()> {
             let w = (220 * groups.len().max(1) + 200).max(700) as u32;
             let root = BitMapBackend::new(path, (w, 520)).into_drawing_area();
-            root.fill(&WHITE)?;
             let n = groups.len() as f64;
-            let mut ch = ChartBuilder::on(&root)
-                .caption(caption, ("sans-serif", 22))
-                .margin(15)
-                .x_label_area_size(40)
-                .y_label_area_size(55)
-                .build_cartesian_2d(0f64..n, 0f64..105f64)?;
+            let mut ch = chart(&root, caption, (40, 55), 0f64..n, 0f64..105f64)?;
             ch.configure_mesh()
                 .disable_x_mesh()
                 .x_labels(groups.len() * 2 + 1)
@@ -213,13 +225,7 @@ pub fn labelled_lines(
         path,
         (|| -> R<()> {
             let root = BitMapBackend::new(path, (900, 560)).into_drawing_area();
-            root.fill(&WHITE)?;
-            let mut ch = ChartBuilder::on(&root)
-                .caption(caption, ("sans-serif", 22))
-                .margin(15)
-                .x_label_area_size(45)
-                .y_label_area_size(60)
-                .build_cartesian_2d(0f64..xmax, 0f64..105f64)?;
+            let mut ch = chart(&root, caption, (45, 60), 0f64..xmax, 0f64..105f64)?;
             ch.configure_mesh().x_desc(x_desc).y_desc(y_desc).draw()?;
             for (i, l) in lines.iter().enumerate() {
                 let c = colour(i);
@@ -247,13 +253,7 @@ fn step_chart<'a, 'b: 'a>(
 ) -> R<Chart<'a, 'b>> {
     let (xmax, ymax) =
         points.fold((1.0f64, 1.0f64), |(x, y), p| (x.max(p.0), if p.1.is_finite() { y.max(p.1) } else { y }));
-    root.fill(&WHITE)?;
-    let mut ch = ChartBuilder::on(root)
-        .caption(title, ("sans-serif", 22))
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0f64..xmax, 0f64..ymax * 1.05)?;
+    let mut ch = chart(root, title, (45, 60), 0f64..xmax, 0f64..ymax * 1.05)?;
     ch.configure_mesh().x_desc("step").draw()?;
     if let Some(t) = threshold {
         ch.draw_series(DashedLineSeries::new([(0.0, t), (xmax, t)], 6, 4, BLACK.stroke_width(1)))?;
@@ -386,13 +386,7 @@ pub fn intervals(
         path,
         (|| -> R<()> {
             let root = BitMapBackend::new(path, (900, 560)).into_drawing_area();
-            root.fill(&WHITE)?;
-            let mut ch = ChartBuilder::on(&root)
-                .caption(caption, ("sans-serif", 22))
-                .margin(15)
-                .x_label_area_size(45)
-                .y_label_area_size(70)
-                .build_cartesian_2d((x0 - dx)..(x1 + dx), (y0 - dy)..(y1 + dy))?;
+            let mut ch = chart(&root, caption, (45, 70), (x0 - dx)..(x1 + dx), (y0 - dy)..(y1 + dy))?;
             let tick = |v: &f64| {
                 let x = if log_x { 10f64.powf(*v) } else { *v };
                 if x >= 10.0 {
