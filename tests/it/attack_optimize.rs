@@ -87,6 +87,27 @@ fn optimization_lowers_the_car_score_and_resume_is_exact() {
 }
 
 #[test]
+fn a_step_budget_cuts_the_passes_short_and_the_cli_epochs_override_it() {
+    let (path, mut cfg, s, wb) = problem();
+    let never = AtomicBool::new(false);
+    let dir = tempfile::tempdir().unwrap();
+    let free = |epochs| RunOptions { epochs, ..opts(&dir.path().join(format!("{epochs:?}")), 0, false) };
+    let two_passes = optimize_texture(&path, &cfg, &s, &wb, &free(Some(2)), &Silent, &never).unwrap();
+    // Five steps over two views: two full passes and one view of a third, the passes' own order.
+    cfg.optimizer.steps = Some(5);
+    let budget = optimize_texture(&path, &cfg, &s, &wb, &free(None), &Silent, &never).unwrap();
+    assert_eq!(budget.log.len(), 5);
+    for (a, b) in two_passes.log.iter().zip(&budget.log) {
+        assert_eq!((a.step, a.epoch, &a.view, a.total.to_bits()), (b.step, b.epoch, &b.view, b.total.to_bits()));
+    }
+    assert_eq!(budget.log[4].epoch, 2);
+    let overridden = optimize_texture(&path, &cfg, &s, &wb, &free(Some(1)), &Silent, &never).unwrap();
+    assert_eq!(overridden.log.len(), 2);
+    cfg.optimizer.steps = Some(0);
+    assert!(cfg.check().unwrap_err().to_string().contains("optimizer.steps must be at least 1"));
+}
+
+#[test]
 fn poisoned_state_is_skipped_then_refused_with_the_checkpoint_kept() {
     let (path, cfg, s, wb) = problem();
     let never = AtomicBool::new(false);

@@ -187,6 +187,11 @@ pub struct OptimizerConfig {
     pub lr: f32,
     /// Passes over the training views.
     pub epochs: usize,
+    /// Steps in all, whatever the number of training views (each pass a fresh shuffle, the last
+    /// one cut short), instead of `epochs` × views: a fixed budget, so that view sets of different
+    /// sizes are compared at the same cost. Absent: `epochs` passes.
+    #[serde(default)]
+    pub steps: Option<u64>,
     /// Seed for the view order and EoT draws.
     #[serde(default)]
     pub seed: u64,
@@ -390,6 +395,9 @@ impl OptimizeConfig {
         }
         if o.epochs == 0 {
             return Err("optimizer.epochs must be at least 1".into());
+        }
+        if o.steps == Some(0) {
+            return Err("optimizer.steps must be at least 1 (or left out for `epochs` passes over the views)".into());
         }
         if !(0.0 <= o.clamp[0] && o.clamp[0] < o.clamp[1] && o.clamp[1] <= 1.0) {
             return Err(format!("optimizer.clamp must satisfy 0 ≤ lo < hi ≤ 1, got {:?}", o.clamp));

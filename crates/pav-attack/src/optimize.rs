@@ -135,7 +135,7 @@ pub struct RunOptions {
     pub checkpoint_every: u64,
     /// Give up after this many consecutive skipped steps.
     pub max_skips: u64,
-    /// Override the epochs of the config.
+    /// Override the epochs of the config (and its `steps` budget).
     pub epochs: Option<usize>,
     /// Save the texture as `snapshots/step{N:06}.png` at the start and every this many steps
     /// (and at the end); 0 saves none.
@@ -430,8 +430,10 @@ pub fn optimize_texture(
     let mut tex = pyramid.compose(&params);
     let views = setup.training_views();
     let n = views.len() as u64;
-    let epochs = opts.epochs.unwrap_or(cfg.optimizer.epochs) as u64;
-    let total = n * epochs;
+    let total = match (opts.epochs, cfg.optimizer.steps) {
+        (None, Some(steps)) => steps,
+        (epochs, _) => n * epochs.unwrap_or(cfg.optimizer.epochs) as u64,
+    };
     if let Some(a) = cfg.optimizer.average.filter(|a| a.from > total) {
         return Err(OptimizeError::AverageBeyondEnd { from: a.from, total });
     }

@@ -128,7 +128,7 @@ pub struct OptimizeRun {
     pub out: PathBuf,
     /// Continue from the checkpoint in `out`.
     pub resume: bool,
-    /// Override the config's epochs.
+    /// Override the config's epochs (and its steps budget).
     pub epochs: Option<usize>,
     /// Texture snapshots every this many steps (0: none; `attack::optimize::RunOptions`).
     pub snapshot_every: u64,

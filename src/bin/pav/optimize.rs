@@ -19,7 +19,7 @@ pub struct Args {
     /// Continue from the checkpoint in the output folder.
     #[arg(long)]
     resume: bool,
-    /// Override the config's epochs.
+    /// Override the config's epochs (and its `optimizer.steps` budget).
     #[arg(long)]
     epochs: Option<usize>,
     /// Save the texture to <out>/snapshots/stepNNNNNN.png every this many steps (0: never).
