@@ -619,6 +619,7 @@ impl RigConfig {
                 azimuth_step: Some(360.0 / self.render.frames as f32),
                 fov_deg: shot.fov_deg,
                 target: shot.target,
+                environments: Vec::new(),
             })
             .collect();
         let s = self.sticker.material.surface();

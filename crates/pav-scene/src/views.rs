@@ -32,6 +32,9 @@
 //! distances = [1.0, 1.4]       # and moved away along it (× the camera's distance; default [1])
 //! ```
 //!
+//! A grid or the plates may name `environments = ["courtyard"]`: only those of the config's
+//! environments draw it (by default all do), so one config mixes kinds of views.
+//!
 //! A plate view is Cycles' car with its caught shadow on a transparent film (`<name>_car.png`),
 //! laid over the photo's [`pav_render::bake::Plate`] at the photo's own camera with the car
 //! turned, so background, camera and ground are real and only the car is rendered. The
@@ -215,6 +218,9 @@ pub struct PoseGrid {
     /// Look-at point.
     #[serde(default)]
     pub target: [f32; 3],
+    /// Only these of the config's environments (by name) draw this grid; empty: all of them.
+    #[serde(default)]
+    pub environments: Vec<String>,
 }
 
 fn sixty() -> f32 {
@@ -249,6 +255,9 @@ pub struct Plates {
     /// The photos as the config names them (`data:` paths stay machine-independent).
     #[serde(skip)]
     pub sources: Vec<String>,
+    /// Only these of the config's environments (by name) light the plates; empty: all of them.
+    #[serde(default)]
+    pub environments: Vec<String>,
 }
 
 /// A `pav views render` config.
@@ -425,6 +434,21 @@ impl ViewsConfig {
                 return Err(format!("poses #{}: fov_deg {} is not a field of view", i + 1, p.fov_deg));
             }
         }
+        let names: Vec<String> = (0..self.environments.len()).map(|i| self.environment_name(i)).collect();
+        let grids = self.poses.iter().enumerate().map(|(i, p)| (format!("poses #{}", i + 1), &p.environments));
+        for (what, only) in grids.chain(self.plates.iter().map(|p| ("plates".to_string(), &p.environments))) {
+            if let Some(e) = only.iter().find(|e| !names.contains(e)) {
+                return Err(format!(
+                    "{what}: environment `{e}` is not among the [[environments]] ({})",
+                    names.join(", ")
+                ));
+            }
+        }
+        if let Some(e) = names.iter().find(|e| !self.draws(e)) {
+            return Err(format!(
+                "environment `{e}` draws no view: every [[poses]] and [plates] lists `environments` without it"
+            ));
+        }
         let mut seen = HashSet::new();
         if let Some(v) = self.views().into_iter().find(|v| !seen.insert(v.name.clone())) {
             return Err(format!("view {} comes twice (an environment listed twice, or grids that overlap)", v.name));
@@ -453,13 +477,21 @@ impl ViewsConfig {
         environment_stem(&self.environments[i].name)
     }
 
+    /// Whether environment `name` draws any view (a grid or the plates take it).
+    fn draws(&self, name: &str) -> bool {
+        let takes = |only: &[String]| only.is_empty() || only.iter().any(|e| e == name);
+        self.poses.iter().any(|g| takes(&g.environments))
+            || self.plates.as_ref().is_some_and(|p| takes(&p.environments))
+    }
+
     /// Every view of the config, in a fixed order: environments, then grids, distances,
     /// elevations, azimuths.
     pub fn views(&self) -> Vec<View> {
         let mut out = Vec::new();
         for ei in 0..self.environments.len() {
             let env_name = self.environment_name(ei);
-            for g in &self.poses {
+            let takes = |only: &[String]| only.is_empty() || only.contains(&env_name);
+            for g in self.poses.iter().filter(|g| takes(&g.environments)) {
                 let mut az = g.azimuths.clone();
                 if let Some(step) = g.azimuth_step {
                     az.extend((0..).map(|k| k as f32 * step).take_while(|a| *a < 360.0 - 1e-3));
@@ -505,6 +537,9 @@ impl ViewsConfig {
     fn plate_views(&self, ei: usize) -> Vec<View> {
         let Some(pl) = &self.plates else { return Vec::new() };
         let env_name = self.environment_name(ei);
+        if !(pl.environments.is_empty() || pl.environments.contains(&env_name)) {
+            return Vec::new();
+        }
         let mut out = Vec::new();
         for (pi, photo) in pl.photos.iter().enumerate() {
             let stem = photo.file_stem().map_or_else(|| format!("plate{pi}"), |s| s.to_string_lossy().into());
@@ -1185,6 +1220,31 @@ mod tests {
         // A camera on the grid looks at the target from its distance.
         let d = v.camera.to_view(v.target);
         assert!(d[0].abs() < 1e-4 && d[1].abs() < 1e-4 && (d[2] - v.pose[0]).abs() < 1e-4, "{d:?}");
+    }
+
+    #[test]
+    fn grids_and_plates_draw_only_the_environments_they_name() {
+        let scale = shipped("scale.toml");
+        let views = scale.views();
+        // 2 environments × 3 distances × 4 elevations × 36 azimuths; 4 × 6 photos × 3 × 31 turns.
+        assert_eq!(views.len(), 864 + 2232);
+        let env = |v: &View| scale.environment_name(v.environment);
+        assert!(views
+            .iter()
+            .filter(|v| v.plate.is_none())
+            .all(|v| ["courtyard", "interior"].contains(&env(v).as_str())));
+        assert_eq!(views.iter().filter(|v| v.plate.is_some() && env(v) == "city").count(), 558);
+        // No view of the held-out set is among them.
+        let held: HashSet<String> = shipped("heldout.toml").views().into_iter().map(|v| v.name).collect();
+        assert!(views.iter().all(|v| !held.contains(&v.name)));
+        let mut typo = scale.clone();
+        typo.poses[0].environments = vec!["courtyrd".into()];
+        let e = typo.check().unwrap_err();
+        assert!(e.contains("poses #1: environment `courtyrd` is not among"), "{e}");
+        let mut idle = scale.clone();
+        idle.plates.as_mut().unwrap().environments = vec!["courtyard".into()];
+        let e = idle.check().unwrap_err();
+        assert!(e.contains("environment `city` draws no view"), "{e}");
     }
 
     #[test]
