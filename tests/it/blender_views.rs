@@ -371,11 +371,44 @@ fn rendered_views_whose_car_goes_unseen_are_dropped() {
     assert_eq!(ss.keep_detected_pbr(&wb, 0.5).unwrap(), k);
     assert_eq!(ss.pbr[0].name(), s.pbr[0].name());
     cfg.views.stream = false;
+    // Each white box's score of each image is kept beside the images, as computed, and a later
+    // filter reads it instead of running the white box: a doctored score is believed.
+    use pav::attack::view_scores::ViewScores;
+    let images = dir.join("views");
+    let id = wb.first().identity().to_string();
+    let files: Vec<(String, String)> = unfiltered_pbr(&cfg)
+        .iter()
+        .map(|p| {
+            let sha = pav::data::store::sha256_hex(&std::fs::read(p.image()).unwrap());
+            (p.image().file_name().unwrap().to_string_lossy().into_owned(), sha)
+        })
+        .collect();
+    let cached = ViewScores::read(&images);
+    let back: Vec<f32> = files.iter().map(|(f, h)| cached.get(&id, f, h).expect("cached")).collect();
+    assert_eq!(
+        back.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+        scores.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+    );
+    let mut doctored = ViewScores::read(&images);
+    files.iter().for_each(|(f, h)| doctored.put(&id, f, h, 0.0));
+    doctored.save(&images).unwrap();
+    let mut none = Setup::load(&cfg, None).unwrap();
+    assert_eq!(none.keep_detected_pbr(&wb, 0.5).unwrap().kept, 0);
+    // Without the file the white box runs again and writes it anew.
+    std::fs::remove_file(images.join(pav::attack::view_scores::FILE)).unwrap();
+    let mut again = Setup::load(&cfg, None).unwrap();
+    assert_eq!(again.keep_detected_pbr(&wb, 0.5).unwrap(), k);
     assert_eq!(s.train.len(), 1, "photos are kept whatever they score");
     // A threshold outside (0, 1) is refused by the config's check.
     cfg.views.pbr_min_score = Some(1.5);
     let e = cfg.check().expect_err("refused").to_string();
     assert!(e.contains("views.pbr_min_score must be in (0, 1), got 1.5"), "{e}");
+}
+
+/// Every rendered view of `cfg`, before any filter.
+#[cfg(feature = "optimize")]
+fn unfiltered_pbr(cfg: &pav::attack::config::OptimizeConfig) -> Vec<pav::attack::setup::PbrView> {
+    pav::attack::setup::Setup::load(cfg, None).unwrap().pbr
 }
 
 /// Mean absolute RGB difference between two renders over the pixels at least 3 px from the car

@@ -19,5 +19,6 @@ pub mod setup;
 pub mod smooth;
 pub mod uv;
 pub mod view;
+pub mod view_scores;
 #[cfg(feature = "optimize")]
 pub mod whitebox;

@@ -151,8 +151,8 @@ pub struct StoredView {
 /// A rendered training view: built and held in memory, or only its files (`views.stream`).
 #[derive(Clone, Debug)]
 pub enum PbrView {
-    /// Built once at set-up.
-    Built(View),
+    /// Built once at set-up, with its rendered image's file.
+    Built(View, PathBuf),
     /// Rebuilt from its files at each use.
     Stored(StoredView),
 }
@@ -161,15 +161,23 @@ impl PbrView {
     /// The view's name.
     pub fn name(&self) -> &str {
         match self {
-            PbrView::Built(v) => &v.name,
+            PbrView::Built(v, _) => &v.name,
             PbrView::Stored(s) => &s.name,
+        }
+    }
+
+    /// Its rendered image's file.
+    pub fn image(&self) -> &Path {
+        match self {
+            PbrView::Built(_, image) => image,
+            PbrView::Stored(s) => &s.image,
         }
     }
 
     /// The view as [`Setup::training_views`] lists it.
     pub fn as_ref(&self) -> ViewRef<'_> {
         match self {
-            PbrView::Built(v) => ViewRef::Built(v),
+            PbrView::Built(v, _) => ViewRef::Built(v),
             PbrView::Stored(s) => ViewRef::Stored(s),
         }
     }
@@ -204,6 +212,17 @@ pub enum KeepError {
     /// A white box.
     #[error(transparent)]
     WhiteBox(#[from] WhiteBoxError),
+    /// Reading a rendered image.
+    #[error("reading {path}: {source}")]
+    Read {
+        /// The image.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// Keeping the scores beside the images.
+    #[error(transparent)]
+    Scores(#[from] crate::view_scores::ViewScoresError),
 }
 
 /// What [`Setup::keep_detected_pbr`] kept.
@@ -497,7 +516,7 @@ impl Setup {
             if stream {
                 PbrView::Stored(StoredView { texels: v.texels_read(), name: v.name, image, camera })
             } else {
-                PbrView::Built(v)
+                PbrView::Built(v, image)
             }
         };
         let pbr = pbr_views(cfg, &cfg.views.pbr, &maker, &mesh, &region, None, &mut plates, held)?;
@@ -671,25 +690,49 @@ impl Setup {
     }
 
     /// Drops the rendered views in which no white box of `wb` finds a car at `min_score` as they
-    /// were rendered (`views.pbr_min_score`); the photos are kept whatever they score.
+    /// were rendered (`views.pbr_min_score`); the photos are kept whatever they score. Each
+    /// white box's score of each image is kept beside the images ([`crate::view_scores`]), so
+    /// a later run with the same white boxes reads it instead of running them again.
     #[cfg(feature = "optimize")]
     pub fn keep_detected_pbr(&mut self, wb: &Ensemble, min_score: f32) -> Result<PbrKept, KeepError> {
+        use crate::view_scores::ViewScores;
         let total = self.pbr.len();
         let mut seen_by = vec![0usize; wb.members.len()];
         let mut kept = Vec::with_capacity(total);
+        let mut caches: HashMap<PathBuf, ViewScores> = HashMap::new();
         for p in std::mem::take(&mut self.pbr) {
-            let v = self.view(p.as_ref()).map_err(|e| KeepError::View(Box::new(e)))?;
+            let image = p.image();
+            let folder = image.parent().unwrap_or(Path::new(".")).to_path_buf();
+            let file = image.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
+            let bytes = std::fs::read(image).map_err(|source| KeepError::Read { path: image.to_path_buf(), source })?;
+            let sha = pav_core::data::store::sha256_hex(&bytes);
+            let cache = caches.entry(folder.clone()).or_insert_with(|| ViewScores::read(&folder));
+            let mut built = None;
             let mut any = false;
             for (k, (m, _)) in wb.members.iter().enumerate() {
-                if pav_detect::detected(m.loss(&v.photo, v.size)?.max_score, min_score) {
+                let score = match cache.get(m.identity(), &file, &sha) {
+                    Some(s) => s,
+                    None => {
+                        if built.is_none() {
+                            built = Some(self.view(p.as_ref()).map_err(|e| KeepError::View(Box::new(e)))?);
+                        }
+                        let v = built.as_ref().expect("built above");
+                        let s = m.loss(&v.photo, v.size)?.max_score;
+                        cache.put(m.identity(), &file, &sha, s);
+                        s
+                    }
+                };
+                if pav_detect::detected(score, min_score) {
                     seen_by[k] += 1;
                     any = true;
                 }
             }
-            drop(v);
             if any {
                 kept.push(p);
             }
+        }
+        for (folder, cache) in &mut caches {
+            cache.save(folder)?;
         }
         self.pbr = kept;
         let seen_by = wb.members.iter().map(|(m, _)| m.name().to_string()).zip(seen_by).collect();

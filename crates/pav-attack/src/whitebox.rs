@@ -56,6 +56,8 @@ pub struct DetectorGrad {
 /// A detector with the paper's loss and its input gradient.
 pub struct WhiteBox {
     name: String,
+    /// What its scores depend on, hashed ([`WhiteBox::identity`]).
+    identity: String,
     session: Mutex<GradSession>,
     /// The description of the values differentiated.
     description: Description,
@@ -263,8 +265,13 @@ impl WhiteBox {
         };
         let gain = [0, 1, 2].map(|c| 255.0 * i.scale / i.std[c]);
         let offset = [0, 1, 2].map(|c| -i.mean[c] / i.std[c]);
+        // The model's bytes and every setting read above; paths only name files already hashed.
+        let identity = pav_core::data::store::sha256_hex(
+            format!("{}\n{cfg:?}\n{loss:?}\n{o:?}", pav_core::data::store::sha256_hex(&bytes)).as_bytes(),
+        );
         Ok(WhiteBox {
             name: cfg.name.clone(),
+            identity,
             session: Mutex::new(session),
             rule: ScoreRule::of(&description, classes),
             description,
@@ -286,6 +293,12 @@ impl WhiteBox {
     /// The detector's name.
     pub fn name(&self) -> &str {
         &self.name
+    }
+
+    /// A hash of what its scores depend on (the model's bytes, its description, the loss and load
+    /// options): two white boxes of one identity score every image alike.
+    pub fn identity(&self) -> &str {
+        &self.identity
     }
 
     /// Network input side.
