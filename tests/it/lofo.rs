@@ -115,3 +115,39 @@ fn each_family_left_out_scores_its_arm_and_shards_give_the_whole_run() {
         "{text}"
     );
 }
+
+/// The scoring behind eval-digital and every arm's held-out table deals the views out among one
+/// set of detectors per core: the records are those of a single set, bit for bit and in order.
+#[test]
+fn scoring_on_several_workers_gives_the_records_of_one() {
+    use pav::attack::config::OptimizeConfig;
+    use pav::attack::setup::Setup;
+    use pav::studies::table2::{score_textures, Condition};
+    common::real_data();
+    let mut cfg = OptimizeConfig::load(&common::repo().join("configs/optimize/paper.toml")).unwrap();
+    cfg.views.train.truncate(3);
+    cfg.views.test.truncate(2);
+    let setup = Setup::load_photos(&cfg, None).unwrap();
+    let detectors = ["yolov3-tiny", "yolox_nano"].map(common::detector_config);
+    let conditions = [
+        Condition { name: "original".into(), seed: 0, texture: None },
+        Condition { name: "random".into(), seed: 1, texture: Some(setup.random_texture(setup.random_block(), 1)) },
+    ];
+    let none = |_: &str| Vec::new();
+    let run = |workers: usize| {
+        let mut sets: Vec<_> =
+            (0..workers).map(|_| pav::detect::load::load_detectors(&detectors, &[], &[], 1).unwrap()).collect();
+        score_textures(&setup, &mut sets, &conditions, 0.5, &none, &pav::progress::Silent).unwrap()
+    };
+    let (rows1, one) = run(1);
+    let (rows3, three) = run(3);
+    assert_eq!(one.len(), 2 * 5 * 2);
+    let key = |r: &pav::studies::per_view::ViewRecord| {
+        (r.view.clone(), r.texture.clone(), r.detector.clone(), r.score.to_bits())
+    };
+    assert_eq!(one.iter().map(key).collect::<Vec<_>>(), three.iter().map(key).collect::<Vec<_>>());
+    let cell = |r: &pav::studies::table2::DigitalRow| {
+        (r.texture.clone(), r.detector.clone(), r.split.clone(), r.mean_score.to_bits())
+    };
+    assert_eq!(rows1.iter().map(cell).collect::<Vec<_>>(), rows3.iter().map(cell).collect::<Vec<_>>());
+}

@@ -82,6 +82,50 @@ pub fn detect_view(
     Ok(out)
 }
 
+/// [`detect_view`] over `views`, dealt out among the `workers` (one set of the same detectors
+/// each) on threads of their own; the detections come back in view order.
+pub fn detect_views(
+    views: &[(&'static str, &View)],
+    tex: Option<&[f32]>,
+    setup: &Setup,
+    workers: &mut [Vec<Box<dyn Detector>>],
+    progress: &dyn Progress,
+) -> Result<Vec<Vec<ImageDetections>>, pav_detect::DetectError> {
+    let n = workers.len().max(1);
+    let (done, ticks) = std::sync::mpsc::channel::<()>();
+    let dealt = std::thread::scope(|scope| {
+        let handles: Vec<_> = workers
+            .iter_mut()
+            .enumerate()
+            .map(|(w, dets)| {
+                let done = done.clone();
+                scope.spawn(move || {
+                    let mut out = Vec::new();
+                    for (i, (_, v)) in views.iter().enumerate().skip(w).step_by(n) {
+                        out.push((i, detect_view(v, tex, setup, dets)?));
+                        // The receiver outlives the workers; a send cannot fail while it waits.
+                        let _ = done.send(());
+                    }
+                    Ok::<_, pav_detect::DetectError>(out)
+                })
+            })
+            .collect();
+        drop(done);
+        // The progress bar is not shared across threads: this thread counts for the workers.
+        for () in ticks.iter() {
+            progress.advance(1);
+        }
+        handles.into_iter().map(|h| h.join().expect("a scoring worker panicked")).collect::<Vec<_>>()
+    });
+    let mut slots: Vec<Option<Vec<ImageDetections>>> = vec![None; views.len()];
+    for part in dealt {
+        for (i, ims) in part? {
+            slots[i] = Some(ims);
+        }
+    }
+    Ok(slots.into_iter().map(|s| s.expect("every view is dealt to one worker")).collect())
+}
+
 /// One cell from the detections of its images; `None` when there are none.
 pub fn aggregate(
     detector: &str,
@@ -122,15 +166,23 @@ pub struct Condition {
 /// Scores every (detector, texture, split) of `setup`, pooling the conditions of one name, and
 /// returns the rows and every view's best score per condition (fold 0; role "train" or
 /// "held-out"); `progress` counts composites. The first condition must be the original.
+/// `workers` holds one set of the same detectors per thread: the views are dealt out among them
+/// and the results kept in view order, so the rows do not depend on how many there are.
 pub fn score_textures(
     setup: &Setup,
-    detectors: &mut [Box<dyn Detector>],
+    workers: &mut [Vec<Box<dyn Detector>>],
     conditions: &[Condition],
     threshold: f32,
     white_box: &dyn Fn(&str) -> Vec<String>,
     progress: &dyn Progress,
 ) -> Result<(Vec<DigitalRow>, Vec<ViewRecord>), pav_detect::DetectError> {
-    progress.begin("composites", (conditions.len() * (setup.train.len() + setup.test.len())) as u64);
+    let names: Vec<String> = match workers.first() {
+        Some(w) => w.iter().map(|d| d.name().to_string()).collect(),
+        None => return Ok((Vec::new(), Vec::new())),
+    };
+    let views: Vec<(&'static str, &View)> =
+        setup.train.iter().map(|v| ("train", v)).chain(setup.test.iter().map(|v| ("test", v))).collect();
+    progress.begin("composites", (conditions.len() * views.len()) as u64);
     let mut records = Vec::new();
     // Per name, per detector: every view it was scored on.
     let mut pooled: Vec<(String, Vec<Vec<Scored>>)> = Vec::new();
@@ -138,22 +190,20 @@ pub fn score_textures(
     let mut original: Option<Vec<Vec<bool>>> = None;
     for c in conditions {
         let tex = c.texture.as_deref().map(|t| setup.scored(t));
-        let mut per: Vec<Vec<(&'static str, ImageDetections)>> = vec![Vec::new(); detectors.len()];
-        for (split, views) in [("train", &setup.train), ("test", &setup.test)] {
-            for v in views.iter() {
-                for (d, im) in detect_view(v, tex.as_deref(), setup, detectors)?.into_iter().enumerate() {
-                    records.push(ViewRecord {
-                        fold: 0,
-                        role: if split == "test" { "held-out" } else { "train" },
-                        view: v.name.clone(),
-                        texture: c.name.clone(),
-                        seed: c.seed,
-                        detector: detectors[d].name().to_string(),
-                        score: im.best_score(),
-                    });
-                    per[d].push((split, im));
-                }
-                progress.advance(1);
+        let detected = detect_views(&views, tex.as_deref(), setup, workers, progress)?;
+        let mut per: Vec<Vec<(&'static str, ImageDetections)>> = vec![Vec::new(); names.len()];
+        for ((split, v), ims) in views.iter().zip(detected) {
+            for (d, im) in ims.into_iter().enumerate() {
+                records.push(ViewRecord {
+                    fold: 0,
+                    role: if *split == "test" { "held-out" } else { "train" },
+                    view: v.name.clone(),
+                    texture: c.name.clone(),
+                    seed: c.seed,
+                    detector: names[d].clone(),
+                    score: im.best_score(),
+                });
+                per[d].push((split, im));
             }
         }
         if c.texture.is_none() && original.is_none() {
@@ -163,7 +213,7 @@ pub fn score_textures(
         let k = match pooled.iter().position(|(n, _)| n == &c.name) {
             Some(k) => k,
             None => {
-                pooled.push((c.name.clone(), vec![Vec::new(); detectors.len()]));
+                pooled.push((c.name.clone(), vec![Vec::new(); names.len()]));
                 pooled.len() - 1
             }
         };
@@ -175,19 +225,12 @@ pub fn score_textures(
     }
     let mut rows = Vec::new();
     for (name, per) in &pooled {
-        for (d, det) in detectors.iter().enumerate() {
+        for (d, det) in names.iter().enumerate() {
             for split in ["train", "test", "all"] {
                 let keep = |s: &str| split == "all" || s == split;
                 let ims: Vec<ImageDetections> =
                     per[d].iter().filter(|(s, _, _)| keep(s)).map(|(_, i, _)| i.clone()).collect();
-                let mut row = aggregate(
-                    det.name(),
-                    white_box(name).iter().any(|w| w == det.name()),
-                    name,
-                    split,
-                    &ims,
-                    threshold,
-                );
+                let mut row = aggregate(det, white_box(name).iter().any(|w| w == det), name, split, &ims, threshold);
                 if let (Some(r), true) = (row.as_mut(), original.is_some()) {
                     let missed: Vec<bool> = per[d]
                         .iter()
@@ -293,9 +336,15 @@ pub fn eval_digital(
     if squeeze.is_some() {
         pav_eval::squeeze::add_squeezers(&mut defences);
     }
-    let mut dets = load_detectors(&scoring.detectors, &[], &defences, 1)?;
+    // One set of single-threaded sessions per core: views are independent, and single-threaded
+    // sessions give the same floats whatever the machine's core count.
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let views = setup.train.len() + setup.test.len();
+    let mut workers = (0..cores.min(views).max(1))
+        .map(|_| load_detectors(&scoring.detectors, &[], &defences, 1))
+        .collect::<Result<Vec<_>, _>>()?;
     let white_box = |name: &str| own_wb.get(name).cloned().unwrap_or_else(|| config_wb.clone());
-    let (rows, records) = score_textures(&setup, &mut dets, &conditions, threshold, &white_box, progress)?;
+    let (rows, records) = score_textures(&setup, &mut workers, &conditions, threshold, &white_box, progress)?;
     create_dir(out)?;
     write_csv(&out.join("digital.csv"), &rows)?;
     write_csv(&out.join("digital_views.csv"), &records)?;
