@@ -8,3 +8,20 @@ def bootstrap(d, n=10000, seed=0):
     rng = random.Random(seed)
     means = sorted(sum(rng.choice(d) for _ in d) / len(d) for _ in range(n))
     return sum(d) / len(d), means[int(0.025 * n)], means[int(0.975 * n) - 1]
+
+
+def two_level_bootstrap(d, n=10000, seed=0):
+    """Mean of `d[seed][unit]` (paired differences per seed and per view or frame, every seed
+    over the same units) and its 95 % percentile interval from `n` resamples that draw seeds and
+    units with replacement, as `pav lofo` does: the interval carries the spread between seeds
+    as well as between units."""
+    rng = random.Random(seed)
+    s, v = len(d), len(d[0])
+    means = []
+    for _ in range(n):
+        seeds = [rng.randrange(s) for _ in range(s)]
+        units = [rng.randrange(v) for _ in range(v)]
+        means.append(sum(d[k][u] for k in seeds for u in units) / (s * v))
+    means.sort()
+    mean = sum(sum(r) for r in d) / (s * v)
+    return mean, means[int(0.025 * n)], means[int(0.975 * n) - 1]
