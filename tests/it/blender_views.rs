@@ -159,9 +159,13 @@ fn the_ci_config_renders_resumes_and_shards() {
     // A rerun renders nothing; a deleted image is rendered again.
     let out = run_ok(pav().args(["views", "render"]).arg(&cfg).arg("-o").arg(&full));
     assert!(out.contains("6 views: 0 rendered now, 6 from an earlier run"), "{out}");
-    std::fs::remove_file(full.join(format!("views/{}.png", names[4]))).unwrap();
+    let drawn = full.join(format!("views/{}.png", names[4]));
+    let bytes = std::fs::read(&drawn).unwrap();
+    std::fs::remove_file(&drawn).unwrap();
     let out = run_ok(pav().args(["views", "render"]).arg(&cfg).arg("-o").arg(&full));
     assert!(out.contains("6 views: 1 rendered now, 5 from an earlier run"), "{out}");
+    // Drawn again, the view is the same file, byte for byte: no date or render time inside.
+    assert!(std::fs::read(&drawn).unwrap() == bytes, "{} differs when drawn again", drawn.display());
     // Two shards and a merge make the same set of views.
     let sharded = tmp.path().join("sharded");
     for k in ["1/2", "2/2"] {

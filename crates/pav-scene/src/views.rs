@@ -987,6 +987,7 @@ pub fn render_views(
                     blender.run(&job, dir, |name, secs| {
                         let Some(v) = todo.iter().find(|v| v.name == name) else { return };
                         let mut done_one = || -> Result<(), ViewsError> {
+                            pav_core::image::strip_png_text(&views_dir.join(out_name(v)))?;
                             if v.plate.is_some() {
                                 let (rgb, alpha) = pav_core::image::load_rgba(&views_dir.join(out_name(v)))?;
                                 writer.lay_over(v, &rgb, &alpha)?;

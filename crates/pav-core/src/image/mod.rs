@@ -71,6 +71,14 @@ pub enum ImageError {
         /// Values given.
         len: usize,
     },
+    /// The file is not a PNG, or could not be rewritten.
+    #[error("cannot rewrite PNG {path}: {why}")]
+    Rewrite {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        why: String,
+    },
 }
 
 impl Rgb {
@@ -112,6 +120,37 @@ impl Rgb {
         }
         Rgb { width: side, height: side, rgb }
     }
+}
+
+/// PNG chunks that carry text or a time stamp rather than pixels.
+const TEXT_CHUNKS: [&[u8; 4]; 4] = [b"tEXt", b"zTXt", b"iTXt", b"tIME"];
+
+/// Rewrites a PNG without its text and time chunks, pixels untouched: Blender writes the date
+/// and the render time into every image, so the same view drawn twice would differ in its bytes.
+pub fn strip_png_text(path: &Path) -> Result<(), ImageError> {
+    let fail = |why: String| ImageError::Rewrite { path: path.into(), why };
+    let bytes = std::fs::read(path).map_err(|e| fail(e.to_string()))?;
+    const SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
+    if !bytes.starts_with(SIGNATURE) {
+        return Err(fail("no PNG signature".into()));
+    }
+    let mut out = SIGNATURE.to_vec();
+    let mut at = SIGNATURE.len();
+    while at < bytes.len() {
+        let head = bytes.get(at..at + 8).ok_or_else(|| fail(format!("a chunk cut short at byte {at}")))?;
+        let len = u32::from_be_bytes([head[0], head[1], head[2], head[3]]) as usize;
+        let end = at + 12 + len;
+        let chunk = bytes.get(at..end).ok_or_else(|| fail(format!("a chunk cut short at byte {at}")))?;
+        if !TEXT_CHUNKS.iter().any(|t| &head[4..8] == *t) {
+            out.extend_from_slice(chunk);
+        }
+        at = end;
+    }
+    if out.len() == bytes.len() {
+        return Ok(());
+    }
+    let tmp = path.with_extension("png.tmp");
+    std::fs::write(&tmp, &out).and_then(|_| std::fs::rename(&tmp, path)).map_err(|e| fail(e.to_string()))
 }
 
 /// Reads an RGBA image as straight (not premultiplied) RGB and alpha, both in [0, 1], as
@@ -262,6 +301,31 @@ pub fn tile<T: Copy>(tiles: &[Vec<T>], tw: usize, th: usize, cols: usize, backgr
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn text_chunks_leave_a_png_and_its_pixels_stay() {
+        use super::*;
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (dir.path().join("a.png"), dir.path().join("b.png"));
+        save_rgb(&a, 2, 1, &[0.0, 0.5, 1.0, 1.0, 0.25, 0.0]).unwrap();
+        // The same image with a date in a text chunk after the header, as Blender writes it.
+        let plain = std::fs::read(&a).unwrap();
+        let ihdr_end = 8 + 12 + 13;
+        let text = b"Date\x002026/11/29 15:51:49";
+        let mut chunk = (text.len() as u32).to_be_bytes().to_vec();
+        chunk.extend_from_slice(b"tEXt");
+        chunk.extend_from_slice(text);
+        chunk.extend_from_slice(&[0, 0, 0, 0]); // the CRC is not checked by the stripper
+        let stamped = [&plain[..ihdr_end], &chunk[..], &plain[ihdr_end..]].concat();
+        std::fs::write(&b, &stamped).unwrap();
+        strip_png_text(&b).unwrap();
+        assert_eq!(std::fs::read(&b).unwrap(), plain);
+        // A file without such chunks is left as it is; a file that is no PNG is refused.
+        strip_png_text(&a).unwrap();
+        assert_eq!(std::fs::read(&a).unwrap(), plain);
+        std::fs::write(&b, b"GIF89a").unwrap();
+        assert!(strip_png_text(&b).unwrap_err().to_string().contains("no PNG signature"));
+    }
+
     use super::*;
 
     #[test]
