@@ -28,7 +28,7 @@ for mode in ["screen", "printed"]:
         randoms = [l for l in score if l.startswith("random")]
         mine = [score[f"{arm}-s{s}"] for s in seeds]
         refs = {
-            "RAUCA_E2E.png": {k: score["rauca"][k] for k in keys},
+            "rauca-e2e": {k: score["rauca"][k] for k in keys},
             "random": {k: sum(score[l][k] for l in randoms) / len(randoms) for k in keys},
         }
         for against, ref in refs.items():
