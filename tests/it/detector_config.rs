@@ -108,3 +108,28 @@ fn every_input_output_and_class_key_changes_inference_and_the_white_box_where_it
         assert_eq!(wb != base.1, white_box_changes, "{key}: the white box changed: {}", wb != base.1);
     }
 }
+
+/// A white box's identity keys the rendered views' score file: the thread count leaves it as it
+/// is (scores do not depend on it), while the composite size or another model changes it.
+#[test]
+fn a_white_box_identity_follows_what_its_scores_depend_on() {
+    common::real_data();
+    let loss = DetectionLoss {
+        box_threshold: 0.05,
+        target: vec![2],
+        reduce: Reduce::LogMax,
+        proposals: Proposals::ArgMax,
+        iou: false,
+        box_gradient: false,
+    };
+    let id = |name: &str, composite: usize, threads: usize| {
+        let cfg = DetectorConfig::load(&common::detector_config(name)).unwrap();
+        let loss = DetectionLoss { target: cfg.target_classes.clone(), ..loss.clone() };
+        let o = WhiteBoxOptions { composite, input: None, threads, surrogate: false };
+        WhiteBox::with_options(&cfg, loss, o).unwrap().identity().to_string()
+    };
+    let base = id("yolov3-tiny", 416, 0);
+    assert_eq!(id("yolov3-tiny", 416, 1), base);
+    assert_ne!(id("yolov3-tiny", 600, 0), base);
+    assert_ne!(id("yolox_nano", 416, 0), base);
+}

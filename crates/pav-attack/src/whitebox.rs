@@ -266,8 +266,10 @@ impl WhiteBox {
         let gain = [0, 1, 2].map(|c| 255.0 * i.scale / i.std[c]);
         let offset = [0, 1, 2].map(|c| -i.mean[c] / i.std[c]);
         // The model's bytes and every setting read above; paths only name files already hashed.
+        // The thread count is left out: it does not change a score.
+        let settings = WhiteBoxOptions { threads: 0, ..o };
         let identity = pav_core::data::store::sha256_hex(
-            format!("{}\n{cfg:?}\n{loss:?}\n{o:?}", pav_core::data::store::sha256_hex(&bytes)).as_bytes(),
+            format!("{}\n{cfg:?}\n{loss:?}\n{settings:?}", pav_core::data::store::sha256_hex(&bytes)).as_bytes(),
         );
         Ok(WhiteBox {
             name: cfg.name.clone(),
