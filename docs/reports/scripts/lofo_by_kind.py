@@ -1,0 +1,37 @@
+#!/usr/bin/env python3
+"""Where on the held-out set an arm of a `pav lofo` run trails or leads RAUCA-E2E's texture: per
+family left out, the mean difference of best car score (the arm's seeds against RAUCA-E2E's
+texture, view by view) over the views of each elevation and over FCA's photos, with the 95 %
+interval of a two-level bootstrap over seeds and views.
+usage: lofo_by_kind.py LOFO_OUT > LOFO_OUT/lofo_by_kind.csv"""
+import csv
+import glob
+import os
+import re
+import sys
+from collections import defaultdict
+
+from paired_stats import two_level_bootstrap
+
+out = sys.argv[1]
+w = csv.writer(sys.stdout, lineterminator="\n")
+w.writerow(["held_out", "views", "count", "diff", "lo", "hi"])
+view_re = re.compile(r"pbr:\w+_d[\d.]+_e(\d+)_a")
+for path in sorted(glob.glob(os.path.join(out, "without-*", "heldout", "digital_views.csv"))):
+    arm = path.split(os.sep)[-3]
+    family = arm[len("without-"):]
+    score = defaultdict(dict)
+    with open(path) as f:
+        for r in csv.DictReader(f):
+            if r["role"] == "held-out" and r["detector"] == family:
+                score[(r["texture"], r["seed"])][r["view"]] = float(r["score"])
+    rauca = score[("rauca-e2e", "0")]
+    seeds = sorted(s for (t, s) in score if t == arm)
+    kinds = defaultdict(list)
+    for v in sorted(rauca):
+        m = view_re.match(v)
+        kinds[f"elevation {m.group(1)}°" if m else "FCA photos"].append(v)
+    for kind, views in sorted(kinds.items()):
+        d = [[score[(arm, s)][v] - rauca[v] for v in views] for s in seeds]
+        mean, lo, hi = two_level_bootstrap(d)
+        w.writerow([family, kind, len(views), f"{mean:.4f}", f"{lo:.4f}", f"{hi:.4f}"])
