@@ -340,9 +340,11 @@ pub fn eval_digital(
     // sessions give the same floats whatever the machine's core count.
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let views = setup.train.len() + setup.test.len();
-    let mut workers = (0..cores.min(views).max(1))
-        .map(|_| load_detectors(&scoring.detectors, &[], &defences, 1))
+    let first = load_detectors(&scoring.detectors, &[], &defences, 1)?;
+    let copies = (1..cores.min(views).max(1))
+        .map(|_| first.iter().map(|d| d.replica()).collect::<Result<Vec<_>, _>>())
         .collect::<Result<Vec<_>, _>>()?;
+    let mut workers: Vec<_> = std::iter::once(first).chain(copies).collect();
     let white_box = |name: &str| own_wb.get(name).cloned().unwrap_or_else(|| config_wb.clone());
     let (rows, records) = score_textures(&setup, &mut workers, &conditions, threshold, &white_box, progress)?;
     create_dir(out)?;
