@@ -713,10 +713,10 @@ impl Setup {
                 let score = match cache.get(m.identity(), &file, &sha) {
                     Some(s) => s,
                     None => {
-                        if built.is_none() {
-                            built = Some(self.view(p.as_ref()).map_err(|e| KeepError::View(Box::new(e)))?);
-                        }
-                        let v = built.as_ref().expect("built above");
+                        let v = match &built {
+                            Some(v) => v,
+                            None => built.insert(self.view(p.as_ref()).map_err(|e| KeepError::View(Box::new(e)))?),
+                        };
                         let s = m.loss(&v.photo, v.size)?.max_score;
                         cache.put(m.identity(), &file, &sha, s);
                         s

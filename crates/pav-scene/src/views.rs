@@ -223,6 +223,11 @@ pub struct PoseGrid {
     pub environments: Vec<String>,
 }
 
+/// Whether a grid or the plates that name `only` (empty: every environment) draw in `env`.
+fn takes(only: &[String], env: &str) -> bool {
+    only.is_empty() || only.iter().any(|e| e == env)
+}
+
 fn sixty() -> f32 {
     60.0
 }
@@ -479,9 +484,8 @@ impl ViewsConfig {
 
     /// Whether environment `name` draws any view (a grid or the plates take it).
     fn draws(&self, name: &str) -> bool {
-        let takes = |only: &[String]| only.is_empty() || only.iter().any(|e| e == name);
-        self.poses.iter().any(|g| takes(&g.environments))
-            || self.plates.as_ref().is_some_and(|p| takes(&p.environments))
+        self.poses.iter().any(|g| takes(&g.environments, name))
+            || self.plates.as_ref().is_some_and(|p| takes(&p.environments, name))
     }
 
     /// Every view of the config, in a fixed order: environments, then grids, distances,
@@ -490,8 +494,7 @@ impl ViewsConfig {
         let mut out = Vec::new();
         for ei in 0..self.environments.len() {
             let env_name = self.environment_name(ei);
-            let takes = |only: &[String]| only.is_empty() || only.contains(&env_name);
-            for g in self.poses.iter().filter(|g| takes(&g.environments)) {
+            for g in self.poses.iter().filter(|g| takes(&g.environments, &env_name)) {
                 let mut az = g.azimuths.clone();
                 if let Some(step) = g.azimuth_step {
                     az.extend((0..).map(|k| k as f32 * step).take_while(|a| *a < 360.0 - 1e-3));
@@ -537,7 +540,7 @@ impl ViewsConfig {
     fn plate_views(&self, ei: usize) -> Vec<View> {
         let Some(pl) = &self.plates else { return Vec::new() };
         let env_name = self.environment_name(ei);
-        if !(pl.environments.is_empty() || pl.environments.contains(&env_name)) {
+        if !takes(&pl.environments, &env_name) {
             return Vec::new();
         }
         let mut out = Vec::new();

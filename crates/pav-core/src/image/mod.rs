@@ -301,9 +301,10 @@ pub fn tile<T: Copy>(tiles: &[Vec<T>], tw: usize, th: usize, cols: usize, backgr
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
     #[test]
     fn text_chunks_leave_a_png_and_its_pixels_stay() {
-        use super::*;
         let dir = tempfile::tempdir().unwrap();
         let (a, b) = (dir.path().join("a.png"), dir.path().join("b.png"));
         save_rgb(&a, 2, 1, &[0.0, 0.5, 1.0, 1.0, 0.25, 0.0]).unwrap();
@@ -325,8 +326,6 @@ mod tests {
         std::fs::write(&b, b"GIF89a").unwrap();
         assert!(strip_png_text(&b).unwrap_err().to_string().contains("no PNG signature"));
     }
-
-    use super::*;
 
     #[test]
     fn tiles_land_in_rows_and_halving_averages_blocks() {
