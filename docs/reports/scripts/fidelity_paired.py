@@ -8,9 +8,8 @@ usage: fidelity_paired.py OUT > OUT/fidelity_paired.csv   (OUT as fidelity.sh wr
 import csv
 import os
 import sys
-from collections import defaultdict
 
-from paired_stats import two_level_bootstrap
+from paired_stats import heldout_scores, two_level_bootstrap
 
 out = sys.argv[1]
 BASE = "cycles16"
@@ -21,12 +20,8 @@ FAMILIES = ["yolox_nano", "nanodet_m_416"]
 def scores(level, family):
     """seed -> view -> best car score of the arm's textures on the held-out views."""
     arm = f"without-{family}"
-    out_ = defaultdict(dict)
-    with open(os.path.join(out, level, arm, "heldout", "digital_views.csv")) as f:
-        for r in csv.DictReader(f):
-            if r["role"] == "held-out" and r["texture"] == arm and r["detector"] == family:
-                out_[r["seed"]][r["view"]] = float(r["score"])
-    return out_
+    every = heldout_scores(os.path.join(out, level, arm, "heldout", "digital_views.csv"), family)
+    return {seed: views for (texture, seed), views in every.items() if texture == arm}
 
 
 w = csv.writer(sys.stdout, lineterminator="\n")

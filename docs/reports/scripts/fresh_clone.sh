@@ -51,18 +51,17 @@ listed() { (cd "$1" && ls views/*.png); }
   compare "held-out views" out/views_heldout "$here/out/views_heldout" $(listed out/views_heldout)
   compare "trained texture and checkpoint" "$unit" "$here/out/lofo/without-yolox_nano/seed0" texture.png checkpoint.bin
   python3 - "$here" <<'PY'
-import csv, sys
+import sys
 here = sys.argv[1]
-def rows(path, rename):
-    out = {}
-    for r in csv.DictReader(open(path)):
-        if r["role"] == "held-out" and r["detector"] == "yolox_nano":
-            out[(rename.get(r["texture"], r["texture"]), r["seed"], r["view"])] = r["score"]
-    return out
-fresh = rows("out/eval-s0/digital_views.csv", {"seed0": "without-yolox_nano"})
-there = rows(f"{here}/out/lofo/without-yolox_nano/heldout/digital_views.csv", {})
-same = sum(1 for k, v in fresh.items() if there.get(k) == v)
-print(f"held-out scores by YOLOX-Nano,{len(fresh)},{same},0,{len(fresh) - same}")
+sys.path.insert(0, f"{here}/docs/reports/scripts")
+from paired_stats import heldout_scores
+fresh = heldout_scores("out/eval-s0/digital_views.csv", "yolox_nano")
+there = heldout_scores(f"{here}/out/lofo/without-yolox_nano/heldout/digital_views.csv", "yolox_nano")
+# The clone's texture is named by its folder, seed0; this checkout's by its arm.
+pairs = [(views[v], there.get(("without-yolox_nano" if t == "seed0" else t, s), {}).get(v))
+         for (t, s), views in fresh.items() for v in views]
+same = sum(1 for a, b in pairs if a == b)
+print(f"held-out scores by YOLOX-Nano,{len(pairs)},{same},0,{len(pairs) - same}")
 PY
 } > ../fresh_clone.csv
 stamp compared

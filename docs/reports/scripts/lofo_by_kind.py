@@ -11,7 +11,7 @@ import re
 import sys
 from collections import defaultdict
 
-from paired_stats import two_level_bootstrap
+from paired_stats import heldout_scores, two_level_bootstrap
 
 out = sys.argv[1]
 w = csv.writer(sys.stdout, lineterminator="\n")
@@ -20,11 +20,7 @@ view_re = re.compile(r"pbr:\w+_d[\d.]+_e(\d+)_a")
 for path in sorted(glob.glob(os.path.join(out, "without-*", "heldout", "digital_views.csv"))):
     arm = path.split(os.sep)[-3]
     family = arm[len("without-"):]
-    score = defaultdict(dict)
-    with open(path) as f:
-        for r in csv.DictReader(f):
-            if r["role"] == "held-out" and r["detector"] == family:
-                score[(r["texture"], r["seed"])][r["view"]] = float(r["score"])
+    score = heldout_scores(path, family)
     rauca = score[("rauca-e2e", "0")]
     seeds = sorted(s for (t, s) in score if t == arm)
     kinds = defaultdict(list)

@@ -1,5 +1,8 @@
-"""The paired bootstrap the report scripts share."""
+"""The paired bootstrap the report scripts share, and the reader of eval-digital's per-view
+scores they pair."""
+import csv
 import random
+from collections import defaultdict
 
 
 def bootstrap(d, n=10000, seed=0):
@@ -25,3 +28,14 @@ def two_level_bootstrap(d, n=10000, seed=0):
     means.sort()
     mean = sum(sum(r) for r in d) / (s * v)
     return mean, means[int(0.025 * n)], means[int(0.975 * n) - 1]
+
+
+def heldout_scores(path, detector):
+    """`digital_views.csv` at `path` as {(texture, seed): {view: best car score}}, over the
+    held-out views that `detector` scored."""
+    out = defaultdict(dict)
+    with open(path) as f:
+        for r in csv.DictReader(f):
+            if r["role"] == "held-out" and r["detector"] == detector:
+                out[(r["texture"], r["seed"])][r["view"]] = float(r["score"])
+    return out
