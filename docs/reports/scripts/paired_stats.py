@@ -39,3 +39,25 @@ def heldout_scores(path, detector):
             if r["role"] == "held-out" and r["detector"] == detector:
                 out[(r["texture"], r["seed"])][r["view"]] = float(r["score"])
     return out
+
+
+def arm_scores(lofo_out, family):
+    """{seed: {view: best car score}} of the textures of the arm of the `pav lofo` run at
+    `lofo_out` that left `family` out, on the held-out views that family scored."""
+    arm = f"without-{family}"
+    every = heldout_scores(f"{lofo_out}/{arm}/heldout/digital_views.csv", family)
+    return {seed: views for (texture, seed), views in every.items() if texture == arm}
+
+
+def paired_arms(mine, base):
+    """Two arms' scores (as `arm_scores` gives them) paired on the seeds and views they share:
+    (mean score of `mine`, of `base`, mean difference, 95 % interval low, high, seeds, views),
+    the interval from `two_level_bootstrap`."""
+    seeds = sorted(set(mine) & set(base))
+    views = sorted(set.intersection(*(set(mine[s]) & set(base[s]) for s in seeds)))
+    d = [[mine[s][v] - base[s][v] for v in views] for s in seeds]
+    mean, lo, hi = two_level_bootstrap(d)
+    n = len(seeds) * len(views)
+    own = sum(mine[s][v] for s in seeds for v in views) / n
+    other = sum(base[s][v] for s in seeds for v in views) / n
+    return own, other, mean, lo, hi, len(seeds), len(views)
