@@ -5,7 +5,7 @@
 
 use crate::common;
 
-use pav::results::{documents, regenerate, ResultFile, Shape, DIR};
+use pav::results::{documents, moved, regenerate, ResultFile, Shape, DIR};
 use std::path::Path;
 
 #[test]
@@ -99,6 +99,53 @@ fn a_changed_config_marks_its_table_stale() {
     // Written, the mark stays until the run is recorded again; the check then passes on it.
     regenerate(tmp.path(), true).unwrap();
     assert!(regenerate(tmp.path(), false).unwrap().is_empty());
+}
+
+/// A recipe frozen under another name while its old path takes another recipe: the tables its
+/// runs made go stale, until `moved` records the new path, which it does only when the new file
+/// holds the values the runs read.
+#[test]
+fn a_config_moved_unchanged_keeps_its_tables_fresh() {
+    common::real_data();
+    let tmp = copy_root();
+    let (old, new) = ("configs/optimize/recommended.toml", "configs/optimize/frozen.toml");
+    let at = |p: &str| tmp.path().join(p);
+    std::fs::copy(at(old), at(new)).unwrap();
+    std::fs::write(at(old), "extends = \"frozen.toml\"\n[optimizer]\nlr = 0.02\n").unwrap();
+    let arm = "configs/studies/lofo/without-yolox_nano.toml";
+    let text = std::fs::read_to_string(at(arm)).unwrap();
+    assert!(text.contains("../../optimize/recommended.toml"), "the arm extends the recipe");
+    std::fs::write(at(arm), text.replace("../../optimize/recommended.toml", "../../optimize/frozen.toml")).unwrap();
+    let lofo = || regenerate(tmp.path(), false).unwrap().into_iter().find(|(p, _)| p.ends_with("docs/reports/lofo.md"));
+    let (_, stale) = lofo().expect("the move makes lofo.md's tables stale");
+    assert!(stale.contains(&format!("{old} changed")) && stale.contains(&format!("{arm} changed")), "{stale}");
+
+    // A frozen copy whose values differ is refused, naming the table, and nothing is written.
+    std::fs::write(at(new), std::fs::read_to_string(at(new)).unwrap() + "[loss]\nbeta = 2.0\n").unwrap();
+    let before = std::fs::read_to_string(at("results/lofo.json")).unwrap();
+    let e = moved(tmp.path(), old, new).unwrap_err().to_string();
+    assert!(e.contains(&format!("{new} is not {old}")) && e.starts_with("results/"), "{e}");
+    assert_eq!(std::fs::read_to_string(at("results/lofo.json")).unwrap(), before);
+
+    std::fs::copy(common::repo().join(old), at(new)).unwrap();
+    // The other arms still extend the old path, which holds another recipe now: refused too.
+    let e = moved(tmp.path(), old, new).unwrap_err().to_string();
+    assert!(e.contains(&format!("still extends {old}")), "{e}");
+    for f in common::files_with_extension(&at("configs/studies"), "toml") {
+        let text = std::fs::read_to_string(&f).unwrap();
+        std::fs::write(&f, text.replace("/optimize/recommended.toml\"", "/optimize/frozen.toml\"")).unwrap();
+    }
+    let changed = moved(tmp.path(), old, new).unwrap();
+    let lofo_json = changed.iter().find(|(n, _)| n == "lofo").expect("results/lofo.json read the recipe");
+    assert!(lofo_json.1.contains(&format!("{arm} extends {new}")), "{lofo_json:?}");
+    regenerate(tmp.path(), true).unwrap();
+    for d in documents(tmp.path()) {
+        let t = std::fs::read_to_string(&d).unwrap();
+        assert!(!t.contains(&format!("{old} changed")) && !t.contains(&format!("{arm} changed")), "{}", d.display());
+    }
+    // A cell that named the recipe names it where it is now.
+    let transfer = ResultFile::load(tmp.path(), "transfer").unwrap();
+    assert!(transfer.rows.iter().flatten().any(|c| c.contains(new)) && !transfer.inputs.contains_key(old));
 }
 
 /// A benchmark's table is its committed CSV made wide (one column per tool, the fastest of the

@@ -90,6 +90,14 @@ pub enum ResultsError {
     #[cfg(feature = "plot")]
     #[error(transparent)]
     Plot(#[from] crate::plot::PlotError),
+    /// A file said to have moved that no longer holds what a results file recorded of it.
+    #[error("results/{name}.json: {msg}")]
+    Moved {
+        /// The results file.
+        name: String,
+        /// What differs.
+        msg: String,
+    },
     /// A marker without its end, or naming no results file.
     #[error("{doc}: {msg}")]
     Marker {
@@ -527,6 +535,129 @@ fn content_sha(path: &Path) -> Option<String> {
     Some(format!("{CONTENT}{}", crate::data::store::sha256_hex(toml::to_string(&table).ok()?.as_bytes())))
 }
 
+/// The sha256 an input under `root` is recorded by: a TOML config's values, any other file's
+/// bytes.
+fn current_sha(root: &Path, key: &str) -> Option<String> {
+    content_sha(&root.join(key)).or_else(|| crate::provenance::describe(&root.join(key)).map(|i| i.sha256))
+}
+
+/// `p` with `.` and `..` resolved without the file system (the file may be gone).
+fn lexical(p: &Path) -> PathBuf {
+    let mut out = PathBuf::new();
+    for c in p.components() {
+        match c {
+            std::path::Component::CurDir => {}
+            std::path::Component::ParentDir if out.file_name().is_some() => {
+                out.pop();
+            }
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+/// The path from the folder `from` to `to`, both relative to one root, as `extends` writes it.
+fn relative(from: &Path, to: &Path) -> PathBuf {
+    let (from, to) = (lexical(from), lexical(to));
+    let common = from.components().zip(to.components()).take_while(|(a, b)| a == b).count();
+    let mut out: PathBuf = from.components().skip(common).map(|_| "..").collect();
+    out.extend(to.components().skip(common));
+    out
+}
+
+/// Whether the TOML config `key` (under `root`) `extends` the file `path`.
+fn extends(root: &Path, key: &str, path: &str) -> Option<toml::Table> {
+    let table: toml::Table = toml::from_str(&std::fs::read_to_string(root.join(key)).ok()?).ok()?;
+    let dir = Path::new(key).parent().unwrap_or(Path::new(""));
+    let target = table.get("extends")?.as_str()?;
+    (lexical(&dir.join(target)) == lexical(Path::new(path))).then_some(table)
+}
+
+/// The recorded sha256 of the TOML config `key` (under `root`) if it now `extends` `new` where
+/// the run read it extending `old`: its values with `extends` pointed back at `old`.
+fn extending_old(root: &Path, key: &str, old: &str, new: &str) -> Option<String> {
+    let mut table = extends(root, key, new)?;
+    let dir = Path::new(key).parent().unwrap_or(Path::new(""));
+    table.insert("extends".into(), relative(dir, Path::new(old)).display().to_string().into());
+    Some(format!("{CONTENT}{}", crate::data::store::sha256_hex(toml::to_string(&table).ok()?.as_bytes())))
+}
+
+impl ResultFile {
+    /// This table made to name `new` (a path relative to `root`) wherever it named `old`: a file
+    /// moved without a change to what the run read. An input `old` becomes `new` when `new` now
+    /// has the sha256 recorded for `old`; a config whose one change is that it now `extends`
+    /// `new` instead of `old` is recorded as it is now; the path is replaced in the command,
+    /// title, note and cells, where it names the file that ran (also in a transcribed table,
+    /// which records no inputs). Returns what changed (nothing: the table never named `old`);
+    /// refuses, naming the table, when `new` is not what `old` was or a config the run read
+    /// still extends `old`.
+    pub fn moved(&mut self, root: &Path, name: &str, old: &str, new: &str) -> Result<Vec<String>, ResultsError> {
+        let mut changed = Vec::new();
+        if let Some(sha) = self.inputs.get(old).cloned() {
+            let refuse = |msg: String| ResultsError::Moved { name: name.into(), msg };
+            match current_sha(root, new) {
+                Some(now) if now == sha => {}
+                Some(_) => return Err(refuse(format!("{new} is not {old} as its run read it"))),
+                None => return Err(refuse(format!("{new} is not there"))),
+            }
+            // A config still extending `old` reads whatever `old` holds now, not what its run read.
+            if let Some(key) = self.inputs.keys().find(|k| extends(root, k, old).is_some()) {
+                return Err(refuse(format!("{key} still extends {old}: point it at {new} first")));
+            }
+            changed.push(format!("{old} → {new}"));
+            self.inputs.remove(old);
+            self.inputs.insert(new.into(), sha);
+            for (key, sha) in self.inputs.iter_mut() {
+                let now = current_sha(root, key);
+                if now.as_ref() != Some(sha) && extending_old(root, key, old, new).as_ref() == Some(sha) {
+                    *sha = now.expect("a config that parses has a content sha");
+                    changed.push(format!("{key} extends {new}"));
+                }
+            }
+        }
+        // A table copied from an older report records no inputs but may still name the file.
+        let texts = [&mut self.command, &mut self.title].into_iter().chain(self.note.as_mut());
+        let mut named = false;
+        for text in texts.chain(self.rows.iter_mut().flatten()) {
+            if text.contains(old) {
+                *text = text.replace(old, new);
+                named = true;
+            }
+        }
+        if named {
+            changed.push(format!("the text names {new}"));
+        }
+        Ok(changed)
+    }
+}
+
+/// [`ResultFile::moved`] for every results file under `root`, each rewritten where it changed:
+/// the names of those changed, with what changed. Nothing is written unless every file can move.
+pub fn moved(root: &Path, old: &str, new: &str) -> Result<Vec<(String, Vec<String>)>, ResultsError> {
+    let dir = root.join(DIR);
+    let mut names: Vec<String> = std::fs::read_dir(&dir)
+        .map_err(io(&dir))?
+        .flatten()
+        .filter_map(|e| e.file_name().to_str()?.strip_suffix(".json").map(str::to_string))
+        .collect();
+    names.sort();
+    let mut files = Vec::new();
+    for name in names {
+        let mut file = ResultFile::load(root, &name)?;
+        let changed = file.moved(root, &name, old, new)?;
+        if !changed.is_empty() {
+            files.push((name, file, changed));
+        }
+    }
+    files
+        .into_iter()
+        .map(|(name, file, changed)| {
+            file.save(root, &name)?;
+            Ok((name, changed))
+        })
+        .collect()
+}
+
 /// An input as a results file names it: a data store entry as `data:NAME`, a file inside
 /// `root` by its relative path.
 fn input_key(i: &Input, root: &Path) -> String {
@@ -654,6 +785,15 @@ mod tests {
         assert!(Column::parse("a/b/d", &head, Path::new("t.csv")).is_err());
         let e = Column::parse("nope", &head, Path::new("t.csv")).err().unwrap().to_string();
         assert!(e.contains("no column `nope`") && e.contains("d, lo, hi, a, b"), "{e}");
+    }
+
+    #[test]
+    fn paths_between_configs_are_written_as_extends_writes_them() {
+        assert_eq!(lexical(Path::new("configs/studies/../optimize/./a.toml")), Path::new("configs/optimize/a.toml"));
+        let rel = |from: &str, to: &str| relative(Path::new(from), Path::new(to)).display().to_string();
+        assert_eq!(rel("configs/studies/lofo", "configs/optimize/recommended.toml"), "../../optimize/recommended.toml");
+        assert_eq!(rel("configs/optimize", "configs/optimize/small.toml"), "small.toml");
+        assert_eq!(rel("configs/studies/../optimize", "configs/a.toml"), "../a.toml");
     }
 
     #[test]

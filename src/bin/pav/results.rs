@@ -4,7 +4,7 @@ use anyhow::{bail, Context, Result};
 use pav::provenance::Run;
 #[cfg(feature = "plot")]
 use pav::results::PlotSpec;
-use pav::results::{regenerate, ResultFile, Shape};
+use pav::results::{moved, regenerate, ResultFile, Shape};
 use std::path::PathBuf;
 
 #[derive(clap::Subcommand)]
@@ -18,6 +18,16 @@ pub enum Cmd {
     /// third, each point with its interval, so that a figure shows the recorded numbers only.
     #[cfg(feature = "plot")]
     Plot(PlotArgs),
+    /// Record that a config or data file moved from OLD to NEW without a change to what the runs
+    /// read (NEW's values are OLD's as recorded), so that the tables that read it stay fresh: each
+    /// results file naming OLD is made to name NEW, and a config that now extends NEW instead of
+    /// OLD is taken as unchanged. Then `pav results write`.
+    Moved {
+        /// The path the runs read, relative to the repository root.
+        old: String,
+        /// Where that file is now.
+        new: String,
+    },
     /// Fail, naming each document whose results blocks differ from what `pav results write`
     /// makes now (a number edited by hand, a table gone stale).
     Check,
@@ -163,6 +173,16 @@ pub fn run(c: &Cmd) -> Result<()> {
             };
             file.plot(&spec, &a.name, a.log_x, &a.out)?;
             println!("wrote {}", a.out.display());
+        }
+        Cmd::Moved { old, new } => {
+            let changed = moved(&root, old, new)?;
+            if changed.is_empty() {
+                bail!("no results file read {old}");
+            }
+            for (name, what) in changed {
+                println!("results/{name}.json: {}", what.join("; "));
+            }
+            println!("`pav results write` puts the new paths in the documents");
         }
         Cmd::Check => {
             let stale = regenerate(&root, false)?;
