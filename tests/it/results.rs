@@ -108,14 +108,14 @@ fn a_changed_config_marks_its_table_stale() {
 fn a_config_moved_unchanged_keeps_its_tables_fresh() {
     common::real_data();
     let tmp = copy_root();
-    let (old, new) = ("configs/optimize/recommended.toml", "configs/optimize/frozen.toml");
+    let (old, new) = ("configs/optimize/quick.toml", "configs/optimize/frozen.toml");
     let at = |p: &str| tmp.path().join(p);
     std::fs::copy(at(old), at(new)).unwrap();
     std::fs::write(at(old), "extends = \"frozen.toml\"\n[optimizer]\nlr = 0.02\n").unwrap();
     let arm = "configs/studies/lofo/without-yolox_nano.toml";
     let text = std::fs::read_to_string(at(arm)).unwrap();
-    assert!(text.contains("../../optimize/recommended.toml"), "the arm extends the recipe");
-    std::fs::write(at(arm), text.replace("../../optimize/recommended.toml", "../../optimize/frozen.toml")).unwrap();
+    assert!(text.contains("../../optimize/quick.toml"), "the arm extends the recipe");
+    std::fs::write(at(arm), text.replace("../../optimize/quick.toml", "../../optimize/frozen.toml")).unwrap();
     let lofo = || regenerate(tmp.path(), false).unwrap().into_iter().find(|(p, _)| p.ends_with("docs/reports/lofo.md"));
     let (_, stale) = lofo().expect("the move makes lofo.md's tables stale");
     assert!(stale.contains(&format!("{old} changed")) && stale.contains(&format!("{arm} changed")), "{stale}");
@@ -133,7 +133,7 @@ fn a_config_moved_unchanged_keeps_its_tables_fresh() {
     assert!(e.contains(&format!("still extends {old}")), "{e}");
     for f in common::files_with_extension(&at("configs/studies"), "toml") {
         let text = std::fs::read_to_string(&f).unwrap();
-        std::fs::write(&f, text.replace("/optimize/recommended.toml\"", "/optimize/frozen.toml\"")).unwrap();
+        std::fs::write(&f, text.replace("/optimize/quick.toml\"", "/optimize/frozen.toml\"")).unwrap();
     }
     let changed = moved(tmp.path(), old, new).unwrap();
     let lofo_json = changed.iter().find(|(n, _)| n == "lofo").expect("results/lofo.json read the recipe");

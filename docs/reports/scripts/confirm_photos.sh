@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# The recommended recipe against its variants on FCA's held-out photos, the full protocol
-# (docs/reports/transfer.md): 11-fold crossval of configs/optimize/recommended.toml (rec) and of
+# The quick recipe against its variants on FCA's held-out photos, the full protocol
+# (docs/reports/transfer.md): 11-fold crossval of configs/optimize/quick.toml (rec) and of
 # each variant of VARIANTS (LABEL=CONFIG; by default recrig, the recipe with the rig views),
 # one seed after the other, each seed all recipes, scored by the main and the wide detector sets
 # beside RAUCA-E2E's texture. Then, for each variant, table1 of the seeds it and rec have both
@@ -16,7 +16,7 @@ variants=${VARIANTS:-recrig=configs/studies/recommended-rig-views.toml}
 common=(--random-seeds 2 --reference data:rauca-e2e/RAUCA_E2E.png -d configs/detectors -d configs/detectors-wide)
 if [ -z "${TABLES_ONLY:-}" ]; then
   for s in ${SEEDS:-0 1 2 3}; do
-    for v in rec=configs/optimize/recommended.toml $variants; do
+    for v in rec=configs/optimize/quick.toml $variants; do
       name=${v%%=*} cfg=${v#*=}
       [ -f "$out/$name/seed$s/crossval.csv" ] || "$pav" crossval --config "$cfg" --seeds "$s" "${common[@]}" -o "$out/$name"
     done

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # A headline unit from a fresh clone (docs/reports/lofo.md, "From a fresh clone"): clone the
-# repository beside ../shared, set it up with its own data store, draw the recommended recipe's
+# repository beside ../shared, set it up with its own data store, draw the quick recipe's
 # training views and the held-out set, train the leave-one-family-out unit that leaves YOLOX-Nano
 # out at seed 0 (shard 6 of the 24 units of the six-arm command), score it on the held-out set,
 # and compare every file and score with those of this checkout. Each step skips what is there.

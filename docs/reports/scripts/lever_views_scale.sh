@@ -12,7 +12,7 @@
 set -euo pipefail
 out=$1
 source "$(dirname "$0")/lever_screen.sh"
-base=configs/optimize/recommended.toml
+base=configs/optimize/quick.toml
 wide=out/views_etron_plates_wide lights=out/views_etron_plates_lights
 "$pav" views render configs/views/etron-plates-wide.toml -o $wide
 [ -d $lights ] || cp -r $wide $lights

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The print-channel study (docs/reports/print.md): for each seed, cross-validate (3 folds over
-# FCA's 11 photos) the recommended recipe on photos trained without the print channel, through it,
+# FCA's 11 photos) the quick recipe on photos trained without the print channel, through it,
 # and through it with the gamut term at three weights; every texture, RAUCA-E2E's and the random
 # ones included, is scored as printed through Ghostscript's CMYK profile. The run without the
 # channel is scored once more unprinted (its folds resume; only the scoring runs again).

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Held-out detector families for the recommended recipe (docs/reports/transfer.md): the four seeds
+# Held-out detector families for the quick recipe (docs/reports/transfer.md): the four seeds
 # of the print study's unprinted base runs (their fold textures reused; only the scoring runs
 # again) scored by the four shipped detectors and by NanoDet-m 416 and PP-PicoDet-XS, which no
 # recipe trains against; then `pav table1` over the four seeds as one row.
