@@ -42,7 +42,7 @@ for mode in screen printed; do
     held=${name#without-}
     for s in $seeds; do film "$mode" "$name-s$s" --texture "$lofo/$name/seed$s/texture.png"; done
     eval_dir="$out/$mode/eval/$name"
-    [ -f "$eval_dir/frames.csv" ] && continue
+    [ -f "$eval_dir/summary.csv" ] && continue   # written last: a stopped evaluation runs again
     videos=() labels=()
     for label in rauca $(printf 'random%s ' $randoms) $(printf "$name-s%s " $seeds); do
       for v in "$out/$mode/films/$label"/videos/*.mp4; do videos+=("$v"); labels+=(--label "$label"); done
