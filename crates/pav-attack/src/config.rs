@@ -213,7 +213,7 @@ pub struct OptimizerConfig {
     #[serde(default)]
     pub average: Option<AverageConfig>,
     /// ONNX Runtime threads per white-box pass (0, the default: the runtime's, one per physical
-    /// core), to leave cores to other jobs. The texture does not depend on it: the recommended
+    /// core), to leave cores to other jobs. The texture does not depend on it: the quick
     /// recipe trained the same bytes at 1 and 2 threads (docs/reports/lofo.md).
     #[serde(default)]
     pub threads: usize,
