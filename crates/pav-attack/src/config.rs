@@ -682,7 +682,7 @@ mod tests {
 
     #[test]
     fn missing_views_name_the_command_that_renders_them() {
-        let c = OptimizeConfig::load(&shipped("recommended.toml")).unwrap();
+        let c = OptimizeConfig::load(&shipped("quick.toml")).unwrap();
         let dir = tempfile::tempdir().unwrap();
         let mut c2 = c.clone();
         c2.views.pbr = vec![dir.path().join("not-rendered")];
