@@ -150,7 +150,7 @@ fn a_chart_carries_the_texture_colours_and_its_pixels_its_intended_colours() {
         "--texture",
         "data:rauca-e2e/RAUCA_E2E.png",
         "--config",
-        "configs/optimize/recommended.toml",
+        "configs/optimize/quick.toml",
         "-o",
         dir.to_str().unwrap(),
     ]);
@@ -184,7 +184,7 @@ fn a_proof_moves_the_texture_as_littlecms_does_and_bad_profiles_are_refused() {
         "print",
         "proof",
         "--config",
-        "configs/optimize/recommended.toml",
+        "configs/optimize/quick.toml",
         "--texture",
         "data:rauca-e2e/RAUCA_E2E.png",
     ];
