@@ -180,14 +180,8 @@ fn a_proof_moves_the_texture_as_littlecms_does_and_bad_profiles_are_refused() {
     common::shared_data();
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("proof.png");
-    let args = [
-        "print",
-        "proof",
-        "--config",
-        "configs/optimize/quick.toml",
-        "--texture",
-        "data:rauca-e2e/RAUCA_E2E.png",
-    ];
+    let args =
+        ["print", "proof", "--config", "configs/optimize/quick.toml", "--texture", "data:rauca-e2e/RAUCA_E2E.png"];
     let (ok, text) = run(&[&args[..], &["-o", out.to_str().unwrap()]].concat());
     assert!(ok, "{text}");
     // Pillow's ImageCms (the same LittleCMS) through the same profile and intent gives a

@@ -565,7 +565,7 @@ fn relative(from: &Path, to: &Path) -> PathBuf {
     out
 }
 
-/// Whether the TOML config `key` (under `root`) `extends` the file `path`.
+/// The values of the TOML config `key` (under `root`) when it `extends` the file `path`.
 fn extends(root: &Path, key: &str, path: &str) -> Option<toml::Table> {
     let table: toml::Table = toml::from_str(&std::fs::read_to_string(root.join(key)).ok()?).ok()?;
     let dir = Path::new(key).parent().unwrap_or(Path::new(""));
@@ -608,10 +608,12 @@ impl ResultFile {
             self.inputs.remove(old);
             self.inputs.insert(new.into(), sha);
             for (key, sha) in self.inputs.iter_mut() {
-                let now = current_sha(root, key);
-                if now.as_ref() != Some(sha) && extending_old(root, key, old, new).as_ref() == Some(sha) {
-                    *sha = now.expect("a config that parses has a content sha");
-                    changed.push(format!("{key} extends {new}"));
+                match current_sha(root, key) {
+                    Some(now) if now != *sha && extending_old(root, key, old, new).as_ref() == Some(sha) => {
+                        *sha = now;
+                        changed.push(format!("{key} extends {new}"));
+                    }
+                    _ => {}
                 }
             }
         }
