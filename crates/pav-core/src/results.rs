@@ -247,17 +247,10 @@ impl ResultFile {
         let manifest = Manifest::builtin();
         self.inputs
             .iter()
-            .filter_map(|(key, sha)| {
-                let now = match key.strip_prefix("data:") {
-                    Some(name) => manifest.get(name).ok().map(|e| e.sha256.clone()),
-                    None if sha.starts_with(CONTENT) => content_sha(&root.join(key)),
-                    None => crate::provenance::describe(&root.join(key)).map(|i| i.sha256),
-                };
-                match now {
-                    Some(now) if &now == sha => None,
-                    Some(_) => Some(format!("{key} changed")),
-                    None => Some(format!("{key} is gone")),
-                }
+            .filter_map(|(key, sha)| match sha_now(&manifest, root, key, sha) {
+                Some(now) if &now == sha => None,
+                Some(_) => Some(format!("{key} changed")),
+                None => Some(format!("{key} is gone")),
             })
             .collect()
     }
@@ -531,14 +524,22 @@ fn content_sha(path: &Path) -> Option<String> {
     if path.extension().is_none_or(|e| e != "toml") {
         return None;
     }
-    let table: toml::Table = toml::from_str(&std::fs::read_to_string(path).ok()?).ok()?;
-    Some(format!("{CONTENT}{}", crate::data::store::sha256_hex(toml::to_string(&table).ok()?.as_bytes())))
+    table_sha(&toml::from_str(&std::fs::read_to_string(path).ok()?).ok()?)
 }
 
-/// The sha256 an input under `root` is recorded by: a TOML config's values, any other file's
-/// bytes.
-fn current_sha(root: &Path, key: &str) -> Option<String> {
-    content_sha(&root.join(key)).or_else(|| crate::provenance::describe(&root.join(key)).map(|i| i.sha256))
+/// `toml:` and the sha256 of `table`'s values written out.
+fn table_sha(table: &toml::Table) -> Option<String> {
+    Some(format!("{CONTENT}{}", crate::data::store::sha256_hex(toml::to_string(table).ok()?.as_bytes())))
+}
+
+/// The sha256 of input `key` (a path under `root`, or `data:NAME` in `manifest`) now, taken the
+/// way `recorded` was: a TOML config's by its values when `recorded` is, else the file's bytes.
+fn sha_now(manifest: &Manifest, root: &Path, key: &str, recorded: &str) -> Option<String> {
+    match key.strip_prefix("data:") {
+        Some(name) => manifest.get(name).ok().map(|e| e.sha256.clone()),
+        None if recorded.starts_with(CONTENT) => content_sha(&root.join(key)),
+        None => crate::provenance::describe(&root.join(key)).map(|i| i.sha256),
+    }
 }
 
 /// `p` with `.` and `..` resolved without the file system (the file may be gone).
@@ -579,7 +580,7 @@ fn extending_old(root: &Path, key: &str, old: &str, new: &str) -> Option<String>
     let mut table = extends(root, key, new)?;
     let dir = Path::new(key).parent().unwrap_or(Path::new(""));
     table.insert("extends".into(), relative(dir, Path::new(old)).display().to_string().into());
-    Some(format!("{CONTENT}{}", crate::data::store::sha256_hex(toml::to_string(&table).ok()?.as_bytes())))
+    table_sha(&table)
 }
 
 impl ResultFile {
@@ -594,11 +595,13 @@ impl ResultFile {
     pub fn moved(&mut self, root: &Path, name: &str, old: &str, new: &str) -> Result<Vec<String>, ResultsError> {
         let mut changed = Vec::new();
         if let Some(sha) = self.inputs.get(old).cloned() {
+            let manifest = Manifest::builtin();
             let refuse = |msg: String| ResultsError::Moved { name: name.into(), msg };
-            match current_sha(root, new) {
+            match sha_now(&manifest, root, new, &sha) {
                 Some(now) if now == sha => {}
-                Some(_) => return Err(refuse(format!("{new} is not {old} as its run read it"))),
-                None => return Err(refuse(format!("{new} is not there"))),
+                None if !root.join(new).exists() => return Err(refuse(format!("{new} is not there"))),
+                // Another file, or one that no longer parses as the config it was.
+                _ => return Err(refuse(format!("{new} is not {old} as its run read it"))),
             }
             // A config still extending `old` reads whatever `old` holds now, not what its run read.
             if let Some(key) = self.inputs.keys().find(|k| extends(root, k, old).is_some()) {
@@ -608,7 +611,7 @@ impl ResultFile {
             self.inputs.remove(old);
             self.inputs.insert(new.into(), sha);
             for (key, sha) in self.inputs.iter_mut() {
-                match current_sha(root, key) {
+                match sha_now(&manifest, root, key, sha) {
                     Some(now) if now != *sha && extending_old(root, key, old, new).as_ref() == Some(sha) => {
                         *sha = now;
                         changed.push(format!("{key} extends {new}"));
