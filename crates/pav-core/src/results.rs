@@ -247,7 +247,7 @@ impl ResultFile {
         let manifest = Manifest::builtin();
         self.inputs
             .iter()
-            .filter_map(|(key, sha)| match sha_now(&manifest, root, key, sha) {
+            .filter_map(|(key, sha)| match sha_now(manifest, root, key, sha) {
                 Some(now) if &now == sha => None,
                 Some(_) => Some(format!("{key} changed")),
                 None => Some(format!("{key} is gone")),
@@ -597,7 +597,7 @@ impl ResultFile {
         if let Some(sha) = self.inputs.get(old).cloned() {
             let manifest = Manifest::builtin();
             let refuse = |msg: String| ResultsError::Moved { name: name.into(), msg };
-            match sha_now(&manifest, root, new, &sha) {
+            match sha_now(manifest, root, new, &sha) {
                 Some(now) if now == sha => {}
                 None if !root.join(new).exists() => return Err(refuse(format!("{new} is not there"))),
                 // Another file, or one that no longer parses as the config it was.
@@ -611,7 +611,7 @@ impl ResultFile {
             self.inputs.remove(old);
             self.inputs.insert(new.into(), sha);
             for (key, sha) in self.inputs.iter_mut() {
-                match sha_now(&manifest, root, key, sha) {
+                match sha_now(manifest, root, key, sha) {
                     Some(now) if now != *sha && extending_old(root, key, old, new).as_ref() == Some(sha) => {
                         *sha = now;
                         changed.push(format!("{key} extends {new}"));
