@@ -63,10 +63,9 @@ for arg in args[1:]:
         base = base_of(base_out)
         if base is None:
             continue
-        if not set(mine) & set(base):
-            sys.exit(f"levers.py: {name} and the base share no seed for {family} ({on})")
-        if not set.intersection(*(set(mine[s]) & set(base[s]) for s in set(mine) & set(base))):
-            sys.exit(f"levers.py: {name} and the base share no view or frame for {family} ({on}): another rig config?")
-        own, other, mean, lo, hi, seeds, units = paired_arms(mine, base)
+        try:
+            own, other, mean, lo, hi, seeds, units = paired_arms(mine, base)
+        except ValueError as e:
+            sys.exit(f"levers.py: {name} against the base for {family} ({on}): {e}")
         w.writerow([name, on, family, f"{own:.4f}", f"{other:.4f}", f"{mean:.4f}", f"{lo:.4f}", f"{hi:.4f}",
                     f"{(hi - lo) / 2:.4f}", seeds, units])

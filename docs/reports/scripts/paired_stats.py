@@ -52,9 +52,13 @@ def arm_scores(lofo_out, family):
 def paired_arms(mine, base):
     """Two arms' scores (as `arm_scores` gives them) paired on the seeds and views they share:
     (mean score of `mine`, of `base`, mean difference, 95 % interval low, high, seeds, views),
-    the interval from `two_level_bootstrap`."""
+    the interval from `two_level_bootstrap`. ValueError when they share no seed or no view."""
     seeds = sorted(set(mine) & set(base))
+    if not seeds:
+        raise ValueError("the two arms share no seed")
     views = sorted(set.intersection(*(set(mine[s]) & set(base[s]) for s in seeds)))
+    if not views:
+        raise ValueError("the two arms share no view or frame (another held-out set or rig config?)")
     d = [[mine[s][v] - base[s][v] for v in views] for s in seeds]
     mean, lo, hi = two_level_bootstrap(d)
     n = len(seeds) * len(views)
