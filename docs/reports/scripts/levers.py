@@ -14,7 +14,7 @@ import glob
 import os
 import sys
 
-from paired_stats import arm_scores, paired_arms
+from paired_stats import arm_scores, paired_arms, rig_frames
 
 
 def rig_scores(rig_out, mode, arm):
@@ -23,12 +23,9 @@ def rig_scores(rig_out, mode, arm):
     path = os.path.join(rig_out, mode, "eval", arm, "frames.csv")
     if not os.path.exists(path):
         return None
-    out = {}
-    with open(path) as f:
-        for r in csv.DictReader(f):
-            if r["video"].startswith(f"{arm}-s"):
-                out.setdefault(r["video"][len(arm) + 2:], {})[(r["file"], r["angle_deg"])] = float(r["max_score"])
-    return out
+    _, frames = rig_frames(path)
+    return {label[len(arm) + 2:]: {(shot, angle): s for (shot, _), (angle, s) in f.items()}
+            for label, f in frames.items() if label.startswith(f"{arm}-s")}
 
 
 def pairs(out, rig):

@@ -6,10 +6,9 @@ index), with the 95 % interval of a two-level bootstrap over seeds and frames.
 usage: lofo_rig_table.py OUT SEED..."""
 import csv
 import sys
-from collections import defaultdict
 from pathlib import Path
 
-from paired_stats import two_level_bootstrap
+from paired_stats import rig_frames, two_level_bootstrap
 
 out = Path(sys.argv[1])
 seeds = sys.argv[2:]
@@ -18,12 +17,8 @@ w.writerow(["mode", "held_out", "against", "score", "other", "diff", "lo", "hi",
 for mode in ["screen", "printed"]:
     for frames_csv in sorted((out / mode / "eval").glob("without-*/frames.csv")):
         arm = frames_csv.parent.name
-        score = defaultdict(dict)  # label -> (file, frame) -> best car score
-        held = None
-        with open(frames_csv) as f:
-            for r in csv.DictReader(f):
-                score[r["video"]][(r["file"], int(r["frame"]))] = float(r["max_score"])
-                held = r["detector"]
+        held, frames = rig_frames(frames_csv)
+        score = {label: {k: s for k, (_, s) in f.items()} for label, f in frames.items()}
         keys = sorted(score["rauca"])
         randoms = [l for l in score if l.startswith("random")]
         mine = [score[f"{arm}-s{s}"] for s in seeds]

@@ -1,5 +1,5 @@
-"""The paired bootstrap the report scripts share, and the reader of eval-digital's per-view
-scores they pair."""
+"""The paired bootstrap the report scripts share, and the readers of the per-view scores of
+eval-digital and the per-frame scores of `pav-rig evaluate` they pair."""
 import csv
 import random
 from collections import defaultdict
@@ -39,6 +39,18 @@ def heldout_scores(path, detector):
             if r["role"] == "held-out" and r["detector"] == detector:
                 out[(r["texture"], r["seed"])][r["view"]] = float(r["score"])
     return out
+
+
+def rig_frames(path):
+    """`pav-rig evaluate`'s `frames.csv` at `path` as (detector, {video label: {(shot file,
+    frame index): (turntable angle, best car score)}})."""
+    out = defaultdict(dict)
+    detector = None
+    with open(path) as f:
+        for r in csv.DictReader(f):
+            out[r["video"]][(r["file"], int(r["frame"]))] = (r["angle_deg"], float(r["max_score"]))
+            detector = r["detector"]
+    return detector, out
 
 
 def arm_scores(lofo_out, family):
