@@ -42,11 +42,15 @@ for mode in screen printed; do
     held=${name#without-}
     for s in $seeds; do film "$mode" "$name-s$s" --texture "$lofo/$name/seed$s/texture.png"; done
     eval_dir="$out/$mode/eval/$name"
-    [ -f "$eval_dir/summary.csv" ] && continue   # written last: a stopped evaluation runs again
+    every="rauca $(printf 'random%s ' $randoms)$(printf "$name-s%s " $seeds)"
+    # The summary is written last and names every video it scored, so a stopped evaluation runs
+    # again, as does one of other seeds.
+    [ -f "$eval_dir/summary.csv" ] && [ "$(tail -n +2 "$eval_dir/summary.csv" | cut -d, -f1 | tr '\n' ' ')" = "$every" ] && continue
     videos=() labels=()
-    for label in rauca $(printf 'random%s ' $randoms) $(printf "$name-s%s " $seeds); do
+    for label in $every; do
       for v in "$out/$mode/films/$label"/videos/*.mp4; do videos+=("$v"); labels+=(--label "$label"); done
     done
+    rm -f "$eval_dir/summary.csv"
     "$rig" evaluate "${videos[@]}" "${labels[@]}" -d "$(detector_of "$held")" --no-plots -o "$eval_dir" > /dev/null
   done
 done
