@@ -1,6 +1,7 @@
 //! `pav lofo` as a user runs it, on FCA's photos at one short epoch: each arm leaves out one
 //! family and is scored by it, paired against RAUCA-E2E's texture and random blocks over seeds and
-//! views; shards and a merge give what one process gives, and a finished unit is not trained again.
+//! views; shards and a merge give what one process gives, and a finished unit is not trained, nor
+//! a scored arm scored, again.
 
 use crate::common;
 
@@ -92,13 +93,28 @@ fn each_family_left_out_scores_its_arm_and_shards_give_the_whole_run() {
     let views = std::fs::read_to_string(whole.join("without-yolox_nano/heldout/digital_views.csv")).unwrap();
     assert!(views.lines().skip(1).all(|l| l.contains(",yolox_nano,")), "{views}");
     assert!(whole.join("without-yolox_nano/seed1/texture.png").is_file());
-    // Run again: nothing is trained again, and the table is the same.
-    let stamp =
-        |p: &Path| std::fs::metadata(p.join("without-yolov3-tiny/seed0/texture.png")).unwrap().modified().unwrap();
-    let before = stamp(&whole);
-    run(&whole, &[]);
-    assert_eq!(stamp(&whole), before);
+    // Run again: nothing is trained or scored again, and the table is the same.
+    let stamp = |p: &Path| std::fs::metadata(p).unwrap().modified().unwrap();
+    let texture = whole.join("without-yolov3-tiny/seed0/texture.png");
+    let scores = whole.join("without-yolov3-tiny/heldout/digital_views.csv");
+    let before = (stamp(&texture), stamp(&scores));
+    let text = run(&whole, &[]);
+    assert_eq!((stamp(&texture), stamp(&scores)), before);
+    assert!(text.contains("without-yolov3-tiny: held-out scores kept from an earlier run"), "{text}");
     assert_eq!(std::fs::read_to_string(whole.join("lofo.csv")).unwrap(), csv);
+    // Another held-out set is scored anew (a fourth photo), the trained textures kept.
+    let three = std::fs::read_to_string(&held).unwrap();
+    std::fs::write(
+        &held,
+        three.replace("data12506.npz\"]", "data12506.npz\", \"data:fca/carla_dataset/test/data12508.npz\"]"),
+    )
+    .unwrap();
+    let text = run(&whole, &[]);
+    assert!(!text.contains("kept from an earlier run") && stamp(&scores) != before.1, "{text}");
+    assert_eq!(stamp(&texture), before.0);
+    let again = std::fs::read_to_string(whole.join("lofo.csv")).unwrap();
+    assert!(again.lines().skip(1).all(|l| l.ends_with(",2,4")), "{again}");
+    std::fs::write(&held, three).unwrap();
     // Two shards and their merge: the same table.
     let cut = tmp.path().join("cut");
     run(&cut, &["--shard", "1/2"]);

@@ -306,12 +306,39 @@ pub fn score(
     progress: &dyn Progress,
 ) -> Result<Vec<LofoRow>, ExperimentError> {
     let mut rows = Vec::new();
+    // What every arm's scores rest on; a rerun that finds them unchanged keeps an arm's scores.
+    let held_inputs = OptimizeConfig::load(heldout)?.inputs();
+    let base = Run::start()
+        .config(heldout)
+        .inputs(held_inputs.iter().map(|p| p.as_path()))
+        .inputs(references.iter().map(|p| p.as_path()))
+        .setting("random_seeds", random_seeds)
+        .setting("threshold", threshold);
     for arm in arms {
         let dir = out.join(arm.dir()).join("heldout");
         let trained = pool(arm, seeds, out, &dir.join("pool"))?;
         let scoring = Scoring { detectors: vec![arm.detector.clone()], threshold, print: None, defences: Vec::new() };
         let textures: Vec<PathBuf> = std::iter::once(trained.clone()).chain(references.iter().cloned()).collect();
-        let (_, records) = eval_digital(heldout, &textures, random_seeds, &scoring, None, &dir, progress)?;
+        let detector = pav_detect::load::detector_inputs(std::slice::from_ref(&arm.detector));
+        let mine: Vec<PathBuf> = seeds.iter().map(|s| trained.join(format!("seed{s}/texture.png"))).collect();
+        let seed_list: Vec<String> = seeds.iter().map(|s| s.to_string()).collect();
+        let mut record = base
+            .clone()
+            .inputs(detector.iter().chain(&mine).map(|p| p.as_path()))
+            .setting("held_out", &arm.held_out)
+            .setting("seeds", seed_list.join(","));
+        let records = match scored_before(&dir, &record) {
+            Some(records) => {
+                progress.note(&format!("{}: held-out scores kept from an earlier run", arm.dir()));
+                records
+            }
+            None => {
+                let (_, records) = eval_digital(heldout, &textures, random_seeds, &scoring, None, &dir, progress)?;
+                record.result(SCORED, "yes");
+                record.write(&dir.join(FILE)).map_err(|source| ExperimentError::Io { path: dir.join(FILE), source })?;
+                records
+            }
+        };
         let arm_rows = compare(&records, &arm.held_out, &arm.dir(), threshold);
         if arm_rows.first().is_some_and(|r| r.seeds != seeds.len()) {
             return Err(ExperimentError::Invalid(format!(
@@ -324,6 +351,32 @@ pub fn score(
     write_csv(&out.join("lofo.csv"), &rows)?;
     write_markdown(out, "lofo.md", &markdown(&rows))?;
     Ok(rows)
+}
+
+/// The result key an arm's held-out `run.toml` gets once its scores are written.
+const SCORED: &str = "scored";
+
+/// The records an earlier run wrote into `dir` when it scored the same inputs with the same
+/// settings as `now` would (its `run.toml`, written after the scores, says so); None otherwise,
+/// and for a run stopped before it finished.
+fn scored_before(dir: &Path, now: &Run) -> Option<Vec<ViewRecord>> {
+    let before = Run::read(&dir.join(FILE)).ok()?;
+    if before.result.get(SCORED).is_none_or(|v| v != "yes") || scored_on(&before) != scored_on(now) {
+        return None;
+    }
+    let mut r = csv::Reader::from_path(dir.join("digital_views.csv")).ok()?;
+    r.deserialize().collect::<Result<Vec<ViewRecord>, _>>().ok()
+}
+
+/// A file a run read, as its path and sha256.
+type Read<'a> = (&'a str, &'a str);
+
+/// What a held-out record's scores rest on: its config, its inputs' sha256 and its settings.
+fn scored_on(r: &Run) -> (Option<Read<'_>>, Vec<Read<'_>>, &BTreeMap<String, String>) {
+    fn file(i: &pav_core::provenance::Input) -> Read<'_> {
+        (i.path.as_str(), i.sha256.as_str())
+    }
+    (r.config.as_ref().map(file), r.inputs.iter().map(file).collect(), &r.settings)
 }
 
 /// The rows as a Markdown table.

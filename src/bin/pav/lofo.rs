@@ -29,7 +29,8 @@ pub struct Args {
     #[command(flatten)]
     shard: ShardArgs,
     /// Output folder: without-NAME/seed<S>/ per trained texture (an interrupted run resumes from
-    /// it), without-NAME/heldout/ per arm's scoring, lofo.csv and lofo.md.
+    /// it), without-NAME/heldout/ per arm's scoring (kept while its inputs are unchanged), lofo.csv
+    /// and lofo.md.
     #[arg(long, short = 'o', default_value = "out/lofo")]
     out: PathBuf,
 }
