@@ -100,6 +100,11 @@ pub fn finished(dir: &Path) -> bool {
     Run::read(&dir.join(FILE)).is_ok_and(|r| r.result.get(FINISHED).is_some_and(|v| v == "yes"))
 }
 
+/// Writes `run` as the `run.toml` of `dir`.
+fn write_run(dir: &Path, run: &Run) -> Result<(), ExperimentError> {
+    run.write(&dir.join(FILE)).map_err(|source| ExperimentError::Io { path: dir.join(FILE), source })
+}
+
 /// Trains `arm` at `seed` into `dir`, unless it finished there before; a run stopped part way
 /// resumes from its checkpoint. Returns whether it trained now.
 pub fn train(
@@ -122,9 +127,7 @@ pub fn train(
         .setting("held_out", &arm.held_out)
         .setting("training_views", p.setup.training_views().len())
         .setting("pbr_kept", p.pbr_kept.as_ref().map_or("all".to_string(), |k| k.to_string()));
-    let write =
-        |r: &Run| r.write(&dir.join(FILE)).map_err(|source| ExperimentError::Io { path: dir.join(FILE), source });
-    write(&record)?;
+    write_run(dir, &record)?;
     let run = OptimizeRun {
         out: dir.to_path_buf(),
         resume: dir.join("checkpoint.bin").is_file(),
@@ -137,7 +140,7 @@ pub fn train(
     }
     let mut record = record;
     record.result(FINISHED, "yes");
-    write(&record)?;
+    write_run(dir, &record)?;
     Ok(true)
 }
 
@@ -335,7 +338,7 @@ pub fn score(
             None => {
                 let (_, records) = eval_digital(heldout, &textures, random_seeds, &scoring, None, &dir, progress)?;
                 record.result(SCORED, "yes");
-                record.write(&dir.join(FILE)).map_err(|source| ExperimentError::Io { path: dir.join(FILE), source })?;
+                write_run(&dir, &record)?;
                 records
             }
         };
@@ -369,11 +372,11 @@ fn scored_before(dir: &Path, now: &Run) -> Option<Vec<ViewRecord>> {
 }
 
 /// A file a run read, as its path and sha256.
-type Read<'a> = (&'a str, &'a str);
+type FileSha<'a> = (&'a str, &'a str);
 
 /// What a held-out record's scores rest on: its config, its inputs' sha256 and its settings.
-fn scored_on(r: &Run) -> (Option<Read<'_>>, Vec<Read<'_>>, &BTreeMap<String, String>) {
-    fn file(i: &pav_core::provenance::Input) -> Read<'_> {
+fn scored_on(r: &Run) -> (Option<FileSha<'_>>, Vec<FileSha<'_>>, &BTreeMap<String, String>) {
+    fn file(i: &pav_core::provenance::Input) -> FileSha<'_> {
         (i.path.as_str(), i.sha256.as_str())
     }
     (r.config.as_ref().map(file), r.inputs.iter().map(file).collect(), &r.settings)

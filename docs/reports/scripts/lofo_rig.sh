@@ -50,7 +50,6 @@ for mode in screen printed; do
     for label in $every; do
       for v in "$out/$mode/films/$label"/videos/*.mp4; do videos+=("$v"); labels+=(--label "$label"); done
     done
-    rm -f "$eval_dir/summary.csv"
     "$rig" evaluate "${videos[@]}" "${labels[@]}" -d "$(detector_of "$held")" --no-plots -o "$eval_dir" > /dev/null
   done
 done
