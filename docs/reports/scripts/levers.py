@@ -13,6 +13,7 @@ import csv
 import glob
 import os
 import sys
+import tomllib
 
 from paired_stats import arm_scores, paired_arms, rig_frames
 
@@ -28,19 +29,31 @@ def rig_scores(rig_out, mode, arm):
             for label, f in frames.items() if label.startswith(f"{arm}-s")}
 
 
+def printed(out):
+    """Whether a `pav lofo` run scored its held-out set through a printer: the config its
+    `--heldout` names (in its run.toml's command) has a [print] table."""
+    with open(os.path.join(out, "run.toml"), "rb") as f:
+        command = tomllib.load(f)["command"]
+    if "--heldout" not in command:
+        return False
+    with open(command[command.index("--heldout") + 1], "rb") as f:
+        return "print" in tomllib.load(f)
+
+
 def pairs(out, rig):
-    """(mode, family, lever scores) of every arm a run holds; the base's come from `base`."""
+    """(where, family, lever scores) of every arm a run holds; the base's come from `base`."""
     if rig:
         found = sorted(glob.glob(os.path.join(out, "*", "eval", "without-*", "frames.csv")))
         for path in found:
             mode, arm = path.split(os.sep)[-4], path.split(os.sep)[-2]
-            yield mode, arm[len("without-"):], rig_scores(out, mode, arm), lambda b, m=mode, a=arm: rig_scores(b, m, a)
+            yield f"rig, {mode}", arm[len("without-"):], rig_scores(out, mode, arm), lambda b, m=mode, a=arm: rig_scores(b, m, a)
     else:
         found = sorted(glob.glob(os.path.join(out, "without-*", "heldout", "digital_views.csv")))
+        on = "held-out set, printed" if printed(out) else "held-out set"
         for path in found:
             family = path.split(os.sep)[-3][len("without-"):]
             has = os.path.exists(os.path.join(base_out, f"without-{family}", "heldout", "digital_views.csv"))
-            yield "held-out set", family, arm_scores(out, family), lambda b, f=family, h=has: arm_scores(b, f) if h else None
+            yield on, family, arm_scores(out, family), lambda b, f=family, h=has: arm_scores(b, f) if h else None
     if not found:
         sys.exit(f"levers.py: {out} holds no scored arm")
 
