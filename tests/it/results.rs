@@ -131,9 +131,11 @@ fn a_config_moved_unchanged_keeps_its_tables_fresh() {
     // The other arms still extend the old path, which holds another recipe now: refused too.
     let e = moved(tmp.path(), old, new).unwrap_err().to_string();
     assert!(e.contains(&format!("still extends {old}")), "{e}");
-    for f in common::files_with_extension(&at("configs/studies"), "toml") {
+    // Every config that extends the recipe, the scaled recipes beside it included.
+    for f in common::files_with_extension(&at("configs"), "toml") {
         let text = std::fs::read_to_string(&f).unwrap();
-        std::fs::write(&f, text.replace("/optimize/quick.toml\"", "/optimize/frozen.toml\"")).unwrap();
+        let text = text.replace("/optimize/quick.toml\"", "/optimize/frozen.toml\"");
+        std::fs::write(&f, text.replace("extends = \"quick.toml\"", "extends = \"frozen.toml\"")).unwrap();
     }
     let changed = moved(tmp.path(), old, new).unwrap();
     let lofo_json = changed.iter().find(|(n, _)| n == "lofo").expect("results/lofo.json read the recipe");
@@ -253,4 +255,62 @@ fn a_table_from_several_runs_keeps_their_inputs_and_plots_its_cells() {
     let o = plot("seconds");
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("no column `seconds`") && err.contains("s/view"), "{err}");
+}
+
+/// A table recorded after a config's comment was edited is still kept by the config's values:
+/// the values come from the commit the run was made at, when it holds what the run read, so
+/// the table is fresh until a value changes.
+#[test]
+fn a_comment_edited_before_recording_keeps_the_table_fresh() {
+    let tmp = tempfile::tempdir().unwrap();
+    let root = tmp.path();
+    let git = |args: &[&str]| {
+        let o = std::process::Command::new("git")
+            .arg("-C")
+            .arg(root)
+            .args(["-c", "user.name=t", "-c", "user.email=t@t"])
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stdout).trim().to_string()
+    };
+    let config = root.join("configs/recipe.toml");
+    std::fs::create_dir_all(config.parent().unwrap()).unwrap();
+    std::fs::write(&config, "# about 3 h\n[optimizer]\nlr = 0.01\n").unwrap();
+    git(&["init", "-q"]);
+    git(&["add", "."]);
+    git(&["commit", "-qm", "recipe"]);
+    let mut run = pav::provenance::Run::start().config(&config);
+    run.git_commit = git(&["rev-parse", "HEAD"]);
+    run.command = vec!["pav optimize --config configs/recipe.toml".into()];
+    let csv = root.join("table.csv");
+    std::fs::write(&csv, "x,y\n1,2\n").unwrap();
+    let shape = Shape { columns: vec!["x".into(), "y".into()], rows_where: vec![], pivot: None };
+    let record = |run: &pav::provenance::Run| ResultFile::from_run(run, &csv, &shape, "t", root).unwrap();
+    let as_run = record(&run);
+    assert!(as_run.inputs["configs/recipe.toml"].starts_with("toml:"));
+    std::fs::write(&config, "# see the report\n[optimizer]\nlr = 0.01\n").unwrap();
+    let later = record(&run);
+    assert_eq!(later.inputs, as_run.inputs, "the edited comment changed the recorded config");
+    assert!(later.stale(root).is_empty(), "{:?}", later.stale(root));
+    // A value changed since the run is not hidden: the table is stale.
+    std::fs::write(&config, "[optimizer]\nlr = 0.02\n").unwrap();
+    assert_eq!(record(&run).stale(root), ["configs/recipe.toml changed"]);
+    // A table from several runs takes each config at the commit of the run that read it.
+    std::fs::write(&config, "# about 3 h\n[optimizer]\nlr = 0.01\n").unwrap();
+    let other = root.join("configs/other.toml");
+    std::fs::write(&other, "# one seed\nseeds = [0]\n").unwrap();
+    git(&["add", "."]);
+    git(&["commit", "-qm", "other"]);
+    let mut second = pav::provenance::Run::start().config(&other);
+    second.git_commit = git(&["rev-parse", "HEAD"]);
+    std::fs::write(&other, "# one seed, see the report\nseeds = [0]\n").unwrap();
+    let both = ResultFile::from_runs(&run, &[second], &csv, &shape, "t", root).unwrap();
+    assert!(both.inputs["configs/other.toml"].starts_with("toml:"), "{:?}", both.inputs);
+    assert!(both.stale(root).is_empty(), "{:?}", both.stale(root));
+    // Without the run's commit (outside git, or another history) the bytes decide, as before.
+    run.git_commit = "0000000000000000000000000000000000000000".into();
+    std::fs::write(&config, "# see the report\n[optimizer]\nlr = 0.01\n").unwrap();
+    assert!(!record(&run).inputs["configs/recipe.toml"].starts_with("toml:"));
 }

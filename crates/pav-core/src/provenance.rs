@@ -90,17 +90,6 @@ impl Run {
         toml::from_str(&text).map_err(|e| format!("not a pav run record: {e}"))
     }
 
-    /// This record with `other`'s config and inputs added (each path once), for a table made
-    /// from several runs of one script; the command, commit and settings stay this record's.
-    pub fn with_inputs_of(mut self, other: &Run) -> Self {
-        for i in other.config.iter().chain(&other.inputs) {
-            if self.config.as_ref().is_none_or(|c| c.path != i.path) && !self.inputs.iter().any(|j| j.path == i.path) {
-                self.inputs.push(i.clone());
-            }
-        }
-        self
-    }
-
     /// Records the config file.
     pub fn config(mut self, path: &Path) -> Self {
         self.config = describe(path);

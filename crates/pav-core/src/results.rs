@@ -130,6 +130,30 @@ impl ResultFile {
         Ok(path)
     }
 
+    /// [`ResultFile::from_run`] of `first`, with the inputs of `rest` too: a table one script
+    /// made from several runs. Each input is taken as the run that read it recorded it (a config
+    /// by its values at that run's commit); where two runs read the same file, the first names it.
+    pub fn from_runs(
+        first: &Run,
+        rest: &[Run],
+        table: &Path,
+        shape: &Shape,
+        title: &str,
+        root: &Path,
+    ) -> Result<ResultFile, ResultsError> {
+        let mut file = Self::from_run(first, table, shape, title, root)?;
+        for run in rest {
+            let other = Self::from_run(run, table, shape, title, root)?;
+            for (key, sha) in other.inputs {
+                file.inputs.entry(key).or_insert(sha);
+            }
+            for (key, sha) in other.generated {
+                file.generated.entry(key).or_insert(sha);
+            }
+        }
+        Ok(file)
+    }
+
     /// The table `title` of the CSV `table` written by the run recorded in `run` (its
     /// `run.toml`), shaped by `shape`, with the run's command, commit, seeds and inputs (paths
     /// made relative to `root`).
@@ -164,11 +188,12 @@ impl ResultFile {
                 generated.insert(key, i.sha256.clone());
                 continue;
             }
-            // A config still as the run read it is kept by its content, so that a comment
-            // edited later does not make the table stale.
+            // A config is kept by its content, so that a comment edited later does not make the
+            // table stale: its content now when it is still as the run read it, else its content
+            // at the run's commit when that commit holds what the run read.
             let sha = match content_sha(&root.join(&key)) {
                 Some(c) if crate::provenance::describe(&root.join(&key)).is_some_and(|now| now.sha256 == i.sha256) => c,
-                _ => i.sha256.clone(),
+                _ => content_sha_at(root, &run.git_commit, &key, &i.sha256).unwrap_or_else(|| i.sha256.clone()),
             };
             inputs.insert(key, sha);
         }
@@ -525,6 +550,25 @@ fn content_sha(path: &Path) -> Option<String> {
         return None;
     }
     table_sha(&toml::from_str(&std::fs::read_to_string(path).ok()?).ok()?)
+}
+
+/// The content sha of TOML config `key` as the repository at `root` holds it at `commit`, when
+/// those are the bytes whose sha256 a run recorded (`read`); None otherwise, and outside git.
+fn content_sha_at(root: &Path, commit: &str, key: &str, read: &str) -> Option<String> {
+    if !key.ends_with(".toml") {
+        return None;
+    }
+    let shown = std::process::Command::new("git")
+        .arg("-C")
+        .arg(root)
+        .args(["show", &format!("{commit}:./{key}")])
+        .output()
+        .ok()
+        .filter(|o| o.status.success())?;
+    if crate::data::store::sha256_hex(&shown.stdout) != read {
+        return None;
+    }
+    table_sha(&toml::from_str(std::str::from_utf8(&shown.stdout).ok()?).ok()?)
 }
 
 /// `toml:` and the sha256 of `table`'s values written out.

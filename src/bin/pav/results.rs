@@ -112,12 +112,13 @@ pub fn run(c: &Cmd) -> Result<()> {
     match c {
         Cmd::Add(a) => {
             let AddArgs { name, run, bench, command, table, columns, rows_where, pivot, title, note } = a.as_ref();
+            let mut others = Vec::new();
             let r = match (run.as_slice(), bench) {
                 ([_, _, ..], _) if command.is_none() => {
                     bail!("a table from several runs needs --command: the script a reader reruns to make them all")
                 }
                 ([first, rest @ ..], _) => {
-                    let mut r = read_run(first)?;
+                    let r = read_run(first)?;
                     for other in rest {
                         let o = read_run(other)?;
                         if o.git_commit != r.git_commit {
@@ -128,7 +129,7 @@ pub fn run(c: &Cmd) -> Result<()> {
                                 r.git_commit
                             );
                         }
-                        r = r.with_inputs_of(&o);
+                        others.push(o);
                     }
                     r
                 }
@@ -143,7 +144,7 @@ pub fn run(c: &Cmd) -> Result<()> {
                 ([], None) => bail!("give --run or --bench"),
             };
             let shape = Shape { columns: columns.clone(), rows_where: rows_where.clone(), pivot: pivot.clone() };
-            let mut file = ResultFile::from_run(&r, table, &shape, title, &root)?;
+            let mut file = ResultFile::from_runs(&r, &others, table, &shape, title, &root)?;
             if let Some(cmd) = bench.as_ref().or(command.as_ref()) {
                 file.command = cmd.clone();
             }
