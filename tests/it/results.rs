@@ -265,15 +265,8 @@ fn a_comment_edited_before_recording_keeps_the_table_fresh() {
     let tmp = tempfile::tempdir().unwrap();
     let root = tmp.path();
     let git = |args: &[&str]| {
-        let o = std::process::Command::new("git")
-            .arg("-C")
-            .arg(root)
-            .args(["-c", "user.name=t", "-c", "user.email=t@t"])
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        String::from_utf8_lossy(&o.stdout).trim().to_string()
+        let out = pav::provenance::git(root, &[&["-c", "user.name=t", "-c", "user.email=t@t"], args].concat()).unwrap();
+        String::from_utf8_lossy(&out).trim().to_string()
     };
     let config = root.join("configs/recipe.toml");
     std::fs::create_dir_all(config.parent().unwrap()).unwrap();

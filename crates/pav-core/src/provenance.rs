@@ -158,20 +158,22 @@ fn git_state() -> (String, bool) {
     git_state_in(Path::new("."))
 }
 
+/// What `git ARGS` run in `dir` prints, or why it failed (its error output).
+pub fn git(dir: &Path, args: &[&str]) -> Result<Vec<u8>, String> {
+    let o = std::process::Command::new("git").arg("-C").arg(dir).args(args).output().map_err(|e| e.to_string())?;
+    if o.status.success() {
+        Ok(o.stdout)
+    } else {
+        Err(String::from_utf8_lossy(&o.stderr).into_owned())
+    }
+}
+
 /// The commit and dirty state of the pav checkout a command runs in (`cwd`), else of the one
 /// this crate was built in. The build's own path alone is not enough: a build folder shared by
 /// several checkouts keeps this crate as first compiled in any of them, that one's path baked in.
 fn git_state_in(cwd: &Path) -> (String, bool) {
-    let git = |dir: &Path, args: &[&str]| {
-        std::process::Command::new("git")
-            .arg("-C")
-            .arg(dir)
-            .args(args)
-            .output()
-            .ok()
-            .filter(|o| o.status.success())
-            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
-    };
+    let git =
+        |dir: &Path, args: &[&str]| git(dir, args).ok().map(|out| String::from_utf8_lossy(&out).trim().to_string());
     let here = git(cwd, &["rev-parse", "--show-toplevel"])
         .map(PathBuf::from)
         .filter(|top| top.join("crates/pav-core/Cargo.toml").is_file());
@@ -263,15 +265,8 @@ mod tests {
     /// A repository with one commit of `files`, and that commit.
     fn repo(dir: &Path, files: &[&str]) -> String {
         let git = |args: &[&str]| {
-            let o = std::process::Command::new("git")
-                .arg("-C")
-                .arg(dir)
-                .args(["-c", "user.name=t", "-c", "user.email=t@t"])
-                .args(args)
-                .output()
-                .unwrap();
-            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-            String::from_utf8_lossy(&o.stdout).trim().to_string()
+            let out = git(dir, &[&["-c", "user.name=t", "-c", "user.email=t@t"], args].concat()).unwrap();
+            String::from_utf8_lossy(&out).trim().to_string()
         };
         git(&["init", "-q"]);
         for f in files {

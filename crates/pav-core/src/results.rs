@@ -143,13 +143,7 @@ impl ResultFile {
     ) -> Result<ResultFile, ResultsError> {
         let mut file = Self::from_run(first, table, shape, title, root)?;
         for run in rest {
-            let other = Self::from_run(run, table, shape, title, root)?;
-            for (key, sha) in other.inputs {
-                file.inputs.entry(key).or_insert(sha);
-            }
-            for (key, sha) in other.generated {
-                file.generated.entry(key).or_insert(sha);
-            }
+            keep_inputs(run, root, &mut file.inputs, &mut file.generated);
         }
         Ok(file)
     }
@@ -182,21 +176,7 @@ impl ResultFile {
                 s.split(|c: char| !c.is_ascii_digit()).filter_map(|v| v.parse().ok()).collect()
             });
         let (mut inputs, mut generated) = (BTreeMap::new(), BTreeMap::new());
-        for i in run.config.iter().chain(&run.inputs) {
-            let key = input_key(i, root);
-            if key.starts_with(GENERATED) {
-                generated.insert(key, i.sha256.clone());
-                continue;
-            }
-            // A config is kept by its content, so that a comment edited later does not make the
-            // table stale: its content now when it is still as the run read it, else its content
-            // at the run's commit when that commit holds what the run read.
-            let sha = match content_sha(&root.join(&key)) {
-                Some(c) if crate::provenance::describe(&root.join(&key)).is_some_and(|now| now.sha256 == i.sha256) => c,
-                _ => content_sha_at(root, &run.git_commit, &key, &i.sha256).unwrap_or_else(|| i.sha256.clone()),
-            };
-            inputs.insert(key, sha);
-        }
+        keep_inputs(run, root, &mut inputs, &mut generated);
         Ok(ResultFile {
             title: title.into(),
             command: shown_command(&run.command),
@@ -552,23 +532,45 @@ fn content_sha(path: &Path) -> Option<String> {
     table_sha(&toml::from_str(&std::fs::read_to_string(path).ok()?).ok()?)
 }
 
+/// Adds the inputs of `run` that `inputs` and `generated` do not name yet, keyed by path under
+/// `root` (files under `out/` into `generated`), each with the sha256 a table keeps for it.
+fn keep_inputs(
+    run: &Run,
+    root: &Path,
+    inputs: &mut BTreeMap<String, String>,
+    generated: &mut BTreeMap<String, String>,
+) {
+    for i in run.config.iter().chain(&run.inputs) {
+        let key = input_key(i, root);
+        if inputs.contains_key(&key) || generated.contains_key(&key) {
+            continue;
+        }
+        if key.starts_with(GENERATED) {
+            generated.insert(key, i.sha256.clone());
+            continue;
+        }
+        // A config is kept by its content, so that a comment edited later does not make the
+        // table stale: its content now when it is still as the run read it, else its content
+        // at the run's commit when that commit holds what the run read.
+        let sha = match content_sha(&root.join(&key)) {
+            Some(c) if crate::provenance::describe(&root.join(&key)).is_some_and(|now| now.sha256 == i.sha256) => c,
+            _ => content_sha_at(root, &run.git_commit, &key, &i.sha256).unwrap_or_else(|| i.sha256.clone()),
+        };
+        inputs.insert(key, sha);
+    }
+}
+
 /// The content sha of TOML config `key` as the repository at `root` holds it at `commit`, when
 /// those are the bytes whose sha256 a run recorded (`read`); None otherwise, and outside git.
 fn content_sha_at(root: &Path, commit: &str, key: &str, read: &str) -> Option<String> {
     if !key.ends_with(".toml") {
         return None;
     }
-    let shown = std::process::Command::new("git")
-        .arg("-C")
-        .arg(root)
-        .args(["show", &format!("{commit}:./{key}")])
-        .output()
-        .ok()
-        .filter(|o| o.status.success())?;
-    if crate::data::store::sha256_hex(&shown.stdout) != read {
+    let shown = crate::provenance::git(root, &["show", &format!("{commit}:./{key}")]).ok()?;
+    if crate::data::store::sha256_hex(&shown) != read {
         return None;
     }
-    table_sha(&toml::from_str(std::str::from_utf8(&shown.stdout).ok()?).ok()?)
+    table_sha(&toml::from_str(std::str::from_utf8(&shown).ok()?).ok()?)
 }
 
 /// `toml:` and the sha256 of `table`'s values written out.
