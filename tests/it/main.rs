@@ -60,5 +60,6 @@ mod steps;
 #[cfg(feature = "eval")]
 mod surrogate;
 mod turntable_sim;
+mod wall_time;
 #[cfg(feature = "optimize")]
 mod whitebox_iou;

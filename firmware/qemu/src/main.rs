@@ -1,18 +1,21 @@
 //! Turntable firmware for QEMU's lm3s6965evb: the shared protocol logic
-//! ([`turntable_proto::Device`]) served on UART0, with a free-running SysTick time base and the
+//! ([`turntable_proto::Device`]) served on UART0, with a free-running 64-bit time base and the
 //! commanded position driven out as STEP/DIR pulses on GPIO port F (pins 0 and 1).
 //!
 //! The core sleeps in WFI with PRIMASK set: a pending UART0 or timer 0A interrupt wakes it
 //! without running a handler, so QEMU does not spin a host core. Timer 0A only wakes the loop
-//! every millisecond; time itself is the SysTick counter, read as a difference on every poll,
-//! so a vCPU that the host deschedules for up to 1.3 s (the 24-bit counter's period) loses no
-//! time. (Counting SysTick wraps instead lost every wrap missed while descheduled: on a loaded
-//! host the device clock ran 15–34 % slow.)
+//! every millisecond. Time itself is QEMU's own clock, read through semihosting's `SYS_ELAPSED`
+//! (QEMU must run with `-semihosting-config enable=on,target=native`): like the RP2040's 64-bit
+//! microsecond timer, it runs on whether or not the core does, so a vCPU that a busy host
+//! deschedules for seconds loses no time. (The board's only readable counter, the 24-bit
+//! SysTick, wraps every 1.34 s: read as a difference on every poll it lost a whole period
+//! whenever QEMU was descheduled for longer, and a capture then found the device clock
+//! contradicting itself by about a second.)
 #![no_std]
 #![no_main]
 
 use core::ptr::{read_volatile, write_volatile};
-use cortex_m::peripheral::{syst::SystClkSource, NVIC, SYST};
+use cortex_m::peripheral::NVIC;
 use cortex_m_rt::entry;
 use panic_halt as _;
 use turntable_proto::{Config, Device, Sink};
@@ -36,8 +39,8 @@ const GPIOF: usize = 0x4002_5000;
 const GPIO_DIR: usize = 0x400;
 const STEP_PIN: u32 = 1 << 0;
 const DIR_PIN: u32 = 1 << 1;
-/// SysTick ticks per millisecond. QEMU clocks the lm3s6965evb core at 12.5 MHz out of reset
-/// (measured: with 12 000 the device clock ran 4.2 % fast against the host's).
+/// Core clock ticks per millisecond, for timer 0A's wake-up. QEMU clocks the lm3s6965evb core
+/// at 12.5 MHz out of reset (measured: with 12 000 a SysTick clock ran 4.2 % fast).
 const TICKS_PER_MS: u32 = 12_500;
 
 fn reg(addr: usize) -> *mut u32 {
@@ -72,21 +75,38 @@ impl Sink for Uart {
     }
 }
 
-/// SysTick's full 24-bit range: the counter wraps every 1.34 s at 12.5 MHz.
-const SYST_MASK: u32 = 0x00FF_FFFF;
+/// Semihosting operations (Arm's semihosting specification).
+const SYS_ELAPSED: u32 = 0x30;
+const SYS_TICKFREQ: u32 = 0x31;
 
-/// Microsecond clock: every poll adds the ticks the down-counter moved since the last one.
+/// Microsecond clock on QEMU's elapsed-time counter, from its first reading.
 struct Clock {
-    last: u32,
-    ticks: u64,
+    start: u64,
+    per_s: u64,
 }
 
 impl Clock {
+    fn new() -> Clock {
+        // SAFETY: a semihosting call without a parameter block; QEMU answers it (see the
+        // module docs), and returns -1 where it cannot.
+        let per_s = unsafe { cortex_m::asm::semihosting_syscall(SYS_TICKFREQ, 0) };
+        assert!(per_s != u32::MAX && per_s > 0, "semihosting has no tick frequency");
+        let mut c = Clock { start: 0, per_s: per_s as u64 };
+        c.start = c.ticks();
+        c
+    }
+
+    fn ticks(&self) -> u64 {
+        let mut words = [0u32; 2];
+        // SAFETY: SYS_ELAPSED writes two words (low, high) to the block its argument points to.
+        let r = unsafe { cortex_m::asm::semihosting_syscall(SYS_ELAPSED, words.as_mut_ptr() as u32) };
+        assert!(r == 0, "semihosting SYS_ELAPSED failed");
+        (words[1] as u64) << 32 | words[0] as u64
+    }
+
     fn now_us(&mut self) -> u64 {
-        let cur = SYST::get_current() & SYST_MASK;
-        self.ticks += (self.last.wrapping_sub(cur) & SYST_MASK) as u64;
-        self.last = cur;
-        self.ticks * 1000 / TICKS_PER_MS as u64
+        let t = self.ticks() - self.start;
+        t / self.per_s * 1_000_000 + t % self.per_s * 1_000_000 / self.per_s
     }
 }
 
@@ -124,7 +144,6 @@ impl Stepper {
 
 #[entry]
 fn main() -> ! {
-    let mut cp = cortex_m::Peripherals::take().expect("peripherals taken once");
     cortex_m::interrupt::disable();
     // SAFETY: enabling UART0 receive interrupts and GPIO F outputs during single-threaded init.
     unsafe {
@@ -132,11 +151,6 @@ fn main() -> ! {
         NVIC::unmask(Irq(UART0_IRQ));
         write_volatile(reg(GPIOF + GPIO_DIR), STEP_PIN | DIR_PIN);
     }
-    cp.SYST.set_clock_source(SystClkSource::Core);
-    cp.SYST.set_reload(SYST_MASK);
-    cp.SYST.clear_current();
-    cp.SYST.disable_interrupt();
-    cp.SYST.enable_counter();
     // SAFETY: timer 0 as a 32-bit periodic timer with its time-out interrupt (a wake-up source
     // only), configured while it is disabled, during single-threaded init.
     unsafe {
@@ -149,7 +163,7 @@ fn main() -> ! {
         NVIC::unmask(Irq(TIMER0A_IRQ));
         write_volatile(reg(TIMER0 + TIMER_CTL), 1);
     }
-    let mut clock = Clock { last: SYST::get_current() & SYST_MASK, ticks: 0 };
+    let mut clock = Clock::new();
     let mut dev = Device::new(Config { fw_version: "0.2.0-qemu", ..Config::default() }, 0);
     dev.reset(0, &mut Uart);
     let mut stepper = Stepper { at: 0 };
