@@ -5,10 +5,10 @@
 //!
 //! | layer | crates (modules of this crate) |
 //! |---|---|
-//! | 0 base | `pav-core`: [`cluster`], [`colour`], [`data`], [`extends`], [`provenance`], [`results`], [`image`], [`video`], [`geometry`], [`rng`], [`shard`], [`sidecar`], [`step`], [`table`], [`plot`], [`progress`]; `pav-onnx` (ONNX graphs and their gradients, no pav dependency) |
-//! | 1 method blocks | `pav-print` ([`print`]), `pav-render` ([`render`]), `pav-scene` ([`scene`]), `pav-dataset` ([`dataset`]), `pav-detect` ([`detect`]) |
+//! | 0 base | `pav-core`: [`colour`], [`extends`], [`path`], [`image`], [`video`], [`geometry`], [`rng`], [`sidecar`], [`step`], [`table`], [`plot`], [`progress`]; `pav-run`: [`data`], [`provenance`], [`shard`] (what a run reads and records); `pav-onnx` (ONNX graphs and their gradients, no pav dependency) |
+//! | 1 method blocks | `pav-print` ([`print`]), `pav-render` ([`render`]), `pav-scene` ([`scene`]), `pav-dataset` ([`dataset`]), `pav-detect` ([`detect`]), `pav-uv` ([`uv`]) |
 //! | 2 jobs | `pav-attack` ([`attack`], the optimizer), `pav-eval` ([`eval`], scoring), `pav-rig` ([`rig`], turntable and capture) |
-//! | 3 studies | `pav-studies` ([`studies`]): the paper's tables and the studies, which combine the optimizer and scoring |
+//! | 3 studies and tooling | `pav-studies` ([`studies`]): the paper's tables and the studies, which combine the optimizer and scoring; `pav-results` ([`results`]): results tables as data; `pav-cluster` ([`cluster`]): job scripts for a cluster |
 //! | 4 binaries | this crate: `pav` and `pav-rig`, clap and printing, one file per command |
 //!
 //! This crate re-exports each lower crate under its module name, so `pav::detect` is
@@ -22,19 +22,21 @@
 pub use pav_core::plot;
 #[cfg(feature = "video")]
 pub use pav_core::video;
-pub use pav_core::{
-    cluster, colour, data, extends, geometry, image, progress, provenance, results, rng, shard, sidecar, step, table,
-};
+pub use pav_core::{colour, extends, geometry, image, path, progress, rng, sidecar, step, table};
+pub use pav_run::{data, provenance, shard};
 
 pub use pav_attack as attack;
+pub use pav_cluster as cluster;
 pub use pav_dataset as dataset;
 pub use pav_detect as detect;
 pub use pav_eval as eval;
 pub use pav_print as print;
 pub use pav_render as render;
+pub use pav_results as results;
 #[cfg(feature = "rig")]
 pub use pav_rig as rig;
 pub use pav_scene as scene;
+pub use pav_uv as uv;
 
 #[cfg(feature = "optimize")]
 pub use pav_studies as studies;

@@ -4,17 +4,11 @@
 //! rebuild whose sha256 is not the recipe's fails with the model kept. Bad recipes are refused.
 
 use crate::common;
+use crate::common::pav;
 
 use pav_onnx::proto::{InitData, Model};
 use std::collections::HashMap;
 use std::path::Path;
-use std::process::Command;
-
-fn pav() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_pav"));
-    c.current_dir(common::repo()).env("RUST_BACKTRACE", "0");
-    c
-}
 
 /// A recipe in `dir` as the shipped one, with `steps` and `extra` lines (absolute paths, since
 /// it does not sit in `configs/`).

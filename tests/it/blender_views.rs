@@ -3,6 +3,7 @@
 //! same check. Needs Debian's `blender` (scripts/setup.sh installs it).
 
 use crate::common;
+use crate::common::pav;
 
 use pav::dataset::fca::CarlaSample;
 use pav::geometry::camera::{spherical, Camera};
@@ -91,10 +92,6 @@ fn a_texture_lands_on_the_same_texels_in_both_renderers() {
     let flipped: Vec<_> = uv.iter().map(|o| o.map(|[u, v]| [u, 1.0 - v])).collect();
     let (fs, _, _) = compare_texels(&flipped, &b, w, h);
     assert!(fs < 0.5, "a v-flipped texture matched {fs}");
-}
-
-fn pav() -> std::process::Command {
-    std::process::Command::new(env!("CARGO_BIN_EXE_pav"))
 }
 
 fn run_ok(c: &mut std::process::Command) -> String {

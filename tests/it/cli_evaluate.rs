@@ -2,13 +2,10 @@
 //! setup, and partial results kept on failures and Ctrl-C.
 
 use crate::common;
+use crate::common::pav_rig;
 
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
-
-fn pav_rig() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_pav-rig"))
-}
 
 fn fixture() -> String {
     common::repo().join("fixtures/carla_orbit.mp4").display().to_string()

@@ -2,14 +2,9 @@
 //! clear errors on bad meshes.
 
 use crate::common;
+use crate::common::pav;
 
 use std::process::Command;
-
-fn pav() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_pav"));
-    c.current_dir(common::repo()).env("RUST_BACKTRACE", "0");
-    c
-}
 
 #[test]
 fn render_and_uv_commands_write_their_files() {

@@ -2,12 +2,7 @@
 //! captured video and sidecar feed straight into `pav-rig evaluate`.
 
 use crate::common;
-
-use std::process::Command;
-
-fn pav_rig() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_pav-rig"))
-}
+use crate::common::pav_rig;
 
 #[test]
 fn capture_on_the_simulator_then_evaluate_uses_the_sidecar() {

@@ -2,15 +2,11 @@
 //! an empty store with real data files, verified, and a corrupted file is refused and never lands.
 
 use crate::common;
+use crate::common::pav;
 
 use std::io::{BufRead, BufReader, Write};
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn pav() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_pav"))
-}
 
 /// Serves the files under `root` (GET only, one connection at a time, 404 for what is absent)
 /// on a loopback port until the test process ends; returns the base URL.

@@ -11,27 +11,12 @@ use std::path::{Path, PathBuf};
 
 const LAYERS: [&[&str]; 4] = [
     &[
-        "onnx",
-        "cluster",
-        "colour",
-        "data",
-        "extends",
-        "provenance",
-        "results",
-        "image",
-        "video",
-        "geometry",
-        "rng",
-        "shard",
-        "sidecar",
-        "step",
-        "table",
-        "plot",
-        "progress",
+        "onnx", "run", "colour", "extends", "path", "image", "video", "geometry", "rng", "sidecar", "step", "table",
+        "plot", "progress",
     ],
-    &["print", "render", "scene", "dataset", "detect"],
+    &["print", "render", "scene", "dataset", "detect", "uv"],
     &["attack", "eval", "rig"],
-    &["studies"],
+    &["studies", "results", "cluster"],
 ];
 /// Layer whose modules must not use each other.
 const JOBS: usize = 2;

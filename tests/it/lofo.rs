@@ -4,15 +4,9 @@
 //! a scored arm scored, again.
 
 use crate::common;
+use crate::common::pav;
 
 use std::path::Path;
-use std::process::Command;
-
-fn pav() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_pav"));
-    c.current_dir(common::repo()).env("RUST_BACKTRACE", "0");
-    c
-}
 
 /// A recipe on half.toml's region training against `boxes`, two photos, one epoch.
 fn arm(dir: &Path, name: &str, boxes: &[&str]) -> std::path::PathBuf {

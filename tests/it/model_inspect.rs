@@ -6,16 +6,9 @@
 use crate::common;
 
 use pav::detect::config::OutputLayout;
-use std::process::Command;
 
 fn inspect(model: &str, out: &std::path::Path) -> (bool, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_pav-rig"))
-        .current_dir(common::repo())
-        .env("RUST_BACKTRACE", "0")
-        .args(["model", "inspect", model, "-o"])
-        .arg(out)
-        .output()
-        .unwrap();
+    let o = common::pav_rig().args(["model", "inspect", model, "-o"]).arg(out).output().unwrap();
     (o.status.success(), common::output_text(&o))
 }
 
@@ -86,16 +79,7 @@ fn gfl_and_in_graph_nms_are_guessed_and_bad_files_refused() {
 }
 
 fn check(config: &std::path::Path, images: &[&str], out: &std::path::Path) -> (bool, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_pav-rig"))
-        .current_dir(common::repo())
-        .env("RUST_BACKTRACE", "0")
-        .args(["model", "check"])
-        .arg(config)
-        .args(images)
-        .arg("-o")
-        .arg(out)
-        .output()
-        .unwrap();
+    let o = common::pav_rig().args(["model", "check"]).arg(config).args(images).arg("-o").arg(out).output().unwrap();
     (o.status.success(), common::output_text(&o))
 }
 

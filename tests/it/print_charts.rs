@@ -4,14 +4,7 @@
 //! and read back, texture proofs match LittleCMS, and bad profiles and configs are clear errors.
 
 use crate::common;
-
-use std::process::Command;
-
-fn pav() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_pav"));
-    c.current_dir(common::repo()).env("RUST_BACKTRACE", "0");
-    c
-}
+use crate::common::pav;
 
 fn run(args: &[&str]) -> (bool, String) {
     let o = pav().args(args).output().unwrap();

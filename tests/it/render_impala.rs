@@ -150,7 +150,7 @@ fn uv_distortion_of_the_patch() {
 #[test]
 fn uv_adjustment_reduces_distortion_in_place() {
     use pav::geometry::uv::{distortion, faces_in_mask, summary};
-    use pav::geometry::uv_adjust::{adjust, islands};
+    use pav::uv::adjust::{adjust, islands};
     let shared = common::shared_data();
     let mut mesh = Mesh::load_obj(&shared.join("pav-camou/xfl_yxz.obj")).unwrap();
     mesh.normalize();
@@ -202,7 +202,7 @@ fn uv_adjustment_reduces_distortion_in_place() {
 #[test]
 fn uv_charts_join_islands_and_raise_density() {
     use pav::geometry::uv::{distortion, faces_in_mask, paint_uv, summary};
-    use pav::geometry::uv_charts::adjust_charts;
+    use pav::uv::charts::adjust_charts;
     let shared = common::shared_data();
     let mut mesh = Mesh::load_obj(&shared.join("pav-camou/xfl_yxz.obj")).unwrap();
     let half = Rgb::load(&shared.join("pav-camou/half.png")).unwrap();

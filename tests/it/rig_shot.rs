@@ -3,21 +3,12 @@
 //! the rig lists it.
 
 use crate::common;
+use crate::common::{pav, pav_rig};
 
 use pav::render::raster::{GBuffer, EMPTY};
 use pav::scene::camera_effects::{apply_noise, circle_of_confusion_px, codec_kbps, cut};
 use pav::scene::rig::{CameraEffect, RigConfig};
 use pav::scene::turntable::CarScene;
-
-/// The `pav` binary under test.
-fn pav() -> std::process::Command {
-    std::process::Command::new(env!("CARGO_BIN_EXE_pav"))
-}
-
-/// The `pav-rig` binary under test.
-fn pav_rig() -> std::process::Command {
-    std::process::Command::new(env!("CARGO_BIN_EXE_pav-rig"))
-}
 
 fn rig(name: &str) -> RigConfig {
     common::shared_data();

@@ -6,6 +6,7 @@
 //! when the test fails. A machine where Slurm cannot start fails this test with the reason.
 
 use crate::common;
+use crate::common::{pav, pav_rig};
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -87,12 +88,6 @@ fn read_logs(dir: &Path) -> String {
         s.push_str(&format!("--- {}\n{}\n", e.path().display(), std::fs::read_to_string(e.path()).unwrap_or_default()));
     }
     s
-}
-
-fn pav() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_pav"));
-    c.current_dir(common::repo()).env("RUST_BACKTRACE", "0");
-    c
 }
 
 fn run_ok(c: &mut Command) {
@@ -270,8 +265,7 @@ fn merge_refuses_missing_foreign_and_unfinished_shards() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("ev");
     let ev = |extra: &[&str]| {
-        let mut c = Command::new(env!("CARGO_BIN_EXE_pav-rig"));
-        c.current_dir(common::repo()).env("RUST_BACKTRACE", "0");
+        let mut c = pav_rig();
         c.args([
             "evaluate",
             "fixtures/turntable.mp4",

@@ -78,7 +78,7 @@ pub enum CheckpointError {
 
 /// FNV-1a of `bytes`: a stable fingerprint of a config file.
 pub fn fingerprint(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ *b as u64).wrapping_mul(0x100_0000_01b3))
+    pav_core::rng::fnv1a(bytes.iter().map(|&b| u64::from(b)))
 }
 
 fn put_f32s(out: &mut Vec<u8>, v: &[f32]) {

@@ -303,7 +303,7 @@ pub enum ConfigError {
         /// The file.
         path: PathBuf,
         /// Which entry, and the `pav data` command that fixes it.
-        source: Box<pav_core::data::DataError>,
+        source: Box<pav_run::data::DataError>,
     },
     /// A value is out of range.
     #[error("optimize config {path}: {source}")]
@@ -328,7 +328,7 @@ impl OptimizeConfig {
         c.files = files;
         let dir = path.parent().unwrap_or(Path::new("."));
         let mut first_err = None;
-        let mut fix = |p: &mut PathBuf| match pav_core::data::resolve(dir, p) {
+        let mut fix = |p: &mut PathBuf| match pav_run::data::resolve(dir, p) {
             Ok(r) => *p = r,
             Err(e) => {
                 first_err.get_or_insert(e);
@@ -538,14 +538,14 @@ pub struct MissingViews {
 
 impl std::fmt::Display for MissingViews {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let (key, dir) = (self.key, pav_core::provenance::tidy(&self.dir));
+        let (key, dir) = (self.key, pav_core::path::tidy(&self.dir));
         let dir = dir.display();
         match &self.config {
             Some(c) => write!(
                 f,
                 "{key} {dir} has not been rendered yet, or not to the end: run `pav views {} {} -o {dir}` first",
                 if self.rig { "turntable --rig" } else { "render" },
-                pav_core::provenance::tidy(c).display()
+                pav_core::path::tidy(c).display()
             ),
             None => write!(
                 f,
@@ -604,9 +604,9 @@ mod tests {
         for p in [shipped("paper.toml"), shipped("authors.toml"), study("half.toml"), study("half-random.toml")] {
             let c = OptimizeConfig::load(&p).unwrap_or_else(|e| panic!("{e}"));
             // `data:` entries resolve into the data store, relative paths against the config.
-            assert!(c.mesh.obj.starts_with(pav_core::data::store::Store::from_env().root), "{p:?}: {:?}", c.mesh.obj);
+            assert!(c.mesh.obj.starts_with(pav_run::data::store::Store::from_env().root), "{p:?}: {:?}", c.mesh.obj);
             let scenes = repo().join("configs/scenes");
-            assert!(pav_core::provenance::tidy(&c.scene).starts_with(&scenes), "{p:?}: {:?}", c.scene);
+            assert!(pav_core::path::tidy(&c.scene).starts_with(&scenes), "{p:?}: {:?}", c.scene);
         }
         let half = OptimizeConfig::load(&study("half.toml")).unwrap();
         assert_eq!(half.parts().unwrap().len(), 2);
@@ -648,9 +648,9 @@ mod tests {
             (v.optimizer.lr, v.views.clone(), v.loss.clone()),
             (base.optimizer.lr, base.views.clone(), base.loss)
         );
-        assert_eq!(pav_core::provenance::tidy(&v.scene), pav_core::provenance::tidy(&base.scene));
-        assert!(v.scene.is_file() || pav_core::provenance::tidy(&v.scene).is_file(), "{:?}", v.scene);
-        assert_eq!(v.files, [variant.clone(), pav_core::provenance::tidy(&sub.join("../configs/optimize/base.toml"))]);
+        assert_eq!(pav_core::path::tidy(&v.scene), pav_core::path::tidy(&base.scene));
+        assert!(v.scene.is_file() || pav_core::path::tidy(&v.scene).is_file(), "{:?}", v.scene);
+        assert_eq!(v.files, [variant.clone(), pav_core::path::tidy(&sub.join("../configs/optimize/base.toml"))]);
         // A two-level chain, and an array that replaces the base's.
         let v2 = sub.join("v2.toml");
         std::fs::write(&v2, "extends = \"v.toml\"\nwhite_box = [{ detector = \"../../detectors/yolox_nano.toml\" }]\n")

@@ -705,7 +705,7 @@ impl Setup {
             let folder = image.parent().unwrap_or(Path::new(".")).to_path_buf();
             let file = image.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
             let bytes = std::fs::read(image).map_err(|source| KeepError::Read { path: image.to_path_buf(), source })?;
-            let sha = pav_core::data::store::sha256_hex(&bytes);
+            let sha = pav_run::data::store::sha256_hex(&bytes);
             let cache = caches.entry(folder.clone()).or_insert_with(|| ViewScores::read(&folder));
             let mut built = None;
             let mut any = false;

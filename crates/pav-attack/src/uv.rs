@@ -4,11 +4,11 @@
 use pav_core::geometry::camera::{spherical, Camera};
 use pav_core::geometry::mesh::{Mesh, MeshError};
 use pav_core::geometry::uv::{distortion, faces_in_mask, faces_mask, heat_colour, paint_uv, summary};
-use pav_core::geometry::uv_adjust::adjust;
-use pav_core::geometry::uv_charts::{adjust_charts, ChartError};
 use pav_core::image::{save_rgb8, tile, ImageError, Rgb};
 use pav_core::table::{write_csv, TableError};
 use pav_render::preview::face_colours;
+use pav_uv::adjust::adjust;
+use pav_uv::charts::{adjust_charts, ChartError};
 use std::path::{Path, PathBuf};
 
 /// Why a UV tool failed.

@@ -268,8 +268,8 @@ impl WhiteBox {
         // The model's bytes and every setting read above; paths only name files already hashed.
         // The thread count is left out: it does not change a score.
         let settings = WhiteBoxOptions { threads: 0, ..o };
-        let identity = pav_core::data::store::sha256_hex(
-            format!("{}\n{cfg:?}\n{loss:?}\n{settings:?}", pav_core::data::store::sha256_hex(&bytes)).as_bytes(),
+        let identity = pav_run::data::store::sha256_hex(
+            format!("{}\n{cfg:?}\n{loss:?}\n{settings:?}", pav_run::data::store::sha256_hex(&bytes)).as_bytes(),
         );
         Ok(WhiteBox {
             name: cfg.name.clone(),

@@ -69,7 +69,7 @@ pub fn read_merged(
     // Where the current file lies, relative to the first file's folder.
     let mut rel = PathBuf::new();
     while let Some(file) = next.take() {
-        if chain.iter().any(|(f, _)| crate::provenance::tidy(f) == crate::provenance::tidy(&file)) {
+        if chain.iter().any(|(f, _)| crate::path::tidy(f) == crate::path::tidy(&file)) {
             let chain: Vec<String> = chain.iter().map(|(f, _)| f.display().to_string()).collect();
             return Err(ExtendsError::Invalid {
                 path: path.into(),
@@ -95,8 +95,8 @@ pub fn read_merged(
             None => {}
             Some(toml::Value::String(base)) => {
                 let dir = file.parent().unwrap_or(Path::new(""));
-                rel = crate::provenance::tidy(&rel.join(Path::new(&base).parent().unwrap_or(Path::new(""))));
-                next = Some(crate::provenance::tidy(&dir.join(&base)));
+                rel = crate::path::tidy(&rel.join(Path::new(&base).parent().unwrap_or(Path::new(""))));
+                next = Some(crate::path::tidy(&dir.join(&base)));
             }
             Some(other) => {
                 return Err(ExtendsError::Invalid {
@@ -140,8 +140,8 @@ fn anchor_value(v: &mut toml::Value, key: &[&str], rel: &Path, names: &[&str]) {
         toml::Value::String(s) if key.is_empty() => {
             let p = Path::new(s.as_str());
             // `data:` entries, absolute paths and names are not relative paths.
-            if !(s.starts_with(crate::data::SCHEME) || p.is_absolute() || names.contains(&s.as_str())) {
-                *s = crate::provenance::tidy(&rel.join(p)).display().to_string();
+            if !(s.starts_with(crate::path::DATA_SCHEME) || p.is_absolute() || names.contains(&s.as_str())) {
+                *s = crate::path::tidy(&rel.join(p)).display().to_string();
             }
         }
         _ => {}

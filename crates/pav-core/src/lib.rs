@@ -1,20 +1,18 @@
 //! The base layer of pav: what every method block and job stands on. Nothing here knows of
-//! detectors, textures or rigs.
+//! detectors or textures, runs nothing outside the process but the video encoder, and reads no
+//! repository; the one rig format, the per-frame angle sidecar, is here because the simulated
+//! turntable (pav-scene), the rig and the scoring all read or write it.
 #![warn(missing_docs)]
 
-pub mod cluster;
 pub mod colour;
-pub mod data;
 pub mod extends;
 pub mod geometry;
 pub mod image;
+pub mod path;
 #[cfg(feature = "plot")]
 pub mod plot;
 pub mod progress;
-pub mod provenance;
-pub mod results;
 pub mod rng;
-pub mod shard;
 pub mod sidecar;
 pub mod step;
 pub mod table;

@@ -151,11 +151,6 @@ pub fn opencv_version() -> Option<String> {
     opencv::core::get_version_string().ok()
 }
 
-/// The first line of `ffmpeg -version`, which encodes recordings (for `run.toml`).
-pub fn ffmpeg_version() -> Option<String> {
-    crate::provenance::tool_version("ffmpeg", &["-version"])
-}
-
 /// Reads an image file (any format OpenCV reads: PNG, JPEG, TIFF, ...) as a [`Frame`].
 pub fn read_image(path: &Path) -> Result<Frame, VideoError> {
     let m =

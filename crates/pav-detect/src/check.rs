@@ -38,7 +38,7 @@ pub struct Checked {
 pub fn read_input(spec: &str) -> Result<Frame, CheckError> {
     let bad = |msg: String| CheckError::Image { path: spec.to_string(), msg };
     // A data store entry (`data:NAME`) is fetched or found where the store keeps it.
-    let local = |p: &str| pav_core::data::resolve(Path::new("."), Path::new(p)).map_err(|e| bad(e.to_string()));
+    let local = |p: &str| pav_run::data::resolve(Path::new("."), Path::new(p)).map_err(|e| bad(e.to_string()));
     if let Some((video, k)) = spec.rsplit_once('#') {
         let k: usize = k.parse().map_err(|_| bad(format!("`{k}` is not a frame number")))?;
         let mut rd = pav_core::video::VideoReader::open(&local(video)?).map_err(|e| bad(e.to_string()))?;

@@ -350,7 +350,7 @@ impl DetectorConfig {
             })?;
         let dir = path.parent().unwrap_or(Path::new("."));
         let resolve = |p: &Path| {
-            pav_core::data::resolve(dir, p)
+            pav_run::data::resolve(dir, p)
                 .map_err(|source| DetectError::ConfigData { path: shown.clone(), source: Box::new(source) })
         };
         let class_names: Vec<String> = if raw.classes.names == "coco80" {
@@ -750,11 +750,11 @@ mod tests {
         let c = DetectorConfig::load(&sub.join("v.toml")).unwrap();
         assert_eq!(c.name, "x+median3");
         // The base's relative paths keep meaning the base's folder.
-        assert_eq!(pav_core::provenance::tidy(&c.model), pav_core::provenance::tidy(&d.path().join("m.onnx")));
+        assert_eq!(pav_core::path::tidy(&c.model), pav_core::path::tidy(&d.path().join("m.onnx")));
         assert_eq!(c.class_names, ["car", "truck"]);
         assert_eq!(c.input.defence, [Defence::Median { k: 3 }]);
         assert_eq!(c.model_defence, [Defence::Clip { layers: vec!["f".into()], level: 1.0 }]);
-        assert_eq!(c.bases, [pav_core::provenance::tidy(&base)]);
+        assert_eq!(c.bases, [pav_core::path::tidy(&base)]);
         std::fs::write(sub.join("w.toml"), "extends = 'v.toml'\n[[defence]]\nkind = 'median'\nk = 2\n").unwrap();
         let e = DetectorConfig::load(&sub.join("w.toml")).unwrap_err().to_string();
         assert!(e.contains("w.toml") && e.contains("k = 2 must be odd"), "{e}");

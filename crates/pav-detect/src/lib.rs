@@ -97,7 +97,7 @@ pub enum DetectError {
         /// Config file.
         path: String,
         /// Which entry, and the `pav data` command that fixes it.
-        source: Box<pav_core::data::DataError>,
+        source: Box<pav_run::data::DataError>,
     },
     /// A config file, its class-names file or a folder of configs could not be read.
     #[error("detector config {path}: cannot read {what}: {source}")]

@@ -6,7 +6,7 @@
 use super::physical::FrameRecord;
 use super::report::{FrameCsv, ReportError};
 use super::run::{pool, settings, write_reports, EvalOptions, EvalOutcome, VideoPart};
-use pav_core::shard::{Shard, ShardError};
+use pav_run::shard::{Shard, ShardError};
 use std::path::{Path, PathBuf};
 
 /// The file in a shard's folder that lists what each of its videos added.
@@ -27,12 +27,12 @@ pub fn write_index(dir: &Path, detectors: &[String], out: &EvalOutcome, indices:
     let videos =
         out.videos.iter().map(|v| VideoPart { index: indices[v.index], ..v.clone() }).collect::<Vec<VideoPart>>();
     let index = ShardIndex { detectors: detectors.to_vec(), videos };
-    Ok(pav_core::shard::write_json(&dir.join(SHARD_INDEX), &index)?)
+    Ok(pav_run::shard::write_json(&dir.join(SHARD_INDEX), &index)?)
 }
 
 fn read_index(dir: &Path) -> Result<Option<ShardIndex>, ReportError> {
     let path = dir.join(SHARD_INDEX);
-    Ok(if path.exists() { Some(pav_core::shard::read_json(&path)?) } else { None })
+    Ok(if path.exists() { Some(pav_run::shard::read_json(&path)?) } else { None })
 }
 
 fn read_frames(path: &Path) -> Result<Vec<FrameRecord>, ReportError> {
@@ -85,7 +85,7 @@ pub fn merge(shards: &[(Shard, PathBuf)], videos: usize, opts: &EvalOptions) -> 
         }
     }
     if let Some(i) = parts.iter().position(Option::is_none) {
-        let shard = pav_core::shard::owner_dir(shards, i);
+        let shard = pav_run::shard::owner_dir(shards, i);
         return Err(ShardError::Unfinished { shard, what: format!("video {}", i + 1) }.into());
     }
     std::fs::create_dir_all(&opts.out_dir).map_err(|e| super::report::io_err(&opts.out_dir, e))?;

@@ -35,7 +35,7 @@ pub enum ReportError {
     Table(#[from] pav_core::table::TableError),
     /// Shards of a run that cannot be joined.
     #[error(transparent)]
-    Shard(#[from] pav_core::shard::ShardError),
+    Shard(#[from] pav_run::shard::ShardError),
     /// A shard's file that cannot be read back.
     #[error("cannot read {path}: {why}")]
     Read {

@@ -205,7 +205,7 @@ impl Blender {
 
     /// The first line of `blender --version` (for `run.toml`).
     pub fn version(&self) -> Option<String> {
-        pav_core::provenance::tool_version(&self.0.display().to_string(), &["--version"])
+        pav_run::provenance::tool_version(&self.0.display().to_string(), &["--version"])
     }
 
     /// Runs `job` in one Blender process (files in `work`); `done(name, seconds)` is called as

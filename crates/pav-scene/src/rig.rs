@@ -369,7 +369,7 @@ impl RigConfig {
             .map_err(|e| err(e.to_string()))?;
         c.bases = files.into_iter().skip(1).collect();
         let dir = path.parent().unwrap_or(Path::new("."));
-        let resolve = |p: &Path| pav_core::data::resolve(dir, p).map_err(|e| err(e.to_string()));
+        let resolve = |p: &Path| pav_run::data::resolve(dir, p).map_err(|e| err(e.to_string()));
         c.mesh.obj = resolve(&c.mesh.obj)?;
         c.mesh.texture = c.mesh.texture.as_deref().map(resolve).transpose()?;
         if c.room.environment.contains('/') || c.room.environment.contains('.') {

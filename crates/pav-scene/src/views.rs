@@ -46,10 +46,10 @@ use pav_core::geometry::mesh::{Mesh, MeshError};
 use pav_core::image::resize::{resize, Interpolation};
 use pav_core::image::{halve, Frame, Rgb};
 use pav_core::progress::Progress;
-use pav_core::shard::{Shard, ShardError};
 use pav_render::bake::Plate;
 use pav_render::raster::{GBuffer, EMPTY};
 use pav_render::shade::{draw_textured, Lights};
+use pav_run::shard::{Shard, ShardError};
 use serde::Deserialize;
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -340,7 +340,7 @@ impl ViewsConfig {
         let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
         let mut c: ViewsConfig = toml::from_str(&text).map_err(|e| err(e.to_string()))?;
         let dir = path.parent().unwrap_or(Path::new("."));
-        let resolve = |p: &Path| pav_core::data::resolve(dir, p).map_err(|e| err(e.to_string()));
+        let resolve = |p: &Path| pav_run::data::resolve(dir, p).map_err(|e| err(e.to_string()));
         c.mesh.obj = resolve(&c.mesh.obj)?;
         c.mesh.texture = c.mesh.texture.as_deref().map(resolve).transpose()?;
         for e in &mut c.environments {
@@ -716,7 +716,7 @@ impl ViewSetInfo {
     /// Whether `obj` (a mesh file) is the mesh these views show: the same path, or the same
     /// bytes as the recorded hash or as the recorded file.
     pub fn shows(&self, obj: &Path) -> bool {
-        let digest = |p: &Path| pav_core::data::store::file_digest(p).ok().map(|d| d.1);
+        let digest = |p: &Path| pav_run::data::store::file_digest(p).ok().map(|d| d.1);
         let ours = std::fs::canonicalize(obj).unwrap_or_else(|_| obj.to_path_buf());
         if self.obj == ours {
             return true;
@@ -845,10 +845,10 @@ pub fn render_views(
     mesh.write_obj(&obj, None).map_err(io(&obj))?;
     let info = ViewSetInfo {
         obj: std::fs::canonicalize(&cfg.mesh.obj).map_err(io(&cfg.mesh.obj))?,
-        obj_sha256: Some(pav_core::data::store::file_digest(&cfg.mesh.obj).map_err(io(&cfg.mesh.obj))?.1),
+        obj_sha256: Some(pav_run::data::store::file_digest(&cfg.mesh.obj).map_err(io(&cfg.mesh.obj))?.1),
         normalize: format!("{:?}", cfg.mesh.normalize).to_lowercase(),
         up: cfg.mesh.up.clone(),
-        texture_sha256: Some(pav_core::data::store::file_digest(&texture).map_err(io(&texture))?.1),
+        texture_sha256: Some(pav_run::data::store::file_digest(&texture).map_err(io(&texture))?.1),
         turntable: cfg.render.turntable,
         rig: cfg.rig.as_ref().map(|r| r.record.clone()),
         rig_key: cfg.rig.as_ref().map(|r| r.key.clone()),
@@ -1143,13 +1143,13 @@ pub fn merge_shards(cfg: &ViewsConfig, shards: &[(Shard, PathBuf)], out: &Path) 
         }
     }
     if let Some((i, v)) = all.iter().enumerate().find(|(_, v)| !rows.contains_key(&v.name)) {
-        let dir = pav_core::shard::owner_dir(shards, i);
+        let dir = pav_run::shard::owner_dir(shards, i);
         let missing = all.iter().filter(|v| !rows.contains_key(&v.name)).count();
         let what = format!("view {} ({missing} of {} views missing)", v.name, all.len());
         return Err(ShardError::Unfinished { shard: dir, what }.into());
     }
     for (_, dir) in shards {
-        pav_core::shard::link_tree(&dir.join("views"), &out.join("views"))?;
+        pav_run::shard::link_tree(&dir.join("views"), &out.join("views"))?;
     }
     if let Some((_, first)) = shards.first() {
         for f in ["views.toml", "mesh.obj"] {

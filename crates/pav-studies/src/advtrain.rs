@@ -67,7 +67,7 @@ impl AdvTrainConfig {
         let mut c: AdvTrainConfig = toml::from_str(&text).map_err(|e| bad(e.to_string()))?;
         let dir = path.parent().unwrap_or(Path::new("."));
         let fix = |p: &mut PathBuf| -> Result<(), ExperimentError> {
-            *p = pav_core::data::resolve(dir, p).map_err(|e| bad(e.to_string()))?;
+            *p = pav_run::data::resolve(dir, p).map_err(|e| bad(e.to_string()))?;
             Ok(())
         };
         fix(&mut c.detector)?;
@@ -371,7 +371,7 @@ fn conditions(setup: &Setup, files: &[(String, PathBuf)], seeds: &[u64]) -> Resu
         v.push(Condition { name: "random".into(), file: format!("seed {s}"), texture });
     }
     for (name, f) in files {
-        let file = pav_core::provenance::tidy(f).display().to_string();
+        let file = pav_core::path::tidy(f).display().to_string();
         v.push(Condition { name: name.clone(), file, texture: Some(setup.load_texture(f)?) });
     }
     Ok(v)

@@ -19,11 +19,11 @@ use pav_attack::view::View;
 use pav_attack::whitebox::Ensemble;
 use pav_core::image::save_rgb;
 use pav_core::progress::{Progress, Silent};
-use pav_core::shard::Shard;
 use pav_core::table::{unique, write_csv};
 use pav_detect::load::load_detectors;
 use pav_detect::Detector;
 use pav_eval::digital::ImageDetections;
+use pav_run::shard::Shard;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -191,12 +191,12 @@ pub struct Pooled {
 pub const FOLD_SCORES: &str = "scores.json";
 
 fn write_fold_scores(dir: &Path, s: &FoldScores) -> Result<(), ExperimentError> {
-    Ok(pav_core::shard::write_json(&dir.join(FOLD_SCORES), s)?)
+    Ok(pav_run::shard::write_json(&dir.join(FOLD_SCORES), s)?)
 }
 
 /// Reads a fold's scores ([`FoldScores`]) from its folder.
 pub fn read_fold_scores(dir: &Path) -> Result<FoldScores, ExperimentError> {
-    Ok(pav_core::shard::read_json(&dir.join(FOLD_SCORES))?)
+    Ok(pav_run::shard::read_json(&dir.join(FOLD_SCORES))?)
 }
 
 /// Pushes `im` onto the entry of (role, texture, detector), in first-seen order.
@@ -435,7 +435,7 @@ pub fn crossval(
     Ok(Crossval { rows, records, boxes, anatomies, rendered, curve, seconds })
 }
 
-/// How a crossval job is cut for a job array (`pav_core::shard`).
+/// How a crossval job is cut for a job array (`pav_run::shard`).
 #[derive(Clone, Debug)]
 pub enum Cut {
     /// The whole job in this process.
@@ -482,13 +482,13 @@ fn gather_shards(
     let mut units = Vec::new();
     for &seed in seeds {
         for f in 0..k {
-            units.push(pav_core::shard::Unit {
+            units.push(pav_run::shard::Unit {
                 what: format!("fold {}/{k}{}", f + 1, seed.map_or(String::new(), |s| format!(" of seed {s}"))),
                 dir: seed_dir(Path::new(""), seed).join(fold_dir(f, k)),
             });
         }
     }
-    Ok(pav_core::shard::gather(shards, &units, &|d: &Path| d.join(FOLD_SCORES).is_file(), out)?)
+    Ok(pav_run::shard::gather(shards, &units, &|d: &Path| d.join(FOLD_SCORES).is_file(), out)?)
 }
 
 /// `pav crossval`: cross-validates `config` with `job.folds` folds (default: leave-one-out) and

@@ -53,7 +53,7 @@ pub enum ExperimentError {
     Print(#[from] pav_print::proof::ProofError),
     /// Shards of a job array.
     #[error(transparent)]
-    Shard(#[from] pav_core::shard::ShardError),
+    Shard(#[from] pav_run::shard::ShardError),
     /// A file or folder.
     #[error("{path}: {source}")]
     Io {

@@ -12,8 +12,8 @@ use pav_attack::config::OptimizeConfig;
 use pav_attack::export::PrintSpec;
 use pav_attack::optimize::Finish;
 use pav_core::progress::Progress;
-use pav_core::provenance::{Run, FILE};
 use pav_core::table::write_csv;
+use pav_run::provenance::{Run, FILE};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -376,7 +376,7 @@ type FileSha<'a> = (&'a str, &'a str);
 
 /// What a held-out record's scores rest on: its config, its inputs' sha256 and its settings.
 fn scored_on(r: &Run) -> (Option<FileSha<'_>>, Vec<FileSha<'_>>, &BTreeMap<String, String>) {
-    fn file(i: &pav_core::provenance::Input) -> FileSha<'_> {
+    fn file(i: &pav_run::provenance::Input) -> FileSha<'_> {
         (i.path.as_str(), i.sha256.as_str())
     }
     (r.config.as_ref().map(file), r.inputs.iter().map(file).collect(), &r.settings)

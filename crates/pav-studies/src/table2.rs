@@ -323,7 +323,7 @@ pub fn eval_digital(
         let (name, runs) = texture_seeds(t)?;
         for (seed, file) in &runs {
             let tex = setup.load_texture(file)?;
-            let recorded = file.parent().and_then(pav_core::provenance::recorded_config);
+            let recorded = file.parent().and_then(pav_run::provenance::recorded_config);
             if let Some(wb) = recorded.and_then(|c| OptimizeConfig::load(&c).ok()?.white_box_names().ok()) {
                 own_wb.insert(name.clone(), wb);
             }

@@ -154,7 +154,7 @@ pub fn run(a: &Args) -> Result<()> {
         .setting("period_s", period)
         .setting("turns", a.turns)
         .setting("max_angle_error_deg", a.max_angle_error)
-        .tool("ffmpeg", pav::video::ffmpeg_version());
+        .tool("ffmpeg", pav::provenance::tool_version("ffmpeg", &["-version"]));
     if let (Some(path), Some(rig)) = (&a.rig, &rig) {
         record = record.config(path).inputs(rig.inputs().iter().map(|p| p.as_path()));
         if a.camera == "sim" {

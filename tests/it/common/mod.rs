@@ -8,6 +8,23 @@ pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// The `pav` binary under test, run in the repository root with backtraces off (a test that
+/// reads an error reads the message a user sees).
+pub fn pav() -> std::process::Command {
+    binary(env!("CARGO_BIN_EXE_pav"))
+}
+
+/// The `pav-rig` binary under test, as [`pav`] runs.
+pub fn pav_rig() -> std::process::Command {
+    binary(env!("CARGO_BIN_EXE_pav-rig"))
+}
+
+fn binary(path: &str) -> std::process::Command {
+    let mut c = std::process::Command::new(path);
+    c.current_dir(repo()).env("RUST_BACKTRACE", "0");
+    c
+}
+
 /// pav's data store (`PAV_DATA`, else the XDG cache), checked against the manifest once per test
 /// binary: a test that needs it fails, naming the missing files and the command that fetches
 /// them (a test that skipped would pass without having checked anything).

@@ -5,6 +5,4 @@ pub mod linalg;
 pub mod mesh;
 pub mod parts;
 pub mod uv;
-pub mod uv_adjust;
-pub mod uv_charts;
 pub mod vec3;

@@ -180,7 +180,7 @@ impl Store {
         &self,
         entries: &[&'a Entry],
         origin: &Origin,
-        progress: &dyn crate::progress::Progress,
+        progress: &dyn pav_core::progress::Progress,
     ) -> Vec<(&'a Entry, Result<Fetched, DataError>)> {
         progress.begin("fetch", entries.len() as u64);
         let out = entries

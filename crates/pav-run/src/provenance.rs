@@ -5,6 +5,7 @@
 
 use crate::data::manifest::Manifest;
 use crate::data::store::{file_digest, Store};
+use pav_core::path::tidy;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -208,22 +209,6 @@ pub fn describe(path: &Path) -> Option<Input> {
         .map(|r| r.display().to_string())
         .filter(|name| Manifest::builtin().get(name).is_ok());
     Some(Input { path: tidy(path).display().to_string(), data, bytes, sha256 })
-}
-
-/// `a/b/../c` → `a/c` without touching the file system, so one file reached two ways is one input.
-pub fn tidy(path: &Path) -> PathBuf {
-    use std::path::Component;
-    let mut out = PathBuf::new();
-    for c in path.components() {
-        match c {
-            Component::ParentDir if matches!(out.components().next_back(), Some(Component::Normal(_))) => {
-                out.pop();
-            }
-            Component::CurDir => {}
-            c => out.push(c),
-        }
-    }
-    out
 }
 
 fn walk(dir: &Path, out: &mut Vec<PathBuf>) {

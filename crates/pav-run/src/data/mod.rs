@@ -8,9 +8,6 @@ pub mod store;
 
 use std::path::{Path, PathBuf};
 
-/// The prefix of a path that names a manifest entry instead of a file.
-pub const SCHEME: &str = "data:";
-
 /// A data file that is unknown, absent, damaged or could not be fetched; each message says
 /// which `pav data` command fixes it.
 #[derive(Debug, thiserror::Error)]
@@ -94,7 +91,7 @@ pub fn arg_path(s: &str) -> Result<PathBuf, String> {
 /// store (refused when the manifest does not list it or the store lacks it), a relative path
 /// against `dir`, an absolute one as it is.
 pub fn resolve(dir: &Path, p: &Path) -> Result<PathBuf, DataError> {
-    match p.to_str().and_then(|s| s.strip_prefix(SCHEME)) {
+    match p.to_str().and_then(|s| s.strip_prefix(pav_core::path::DATA_SCHEME)) {
         Some(name) => store::Store::from_env().require(name),
         None if p.is_relative() => Ok(dir.join(p)),
         None => Ok(p.to_path_buf()),

@@ -3,9 +3,9 @@
 //! (LSCM) as one printable piece. The charts are then packed at one common texel density into the
 //! texels no other face uses, which lets that density exceed the original map's.
 
-use super::mesh::Mesh;
-use super::uv::paint_uv;
-use super::uv_adjust::lscm_with;
+use crate::adjust::lscm_with;
+use pav_core::geometry::mesh::Mesh;
+use pav_core::geometry::uv::paint_uv;
 use std::collections::{HashMap, VecDeque};
 
 /// What a chart adjustment did.
@@ -211,7 +211,7 @@ pub fn adjust_charts(
         auv / a3.max(f64::MIN_POSITIVE)
     };
     let cs = charts(mesh, faces, max_angle_deg);
-    let islands = super::uv_adjust::islands(mesh, faces);
+    let islands = crate::adjust::islands(mesh, faces);
     let island_of: HashMap<usize, usize> =
         islands.iter().enumerate().flat_map(|(k, isl)| isl.iter().map(move |&f| (f, k))).collect();
     let max_islands_joined = cs
@@ -345,7 +345,7 @@ mod tests {
     fn a_smooth_surface_cut_by_uv_seams_becomes_one_chart() {
         let m = strip(20.0);
         let all: Vec<usize> = (0..m.faces.len()).collect();
-        assert_eq!(super::super::uv_adjust::islands(&m, &all).len(), 2);
+        assert_eq!(crate::adjust::islands(&m, &all).len(), 2);
         let c = charts(&m, &all, 45.0);
         assert_eq!(c.len(), 1, "20° bend under a 45° cone: one chart");
         // A sharp fold splits it, along the fold.
@@ -360,7 +360,7 @@ mod tests {
         let r = adjust_charts(&mut m, &all, 45.0, 256, 2).unwrap();
         assert_eq!((r.charts, r.max_islands_joined, r.flipped), (1, 2, 0));
         // A developable strip flattens without distortion: every face keeps its 3D shape.
-        let d = crate::geometry::uv::distortion(&m, &all);
+        let d = pav_core::geometry::uv::distortion(&m, &all);
         assert!(d.iter().all(|x| (x.anisotropy - 1.0).abs() < 1e-3 && x.log2_stretch.abs() < 1e-3), "{d:?}");
         // Alone in the atlas, the chart grows well beyond the original density.
         assert!(r.density > 1.5, "{}", r.density);

@@ -6,8 +6,9 @@
 //! TOML config in its values, not its comments) is marked stale, with the command that reruns it; one copied from an older document rather than
 //! made by its command says so.
 
-use crate::data::manifest::Manifest;
-use crate::provenance::{Input, Run};
+use pav_core::path::tidy;
+use pav_run::data::manifest::Manifest;
+use pav_run::provenance::{Input, Run};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -89,7 +90,7 @@ pub enum ResultsError {
     /// A plot that could not be drawn.
     #[cfg(feature = "plot")]
     #[error(transparent)]
-    Plot(#[from] crate::plot::PlotError),
+    Plot(#[from] pav_core::plot::PlotError),
     /// A file said to have moved that no longer holds what a results file recorded of it.
     #[error("results/{name}.json: {msg}")]
     Moved {
@@ -227,18 +228,18 @@ impl ResultFile {
     /// intervals, titled with the table's title.
     #[cfg(feature = "plot")]
     pub fn plot(&self, spec: &PlotSpec, name: &str, log_x: bool, path: &Path) -> Result<(), ResultsError> {
-        let series: Vec<crate::plot::IntervalSeries> = self
+        let series: Vec<pav_core::plot::IntervalSeries> = self
             .points(spec, name)?
             .into_iter()
-            .map(|(name, pts)| crate::plot::IntervalSeries {
+            .map(|(name, pts)| pav_core::plot::IntervalSeries {
                 name,
                 points: pts
                     .into_iter()
-                    .map(|p| crate::plot::IntervalPoint { x: p.x, y: p.y, interval: p.interval, label: p.label })
+                    .map(|p| pav_core::plot::IntervalPoint { x: p.x, y: p.y, interval: p.interval, label: p.label })
                     .collect(),
             })
             .collect();
-        Ok(crate::plot::intervals(path, &self.title, (&spec.x, &spec.y), log_x, &series)?)
+        Ok(pav_core::plot::intervals(path, &self.title, (&spec.x, &spec.y), log_x, &series)?)
     }
 
     /// How this table was taken from its CSV, to take it again from a fresh run.
@@ -553,7 +554,7 @@ fn keep_inputs(
         // table stale: its content now when it is still as the run read it, else its content
         // at the run's commit when that commit holds what the run read.
         let sha = match content_sha(&root.join(&key)) {
-            Some(c) if crate::provenance::describe(&root.join(&key)).is_some_and(|now| now.sha256 == i.sha256) => c,
+            Some(c) if pav_run::provenance::describe(&root.join(&key)).is_some_and(|now| now.sha256 == i.sha256) => c,
             _ => content_sha_at(root, &run.git_commit, &key, &i.sha256).unwrap_or_else(|| i.sha256.clone()),
         };
         inputs.insert(key, sha);
@@ -566,8 +567,8 @@ fn content_sha_at(root: &Path, commit: &str, key: &str, read: &str) -> Option<St
     if !key.ends_with(".toml") {
         return None;
     }
-    let shown = crate::provenance::git(root, &["show", &format!("{commit}:./{key}")]).ok()?;
-    if crate::data::store::sha256_hex(&shown) != read {
+    let shown = pav_run::provenance::git(root, &["show", &format!("{commit}:./{key}")]).ok()?;
+    if pav_run::data::store::sha256_hex(&shown) != read {
         return None;
     }
     table_sha(&toml::from_str(std::str::from_utf8(&shown).ok()?).ok()?)
@@ -575,7 +576,7 @@ fn content_sha_at(root: &Path, commit: &str, key: &str, read: &str) -> Option<St
 
 /// `toml:` and the sha256 of `table`'s values written out.
 fn table_sha(table: &toml::Table) -> Option<String> {
-    Some(format!("{CONTENT}{}", crate::data::store::sha256_hex(toml::to_string(table).ok()?.as_bytes())))
+    Some(format!("{CONTENT}{}", pav_run::data::store::sha256_hex(toml::to_string(table).ok()?.as_bytes())))
 }
 
 /// The sha256 of input `key` (a path under `root`, or `data:NAME` in `manifest`) now, taken the
@@ -584,28 +585,13 @@ fn sha_now(manifest: &Manifest, root: &Path, key: &str, recorded: &str) -> Optio
     match key.strip_prefix("data:") {
         Some(name) => manifest.get(name).ok().map(|e| e.sha256.clone()),
         None if recorded.starts_with(CONTENT) => content_sha(&root.join(key)),
-        None => crate::provenance::describe(&root.join(key)).map(|i| i.sha256),
+        None => pav_run::provenance::describe(&root.join(key)).map(|i| i.sha256),
     }
-}
-
-/// `p` with `.` and `..` resolved without the file system (the file may be gone).
-fn lexical(p: &Path) -> PathBuf {
-    let mut out = PathBuf::new();
-    for c in p.components() {
-        match c {
-            std::path::Component::CurDir => {}
-            std::path::Component::ParentDir if out.file_name().is_some() => {
-                out.pop();
-            }
-            c => out.push(c),
-        }
-    }
-    out
 }
 
 /// The path from the folder `from` to `to`, both relative to one root, as `extends` writes it.
 fn relative(from: &Path, to: &Path) -> PathBuf {
-    let (from, to) = (lexical(from), lexical(to));
+    let (from, to) = (tidy(from), tidy(to));
     let common = from.components().zip(to.components()).take_while(|(a, b)| a == b).count();
     let mut out: PathBuf = from.components().skip(common).map(|_| "..").collect();
     out.extend(to.components().skip(common));
@@ -617,7 +603,7 @@ fn extends(root: &Path, key: &str, path: &str) -> Option<toml::Table> {
     let table: toml::Table = toml::from_str(&std::fs::read_to_string(root.join(key)).ok()?).ok()?;
     let dir = Path::new(key).parent().unwrap_or(Path::new(""));
     let target = table.get("extends")?.as_str()?;
-    (lexical(&dir.join(target)) == lexical(Path::new(path))).then_some(table)
+    (tidy(&dir.join(target)) == tidy(Path::new(path))).then_some(table)
 }
 
 /// The recorded sha256 of the TOML config `key` (under `root`) if it now `extends` `new` where
@@ -840,7 +826,7 @@ mod tests {
 
     #[test]
     fn paths_between_configs_are_written_as_extends_writes_them() {
-        assert_eq!(lexical(Path::new("configs/studies/../optimize/./a.toml")), Path::new("configs/optimize/a.toml"));
+        assert_eq!(tidy(Path::new("configs/studies/../optimize/./a.toml")), Path::new("configs/optimize/a.toml"));
         let rel = |from: &str, to: &str| relative(Path::new(from), Path::new(to)).display().to_string();
         assert_eq!(rel("configs/studies/lofo", "configs/optimize/recommended.toml"), "../../optimize/recommended.toml");
         assert_eq!(rel("configs/optimize", "configs/optimize/small.toml"), "small.toml");

@@ -3,8 +3,8 @@
 //! island by a similarity transform (so its placement is kept), and all islands are scaled to one
 //! common texel density, as large as still fits every island inside its original bounding box.
 
-use super::linalg::cholesky_solve;
-use super::mesh::Mesh;
+use pav_core::geometry::linalg::cholesky_solve;
+use pav_core::geometry::mesh::Mesh;
 use std::collections::{BTreeSet, HashMap};
 
 /// UV islands among `faces`: faces are connected when they share a UV *edge*. Faces touching
@@ -228,7 +228,7 @@ pub fn adjust(mesh: &mut Mesh, faces: &[usize]) -> f64 {
     }
     let area3 = |m: &Mesh, f: usize| {
         let c = m.face_cross(f);
-        (super::vec3::dot(c, c).sqrt() / 2.0) as f64
+        (pav_core::geometry::vec3::dot(c, c).sqrt() / 2.0) as f64
     };
     let area_uv = |uv: &HashMap<u32, [f64; 2]>, m: &Mesh, f: usize| {
         let t = m.face_uvs[f].map(|i| uv[&i]);
