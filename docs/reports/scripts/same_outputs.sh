@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # Runs the README's main job, a paper.toml optimize and a 3-fold crossval (half.toml, one epoch)
 # with two builds of pav on the same inputs, and lists every output file that differs between
-# them. Timing columns of loss.csv, a fold's time in its scores.json, the run time in
-# crossval.md's title and run.toml (command, start time, commit) are expected to differ and are
-# compared with those parts removed.
+# them. The timing columns of loss.csv and loss_stages.csv, a fold's time in its scores.json, the
+# run time in crossval.md's title and run.toml (command, start time, commit) are expected to
+# differ and are compared with those parts removed.
 # usage: docs/reports/scripts/same_outputs.sh BASE_BIN_DIR NEW_BIN_DIR OUT
 #        (COMPARE_ONLY=1 compares the outputs already in OUT)
 set -euo pipefail
@@ -22,12 +22,12 @@ for tree in base new; do
   "$bin/pav" optimize --config configs/optimize/paper.toml -o "$o/optimize" >/dev/null 2>&1
   "$bin/pav" crossval --config "$cv" --folds 3 --random-seeds 1 -o "$o/crossval" >/dev/null 2>&1
 done
-# Drops what is expected to differ: run.toml, loss.csv's timing columns, scores.json's seconds,
-# crossval.md's run time.
+# Drops what is expected to differ: run.toml, the timing columns of loss.csv and loss_stages.csv,
+# scores.json's seconds, crossval.md's run time.
 normal() {
   case "$1" in
     */run.toml) echo "(run record)" ;;
-    */loss.csv) python3 -c 'import csv,sys
+    */loss.csv | */loss_stages.csv) python3 -c 'import csv,sys
 r=list(csv.reader(open(sys.argv[1])))
 keep=[i for i,h in enumerate(r[0]) if not h.endswith("_ms")]
 [print(",".join(row[i] for i in keep)) for row in r]' "$1" ;;
