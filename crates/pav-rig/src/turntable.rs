@@ -391,10 +391,7 @@ impl Turntable {
 
     /// Sends a command that is safe to repeat (not a motion), retrying after timeouts.
     pub fn command_retry(&mut self, cmd: Command, attempts: usize) -> Result<u32> {
-        assert!(
-            !matches!(cmd, Command::Home | Command::MoveTo(_) | Command::MoveBy(_) | Command::Spin { .. }),
-            "motions are not retried: a lost `ok` would start them twice"
-        );
+        assert!(!cmd.is_motion(), "motions are not retried: a lost `ok` would start them twice");
         let mut last = None;
         for _ in 0..attempts.max(1) {
             match self.command(cmd) {

@@ -40,6 +40,25 @@ pub enum Command {
     Unlock,
 }
 
+impl Command {
+    /// A motion: it runs until its `done`, an alarm refuses it, another motion in progress makes
+    /// it `Busy`, and a host never retries it (a lost `ok` would start it twice). Every command
+    /// is listed, so a new one must say which it is.
+    pub const fn is_motion(&self) -> bool {
+        match self {
+            Command::Home | Command::MoveTo(_) | Command::MoveBy(_) | Command::Spin { .. } => true,
+            Command::Ping
+            | Command::Info
+            | Command::Status
+            | Command::Speed(_)
+            | Command::Accel(_)
+            | Command::Report(_)
+            | Command::Stop
+            | Command::Unlock => false,
+        }
+    }
+}
+
 /// A command with its optional sequence number.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Frame {

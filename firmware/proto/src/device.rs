@@ -209,6 +209,9 @@ impl Device {
 
     fn execute(&mut self, f: Frame, now: u64, out: &mut impl Sink) {
         let seq = f.seq;
+        if f.cmd.is_motion() {
+            return self.start_motion(f.cmd, seq, now, out);
+        }
         let ok = Reply::Ok { seq };
         match f.cmd {
             Command::Ping => send(out, ok),
@@ -248,45 +251,48 @@ impl Device {
                 send(out, ok);
             }
             Command::Home | Command::MoveTo(_) | Command::MoveBy(_) | Command::Spin { .. } => {
-                if let Some(a) = self.alarm {
-                    send(out, Reply::Error { code: ErrorCode::Locked, seq, msg: a.text() });
-                    return;
-                }
-                if self.active.is_some() {
-                    send(out, Reply::Error { code: ErrorCode::Busy, seq, msg: "moving: wait for done or STOP" });
-                    return;
-                }
-                let here = self.physical_position(now);
-                let rev = self.cfg.usteps_per_rev as i64;
-                let (profile, state) = match f.cmd {
-                    Command::Home => {
-                        // Nearest whole turn of the current count; origin moves there when done.
-                        let rel = here - self.origin;
-                        let target = self.origin + (rel + rel.signum() * rev / 2) / rev * rev;
-                        (Profile::new(here, target, self.cfg.max_speed, self.cfg.accel, now), State::Homing)
-                    }
-                    Command::MoveTo(d) => (
-                        Profile::new(here, self.origin + self.usteps(d), self.cfg.max_speed, self.cfg.accel, now),
-                        State::Moving,
-                    ),
-                    Command::MoveBy(d) => (
-                        Profile::new(here, here + self.usteps(d), self.cfg.max_speed, self.cfg.accel, now),
-                        State::Moving,
-                    ),
-                    Command::Spin { period_s, turns } => (
-                        Profile::spin(here, self.cfg.usteps_per_rev, period_s.0, turns, self.cfg.accel, now),
-                        State::Spinning,
-                    ),
-                    _ => unreachable!("motion commands only"),
-                };
-                self.motion = Motion::Running(profile);
-                self.state = state;
-                self.active = Some(seq);
-                self.next_report_us = now;
-                self.next_busy_us = now + self.cfg.busy_ms as u64 * 1000;
-                send(out, ok);
+                unreachable!("motions start above")
             }
         }
+    }
+
+    /// Starts a motion command unless an alarm locks the table or another motion runs.
+    fn start_motion(&mut self, cmd: Command, seq: Option<u32>, now: u64, out: &mut impl Sink) {
+        if let Some(a) = self.alarm {
+            send(out, Reply::Error { code: ErrorCode::Locked, seq, msg: a.text() });
+            return;
+        }
+        if self.active.is_some() {
+            send(out, Reply::Error { code: ErrorCode::Busy, seq, msg: "moving: wait for done or STOP" });
+            return;
+        }
+        let here = self.physical_position(now);
+        let rev = self.cfg.usteps_per_rev as i64;
+        let (profile, state) = match cmd {
+            Command::Home => {
+                // Nearest whole turn of the current count; origin moves there when done.
+                let rel = here - self.origin;
+                let target = self.origin + (rel + rel.signum() * rev / 2) / rev * rev;
+                (Profile::new(here, target, self.cfg.max_speed, self.cfg.accel, now), State::Homing)
+            }
+            Command::MoveTo(d) => (
+                Profile::new(here, self.origin + self.usteps(d), self.cfg.max_speed, self.cfg.accel, now),
+                State::Moving,
+            ),
+            Command::MoveBy(d) => {
+                (Profile::new(here, here + self.usteps(d), self.cfg.max_speed, self.cfg.accel, now), State::Moving)
+            }
+            Command::Spin { period_s, turns } => {
+                (Profile::spin(here, self.cfg.usteps_per_rev, period_s.0, turns, self.cfg.accel, now), State::Spinning)
+            }
+            _ => unreachable!("motion commands only"),
+        };
+        self.motion = Motion::Running(profile);
+        self.state = state;
+        self.active = Some(seq);
+        self.next_report_us = now;
+        self.next_busy_us = now + self.cfg.busy_ms as u64 * 1000;
+        send(out, Reply::Ok { seq });
     }
 
     /// Advances time: emits angle reports and keep-alives, and `done` when a motion ends.

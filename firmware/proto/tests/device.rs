@@ -461,3 +461,30 @@ proptest! {
         let _ = Reply::parse(&s);
     }
 }
+
+#[test]
+fn the_device_treats_as_motions_exactly_the_commands_is_motion_names() {
+    let all = [
+        Command::Ping,
+        Command::Info,
+        Command::Status,
+        Command::Home,
+        Command::MoveTo(Milli(90_000)),
+        Command::MoveBy(Milli(-45_000)),
+        Command::Spin { period_s: Milli(28_000), turns: 1 },
+        Command::Speed(Milli(90_000)),
+        Command::Accel(Milli(360_000)),
+        Command::Report(10),
+        Command::Stop,
+        Command::Unlock,
+    ];
+    for cmd in all {
+        // A motion is running: a second motion is refused as busy, anything else is answered.
+        let mut r = Rig::new();
+        r.send("N1 SPIN 28 0");
+        let reply = r.send(&format!("N2 {cmd}"));
+        let busy = reply.iter().any(|l| l.starts_with("error:6 N2"));
+        assert_eq!(busy, cmd.is_motion(), "{cmd}: {reply:?}");
+    }
+    assert_eq!(all.iter().filter(|c| c.is_motion()).count(), 4);
+}
