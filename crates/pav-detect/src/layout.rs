@@ -83,6 +83,36 @@ pub enum Encoding {
     Prior,
 }
 
+impl Encoding {
+    /// Its boxes are relative to a grid cell, so a description lists `[[output.levels]]`.
+    pub const fn needs_grid(self) -> bool {
+        use Encoding::*;
+        match self {
+            Grid | Darknet | Yolov5 | Ltrb | LtrbBins | Prior | TanhShare => true,
+            Xyxy | Cxcywh => false,
+        }
+    }
+
+    /// Its sizes scale an anchor (or a prior), so every level lists `anchors`.
+    pub const fn needs_anchors(self) -> bool {
+        use Encoding::*;
+        match self {
+            Darknet | Yolov5 | Prior => true,
+            Xyxy | Cxcywh | Grid | Ltrb | LtrbBins | TanhShare => false,
+        }
+    }
+
+    /// It applies a sigmoid, tanh or softmax of its own, which `activated = true` says the graph
+    /// already applied.
+    pub const fn activates(self) -> bool {
+        use Encoding::*;
+        match self {
+            Darknet | Yolov5 | TanhShare | LtrbBins => true,
+            Xyxy | Cxcywh | Grid | Ltrb | Prior => false,
+        }
+    }
+}
+
 /// The function a model's scores still need.
 #[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
@@ -359,23 +389,11 @@ impl Description {
                     .into(),
             );
         };
-        let gridded = matches!(
-            enc,
-            Encoding::Grid
-                | Encoding::Darknet
-                | Encoding::Yolov5
-                | Encoding::Ltrb
-                | Encoding::LtrbBins
-                | Encoding::Prior
-                | Encoding::TanhShare
-        );
         let name = format!("{enc:?}").to_lowercase();
-        if gridded && self.levels.is_empty() {
+        if enc.needs_grid() && self.levels.is_empty() {
             return Err(format!("boxes encoded as `{name}` are relative to a grid: list its [[output.levels]]"));
         }
-        if matches!(enc, Encoding::Darknet | Encoding::Yolov5 | Encoding::Prior)
-            && self.levels.iter().any(|l| l.anchors.is_empty())
-        {
+        if enc.needs_anchors() && self.levels.iter().any(|l| l.anchors.is_empty()) {
             return Err(format!("boxes encoded as `{name}` need `anchors` on every level"));
         }
         if self
@@ -457,9 +475,7 @@ impl Description {
         if enc != Encoding::LtrbBins && b.bins.is_some() {
             return Err("`bins` belongs to the `ltrb-bins` encoding".into());
         }
-        if b.activated
-            && !matches!(enc, Encoding::Darknet | Encoding::Yolov5 | Encoding::TanhShare | Encoding::LtrbBins)
-        {
+        if b.activated && !enc.activates() {
             return Err(format!(
                 "`activated` says the encoding's sigmoid, tanh or softmax is already applied; `{name}` applies none, so its values are read as they are"
             ));
