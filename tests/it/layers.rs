@@ -6,6 +6,7 @@
 //! neither the top-level modules (pav-core's are the base layer's) nor the files form a cycle.
 
 use crate::common;
+use crate::common::{code_of, functions};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
@@ -392,82 +393,6 @@ fn each_rule_catches_its_breach() {
     assert_eq!(expand("crate::a::{b, c::{d, e as f}}"), ["crate::a::b", "crate::a::c::d", "crate::a::c::e as f"]);
 }
 
-/// `line` without its string and character literals and its `//` comment, so that only code's
-/// braces are left.
-fn code_of(line: &str) -> String {
-    let (mut out, mut chars) = (String::new(), line.chars().peekable());
-    while let Some(c) = chars.next() {
-        match c {
-            '/' if chars.peek() == Some(&'/') => break,
-            '"' => {
-                while let Some(s) = chars.next() {
-                    match s {
-                        '\\' => {
-                            chars.next();
-                        }
-                        '"' => break,
-                        _ => {}
-                    }
-                }
-            }
-            // A char literal ('{', '\''); a lifetime ('a) has no closing quote two places on.
-            '\'' => {
-                let rest: String = chars.clone().take(3).collect();
-                if rest.starts_with('\\') {
-                    chars.nth(2);
-                } else if rest.chars().nth(1) == Some('\'') {
-                    chars.nth(1);
-                } else {
-                    out.push(c);
-                }
-            }
-            _ => out.push(c),
-        }
-    }
-    out
-}
-
-/// Each function in `text` longer than `limit` lines: (name, first line, lines).
-fn long_functions(text: &str, limit: usize) -> Vec<(String, usize, usize)> {
-    let lines: Vec<&str> = text.lines().collect();
-    let mut out = Vec::new();
-    for (i, line) in lines.iter().enumerate() {
-        let code = code_of(line);
-        let words: Vec<&str> = code.split_whitespace().collect();
-        let Some(at) = words.iter().position(|w| *w == "fn") else { continue };
-        let qualifiers = ["pub", "pub(crate)", "pub(super)", "const", "async", "unsafe", "extern"];
-        if !words[..at].iter().all(|w| qualifiers.contains(w)) || at + 1 >= words.len() {
-            continue;
-        }
-        let name = words[at + 1].split(['(', '<']).next().unwrap_or("").to_string();
-        let mut depth = 0i32;
-        let mut opened = false;
-        for (j, l) in lines.iter().enumerate().skip(i) {
-            let c = code_of(l);
-            if !opened && c.contains(';') && !c.contains('{') {
-                break; // a declaration without a body
-            }
-            for ch in c.chars() {
-                match ch {
-                    '{' => {
-                        depth += 1;
-                        opened = true;
-                    }
-                    '}' => depth -= 1,
-                    _ => {}
-                }
-            }
-            if opened && depth <= 0 {
-                if j - i + 1 > limit {
-                    out.push((name.clone(), i + 1, j - i + 1));
-                }
-                break;
-            }
-        }
-    }
-    out
-}
-
 #[test]
 fn src_holds_only_the_binaries_and_the_re_exports() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
@@ -501,8 +426,9 @@ fn binaries_are_thin_and_library_functions_short() {
     for e in std::fs::read_dir(repo.join("crates")).unwrap().flatten() {
         for f in common::files_with_extension(&e.path().join("src"), "rs") {
             let text = std::fs::read_to_string(&f).unwrap();
-            seen += long_functions(&text, 0).len();
-            for (name, line, n) in long_functions(&text, 200) {
+            let fns = functions(&text);
+            seen += fns.len();
+            for (name, line, n) in fns.into_iter().filter(|f| f.2 > 200) {
                 long.push(format!("{}:{line} {name} ({n} lines)", f.strip_prefix(repo).unwrap().display()));
             }
         }
@@ -515,8 +441,8 @@ fn binaries_are_thin_and_library_functions_short() {
 fn the_function_reader_measures_bodies_and_skips_literals() {
     let body = "    let x = 1;\n".repeat(200);
     let text = format!("/// Doc.\npub(crate) fn long(a: &str) -> usize {{\n{body}    a.len()\n}}\n\nfn short() {{ let _ = \"{{\"; let _ = '}}'; }}\ntrait T {{\n    fn declared(&self);\n}}\n");
-    assert_eq!(long_functions(&text, 200), [("long".to_string(), 2, 203)]);
-    let all = long_functions(&text, 0);
+    let all = functions(&text);
+    assert_eq!(all.iter().filter(|f| f.2 > 200).collect::<Vec<_>>(), [&("long".to_string(), 2, 203)]);
     assert_eq!(all.iter().map(|f| f.0.as_str()).collect::<Vec<_>>(), ["long", "short"], "{all:?}");
     assert_eq!(all[1].2, 1);
     assert_eq!(code_of("fn f<'a>(x: &'a str) { let c = '{'; } // }"), "fn f<'a>(x: &'a str) { let c = ; } ");

@@ -24,31 +24,19 @@ const MARKERS: &[&str] = &[
 /// The section of docs/testing.md that lists them.
 const SECTION: &str = "## Tests that wait on wall time";
 
-/// The top-level functions of a test file: name, whether it is a `#[test]`, and its text.
+/// The functions of a test file (by [`common::functions`]): name, whether it is a `#[test]`,
+/// and its text.
 fn functions(src: &str) -> Vec<(String, bool, String)> {
     let lines: Vec<&str> = src.lines().collect();
-    let mut out = Vec::new();
-    let mut i = 0;
-    while i < lines.len() {
-        let l = lines[i];
-        let Some(rest) = l.strip_prefix("fn ").or_else(|| l.strip_prefix("pub fn ")) else {
-            i += 1;
-            continue;
-        };
-        let name: String = rest.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
-        // Attributes and doc comments above the signature; `#[test]` is among them for a test.
-        let is_test = lines[..i]
-            .iter()
-            .rev()
-            .take_while(|p| p.starts_with("#[") || p.starts_with("///"))
-            .any(|p| p.trim() == "#[test]");
-        // A one-line function ends where it starts; any other at the first `}` in column 0.
-        let one_line = l.contains('{') && l.trim_end().ends_with('}');
-        let end = if one_line { i } else { (i..lines.len()).find(|&j| lines[j] == "}").unwrap_or(lines.len() - 1) };
-        out.push((name, is_test, lines[i..=end].join("\n")));
-        i = end + 1;
-    }
-    out
+    common::functions(src)
+        .into_iter()
+        .map(|(name, first, n)| {
+            // Attributes and doc comments above the signature; `#[test]` is among them for a test.
+            let above = lines[..first - 1].iter().rev().map(|l| l.trim());
+            let is_test = above.take_while(|l| l.starts_with("#[") || l.starts_with("///")).any(|l| l == "#[test]");
+            (name, is_test, lines[first - 1..first - 1 + n].join("\n"))
+        })
+        .collect()
 }
 
 /// The tests of one file that wait on wall time, directly or through the file's own functions.

@@ -260,3 +260,78 @@ pub fn files_with_extension(dir: &Path, ext: &str) -> Vec<PathBuf> {
 pub fn doc_files(root: &Path) -> Vec<PathBuf> {
     pav::results::documents(root)
 }
+
+/// `line` without its string and character literals and its `//` comment, so that only code's
+/// braces are left.
+pub fn code_of(line: &str) -> String {
+    let (mut out, mut chars) = (String::new(), line.chars().peekable());
+    while let Some(c) = chars.next() {
+        match c {
+            '/' if chars.peek() == Some(&'/') => break,
+            '"' => {
+                while let Some(s) = chars.next() {
+                    match s {
+                        '\\' => {
+                            chars.next();
+                        }
+                        '"' => break,
+                        _ => {}
+                    }
+                }
+            }
+            // A char literal ('{', '\''); a lifetime ('a) has no closing quote two places on.
+            '\'' => {
+                let rest: String = chars.clone().take(3).collect();
+                if rest.starts_with('\\') {
+                    chars.nth(2);
+                } else if rest.chars().nth(1) == Some('\'') {
+                    chars.nth(1);
+                } else {
+                    out.push(c);
+                }
+            }
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
+/// Each function in `text` with a body, nested ones too: (name, first line, lines). Braces are
+/// counted on [`code_of`]'s lines, so braces in literals and comments do not end a body.
+pub fn functions(text: &str) -> Vec<(String, usize, usize)> {
+    let lines: Vec<&str> = text.lines().collect();
+    let mut out = Vec::new();
+    for (i, line) in lines.iter().enumerate() {
+        let code = code_of(line);
+        let words: Vec<&str> = code.split_whitespace().collect();
+        let Some(at) = words.iter().position(|w| *w == "fn") else { continue };
+        let qualifiers = ["pub", "pub(crate)", "pub(super)", "const", "async", "unsafe", "extern"];
+        if !words[..at].iter().all(|w| qualifiers.contains(w)) || at + 1 >= words.len() {
+            continue;
+        }
+        let name = words[at + 1].split(['(', '<']).next().unwrap_or("").to_string();
+        let mut depth = 0i32;
+        let mut opened = false;
+        for (j, l) in lines.iter().enumerate().skip(i) {
+            let c = code_of(l);
+            if !opened && c.contains(';') && !c.contains('{') {
+                break; // a declaration without a body
+            }
+            for ch in c.chars() {
+                match ch {
+                    '{' => {
+                        depth += 1;
+                        opened = true;
+                    }
+                    '}' => depth -= 1,
+                    _ => {}
+                }
+            }
+            if opened && depth <= 0 {
+                out.push((name.clone(), i + 1, j - i + 1));
+                break;
+            }
+        }
+    }
+    out
+}
