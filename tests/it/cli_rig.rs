@@ -34,6 +34,18 @@ fn capture_on_the_simulator_then_evaluate_uses_the_sidecar() {
     assert!(out.contains("table ended at 360.000°"), "{out}");
     let rows = pav::sidecar::read(&pav::sidecar::sidecar_path(&video)).unwrap();
     assert!((80..=90).contains(&rows.len()), "{} frames for 2.8 s at 30 fps", rows.len());
+    // In simulated time the capture is the same run however busy the machine: a second one
+    // writes the same sidecar, every frame at the same instant and angle.
+    let again = tmp.path().join("again.mp4");
+    let o = pav_rig()
+        .args(["capture", "--port", "sim", "--time-scale", "10", "--camera", "sim", "--width", "320"])
+        .args(["--height", "240", "--codec", "mp4v", "-o"])
+        .arg(&again)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", common::output_text(&o));
+    let sidecar = |v: &std::path::Path| std::fs::read(pav::sidecar::sidecar_path(v)).unwrap();
+    assert!(sidecar(&video) == sidecar(&again), "two simulated captures placed their frames differently");
     // The capture's record states its bound and the link's round trip, as the summary printed.
     let run = common::run_record(&tmp.path().join("spin.run.toml"));
     let bound: f64 = run["result"]["angle_bound_deg"].as_str().unwrap().parse().unwrap();
@@ -127,8 +139,10 @@ fn a_killed_capture_leaves_a_playable_video() {
     // OpenCV's MP4 writer left 44 undecodable bytes after SIGKILL: the index comes at the end.
     let tmp = tempfile::tempdir().unwrap();
     let video = tmp.path().join("killed.mp4");
+    // A live source in real time: a simulated camera would film the whole turn in simulated
+    // time before the kill.
     let mut child = pav_rig()
-        .args(["capture", "--port", "sim", "--time-scale", "4", "--camera", "sim", "--width", "160"])
+        .args(["capture", "--port", "sim", "--time-scale", "4", "--camera", "gst-test", "--width", "160"])
         .args(["--height", "120", "--codec", "mp4v", "-o"])
         .arg(&video)
         .stdout(std::process::Stdio::null())

@@ -374,7 +374,8 @@ fn the_quick_start_runs_as_written() {
     }
     assert!(out.join("digital/run.toml").is_file());
     for v in ["original", "camo"] {
-        assert!(common::decoded_frames(&out.join(format!("sim/{v}.mp4"))).unwrap() > 20, "{v}");
+        // A 7 s turn at 10 fps, every frame filmed in simulated time however busy the machine.
+        assert!(common::decoded_frames(&out.join(format!("sim/{v}.mp4"))).unwrap() >= 70, "{v}");
         assert!(out.join(format!("sim/{v}.angles.csv")).is_file());
     }
     let eval = out.join("sim/eval");

@@ -1,7 +1,7 @@
 //! `pav-rig capture`.
 
 use crate::common::{ctrl_c_flag, Bar};
-use crate::port::{connect, parse_signed_seconds, PortArgs};
+use crate::port::{connect, parse_signed_seconds, PortArgs, SimTime};
 use anyhow::{bail, Context, Result};
 use pav::rig::capture::{capture, CaptureOptions};
 use pav::rig::controls::{lock_all, read_back, Control};
@@ -16,7 +16,8 @@ use std::path::PathBuf;
 pub struct Args {
     #[command(flatten)]
     port: PortArgs,
-    /// Frame source: `v4l2:/dev/video0`, `file:VIDEO`, `gst-test` or `sim` (needs --port sim).
+    /// Frame source: `v4l2:/dev/video0`, `file:VIDEO`, `gst-test` or `sim` (needs --port sim; the
+    /// capture then runs in simulated time, the same video on a busy machine as on an idle one).
     #[arg(long, default_value = "v4l2:/dev/video0")]
     camera: String,
     /// Output video; the sidecar goes beside it as NAME.angles.csv.
@@ -134,8 +135,12 @@ pub fn run(a: &Args) -> Result<()> {
     );
     let fps = a.fps.or(rig.as_ref().map(|r| r.camera.fps)).unwrap_or(30.0);
     let period = a.period.or(rig.as_ref().map(|r| r.table.period_s)).unwrap_or(28.0);
-    let (sim, mut table) = connect(&a.port)?;
-    let mut cam = open_source(&a.camera, sim.as_ref().map(|s| s.truth()), car, size, fps)?;
+    // A simulated camera filming the simulated table needs no wall clock: in simulated time each
+    // frame is taken at its instant however long it takes to draw, so a busy machine films the
+    // same video as an idle one.
+    let time = if a.camera == "sim" { SimTime::Simulated } else { SimTime::Real };
+    let mut connected = connect(&a.port, time)?;
+    let mut cam = open_source(&a.camera, connected.truth.clone(), car, size, fps)?;
     let (w, h) = cam.size();
     eprintln!("camera: {} {w}x{h} at {:.1} fps", cam.describe(), cam.fps());
     let opts = CaptureOptions {
@@ -155,6 +160,9 @@ pub fn run(a: &Args) -> Result<()> {
         .setting("turns", a.turns)
         .setting("max_angle_error_deg", a.max_angle_error)
         .tool("ffmpeg", pav::provenance::tool_version("ffmpeg", &["-version"]));
+    if time == SimTime::Simulated {
+        record = record.setting("time", "simulated");
+    }
     if let (Some(path), Some(rig)) = (&a.rig, &rig) {
         record = record.config(path).inputs(rig.inputs().iter().map(|p| p.as_path()));
         if a.camera == "sim" {
@@ -187,7 +195,7 @@ pub fn run(a: &Args) -> Result<()> {
         |r: &pav::provenance::Run| r.write(&record_path).with_context(|| format!("writing {}", record_path.display()));
     write(&record)?;
     let stop = ctrl_c_flag()?;
-    let result = capture(&mut table, cam.as_mut(), &opts, &Bar::default(), &stop);
+    let result = capture(&mut connected.table, cam.as_mut(), &opts, &Bar::default(), &stop);
     if let Some(controls) = cam.controls().filter(|_| !locked.is_empty()) {
         read_back(controls, &mut locked);
     }

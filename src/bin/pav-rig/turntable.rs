@@ -1,7 +1,7 @@
 //! `pav-rig turntable`.
 
 use crate::common::ctrl_c_flag;
-use crate::port::{connect, parse_signed_seconds, PortArgs};
+use crate::port::{connect, parse_signed_seconds, PortArgs, SimTime};
 use anyhow::{Context, Result};
 use clap::Subcommand;
 use std::time::Duration;
@@ -53,7 +53,9 @@ fn milli(deg: f64) -> Result<Milli> {
 }
 
 pub fn run(a: &Args) -> Result<()> {
-    let (_sim, mut t) = connect(&a.port)?;
+    // The connection keeps a simulator alive as long as the table is used.
+    let mut connected = connect(&a.port, SimTime::Real)?;
+    let t = &mut connected.table;
     let motion = match a.action {
         Action::Status => {
             let st = t.status()?;
