@@ -215,7 +215,7 @@ fn bad_or_incomplete_sidecars_get_error_rows_and_fail_the_run() {
 fn out_of_range_settings_are_refused_before_any_work() {
     for (flag, value, needle) in [
         ("--start-angle", "NaN", "--start-angle NaN must be a number"),
-        ("--rotation-period", "0", "rotation period must be positive"),
+        ("--period", "0", "a period is a non-zero number of seconds"),
         ("--threshold", "1.01", "--threshold 1.01 must be within [0, 1]"),
     ] {
         let o = pav_rig().args(["evaluate", &fixture(), "-d", &cfg("yolox_nano"), flag, value]).output().unwrap();

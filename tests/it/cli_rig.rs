@@ -104,6 +104,16 @@ fn missing_hardware_is_a_clear_error() {
         "{}",
         common::output_text(&o)
     );
+    // Without --camera, none or several cameras are refused, never guessed (on a machine with
+    // exactly one, the capture would film it: the choice itself is port.rs's unit test).
+    let cameras = pav::rig::v4l2::capture_devices().len();
+    if cameras != 1 {
+        let o = pav_rig().args(["capture", "--port", "sim", "-o", "/tmp/never.mp4"]).output().unwrap();
+        let said = common::output_text(&o);
+        let why = if cameras == 0 { "no V4L2 camera found" } else { "pav does not guess" };
+        assert!(!o.status.success() && said.contains(why), "{said}");
+        assert!(!std::path::Path::new("/tmp/never.mp4").exists());
+    }
 }
 
 #[test]

@@ -3,6 +3,7 @@
 //! README's main job and quick start run as written and leave what they promise.
 
 use crate::common;
+use crate::common::cli::{self, help, subcommands};
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -154,31 +155,6 @@ fn invocations(file: &str, md: &str) -> Vec<Invocation> {
     out
 }
 
-fn bin_path(bin: &str) -> &'static str {
-    if bin == "pav" {
-        env!("CARGO_BIN_EXE_pav")
-    } else {
-        env!("CARGO_BIN_EXE_pav-rig")
-    }
-}
-
-/// `--help` of `bin` with the subcommand path `sub`.
-fn help(bin: &str, sub: &[String]) -> String {
-    let o = Command::new(bin_path(bin)).args(sub).arg("--help").env("RUST_BACKTRACE", "0").output().unwrap();
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-/// The subcommands a help text lists.
-fn subcommands(help: &str) -> Vec<String> {
-    let Some(i) = help.find("Commands:\n") else { return Vec::new() };
-    help[i..]
-        .lines()
-        .skip(1)
-        .take_while(|l| l.starts_with("  "))
-        .filter_map(|l| l.split_whitespace().next().map(str::to_string))
-        .collect()
-}
-
 /// Why `inv` does not match the binaries' options, if it does not.
 fn check(inv: &Invocation, cache: &mut std::collections::HashMap<(String, Vec<String>), String>) -> Option<String> {
     let mut sub: Vec<String> = Vec::new();
@@ -211,10 +187,12 @@ fn check(inv: &Invocation, cache: &mut std::collections::HashMap<(String, Vec<St
     }
     for w in rest {
         let flag = w.split('=').next().unwrap_or(w);
+        // A flag the help does not show may be an old spelling clap still takes.
         let known = if flag.starts_with("--") && flag.len() > 2 {
             text.contains(&format!("{flag} "))
                 || text.contains(&format!("{flag}\n"))
                 || text.contains(&format!("{flag},"))
+                || cli::knows(inv.bin, &sub, flag)
         } else if flag.len() == 2
             && flag.starts_with('-')
             && flag != "--"

@@ -55,9 +55,9 @@ fn opts(out: &Path, frames: Frames) -> EvalOptions {
     EvalOptions {
         threshold: 0.5,
         frames,
-        rotation_period_s: 28.0,
+        period_s: 28.0,
         start_angle_deg: 0.0,
-        angle_bins: 8,
+        sectors: 8,
         out_dir: out.to_path_buf(),
         plots: true,
         parallel: 1,

@@ -33,6 +33,7 @@ mod detectors_wide;
 mod docs;
 mod evaluate_fixture;
 mod firmware_qemu;
+mod grammar;
 mod layers;
 #[cfg(feature = "optimize")]
 mod lofo;

@@ -164,7 +164,7 @@ fn a_chart_carries_the_texture_colours_and_its_pixels_its_intended_colours() {
         checked += 1;
     }
     assert_eq!(checked, 437);
-    let (ok, text) = run(&["print", "chart", "--page", "100x100", "-o", dir.to_str().unwrap()]);
+    let (ok, text) = run(&["print", "chart", "--paper", "100x100", "-o", dir.to_str().unwrap()]);
     assert!(!ok && text.contains("fewer than the 216"), "{text}");
 }
 

@@ -199,9 +199,9 @@ fn run_evaluate(
     let eval_opts = EvalOptions {
         threshold: opts.threshold,
         frames: super::run::Frames::Stride(stride),
-        rotation_period_s: 28.0,
+        period_s: 28.0,
         start_angle_deg: 0.0,
-        angle_bins: 12,
+        sectors: 12,
         out_dir: tmp.clone(),
         plots: false,
         parallel: 1,

@@ -185,7 +185,7 @@ pub fn compare(
         }
         if v.iter().all(|f| f.angle_deg.is_none()) {
             return Err(CompareError::Missing(format!(
-                "`{label}` has no angles: evaluate it with its angle sidecar (or --rotation-period)"
+                "`{label}` has no angles: evaluate it with its angle sidecar (or --period)"
             )));
         }
         Ok(v)

@@ -127,7 +127,7 @@ pub(crate) struct ReportSettings {
     /// The same in words.
     pub sampling_text: String,
     /// Number of angle sectors.
-    pub angle_bins: usize,
+    pub sectors: usize,
     /// Where angles came from, per video label.
     pub angle_sources: Vec<(String, String)>,
     /// The limits of the light's drift.
@@ -294,7 +294,7 @@ pub(crate) fn summary_markdown(rows: &[SummaryRow], records: &[FrameRecord], s: 
             r.status
         );
     }
-    let _ = writeln!(md, "\n## Per angle ({} sectors of {:.0}°)\n", s.angle_bins, 360.0 / s.angle_bins.max(1) as f64);
+    let _ = writeln!(md, "\n## Per angle ({} sectors of {:.0}°)\n", s.sectors, 360.0 / s.sectors.max(1) as f64);
     for (v, src) in &s.angle_sources {
         let _ = writeln!(md, "Angles for **{v}**: {src}.\n");
     }
@@ -304,9 +304,9 @@ pub(crate) fn summary_markdown(rows: &[SummaryRow], records: &[FrameRecord], s: 
         let _ = writeln!(md, "|---|{}", "---:|".repeat(dets.len()));
         let per_det: Vec<_> = dets
             .iter()
-            .map(|d| angle_bins(records.iter().filter(|f| &&f.video == v && &&f.detector == d), s.angle_bins))
+            .map(|d| angle_bins(records.iter().filter(|f| &&f.video == v && &&f.detector == d), s.sectors))
             .collect();
-        for k in 0..s.angle_bins.max(1) {
+        for k in 0..s.sectors.max(1) {
             let b = &per_det[0][k];
             let cells: Vec<String> = per_det
                 .iter()

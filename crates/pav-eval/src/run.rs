@@ -83,11 +83,11 @@ pub struct EvalOptions {
     /// Which frames are scored.
     pub frames: Frames,
     /// Seconds per turntable revolution, used when a video has no sidecar.
-    pub rotation_period_s: f64,
+    pub period_s: f64,
     /// Angle at frame 0 when no sidecar.
     pub start_angle_deg: f64,
     /// Angle sectors in the per-angle breakdown.
-    pub angle_bins: usize,
+    pub sectors: usize,
     /// Output directory (created).
     pub out_dir: PathBuf,
     /// Draw PNG plots.
@@ -174,13 +174,13 @@ impl EvalOptions {
         if !(0.0..=1.0).contains(&self.threshold) {
             return bad(format!("threshold {} must be within [0, 1]", self.threshold));
         }
-        if !(self.rotation_period_s.is_finite() && self.rotation_period_s != 0.0) {
-            return bad(format!("rotation period {} s must be a non-zero number", self.rotation_period_s));
+        if !(self.period_s.is_finite() && self.period_s != 0.0) {
+            return bad(format!("rotation period {} s must be a non-zero number", self.period_s));
         }
         if !self.start_angle_deg.is_finite() {
             return bad(format!("start angle {}° must be a number", self.start_angle_deg));
         }
-        if self.angle_bins == 0 {
+        if self.sectors == 0 {
             return bad("the per-angle breakdown needs at least one sector".into());
         }
         let d = &self.drift;
@@ -428,8 +428,8 @@ fn video_angles(job: &VideoJob, opts: &EvalOptions) -> Result<(Angles, String), 
             Ok((Angles::Sidecar(rows.into_iter().map(|r| (r.frame, r)).collect()), format!("sidecar {}", p.display())))
         }
         None => Ok((
-            Angles::Period { period_s: opts.rotation_period_s, start_deg: opts.start_angle_deg },
-            format!("no sidecar; {}° + 360° × t / {} s", opts.start_angle_deg, opts.rotation_period_s),
+            Angles::Period { period_s: opts.period_s, start_deg: opts.start_angle_deg },
+            format!("no sidecar; {}° + 360° × t / {} s", opts.start_angle_deg, opts.period_s),
         )),
     }
 }
@@ -726,7 +726,7 @@ pub(crate) fn settings(opts: &EvalOptions, angle_sources: Vec<(String, String)>)
         threshold: opts.threshold,
         sampling: opts.frames.tag(),
         sampling_text: opts.frames.to_string(),
-        angle_bins: opts.angle_bins,
+        sectors: opts.sectors,
         angle_sources,
         drift: opts.drift,
     }
@@ -744,7 +744,7 @@ pub(crate) fn write_reports(
     write_summary_csv(&p, &out.rows, s)?;
     out.files.push(p);
     let p = dir.join("angles.csv");
-    write_angles_csv(&p, &out.records, &out.rows, s.angle_bins)?;
+    write_angles_csv(&p, &out.records, &out.rows, s.sectors)?;
     out.files.push(p);
     let p = dir.join("summary.md");
     write_text(&p, &summary_markdown(&out.rows, &out.records, s))?;

@@ -10,6 +10,7 @@ pub mod chart;
 pub mod colorchecker;
 pub mod fit;
 pub mod lut;
+pub mod paper;
 #[cfg(feature = "video")]
 pub mod photo;
 pub mod proof;

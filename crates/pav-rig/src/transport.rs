@@ -79,6 +79,21 @@ impl Lines {
     }
 }
 
+/// The USB serial ports (`/dev/ttyACM*`, where a Pico's USB-CDC appears, and `/dev/ttyUSB*`,
+/// a USB-serial adapter's), sorted: the ports a turntable can be on. The legacy `/dev/ttyS*`
+/// are left out, since a machine has them whether or not anything is plugged in.
+pub fn usb_serial_ports() -> Vec<std::path::PathBuf> {
+    let mut found: Vec<std::path::PathBuf> = std::fs::read_dir("/dev")
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter(|e| e.file_name().to_str().is_some_and(|n| n.starts_with("ttyACM") || n.starts_with("ttyUSB")))
+        .map(|e| e.path())
+        .collect();
+    found.sort();
+    found
+}
+
 /// A serial port (or a pseudo-terminal) on the system clock.
 pub struct SerialTransport {
     /// `None` only while reopening (the old port must close before the device can be reopened).

@@ -21,6 +21,28 @@ fn ids(c: Control) -> (u32, u32, i64) {
     }
 }
 
+/// The video devices (`/dev/videoN`, in N's order) that capture frames: a webcam's metadata
+/// node, which shares its name pattern, is left out.
+pub fn capture_devices() -> Vec<PathBuf> {
+    let mut found: Vec<(u32, PathBuf)> = std::fs::read_dir("/dev")
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|e| {
+            let name = e.file_name().into_string().ok()?;
+            let n = name.strip_prefix("video")?.parse().ok()?;
+            Some((n, e.path()))
+        })
+        .filter(|(_, p)| {
+            Device::with_path(p)
+                .and_then(|d| d.query_caps())
+                .is_ok_and(|c| c.capabilities.contains(v4l::capability::Flags::VIDEO_CAPTURE))
+        })
+        .collect();
+    found.sort();
+    found.into_iter().map(|(_, p)| p).collect()
+}
+
 /// A V4L2 device's controls.
 pub struct V4l2Controls {
     dev: Device,

@@ -169,3 +169,28 @@ impl ShardArgs {
         Ok(shards)
     }
 }
+
+/// A number of seconds written `28s` or `28`, finite and not zero.
+pub fn seconds_value(s: &str) -> Result<f64, String> {
+    let v: f64 = s.trim().trim_end_matches('s').parse().map_err(|_| format!("`{s}` is not a duration like 28s"))?;
+    if v.is_finite() && v != 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("a period is a non-zero number of seconds, not {s}"))
+    }
+}
+
+/// A positive duration like `28s` or `28`: `--period` wherever a turn's length is given.
+pub fn parse_seconds(s: &str) -> Result<f64, String> {
+    seconds_value(s).and_then(|v| if v > 0.0 { Ok(v) } else { Err(format!("a period is positive here, not {s}")) })
+}
+
+/// The config a command follows: `--config FILE`, or the first argument where a command took it
+/// there before `--config` was everywhere (clap lets through exactly one of the two).
+#[allow(dead_code)] // pav's commands only; pav-rig's `model check` sorts its arguments itself
+pub fn config_path<'a>(
+    flag: &'a Option<std::path::PathBuf>,
+    positional: &'a Option<std::path::PathBuf>,
+) -> &'a std::path::Path {
+    flag.as_deref().or(positional.as_deref()).expect("clap requires --config or the positional config")
+}

@@ -11,8 +11,8 @@ pub struct Args {
     /// Video to score.
     #[arg(long, default_value = "fixtures/carla_orbit.mp4")]
     video: PathBuf,
-    /// Detector configs or directories of them (default: configs/detectors).
-    #[arg(long = "detector", short = 'd')]
+    /// Detector configs or directories of them.
+    #[arg(long = "detectors", short = 'd', alias = "detector", default_value = "configs/detectors")]
     detectors: Vec<PathBuf>,
     /// Strides for the trade-off.
     #[arg(long, value_delimiter = ',', default_value = "1,2,4,8")]
@@ -32,8 +32,8 @@ pub struct Args {
     /// Score threshold.
     #[arg(long, default_value_t = 0.5)]
     threshold: f32,
-    /// Output directory.
-    #[arg(long, short = 'o', default_value = "bench")]
+    /// Output directory (the tracked tables under bench/ are written only when named here).
+    #[arg(long, short = 'o', default_value = "out/bench")]
     out: PathBuf,
 }
 

@@ -16,8 +16,8 @@ pub struct Args {
     /// Simulated time scales for the angle-sync capture (28 s turn / scale of wall time each).
     #[arg(long, value_delimiter = ',', default_value = "1,4,10")]
     time_scales: Vec<f64>,
-    /// Output directory.
-    #[arg(long, short = 'o', default_value = "bench")]
+    /// Output directory (the tracked tables under bench/ are written only when named here).
+    #[arg(long, short = 'o', default_value = "out/bench")]
     out: PathBuf,
 }
 

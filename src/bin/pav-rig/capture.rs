@@ -1,7 +1,7 @@
 //! `pav-rig capture`.
 
 use crate::common::{ctrl_c_flag, Bar};
-use crate::port::{connect, parse_signed_seconds, PortArgs, SimTime};
+use crate::port::{connect, only_one, parse_signed_seconds, PortArgs, SimTime};
 use anyhow::{bail, Context, Result};
 use pav::rig::capture::{capture, CaptureOptions};
 use pav::rig::controls::{lock_all, read_back, Control};
@@ -16,10 +16,11 @@ use std::path::PathBuf;
 pub struct Args {
     #[command(flatten)]
     port: PortArgs,
-    /// Frame source: `v4l2:/dev/video0`, `file:VIDEO`, `gst-test` or `sim` (needs --port sim; the
-    /// capture then runs in simulated time, the same video on a busy machine as on an idle one).
-    #[arg(long, default_value = "v4l2:/dev/video0")]
-    camera: String,
+    /// Frame source: `v4l2:/dev/videoN`, `file:VIDEO`, `gst-test` or `sim` (needs --port sim; the
+    /// capture then runs in simulated time, the same video on a busy machine as on an idle one)
+    /// [default: the one V4L2 camera there is; with several, pav lists them and asks].
+    #[arg(long)]
+    camera: Option<String>,
     /// Output video; the sidecar goes beside it as NAME.angles.csv.
     #[arg(long, short = 'o')]
     out: PathBuf,
@@ -109,11 +110,23 @@ pub fn run(a: &Args) -> Result<()> {
     if !(a.max_angle_error.is_finite() && a.max_angle_error > 0.0) {
         bail!("--max-angle-error must be a positive number of degrees, not {}", a.max_angle_error);
     }
-    if a.camera == "sim" && a.port.port != "sim" {
+    let camera = match &a.camera {
+        Some(c) => c.clone(),
+        None => format!(
+            "v4l2:{}",
+            only_one(
+                "V4L2 camera",
+                "--camera",
+                pav::rig::v4l2::capture_devices(),
+                "--camera file:VIDEO, gst-test or sim"
+            )?
+        ),
+    };
+    if camera == "sim" && !a.port.is_sim() {
         bail!("--camera sim films the simulated turntable: use it with --port sim");
     }
     let rig = a.rig.as_deref().map(RigConfig::load).transpose()?;
-    if a.texture.is_some() && a.car.is_none() && !(rig.is_some() && a.camera == "sim") {
+    if a.texture.is_some() && a.car.is_none() && !(rig.is_some() && camera == "sim") {
         bail!("--texture paints the simulated model: use it with --car, or with --rig and --camera sim");
     }
     let car = match (&a.car, &rig) {
@@ -121,7 +134,7 @@ pub fn run(a: &Args) -> Result<()> {
             let views = ViewsConfig::load(cfg)?;
             Some(CarScene::new(&views, a.texture.as_deref(), a.elevation)?)
         }
-        (None, Some(rig)) if a.camera == "sim" => {
+        (None, Some(rig)) if camera == "sim" => {
             if a.placement == 0 {
                 bail!("--placement counts from 1");
             }
@@ -138,9 +151,9 @@ pub fn run(a: &Args) -> Result<()> {
     // A simulated camera filming the simulated table needs no wall clock: in simulated time each
     // frame is taken at its instant however long it takes to draw, so a busy machine films the
     // same video as an idle one.
-    let time = if a.camera == "sim" { SimTime::Simulated } else { SimTime::Real };
+    let time = if camera == "sim" { SimTime::Simulated } else { SimTime::Real };
     let mut connected = connect(&a.port, time)?;
-    let mut cam = open_source(&a.camera, connected.truth.clone(), car, size, fps)?;
+    let mut cam = open_source(&camera, connected.truth.clone(), car, size, fps)?;
     let (w, h) = cam.size();
     eprintln!("camera: {} {w}x{h} at {:.1} fps", cam.describe(), cam.fps());
     let opts = CaptureOptions {
@@ -152,7 +165,7 @@ pub fn run(a: &Args) -> Result<()> {
         ..CaptureOptions::new(&a.out)
     };
     let mut record = pav::provenance::Run::start()
-        .setting("port", &a.port.port)
+        .setting("port", &connected.port)
         .setting("camera", cam.describe())
         .setting("size", format!("{w}x{h}"))
         .setting("fps", cam.fps())
@@ -165,7 +178,7 @@ pub fn run(a: &Args) -> Result<()> {
     }
     if let (Some(path), Some(rig)) = (&a.rig, &rig) {
         record = record.config(path).inputs(rig.inputs().iter().map(|p| p.as_path()));
-        if a.camera == "sim" {
+        if camera == "sim" {
             record = record.setting("placement", a.placement);
         }
     }

@@ -1,7 +1,6 @@
 //! `pav-rig evaluate`.
 
-use crate::common::{ctrl_c_flag, defence_chains, parse_defence, Bar, DefenceArg, ShardArgs};
-use crate::port::parse_seconds;
+use crate::common::{ctrl_c_flag, defence_chains, parse_defence, parse_seconds, Bar, DefenceArg, ShardArgs};
 use anyhow::{bail, Result};
 use pav::detect::load::load_detectors;
 use pav::eval::drift::DriftLimits;
@@ -16,7 +15,7 @@ pub struct Args {
     #[arg(required = true)]
     videos: Vec<PathBuf>,
     /// Detector config TOML, or a directory of them; repeat for several detectors.
-    #[arg(long = "detector", short = 'd', required = true)]
+    #[arg(long = "detectors", short = 'd', alias = "detector", default_value = "configs/detectors")]
     detectors: Vec<PathBuf>,
     /// Label per video, in order (default: file stem), e.g. `--label original --label camouflaged`.
     /// Videos given the same label are pooled into one row (e.g. the two polar angles of a texture).
@@ -38,15 +37,15 @@ pub struct Args {
     /// Target classes overriding the configs, comma-separated (e.g. `car,truck`).
     #[arg(long, value_delimiter = ',')]
     classes: Vec<String>,
-    /// Turntable period for videos without a sidecar, e.g. `28s` or `28`.
-    #[arg(long, default_value = "28s", value_parser = parse_seconds)]
-    rotation_period: f64,
+    /// Seconds per turn for videos without a sidecar, e.g. `28s` or `28`.
+    #[arg(long, alias = "rotation-period", default_value = "28s", value_parser = parse_seconds)]
+    period: f64,
     /// Turntable angle at the first frame for videos without a sidecar (degrees).
     #[arg(long, default_value_t = 0.0)]
     start_angle: f64,
     /// Angle sectors in the per-angle breakdown.
-    #[arg(long, default_value_t = 12, value_parser = clap::value_parser!(u64).range(1..=360))]
-    angle_bins: u64,
+    #[arg(long, alias = "angle-bins", default_value_t = 12, value_parser = clap::value_parser!(u64).range(1..=360))]
+    sectors: u64,
     /// Output directory for CSV, Markdown and PNG reports.
     #[arg(long, short = 'o', default_value = "out/evaluate")]
     out: PathBuf,
@@ -130,9 +129,9 @@ pub fn run(a: &Args) -> Result<()> {
     let opts = EvalOptions {
         threshold: a.threshold,
         frames,
-        rotation_period_s: a.rotation_period,
+        period_s: a.period,
         start_angle_deg: a.start_angle,
-        angle_bins: a.angle_bins as usize,
+        sectors: a.sectors as usize,
         out_dir: a.out.clone(),
         plots: !a.no_plots,
         parallel: sharing.parallel,
@@ -151,7 +150,7 @@ pub fn run(a: &Args) -> Result<()> {
         .setting("threshold", a.threshold)
         .setting("defences", &defence_labels)
         .setting("sampling", frames.tag())
-        .setting("rotation_period_s", a.rotation_period)
+        .setting("rotation_period_s", a.period)
         .setting("start_angle_deg", a.start_angle)
         .setting("squeeze", squeezing.as_ref().map_or_else(|| "off".into(), Thresholds::setting))
         .tool("onnxruntime", pav_onnx::runtime::runtime_version())

@@ -1,7 +1,6 @@
 //! `pav-rig model`.
 
-use anyhow::Context;
-use anyhow::Result;
+use anyhow::{bail, Context, Result};
 use clap::Subcommand;
 use pav_onnx::darknet::to_onnx::convert;
 use pav_onnx::proto::Model;
@@ -32,10 +31,11 @@ pub enum Cmd {
     /// wrong channel order, scale or layout shows at once.
     Check {
         /// The detector config.
-        config: PathBuf,
+        #[arg(long)]
+        config: Option<PathBuf>,
         /// Image files (any format OpenCV reads), FCA `.npz` samples, or `VIDEO#K` for frame K;
-        /// `data:NAME` for a manifest entry.
-        #[arg(required = true)]
+        /// `data:NAME` for a manifest entry. Without --config, the first argument is the config.
+        #[arg(required = true, value_name = "IMAGES")]
         images: Vec<String>,
         /// List detections from this score.
         #[arg(long, default_value_t = 0.25)]
@@ -53,13 +53,14 @@ pub enum Cmd {
         #[arg(long)]
         weights: PathBuf,
         /// Output .onnx path.
-        #[arg(long)]
+        #[arg(long, short = 'o')]
         out: PathBuf,
     },
     /// Write the float surrogate of a dynamically quantized ONNX model (ConvInteger and MatMulInteger
     /// chains become float Convs and MatMuls with dequantized weights): not the evaluated model.
     Surrogate {
-        /// The quantized model, e.g. yolov8n_int8.onnx.
+        /// The quantized model, e.g. yolov8n_int8.onnx (`data:NAME` for a manifest entry).
+        #[arg(value_parser = pav::data::arg_path)]
         model: PathBuf,
         /// Output .onnx path.
         #[arg(short, long)]
@@ -70,7 +71,14 @@ pub enum Cmd {
 pub fn run(c: &Cmd) -> Result<()> {
     match c {
         Cmd::Inspect { model, size, no_run, out } => inspect(model, *size, *no_run, out.as_deref())?,
-        Cmd::Check { config, images, min_score, out } => check(config, images, *min_score, out.as_deref())?,
+        Cmd::Check { config, images, min_score, out } => {
+            let (config, images) = match config {
+                Some(c) => (c.clone(), &images[..]),
+                None if images.len() >= 2 => (PathBuf::from(&images[0]), &images[1..]),
+                None => bail!("model check needs --config DETECTOR.toml and at least one image"),
+            };
+            check(&config, images, *min_score, out.as_deref())?
+        }
         Cmd::Darknet2onnx { cfg, weights, out } => {
             let r = convert(cfg, weights, out)?;
             eprintln!(

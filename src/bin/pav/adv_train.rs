@@ -8,7 +8,11 @@ use std::path::PathBuf;
 #[derive(clap::Args)]
 pub struct Args {
     /// The recipe (e.g. configs/advtrain/yolox_nano.toml).
-    recipe: PathBuf,
+    #[arg(long = "config", required_unless_present = "config_at", conflicts_with = "config_at")]
+    config: Option<PathBuf>,
+    /// The recipe as the first argument (accepted as before).
+    #[arg(value_name = "CONFIG", hide = true)]
+    config_at: Option<PathBuf>,
     /// Another adversarial texture to tune on (repeat for several); the recipe's sha256 is then
     /// not checked, since the model is another.
     #[arg(long = "train-texture", value_parser = pav::data::arg_path)]
@@ -23,11 +27,12 @@ pub struct Args {
 }
 
 pub fn run(a: &Args) -> Result<()> {
-    let mut cfg = AdvTrainConfig::load(&a.recipe)?;
+    let recipe = crate::common::config_path(&a.config, &a.config_at);
+    let mut cfg = AdvTrainConfig::load(recipe)?;
     let check = cfg.sha256.clone().filter(|_| a.train_textures.is_empty());
     cfg.train_textures.extend(a.train_textures.iter().cloned());
     let mut record = pav::provenance::Run::start()
-        .config(&a.recipe)
+        .config(recipe)
         .inputs(cfg.inputs().iter().chain(a.test_textures.iter().map(|t| &t.1)).map(|p| p.as_path()))
         .setting("steps", cfg.steps)
         .setting("lr", cfg.lr)

@@ -19,7 +19,7 @@ pub struct Args {
     #[arg(long, default_value_t = 8)]
     views: usize,
     /// Output CSV.
-    #[arg(long, short = 'o', default_value = "bench/render.csv")]
+    #[arg(long, short = 'o', default_value = "out/bench/render.csv")]
     out: PathBuf,
 }
 

@@ -10,7 +10,7 @@ use std::path::PathBuf;
 #[derive(clap::Args)]
 pub struct Args {
     /// Detector config of the white box to time.
-    #[arg(long, default_value = "configs/detectors/yolov3-tiny.toml")]
+    #[arg(long = "detectors", short = 'd', alias = "detector", default_value = "configs/detectors/yolov3-tiny.toml")]
     detector: PathBuf,
     /// Network input sizes (the composite has the same size).
     #[arg(long, value_delimiter = ',', default_value = "416,608")]
@@ -32,7 +32,7 @@ pub struct Args {
     #[arg(long)]
     box_gradient: bool,
     /// Output CSV.
-    #[arg(long, short = 'o', default_value = "bench/step.csv")]
+    #[arg(long, short = 'o', default_value = "out/bench/step.csv")]
     out: PathBuf,
 }
 

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 #[derive(clap::Args)]
 pub struct Args {
     /// Optimization config; its training and held-out views are pooled and re-split.
-    #[arg(long, default_value = "configs/studies/half.toml")]
+    #[arg(long)]
     config: PathBuf,
     /// Number of folds (default: one per view, leave-one-out).
     #[arg(long)]

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 #[derive(clap::Args)]
 pub struct Args {
     /// Optimization config (mesh, views, scene lighting).
-    #[arg(long, default_value = "configs/optimize/paper.toml")]
+    #[arg(long)]
     config: PathBuf,
     /// Texture PNGs to evaluate (named by their folder); `data:NAME` for a manifest entry; or the
     /// folder of a `pav optimize --seeds` run, its seeds pooled into one row and paired per

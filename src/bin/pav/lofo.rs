@@ -8,9 +8,13 @@ use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The arms: recipe configs, each training against every family but one.
-    #[arg(required = true)]
+    /// The arms: recipe configs, each training against every family but one (repeat, or list
+    /// them after the flags).
+    #[arg(long = "config", required_unless_present = "configs_at")]
     configs: Vec<PathBuf>,
+    /// The arms as arguments (accepted as before).
+    #[arg(value_name = "CONFIG", hide = true)]
+    configs_at: Vec<PathBuf>,
     /// Optimizer seeds of every arm, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "0,1,2,3")]
     seeds: Vec<u64>,
@@ -36,7 +40,8 @@ pub struct Args {
 }
 
 pub fn run(a: &Args) -> Result<()> {
-    let arms = arms(&a.configs)?;
+    let configs: Vec<PathBuf> = a.configs.iter().chain(&a.configs_at).cloned().collect();
+    let arms = arms(&configs)?;
     let missing = OptimizeConfig::load(&a.heldout)?.missing_views();
     if !missing.is_empty() {
         let lines: Vec<String> = missing.iter().map(|m| format!("  {m}")).collect();
@@ -46,7 +51,7 @@ pub fn run(a: &Args) -> Result<()> {
         bail!("--seeds: give at least one");
     }
     let record = pav::provenance::Run::start()
-        .inputs(a.configs.iter().chain([&a.heldout]).chain(&a.references).map(|p| p.as_path()))
+        .inputs(configs.iter().chain([&a.heldout]).chain(&a.references).map(|p| p.as_path()))
         .setting("seeds", a.seeds.iter().map(u64::to_string).collect::<Vec<_>>().join(", "))
         .setting("held_out", arms.iter().map(|a| a.held_out.clone()).collect::<Vec<_>>().join(", "))
         .setting("random_seeds", a.random_seeds)

@@ -118,7 +118,7 @@ struct Scoring {
     #[arg(long)]
     print: bool,
     /// Score as printed through this ICC output profile (implies --print).
-    #[arg(long, value_parser = pav::data::arg_path)]
+    #[arg(long = "profile", alias = "print-profile", value_parser = pav::data::arg_path)]
     print_profile: Option<std::path::PathBuf>,
     /// Also score with each detector behind this input defence, named `DETECTOR+LABEL`
     /// (`median:k=3`, `bits:b=5`, `jpeg:q=75`, `cutout:n=2,s=40`, `noise:sigma=8`; `+` chains

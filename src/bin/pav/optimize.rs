@@ -10,8 +10,8 @@ use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Optimization config.
-    #[arg(long, default_value = "configs/optimize/paper.toml")]
+    /// Optimization config, e.g. configs/optimize/recommended.toml (docs/configs.md says which to start from).
+    #[arg(long)]
     config: PathBuf,
     /// Output folder.
     #[arg(long, short = 'o', default_value = "out/optimize")]
@@ -28,8 +28,8 @@ pub struct Args {
     /// Override the config's render size (views.size).
     #[arg(long)]
     size: Option<usize>,
-    /// Model scale of the printable sheet (20 = 1:20).
-    #[arg(long, default_value_t = 20.0)]
+    /// Model scale of the printable sheet: `20` or `1:20`.
+    #[arg(long, default_value = "20", value_parser = pav::print::paper::parse_scale)]
     scale: f64,
     /// Printer resolution of the sheet.
     #[arg(long, default_value_t = 300.0)]

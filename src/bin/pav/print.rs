@@ -98,9 +98,9 @@ pub struct ChartArgs {
     /// Printer resolution of the PNG (its pHYs chunk).
     #[arg(long, default_value_t = 300.0)]
     dpi: f64,
-    /// Page size in millimetres, WIDTHxHEIGHT (A4: 210x297, A3: 297x420).
-    #[arg(long, default_value = "210x297")]
-    page: String,
+    /// Paper: a4, a3, a5, letter, legal, tabloid, or WIDTHxHEIGHT in millimetres.
+    #[arg(long, alias = "page", default_value = "a4")]
+    paper: pav::print::paper::Paper,
     /// Patch side in millimetres.
     #[arg(long, default_value_t = 8.0)]
     patch_mm: f64,
@@ -121,8 +121,8 @@ pub struct CalibrateArgs {
     #[arg(long)]
     colorchecker: bool,
     /// The ColorChecker's published CIELAB (D50) values (id,square,Lab_l,Lab_a,Lab_b).
-    #[arg(long, value_parser = pav::data::arg_path, default_value = "data:charts/reference/jtvd_reference_values.csv")]
-    reference: PathBuf,
+    #[arg(long, alias = "reference", value_parser = pav::data::arg_path, default_value = "data:charts/reference/jtvd_reference_values.csv")]
+    lab: PathBuf,
     /// Refuse a fit whose held-out median ΔE2000 exceeds this.
     #[arg(long, default_value_t = 5.0)]
     max_delta_e: f64,
@@ -136,9 +136,7 @@ pub struct CalibrateArgs {
 
 #[cfg(feature = "video")]
 fn chart(a: &ChartArgs) -> Result<()> {
-    let page: Vec<f64> = a.page.split(['x', 'X']).filter_map(|v| v.trim().parse().ok()).collect();
-    let [w, h] = page[..] else { anyhow::bail!("--page must be WIDTHxHEIGHT in millimetres, got {:?}", a.page) };
-    let mut spec = ChartSpec { page_mm: [w, h], dpi: a.dpi, patch_mm: a.patch_mm, ..Default::default() };
+    let mut spec = ChartSpec { page_mm: a.paper.mm(), dpi: a.dpi, patch_mm: a.patch_mm, ..Default::default() };
     if let Some(t) = &a.texture {
         let tex = Rgb::load(t)?;
         let region = match &a.config {
@@ -152,7 +150,7 @@ fn chart(a: &ChartArgs) -> Result<()> {
     let record = pav::provenance::Run::start()
         .inputs(a.texture.iter().chain(&a.config).map(|p| p.as_path()))
         .setting("dpi", a.dpi)
-        .setting("page_mm", &a.page)
+        .setting("page_mm", format!("{}x{}", a.paper.width_mm, a.paper.height_mm))
         .setting("patch_mm", a.patch_mm);
     let record_path = a.out.join(pav::provenance::FILE);
     record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
@@ -160,8 +158,8 @@ fn chart(a: &ChartArgs) -> Result<()> {
     println!(
         "wrote {} ({:.0}×{:.0} mm at {} dpi: print at 100 %, the bar is 10 mm), {} and {}: {} patches ({} spanning the cube, {} greys, {} from the texture, {} to fill)",
         png.display(),
-        w,
-        h,
+        a.paper.width_mm,
+        a.paper.height_mm,
         a.dpi,
         a.out.join(pav::print::chart::LAYOUT_FILE).display(),
         a.out.join(pav::print::chart::PATCHES_FILE).display(),
@@ -179,7 +177,7 @@ fn calibrate(a: &CalibrateArgs) -> Result<()> {
     let chart = a.chart.as_ref().map(|c| Chart::load(c)).transpose()?;
     let target = match (&chart, a.colorchecker) {
         (Some(c), _) => Target::Chart(c),
-        (None, true) => Target::ColorChecker { reference: &a.reference },
+        (None, true) => Target::ColorChecker { reference: &a.lab },
         (None, false) => anyhow::bail!("name the chart the photos show: --chart DIR (pav's) or --colorchecker"),
     };
     let (cal, [csv, png]) = calibrate_to(target, &a.photos, a.max_delta_e, a.force, &a.out)?;
@@ -193,7 +191,7 @@ fn calibrate(a: &CalibrateArgs) -> Result<()> {
                 .iter()
                 .map(|p| p.as_path()),
         )
-        .inputs(a.colorchecker.then_some(a.reference.as_path()))
+        .inputs(a.colorchecker.then_some(a.lab.as_path()))
         .setting("max_delta_e", a.max_delta_e)
         .setting("force", a.force)
         .tool("opencv", pav::video::opencv_version());

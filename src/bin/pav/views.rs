@@ -26,7 +26,11 @@ pub enum Cmd {
 #[derive(clap::Args)]
 pub struct RenderArgs {
     /// Views config (TOML), e.g. configs/views/ci.toml.
-    config: PathBuf,
+    #[arg(long, required_unless_present = "config_at", conflicts_with = "config_at", value_parser = pav::data::arg_path)]
+    config: Option<PathBuf>,
+    /// The config as the first argument (accepted as before).
+    #[arg(value_name = "CONFIG", hide = true, value_parser = pav::data::arg_path)]
+    config_at: Option<PathBuf>,
     /// Output folder.
     #[arg(long, short = 'o', default_value = "out/views")]
     out: PathBuf,
@@ -42,12 +46,15 @@ pub struct RenderArgs {
 pub struct TurntableArgs {
     /// Views config (TOML): the camera's distances and elevations (the paper's polar angles), the
     /// table's angles as azimuths, the room as environments; e.g. configs/views/turntable.toml.
-    #[arg(required_unless_present = "rig", conflicts_with = "rig")]
+    #[arg(long, conflicts_with_all = ["rig", "config_at"], value_parser = pav::data::arg_path)]
     config: Option<PathBuf>,
+    /// The config as the first argument (accepted as before).
+    #[arg(value_name = "CONFIG", hide = true, conflicts_with = "rig", value_parser = pav::data::arg_path)]
+    config_at: Option<PathBuf>,
     /// Or a rig config (configs/rig/*.toml): the model at model size on the rig's table, filmed
     /// by its camera, with the camera effects it lists; one video per camera position at the
     /// rig's frame size, `render.frames` a turn.
-    #[arg(long, value_parser = pav::data::arg_path)]
+    #[arg(long, value_parser = pav::data::arg_path, required_unless_present_any = ["config", "config_at"])]
     rig: Option<PathBuf>,
     /// Output folder: views/, manifest.csv and videos/.
     #[arg(long, short = 'o', default_value = "out/turntable")]
@@ -59,9 +66,9 @@ pub struct TurntableArgs {
     /// of Blender: the same angles, effects and file names, in seconds instead of minutes.
     #[arg(long, requires = "rig")]
     rasterizer: bool,
-    /// Seconds per turn in the videos' time stamps [default: the rig's table, else 28 s, the
-    /// paper's].
-    #[arg(long)]
+    /// Seconds per turn in the videos' time stamps, e.g. `28s` or `28` [default: the rig's
+    /// table, else 28 s, the paper's].
+    #[arg(long, value_parser = crate::common::parse_seconds)]
     period: Option<f64>,
     /// (Blender only) a shard renders its frames; the merge joins them and cuts the videos.
     #[command(flatten)]
@@ -118,14 +125,15 @@ fn render(cfg: &ViewsConfig, config: &std::path::Path, out: &std::path::Path, sh
 pub fn run(c: &Cmd) -> Result<()> {
     match c {
         Cmd::Render(a) => {
-            let mut cfg = ViewsConfig::load(&a.config)?;
+            let config = crate::common::config_path(&a.config, &a.config_at);
+            let mut cfg = ViewsConfig::load(config)?;
             cfg.mesh.texture = a.texture.clone().or(cfg.mesh.texture);
-            render(&cfg, &a.config, &a.out, &a.shard)?;
+            render(&cfg, config, &a.out, &a.shard)?;
         }
         #[cfg(feature = "video")]
         Cmd::Turntable(a) => {
             let rig = a.rig.as_deref().map(RigConfig::load).transpose()?;
-            let (mut cfg, config, period) = match (&a.config, &a.rig, &rig) {
+            let (mut cfg, config, period) = match (a.config.as_ref().or(a.config_at.as_ref()), &a.rig, &rig) {
                 (_, Some(path), Some(rig)) => (rig.views_config()?.0, path, rig.table.period_s),
                 (Some(c), None, None) => (ViewsConfig::load(c)?, c, 28.0),
                 _ => unreachable!("clap requires a config or --rig"),

@@ -1,0 +1,100 @@
+//! Paper sizes by name (`a4`, `letter`, …) or as `WIDTHxHEIGHT` in millimetres: `--paper` on
+//! every command that lays something out on a page; model scales (`--scale 20` or `1:20`).
+
+use std::fmt;
+use std::str::FromStr;
+
+/// A sheet of paper, portrait, in millimetres.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Paper {
+    /// Width in millimetres (the shorter side for a named size).
+    pub width_mm: f64,
+    /// Height in millimetres.
+    pub height_mm: f64,
+}
+
+/// The named sizes `--paper` knows: ISO 216 and the North American ones.
+pub const NAMED: &[(&str, f64, f64)] = &[
+    ("a5", 148.0, 210.0),
+    ("a4", 210.0, 297.0),
+    ("a3", 297.0, 420.0),
+    ("letter", 215.9, 279.4),
+    ("legal", 215.9, 355.6),
+    ("tabloid", 279.4, 431.8),
+];
+
+impl Paper {
+    /// ISO A4, the default.
+    pub const A4: Paper = Paper { width_mm: 210.0, height_mm: 297.0 };
+
+    /// The size as `[width, height]` millimetres.
+    pub fn mm(&self) -> [f64; 2] {
+        [self.width_mm, self.height_mm]
+    }
+}
+
+impl FromStr for Paper {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        let key = s.trim().to_ascii_lowercase();
+        if let Some(&(_, w, h)) = NAMED.iter().find(|(n, ..)| *n == key) {
+            return Ok(Paper { width_mm: w, height_mm: h });
+        }
+        let names = NAMED.iter().map(|n| n.0).collect::<Vec<_>>().join(", ");
+        let bad = || format!("`{s}` is no paper size: use {names}, or WIDTHxHEIGHT in millimetres (e.g. 210x297)");
+        let (w, h) = key.split_once('x').ok_or_else(bad)?;
+        let (w, h): (f64, f64) = (w.trim().parse().map_err(|_| bad())?, h.trim().parse().map_err(|_| bad())?);
+        if !(w.is_finite() && h.is_finite() && w > 0.0 && h > 0.0) {
+            return Err(format!("a paper of {w} × {h} mm has no area: {}", bad()));
+        }
+        Ok(Paper { width_mm: w, height_mm: h })
+    }
+}
+
+impl fmt::Display for Paper {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match NAMED.iter().find(|(_, w, h)| *w == self.width_mm && *h == self.height_mm) {
+            Some((name, ..)) => f.write_str(name),
+            None => write!(f, "{}x{}", self.width_mm, self.height_mm),
+        }
+    }
+}
+
+/// A model scale written `20` or `1:20` (the model is 1/20 of the car): `--scale` wherever a
+/// print is sized.
+pub fn parse_scale(s: &str) -> Result<f64, String> {
+    let t = s.trim();
+    let n = t.strip_prefix("1:").unwrap_or(t).trim();
+    match n.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 1.0 => Ok(v),
+        _ => Err(format!("`{s}` is no model scale: write 20 or 1:20 for a model 1/20 of the car's size")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn named_sizes_and_millimetres_parse_and_print_back() {
+        assert_eq!("A4".parse::<Paper>().unwrap(), Paper::A4);
+        assert_eq!("letter".parse::<Paper>().unwrap().mm(), [215.9, 279.4]);
+        assert_eq!("210x297".parse::<Paper>().unwrap().to_string(), "a4");
+        assert_eq!("100 x 150".parse::<Paper>().unwrap().to_string(), "100x150");
+        for bad in ["b5", "210", "0x297", "-1x2", "axb", ""] {
+            let e = bad.parse::<Paper>().unwrap_err();
+            assert!(e.contains("a4") || e.contains("no area"), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn a_scale_is_a_number_or_one_to_a_number() {
+        assert_eq!(parse_scale("20"), Ok(20.0));
+        assert_eq!(parse_scale("1:20"), Ok(20.0));
+        assert_eq!(parse_scale(" 1:24.5 "), Ok(24.5));
+        for bad in ["1:0", "0.5", "1/20", "x", "2:20"] {
+            assert!(parse_scale(bad).is_err(), "{bad}");
+        }
+    }
+}
