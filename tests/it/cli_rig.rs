@@ -397,3 +397,24 @@ fn evaluated(video: &std::path::Path, out: &std::path::Path) -> (bool, f64) {
     eprintln!("{}: luminance drift {}, flagged {flag}", video.display(), get("luminance_drift"));
     (flag, get("luminance_drift").parse().unwrap())
 }
+
+/// A reader that has gone (`pav-rig model check … | head -1`) ends either binary quietly with
+/// 141, as SIGPIPE would, not with a panic: stdout's read end is closed before the command starts,
+/// so its first line already meets the closed pipe.
+#[test]
+fn a_closed_stdout_ends_either_binary_quietly() {
+    common::real_data();
+    let detector = common::detector_config("yolox_nano").display().to_string();
+    let runs: [(std::process::Command, &[&str]); 2] = [
+        (pav_rig(), &["model", "check", "--config", &detector, "fixtures/turntable.mp4#0"]),
+        (common::pav(), &["data", "list"]),
+    ];
+    for (mut cmd, args) in runs {
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let o = cmd.args(args).stdout(writer).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(141), "{args:?}: {err}");
+        assert!(!err.contains("panicked") && !err.contains("Broken pipe"), "{args:?}: {err}");
+    }
+}

@@ -194,3 +194,36 @@ pub fn config_path<'a>(
 ) -> &'a std::path::Path {
     flag.as_deref().or(positional.as_deref()).expect("clap requires --config or the positional config")
 }
+
+/// `println!` for a command's output on stdout, quiet when the reader has gone (`pav … | head`):
+/// the process ends with 141, as one killed by SIGPIPE does, instead of panicking. SIGPIPE itself
+/// stays ignored, so a write to a dead encoder is an error the job handles, not a silent death.
+macro_rules! outln {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        if let Err(e) = writeln!(std::io::stdout(), $($t)*) {
+            $crate::common::stdout_failed(e)
+        }
+    }};
+}
+
+/// `print!` with [`outln!`]'s handling of a closed stdout.
+#[allow(unused_macros)] // pav-rig's commands only
+macro_rules! out {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        if let Err(e) = write!(std::io::stdout(), $($t)*) {
+            $crate::common::stdout_failed(e)
+        }
+    }};
+}
+
+/// Ends the process after a failed write to stdout: quietly with 141 when the reader has gone,
+/// else with the error.
+pub fn stdout_failed(e: std::io::Error) -> ! {
+    if e.kind() == std::io::ErrorKind::BrokenPipe {
+        std::process::exit(141);
+    }
+    eprintln!("Error: writing to standard output: {e}");
+    std::process::exit(1);
+}

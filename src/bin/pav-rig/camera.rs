@@ -31,17 +31,17 @@ pub fn run(c: &Cmd) -> Result<()> {
         }
     };
     let offers = cam.offers().context("listing the controls")?;
-    println!("{}", cam.camera());
-    println!("controls:");
+    outln!("{}", cam.camera());
+    outln!("controls:");
     if offers.is_empty() {
-        println!("  none of exposure, gain, white balance, focus");
+        outln!("  none of exposure, gain, white balance, focus");
     }
     for o in &offers {
-        println!("  {o}");
+        outln!("  {o}");
     }
-    println!("formats:");
+    outln!("formats:");
     for f in cam.formats().context("listing the formats")? {
-        println!("  {f}");
+        outln!("  {f}");
     }
     Ok(())
 }

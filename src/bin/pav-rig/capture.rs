@@ -226,21 +226,21 @@ pub fn run(a: &Args) -> Result<()> {
     }
     write(&record)?;
     let sum = result?;
-    println!(
+    outln!(
         "recorded {} frames ({} with angles between reports), table ended at {:.3}°",
         sum.frames,
         sum.interpolated,
         sum.final_deg.unwrap_or(f64::NAN)
     );
     if let (Some(b), Some(rtt)) = (sum.angle_bound_deg, sum.round_trip_ms) {
-        println!("every angle within ±{b:.3}° (fastest round trip to the table {rtt:.2} ms)");
+        outln!("every angle within ±{b:.3}° (fastest round trip to the table {rtt:.2} ms)");
     }
     if sum.reports_discarded > 0 {
-        println!("{} angle report(s) refused: the commanded spin cannot have produced them", sum.reports_discarded);
+        outln!("{} angle report(s) refused: the commanded spin cannot have produced them", sum.reports_discarded);
     }
     if sum.done_lost {
-        println!("the table's `done` was lost on the line; its end position came from a status report");
+        outln!("the table's `done` was lost on the line; its end position came from a status report");
     }
-    println!("video   {}\nsidecar {}", sum.video.display(), sum.sidecar.display());
+    outln!("video   {}\nsidecar {}", sum.video.display(), sum.sidecar.display());
     Ok(())
 }

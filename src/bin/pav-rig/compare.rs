@@ -51,7 +51,7 @@ pub fn run(a: &Args) -> Result<()> {
         .setting("sectors", a.sectors);
     record.result("offset_deg", c.offset_deg);
     record.write(&a.out.join(pav::provenance::FILE)).context("writing run.toml")?;
-    print!("{md}");
-    println!("\nwrote {} and {}", a.out.join("compare.md").display(), a.out.join("compare.csv").display());
+    out!("{md}");
+    outln!("\nwrote {} and {}", a.out.join("compare.md").display(), a.out.join("compare.csv").display());
     Ok(())
 }

@@ -204,14 +204,14 @@ fn squeeze(a: &Args, jobs: &[VideoJob]) -> Result<Option<Thresholds>> {
 /// With --squeeze: writes and prints the squeeze report.
 fn squeeze_report(how: Option<&Thresholds>, out: &EvalOutcome, dir: &std::path::Path) -> Result<()> {
     if let Some(how) = how {
-        println!("{}", pav::eval::squeeze::write_report(&out.records, how, dir)?);
+        outln!("{}", pav::eval::squeeze::write_report(&out.records, how, dir)?);
     }
     Ok(())
 }
 
 /// Prints the summary and the files written; fails when the run was cut short or had problems.
 fn report(out: &EvalOutcome, threshold: f32) -> Result<()> {
-    println!("{}", summary_table(&out.rows, threshold));
+    outln!("{}", summary_table(&out.rows, threshold));
     for f in &out.files {
         eprintln!("wrote {}", f.display());
     }

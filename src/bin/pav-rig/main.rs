@@ -1,6 +1,7 @@
 //! `pav-rig`: the physical test rig: drive the turntable, record turntable videos with per-frame
 //! angles, and score every frame with real detectors (A_physical).
 
+#[macro_use]
 #[path = "../common/mod.rs"]
 mod common;
 

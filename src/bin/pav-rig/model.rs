@@ -125,23 +125,32 @@ fn check(config: &std::path::Path, images: &[String], min_score: f32, out: Optio
     for spec in images {
         let frame = read_input(spec)?;
         let c = check(&mut det, &frame, min_score)?;
-        println!("{spec} ({}x{}):", frame.width, frame.height);
+        outln!("{spec} ({}x{}):", frame.width, frame.height);
         for d in &c.detections {
             let b = d.bbox;
             let star = if det.target_classes().contains(&d.class_id) { " *" } else { "" };
-            println!(
+            outln!(
                 "  {:<14} {:.3}  [{:.0}, {:.0}, {:.0}, {:.0}]{star}",
-                names[d.class_id], d.score, b[0], b[1], b[2], b[3]
+                names[d.class_id],
+                d.score,
+                b[0],
+                b[1],
+                b[2],
+                b[3]
             );
         }
         match c.best {
-            Some(b) if b.score >= min_score => println!(
+            Some(b) if b.score >= min_score => outln!(
                 "  best {target}: {:.3} at [{:.0}, {:.0}, {:.0}, {:.0}]",
-                b.score, b.bbox[0], b.bbox[1], b.bbox[2], b.bbox[3]
+                b.score,
+                b.bbox[0],
+                b.bbox[1],
+                b.bbox[2],
+                b.bbox[3]
             ),
             best => {
                 missed += 1;
-                println!("  no {target} from {min_score} (best {:.3})", best.map_or(0.0, |b| b.score));
+                outln!("  no {target} from {min_score} (best {:.3})", best.map_or(0.0, |b| b.score));
             }
         }
         if let Some(o) = out {
@@ -155,11 +164,11 @@ fn check(config: &std::path::Path, images: &[String], min_score: f32, out: Optio
                 None => format!("{stem}.png"),
             });
             annotate(&frame, &c.detections, det.target_classes()).save_png(&path)?;
-            println!("  wrote {}", path.display());
+            outln!("  wrote {}", path.display());
         }
     }
     if missed > 0 {
-        println!(
+        outln!(
             "\nno {target} on {missed} of {} images: if they show one, check the config's channels, scale, mean/std, resize and align, and its output layout",
             images.len()
         );
@@ -183,7 +192,7 @@ fn inspect(model: &std::path::Path, size: usize, no_run: bool, out: Option<&std:
         probe(model, &mut insp, side)?;
     }
     let opset = if insp.opset > 0 { insp.opset.to_string() } else { "unknown".into() };
-    println!(
+    outln!(
         "{}: opset {opset}{}{}",
         model.display(),
         insp.domains.iter().map(|(d, v)| format!(", {d} {v}")).collect::<String>(),
@@ -193,21 +202,21 @@ fn inspect(model: &std::path::Path, size: usize, no_run: bool, out: Option<&std:
     for (what, ports) in [("input", &insp.inputs), ("output", &insp.outputs)] {
         for p in ports.iter() {
             let ran = p.ran.as_ref().map(|r| format!(", ran {:?}", r)).unwrap_or_default();
-            println!("  {what:6} {:28} {:8} {}{ran}", p.name, p.dtype, dims(&p.declared));
+            outln!("  {what:6} {:28} {:8} {}{ran}", p.name, p.dtype, dims(&p.declared));
         }
     }
     let ops: Vec<String> = insp.ops.iter().map(|(o, n)| format!("{o} {n}")).collect();
-    println!("  operators: {}", ops.join(", "));
+    outln!("  operators: {}", ops.join(", "));
     let guess = insp.guess(side);
-    println!("layout: {} ({})", guess.layout.unwrap_or("none of pav's"), guess.why);
+    outln!("layout: {} ({})", guess.layout.unwrap_or("none of pav's"), guess.why);
     let stem = model.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "model".into());
     let skeleton = insp.skeleton(&stem, &model.display().to_string(), side, &guess);
     match out {
         Some(o) => {
             std::fs::write(o, &skeleton).with_context(|| format!("writing {}", o.display()))?;
-            println!("wrote {} (complete the values marked CHECK)", o.display());
+            outln!("wrote {} (complete the values marked CHECK)", o.display());
         }
-        None => println!("\n{skeleton}"),
+        None => outln!("\n{skeleton}"),
     }
     Ok(())
 }

@@ -38,7 +38,7 @@ pub fn run(a: &Args) -> Result<()> {
         .setting("against", &a.against)
         .write(&a.out.join(pav::provenance::FILE))
         .context("writing run.toml")?;
-    print!("{md}");
-    println!("\nwrote {} and {}", a.out.join("paired.md").display(), p.display());
+    out!("{md}");
+    outln!("\nwrote {} and {}", a.out.join("paired.md").display(), p.display());
     Ok(())
 }

@@ -39,7 +39,7 @@ pub fn run(a: &Args) -> Result<()> {
         ..Faults::default()
     };
     let sim = SimTurntable::spawn(SimOptions { time_scale: a.time_scale, faults, ..SimOptions::default() })?;
-    println!("{}", sim.path().display());
+    outln!("{}", sim.path().display());
     eprintln!("simulated turntable on {} (time x{}); Ctrl-C to stop", sim.path().display(), a.time_scale);
     let stop = ctrl_c_flag()?;
     while !stop.load(Ordering::Relaxed) && sim.is_running() {

@@ -60,7 +60,7 @@ pub fn run(a: &Args) -> Result<()> {
         Action::Status => {
             let st = t.status()?;
             let deg = t.degrees(st.pos);
-            println!(
+            outln!(
                 "state {:?}{}  position {} microsteps = {:.3}° ({:.3}° in the current turn)",
                 st.state,
                 st.alarm.map(|x| format!(" (alarm: {})", x.text())).unwrap_or_default(),
@@ -82,6 +82,6 @@ pub fn run(a: &Args) -> Result<()> {
     let seq = t.start_motion(motion)?;
     // Angle reports arrive every 50 ms while moving; five silent seconds mean a dead link.
     let pos = t.wait_done_or_stop(seq, Duration::from_secs(5), &stop)?;
-    println!("done at {pos} microsteps = {:.3}°", t.degrees(pos));
+    outln!("done at {pos} microsteps = {:.3}°", t.degrees(pos));
     Ok(())
 }

@@ -45,7 +45,7 @@ pub fn run(a: &Args) -> Result<()> {
     record.result("sha256", &done.sha256);
     record.result("finished", "yes");
     record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
-    println!("{}", done.markdown);
+    outln!("{}", done.markdown);
     eprintln!(
         "wrote {} (sha256 {}) and its detector config {}; loss {:.4} → {:.4}",
         done.model.display(),

@@ -94,7 +94,7 @@ pub fn run(a: &Args) -> Result<()> {
         },
     };
     let md = crossval_report(&a.config, &job, &a.scoring.to_lib(&a.config)?, &a.out, &Bar::default(), &stop)?;
-    println!("{md}");
+    outln!("{md}");
     match a.shard.shard {
         Some(s) => eprintln!("wrote shard {s}'s folds into {}; `--merge` joins the shards", s.dir(&a.out).display()),
         None => eprintln!(

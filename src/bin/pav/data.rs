@@ -35,8 +35,8 @@ pub fn run(cmd: &Cmd) -> Result<()> {
         Cmd::List { names } => {
             let entries = manifest.select(names)?;
             let mut counts = [0usize; 3];
-            println!("store: {}", store.root.display());
-            println!("{:<8} {:>9}  {:<46} {:<28} source", "state", "bytes", "name", "licence");
+            outln!("store: {}", store.root.display());
+            outln!("{:<8} {:>9}  {:<46} {:<28} source", "state", "bytes", "name", "licence");
             for e in &entries {
                 let state = store.state(e, true);
                 let shown = match &state {
@@ -50,11 +50,11 @@ pub fn run(cmd: &Cmd) -> Result<()> {
                     State::Corrupt(_) => 2,
                 }] += 1;
                 let license: String = e.license.chars().take(28).collect();
-                println!("{shown:<8} {:>9}  {:<46} {license:<28} {}", e.bytes, e.name, e.source);
+                outln!("{shown:<8} {:>9}  {:<46} {license:<28} {}", e.bytes, e.name, e.source);
             }
-            println!("{} present, {} missing, {} corrupt", counts[0], counts[1], counts[2]);
+            outln!("{} present, {} missing, {} corrupt", counts[0], counts[1], counts[2]);
             if counts[1] + counts[2] > 0 {
-                println!("fill the store: pav data fetch [--mirror DIR|URL]");
+                outln!("fill the store: pav data fetch [--mirror DIR|URL]");
             }
         }
         Cmd::Fetch { names, mirror } => {
@@ -79,12 +79,12 @@ pub fn run(cmd: &Cmd) -> Result<()> {
                     Err(err) => failed.push(format!("  {err}")),
                 }
             }
-            println!("{written} written, {kept} already present, {} failed", failed.len());
+            outln!("{written} written, {kept} already present, {} failed", failed.len());
             if !failed.is_empty() {
                 bail!("{} of {} files could not be fetched:\n{}", failed.len(), entries.len(), failed.join("\n"));
             }
         }
-        Cmd::Path { name } => println!("{}", store.require(name)?.display()),
+        Cmd::Path { name } => outln!("{}", store.require(name)?.display()),
     }
     Ok(())
 }

@@ -56,7 +56,7 @@ pub fn run(a: &Args) -> Result<()> {
     let squeeze = a.squeeze.then_some(a.squeeze_false_flags);
     let scoring = a.scoring.to_lib(&a.config)?;
     let (md, _) = eval_digital(&a.config, &a.textures, a.random_seeds, &scoring, squeeze, &a.out, &Bar::default())?;
-    println!("{md}");
+    outln!("{md}");
     eprintln!("wrote {}/digital.csv, digital_views.csv, digital_paired.csv and digital.md", a.out.display());
     Ok(())
 }

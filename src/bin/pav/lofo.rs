@@ -87,7 +87,7 @@ pub fn run(a: &Args) -> Result<()> {
         }
     }
     let rows = score(&arms, &a.seeds, &a.heldout, &a.references, a.random_seeds, a.threshold, &a.out, &Bar::default())?;
-    println!("{}", pav::studies::lofo::markdown(&rows));
+    outln!("{}", pav::studies::lofo::markdown(&rows));
     let path = a.out.join(pav::provenance::FILE);
     record.write(&path).with_context(|| format!("writing {}", path.display()))?;
     eprintln!("wrote lofo.csv, lofo.md and each arm's held-out scores (without-NAME/heldout/) in {}", a.out.display());

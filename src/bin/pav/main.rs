@@ -3,6 +3,7 @@
 
 // Only the optimizer's commands take Ctrl-C.
 #[cfg_attr(not(feature = "optimize"), allow(dead_code))]
+#[macro_use]
 #[path = "../common/mod.rs"]
 mod common;
 

@@ -171,15 +171,15 @@ pub fn run(a: &Args) -> Result<()> {
 
 /// Prints a finished run's per-view scores, its sheet and print shift, and its files.
 fn print_report(r: &pav::studies::outputs::OptimizeReport, p: &Prepared, a: &Args, out: &std::path::Path) {
-    println!(
+    outln!(
         "white-box {} car score per view (no EoT): original photo / initial texture / optimized",
         p.wb.first().name()
     );
     for s in &r.scores {
-        println!("  {:5} {:10} {:.3} / {:.3} / {:.3}", s.split, s.view, s.original, s.initial, s.optimized);
+        outln!("  {:5} {:10} {:.3} / {:.3} / {:.3}", s.split, s.view, s.original, s.initial, s.optimized);
     }
     if let Some(sheet) = &r.sheet {
-        println!(
+        outln!(
             "printable sheet: {} ({}x{} px at {} dpi): print at 100 % so the atlas is {:.1} mm wide for a 1:{} model (the bar is 10 mm; texel density varies {:.2}x between faces, 10th-90th percentile)",
             out.join("texture_print.png").display(),
             sheet.width_px,
@@ -191,7 +191,7 @@ fn print_report(r: &pav::studies::outputs::OptimizeReport, p: &Prepared, a: &Arg
         );
     }
     if let Some(shift) = &r.shift {
-        println!("as printed (print.profile), the region's {shift}");
+        outln!("as printed (print.profile), the region's {shift}");
     }
     eprintln!("wrote {} in {}", r.files.join(", "), out.display());
 }

@@ -56,17 +56,13 @@ pub fn run(a: &Args) -> Result<()> {
         let p = a.printer.resolve(&cfg);
         let channel = pav::print::channel::PrintChannel::open(&p)?;
         let region = pav::attack::setup::region_at(&cfg, texture.width, texture.height)?;
-        println!(
-            "as printed ({}): the region's {}",
-            p.profile.display(),
-            channel.shift(&texture.rgb, region.as_deref())
-        );
+        outln!("as printed ({}): the region's {}", p.profile.display(), channel.shift(&texture.rgb, region.as_deref()));
         texture.rgb = channel.printed(&texture.rgb);
     }
     let painted = on_the_car(&base_img, &texture, &region, cfg.mesh.texture_size);
     save_rgb(&a.out, painted.width, painted.height, &painted.rgb)?;
     let on = region.iter().filter(|r| **r > 0.5).count();
-    println!(
+    outln!(
         "wrote {} ({}x{}): {} over {on} of {} region texels, {} elsewhere",
         a.out.display(),
         painted.width,

@@ -155,7 +155,7 @@ fn chart(a: &ChartArgs) -> Result<()> {
     let record_path = a.out.join(pav::provenance::FILE);
     record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
     let count = |s: &str| c.patches.iter().filter(|p| p.source == s).count();
-    println!(
+    outln!(
         "wrote {} ({:.0}×{:.0} mm at {} dpi: print at 100 %, the bar is 10 mm), {} and {}: {} patches ({} spanning the cube, {} greys, {} from the texture, {} to fill)",
         png.display(),
         a.paper.width_mm,
@@ -199,7 +199,7 @@ fn calibrate(a: &CalibrateArgs) -> Result<()> {
     record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
     let r = cal.residual();
     for h in &cal.held_out {
-        println!(
+        outln!(
             "  {:7} held-out ΔE2000 median {:.2}, p90 {:.2}, max {:.2}",
             format!("{:?}", h.model),
             h.median,
@@ -208,9 +208,9 @@ fn calibrate(a: &CalibrateArgs) -> Result<()> {
         );
     }
     for how in pav::table::unique(cal.found.iter().cloned()) {
-        println!("  {how}");
+        outln!("  {how}");
     }
-    println!(
+    outln!(
         "kept {:?} ({} map from {} patches; {} clipped and {} unreadable left out){}",
         r.model,
         cal.measures,
@@ -219,7 +219,7 @@ fn calibrate(a: &CalibrateArgs) -> Result<()> {
         cal.unreadable.len(),
         if cal.forced { format!("; above the bound {} (--force)", cal.bound) } else { String::new() }
     );
-    println!("wrote {}, {} and {}", a.out.display(), csv.display(), png.display());
+    outln!("wrote {}, {} and {}", a.out.display(), csv.display(), png.display());
     Ok(())
 }
 
@@ -235,7 +235,7 @@ fn proof(config: &Path, texture: &Path, printer: &PrinterArgs, out: &Path) -> Re
     }
     save_rgb(out, tex.width, tex.height, &printed)?;
     let region = region_at(&cfg, tex.width, tex.height)?;
-    println!(
+    outln!(
         "wrote {} ({}, {}{}): the region's {}",
         out.display(),
         p.profile.display(),

@@ -150,15 +150,11 @@ pub fn run(c: &Cmd) -> Result<()> {
             }
             file.note = note.clone();
             let path = file.save(&root, name)?;
-            println!(
-                "wrote {} ({} rows); `pav results write` puts it in the documents",
-                path.display(),
-                file.rows.len()
-            );
+            outln!("wrote {} ({} rows); `pav results write` puts it in the documents", path.display(), file.rows.len());
         }
         Cmd::Write => {
             for (p, _) in regenerate(&root, true)? {
-                println!("regenerated {}", p.display());
+                outln!("regenerated {}", p.display());
             }
         }
         #[cfg(feature = "plot")]
@@ -173,7 +169,7 @@ pub fn run(c: &Cmd) -> Result<()> {
                 rows_where: a.rows_where.clone(),
             };
             file.plot(&spec, &a.name, a.log_x, &a.out)?;
-            println!("wrote {}", a.out.display());
+            outln!("wrote {}", a.out.display());
         }
         Cmd::Moved { old, new } => {
             let changed = moved(&root, old, new)?;
@@ -181,9 +177,9 @@ pub fn run(c: &Cmd) -> Result<()> {
                 bail!("no results file read {old}");
             }
             for (name, what) in changed {
-                println!("results/{name}.json: {}", what.join("; "));
+                outln!("results/{name}.json: {}", what.join("; "));
             }
-            println!("`pav results write` puts the new paths in the documents");
+            outln!("`pav results write` puts the new paths in the documents");
         }
         Cmd::Check => {
             let stale = regenerate(&root, false)?;
@@ -191,7 +187,7 @@ pub fn run(c: &Cmd) -> Result<()> {
                 let names: Vec<String> = stale.iter().map(|(p, _)| p.display().to_string()).collect();
                 bail!("results blocks differ from results/ in {}: run `pav results write`", names.join(", "));
             }
-            println!("every results block matches results/");
+            outln!("every results block matches results/");
         }
     }
     Ok(())

@@ -44,7 +44,7 @@ pub fn run(a: &Args) -> Result<()> {
             (name, d.clone(), a.textures.get(i).cloned().unwrap_or_else(|| "optimized".into()))
         })
         .collect();
-    println!("{}", table1_report(&runs, &a.against, &a.out)?);
+    outln!("{}", table1_report(&runs, &a.against, &a.out)?);
     eprintln!("wrote table1.md and its CSVs in {}", a.out.display());
     Ok(())
 }

@@ -52,7 +52,7 @@ pub enum Mode {
 }
 
 fn print_check(r: &UvCheck, out: &Path) {
-    println!(
+    outln!(
         "{} patch faces: area-weighted mean |log2 stretch| {:.3} (1.0 = a factor of 2), 95th-percentile anisotropy {:.2}",
         r.faces, r.mean_abs_log2_stretch, r.p95_anisotropy
     );
@@ -73,7 +73,7 @@ pub fn run(c: &Cmd) -> Result<()> {
             let pieces = r.charts.map_or(String::new(), |(charts, joined, flipped)| {
                 format!("; {charts} charts (one joins up to {joined} original UV islands), {flipped} folded faces")
             });
-            println!(
+            outln!(
                 "adjusted {} faces: mean |log2 stretch| {:.3} -> {:.3}, 95th-percentile anisotropy {:.2} -> {:.2}; texel density {:.0} % of the original{pieces}",
                 r.before.faces,
                 r.before.mean_abs_log2_stretch,

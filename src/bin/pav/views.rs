@@ -104,10 +104,10 @@ fn render(cfg: &ViewsConfig, config: &std::path::Path, out: &std::path::Path, sh
     }
     if let Some(shards) = shard.write_record(record, out)? {
         let n = merge_shards(cfg, &shards, out)?;
-        println!("{n} views from {} shards; manifest {}", shards.len(), out.join("manifest.csv").display());
+        outln!("{n} views from {} shards; manifest {}", shards.len(), out.join("manifest.csv").display());
     } else {
         let s = render_views(cfg, &shard.record_dir(out), shard.shard, blender.as_ref(), &Bar::default())?;
-        println!(
+        outln!(
             "{} views: {} rendered now, {} from an earlier run; manifest {}",
             s.total,
             s.rendered,
@@ -118,7 +118,7 @@ fn render(cfg: &ViewsConfig, config: &std::path::Path, out: &std::path::Path, sh
             return Ok(false);
         }
     }
-    println!("contact sheet {}", contact_sheet(out, 12)?.display());
+    outln!("contact sheet {}", contact_sheet(out, 12)?.display());
     Ok(true)
 }
 
@@ -155,14 +155,14 @@ pub fn run(c: &Cmd) -> Result<()> {
                 }
                 _ => {
                     if !render(&cfg, config, &a.out, &a.shard)? {
-                        println!("`--merge` with the same arguments joins the shards and cuts the videos");
+                        outln!("`--merge` with the same arguments joins the shards and cuts the videos");
                         return Ok(());
                     }
                     write_videos(&a.out, a.period.unwrap_or(period))?
                 }
             };
             for v in &videos {
-                println!(
+                outln!(
                     "{}: {} frames, {} at distance {} and elevation {}°",
                     v.path.display(),
                     v.frames,
@@ -171,7 +171,7 @@ pub fn run(c: &Cmd) -> Result<()> {
                     v.elevation_deg
                 );
             }
-            println!(
+            outln!(
                 "simulated A_physical (uncalibrated until compared with a real capture):\n  pav-rig evaluate {} --label NAME{} -d configs/detectors -o out/evaluate",
                 videos.iter().map(|v| v.path.display().to_string()).collect::<Vec<_>>().join(" "),
                 " --label NAME".repeat(videos.len().saturating_sub(1))
