@@ -3,7 +3,7 @@
 //! README's main job and quick start run as written and leave what they promise.
 
 use crate::common;
-use crate::common::cli::{self, help, subcommands};
+use crate::common::cli::{self, help, subcommands, words};
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -63,37 +63,6 @@ struct Invocation {
     bin: &'static str,
     words: Vec<String>,
     at: String,
-}
-
-/// Splits a shell line into words, keeping quoted strings whole (quotes dropped).
-fn words(line: &str) -> Vec<String> {
-    let mut out = Vec::new();
-    let mut cur = String::new();
-    let mut quote = None;
-    let mut any = false;
-    for ch in line.chars() {
-        match (quote, ch) {
-            (None, '"' | '\'') => {
-                quote = Some(ch);
-                any = true;
-            }
-            (Some(q), c) if c == q => quote = None,
-            (None, c) if c.is_whitespace() => {
-                if any {
-                    out.push(std::mem::take(&mut cur));
-                }
-                any = false;
-            }
-            (_, c) => {
-                cur.push(c);
-                any = true;
-            }
-        }
-    }
-    if any {
-        out.push(cur);
-    }
-    out
 }
 
 /// Whether a word names the pav or pav-rig binary (bare, or a build's path).

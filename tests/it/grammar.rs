@@ -2,6 +2,7 @@
 //! binaries names each concept the one way, and the old spellings of renamed flags still parse,
 //! so that the commands recorded in results files and reports still run.
 
+use crate::common;
 use crate::common::cli::{self, Opt};
 
 /// Names a concept had before it had one: the help of no command shows them.
@@ -118,4 +119,38 @@ fn every_old_spelling_still_parses() {
     assert!(bad.is_empty(), "{}", bad.join("\n"));
     // The check itself: a spelling no command ever had is refused.
     assert!(cli::parses("pav-rig", &["evaluate".into()], &["--angle-bin", "8"]).is_err());
+}
+
+/// Every command's help ends with examples, each a command line of that command which clap
+/// takes as written (checked with `--help` in front of anything after `--`, so none runs).
+#[test]
+fn every_command_ends_its_help_with_examples_that_parse() {
+    common::real_data(); // examples name `data:` entries
+    let mut bad = Vec::new();
+    let mut seen = 0;
+    for bin in ["pav", "pav-rig"] {
+        for sub in cli::every_command(bin).into_iter().filter(|s| !s.is_empty()) {
+            let name = format!("{bin} {}", sub.join(" "));
+            let examples = cli::examples(&cli::help(bin, &sub));
+            if examples.is_empty() {
+                bad.push(format!("{name}: no examples"));
+            }
+            for line in examples {
+                let words = cli::words(&line);
+                // An option before the subcommand (`turntable --port P status`) may sit between.
+                let path: Vec<&String> = words.iter().skip(1).filter(|w| sub.contains(w)).collect();
+                if words.first().map(String::as_str) != Some(bin) || path.len() < sub.len() {
+                    bad.push(format!("{name}: the example `{line}` is not a `{name}` command"));
+                    continue;
+                }
+                let args: Vec<&str> = words[1..].iter().map(String::as_str).collect();
+                if let Err(e) = cli::parses(bin, &[], &args) {
+                    bad.push(format!("{name}: `{line}`: {e}"));
+                }
+                seen += 1;
+            }
+        }
+    }
+    assert!(seen > 50, "only {seen} examples found");
+    assert!(bad.is_empty(), "{}", bad.join("\n"));
 }

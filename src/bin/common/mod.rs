@@ -227,3 +227,27 @@ pub fn stdout_failed(e: std::io::Error) -> ! {
     eprintln!("Error: writing to standard output: {e}");
     std::process::exit(1);
 }
+
+/// `cmd` with the subcommands of each `(heading, names)` group listed under that heading after
+/// the user's jobs instead of among them (clap has one list of subcommands; these are hidden
+/// from it and listed again, with their one-line help, below it). They run as before; a name
+/// this build lacks (a feature left out) is skipped.
+pub fn grouped(mut cmd: clap::Command, groups: &[(&str, &[&str])]) -> clap::Command {
+    let mut text = String::new();
+    for (heading, names) in groups {
+        let names: Vec<&str> = names.iter().copied().filter(|n| cmd.find_subcommand(n).is_some()).collect();
+        if names.is_empty() {
+            continue;
+        }
+        let width = names.iter().map(|n| n.len()).max().unwrap_or(0);
+        text.push_str(&format!("{heading}:\n"));
+        for name in names {
+            let about =
+                cmd.find_subcommand(name).and_then(|s| s.get_about()).map(|a| a.to_string()).unwrap_or_default();
+            text.push_str(&format!("  {name:width$}  {about}\n"));
+            cmd = cmd.mut_subcommand(name, |s| s.hide(true));
+        }
+        text.push('\n');
+    }
+    cmd.after_help(text.trim_end().to_string())
+}

@@ -9,6 +9,9 @@ use std::path::Path;
 pub enum Cmd {
     /// A camera's exposure, gain, white balance and focus controls (ranges, values, automatic
     /// modes) and its formats: what `pav-rig capture --exposure …` can lock.
+    #[command(after_help = "Examples:
+  pav-rig camera list /dev/video0
+  pav-rig camera list sim")]
     List {
         /// `/dev/videoN` (or `v4l2:/dev/videoN`), or `sim` for the simulated camera.
         device: String,

@@ -18,13 +18,14 @@ mod simulate;
 mod turntable;
 
 use anyhow::Result;
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 
 #[derive(Parser)]
 #[command(
     name = "pav-rig",
     version,
-    about = "Physical rig for adversarial vehicle camouflage: turntable, capture and frame-by-frame evaluation"
+    about = "Physical rig for adversarial vehicle camouflage: turntable, capture and frame-by-frame evaluation",
+    subcommand_help_heading = "Jobs"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -33,34 +34,67 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Cmd {
-    /// Score every frame of one or more videos with one or more detectors (A_physical).
-    Evaluate(evaluate::Args),
-    /// Model utilities.
-    #[command(subcommand)]
-    Model(model::Cmd),
-    /// Benchmark: decode / inference / evaluate throughput and the accuracy-vs-time trade-off (CSV + PNG).
-    Bench(bench::Args),
-    /// Benchmark the rig: command round-trip latency and capture angle-sync error (CSV).
-    BenchRig(bench_rig::Args),
-    /// Drive the turntable directly.
+    /// Drive the turntable: status, home, rotate, spin, stop.
+    #[command(after_help = "Examples:
+  pav-rig turntable --port /dev/ttyACM0 status
+  pav-rig turntable --port /dev/ttyACM0 spin --period 28s")]
     Turntable(turntable::Args),
-    /// Serve a simulated turntable on a pseudo-terminal (prints its path) until Ctrl-C.
-    Simulate(simulate::Args),
-    /// Record one or more turntable revolutions: video plus a per-frame angle sidecar.
-    Capture(capture::Args),
-    /// Camera controls: what a capture can lock.
+    /// A camera's controls: what a capture can lock.
     #[command(subcommand)]
+    #[command(after_help = "Examples:
+  pav-rig camera list /dev/video0")]
     Camera(camera::Cmd),
-    /// A real capture beside its simulation: A_physical of both and per-angle car scores, the
-    /// angle offset between the two tables found from the scores.
+    /// Record turntable revolutions: a video plus each frame's table angle in a sidecar.
+    #[command(after_help = "Examples:
+  pav-rig capture --port /dev/ttyACM0 --camera v4l2:/dev/video0 --period 28s --exposure 166 -o runs/camo.mp4
+  pav-rig capture --port sim --camera sim --rig configs/rig/phone-etron.toml --time-scale 4 -o out/sim/original.mp4")]
+    Capture(capture::Args),
+    /// Score every frame of videos with every detector: A_physical per detector and angle.
+    #[command(after_help = "Examples:
+  pav-rig evaluate runs/camo.mp4 -o out/real
+  pav-rig evaluate out/sim/original.mp4 out/sim/camo.mp4 --label original --label camouflaged -d configs/detectors -o out/sim/eval")]
+    Evaluate(evaluate::Args),
+    /// A real capture beside its simulation: A_physical of both and the angle offset between them.
+    ///
+    /// Per-angle car scores of both; the offset between the two tables' zeros is found from the
+    /// scores.
+    #[command(after_help = "Examples:
+  pav-rig compare out/eval --real real --sim sim -o out/compare")]
     Compare(compare::Args),
-    /// Paints filmed on the same shots, frame by frame: per detector, the mean difference of the
-    /// best car score against a reference label, with its paired interval.
+    /// Paints filmed on the same shots, compared frame by frame with a paired interval.
+    ///
+    /// Per detector, the mean difference of the best car score against a reference label.
+    #[command(after_help = "Examples:
+  pav-rig paired out/eval --against original -o out/paired")]
     Paired(paired::Args),
+    /// Bring your own detector: inspect an ONNX model, check a detector config, convert, dequantize.
+    #[command(subcommand)]
+    #[command(after_help = "Examples:
+  pav-rig model inspect data:models-yolox/yolox_nano.onnx -o my_detector.toml
+  pav-rig model check --config my_detector.toml fixtures/turntable.mp4#0")]
+    Model(model::Cmd),
+    /// Serve a simulated turntable on a pseudo-terminal (prints its path) until Ctrl-C.
+    #[command(after_help = "Examples:
+  pav-rig simulate --time-scale 4
+  pav-rig simulate --drop-rate 0.01 --delay-ms 20")]
+    Simulate(simulate::Args),
+    /// Time decoding, inference and evaluate, and what accuracy costs in time; CSV and PNG.
+    #[command(after_help = "Examples:
+  pav-rig bench --video fixtures/turntable.mp4 --strides 1,2,4 -o out/bench")]
+    Bench(bench::Args),
+    /// Time the rig: command round trips and the angle sync of a capture; CSV.
+    #[command(after_help = "Examples:
+  pav-rig bench-rig --time-scales 1,4 -o out/bench")]
+    BenchRig(bench_rig::Args),
 }
 
+/// The commands that are not a user's jobs: the project's own tooling.
+const GROUPS: &[(&str, &[&str])] = &[("Project tooling", &["bench", "bench-rig"])];
+
 fn main() -> Result<()> {
-    match &Cli::parse().cmd {
+    let matches = common::grouped(Cli::command(), GROUPS).get_matches();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    match &cli.cmd {
         Cmd::Evaluate(a) => evaluate::run(a),
         Cmd::Model(c) => model::run(c),
         Cmd::Bench(a) => bench::run(a),

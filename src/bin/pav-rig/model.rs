@@ -12,6 +12,9 @@ pub enum Cmd {
     /// What an ONNX detector takes and gives: inputs and outputs (names, types, declared shapes
     /// and the shapes of one run on a blank image), opset and operators, a guess at its output
     /// layout, and a detector-config skeleton to complete.
+    #[command(after_help = "Examples:
+  pav-rig model inspect data:models-yolox/yolox_nano.onnx --size 416
+  pav-rig model inspect data:models-yolox/yolox_nano.onnx -o my_detector.toml")]
     Inspect {
         /// The ONNX model (`data:NAME` for a manifest entry).
         #[arg(value_parser = pav::data::arg_path)]
@@ -29,6 +32,8 @@ pub enum Cmd {
     /// Try a finished detector config on images with a car: every detection above a score, the
     /// target's best, and each image with its boxes drawn (targets green, others orange), so that a
     /// wrong channel order, scale or layout shows at once.
+    #[command(after_help = "Examples:
+  pav-rig model check --config configs/detectors/yolox_nano.toml fixtures/turntable.mp4#0 -o out/check")]
     Check {
         /// The detector config.
         #[arg(long)]
@@ -45,6 +50,8 @@ pub enum Cmd {
         out: Option<PathBuf>,
     },
     /// Convert a darknet cfg + weights (YOLOv3/YOLOv3-tiny) to an ONNX graph with raw head outputs.
+    #[command(after_help = "Examples:
+  pav-rig model darknet2onnx --cfg yolov3-tiny.cfg --weights yolov3-tiny.weights -o yolov3-tiny.onnx")]
     Darknet2onnx {
         /// Darknet .cfg file.
         #[arg(long)]
@@ -58,6 +65,8 @@ pub enum Cmd {
     },
     /// Write the float surrogate of a dynamically quantized ONNX model (ConvInteger and MatMulInteger
     /// chains become float Convs and MatMuls with dequantized weights): not the evaluated model.
+    #[command(after_help = "Examples:
+  pav-rig model surrogate data:models-yolov8n/yolov8n_int8.onnx -o yolov8n_float.onnx")]
     Surrogate {
         /// The quantized model, e.g. yolov8n_int8.onnx (`data:NAME` for a manifest entry).
         #[arg(value_parser = pav::data::arg_path)]

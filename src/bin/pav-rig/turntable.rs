@@ -19,10 +19,17 @@ pub struct Args {
 #[derive(Subcommand)]
 enum Action {
     /// Print state, position and angle.
+    #[command(after_help = "Examples:
+  pav-rig turntable --port /dev/ttyACM0 status")]
     Status,
     /// Return to angle 0 and restart the turn count.
+    #[command(after_help = "Examples:
+  pav-rig turntable --port /dev/ttyACM0 home")]
     Home,
     /// Turn to an angle (degrees), or by an angle with --relative.
+    #[command(after_help = "Examples:
+  pav-rig turntable --port /dev/ttyACM0 rotate 90
+  pav-rig turntable --port sim rotate --relative -- -45")]
     Rotate {
         /// Degrees.
         #[arg(allow_hyphen_values = true)]
@@ -32,6 +39,8 @@ enum Action {
         relative: bool,
     },
     /// Spin continuously; Ctrl-C stops the table.
+    #[command(after_help = "Examples:
+  pav-rig turntable --port /dev/ttyACM0 spin --period 28s --turns 1")]
     Spin {
         /// Seconds per revolution (negative: backwards).
         #[arg(long, default_value = "28s", value_parser = parse_signed_seconds, allow_hyphen_values = true)]
@@ -41,10 +50,16 @@ enum Action {
         turns: u32,
     },
     /// Ramp down to a halt.
+    #[command(after_help = "Examples:
+  pav-rig turntable --port /dev/ttyACM0 stop")]
     Stop,
     /// Emergency stop (locks until unlock).
+    #[command(after_help = "Examples:
+  pav-rig turntable --port /dev/ttyACM0 estop")]
     Estop,
     /// Clear an alarm.
+    #[command(after_help = "Examples:
+  pav-rig turntable --port /dev/ttyACM0 unlock")]
     Unlock,
 }
 

@@ -10,9 +10,13 @@ pub enum Cmd {
     /// `pav views render|turntable`, `pav optimize --seeds`): task K of N runs it with
     /// `--shard K/N`, a merge job runs it with `--merge` once every task succeeded. Writes
     /// array.sbatch, merge.sbatch and submit.sh into the folder; `bash <folder>/submit.sh` submits.
+    #[command(after_help = "Examples:
+  pav cluster slurm --tasks 6 --cpus-per-task 2 --mem 4G -o jobs/cv -- target/release/pav crossval --config configs/optimize/quick.toml -o out/cv")]
     Slurm(Args),
     /// The same as a Kubernetes Indexed Job (job.yaml) and a merge Job (merge.yaml). Not run by
     /// pav's tests: no Kubernetes here; the commands are the ones the Slurm test proves.
+    #[command(after_help = "Examples:
+  pav cluster kubernetes --tasks 6 --cpus-per-task 1 --mem 4G --image registry.example/pav:0.1 -o jobs/cv -- target/release/pav crossval --config configs/optimize/quick.toml -o out/cv")]
     Kubernetes(Args),
 }
 

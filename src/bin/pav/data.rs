@@ -8,12 +8,17 @@ use pav::data::store::{Fetched, Origin, State, Store, ENV_MIRROR};
 pub enum Cmd {
     /// Every manifest entry with its licence and whether the store holds it (present, missing,
     /// corrupt: sizes and sha256 are checked).
+    #[command(after_help = "Examples:
+  pav data list")]
     List {
         /// Only entries whose name starts with one of these.
         names: Vec<String>,
     },
     /// Fills the store (PAV_DATA, else the XDG cache) with verified files: from each entry's
     /// public source, or from a mirror.
+    #[command(after_help = "Examples:
+  pav data fetch
+  pav data fetch --mirror ../shared/data")]
     Fetch {
         /// Entries or folders of them (`fca/`); all when none.
         names: Vec<String>,
@@ -23,6 +28,8 @@ pub enum Cmd {
         mirror: Option<String>,
     },
     /// Prints the file of an entry (fails, saying how to fetch it, when the store lacks it).
+    #[command(after_help = "Examples:
+  pav data path rauca-e2e/RAUCA_E2E.png")]
     Path {
         /// The entry's name.
         name: String,

@@ -48,6 +48,8 @@ impl PrinterArgs {
 pub enum Cmd {
     /// A texture as the printer prints it (ICC soft proof): writes the proof PNG and says how far
     /// the region's texels move (ΔE2000).
+    #[command(after_help = "Examples:
+  pav print proof --config configs/optimize/paper.toml --texture out/paper/texture.png -o out/paper/proof.png")]
     Proof {
         /// The optimize config whose region (and [print] table) the texture belongs to.
         #[arg(long)]
@@ -65,11 +67,16 @@ pub enum Cmd {
     /// greys and a texture's most frequent colours, each with its ID; the layout and intended
     /// colours beside it.
     #[cfg(feature = "video")]
+    #[command(after_help = "Examples:
+  pav print chart --config configs/optimize/paper.toml --texture out/paper/texture.png --paper a4 -o out/chart")]
     Chart(ChartArgs),
     /// Fit the colour map of printer + camera from photos of the printed chart (or of the camera
     /// alone from a ColorChecker): affine, second-order polynomial and smoothed 3D LUT compared
     /// on held-out patches; writes calibration.toml, a per-patch CSV and a report PNG.
     #[cfg(feature = "video")]
+    #[command(after_help = "Examples:
+  pav print calibrate photos/chart-1.jpg photos/chart-2.jpg --chart out/chart -o out/chart/calibration.toml
+  pav print calibrate --colorchecker photos/colorchecker.jpg -o out/camera/calibration.toml")]
     Calibrate(CalibrateArgs),
 }
 

@@ -11,17 +11,25 @@ use std::path::PathBuf;
 pub enum Cmd {
     /// Record a headline table from a finished run as results/NAME.json: columns of a CSV it
     /// wrote, with the command, commit, seeds and input hashes of its run.toml.
+    #[command(after_help = "Examples:
+  pav results add main-job --run out/evaluate --table summary.csv --columns video,detector,a_physical --title \"A_physical of the bundled clip\"")]
     Add(Box<AddArgs>),
     /// Regenerate every results block in README.md and docs/ from results/.
+    #[command(after_help = "Examples:
+  pav results write")]
     Write,
     /// Draw a results table as a PNG: one column against another, one line per value of a
     /// third, each point with its interval, so that a figure shows the recorded numbers only.
     #[cfg(feature = "plot")]
+    #[command(after_help = "Examples:
+  pav results plot load-test --x test --y failures -o out/load-test.png")]
     Plot(PlotArgs),
     /// Record that a config or data file moved from OLD to NEW without a change to what the runs
     /// read (NEW's values are OLD's as recorded), so that the tables that read it stay fresh: each
     /// results file naming OLD is made to name NEW, and a config that now extends NEW instead of
     /// OLD is taken as unchanged. Then `pav results write`.
+    #[command(after_help = "Examples:
+  pav results moved fixtures/old.mp4 fixtures/turntable.mp4")]
     Moved {
         /// The path the runs read, relative to the repository root.
         old: String,
@@ -30,6 +38,8 @@ pub enum Cmd {
     },
     /// Fail, naming each document whose results blocks differ from what `pav results write`
     /// makes now (a number edited by hand, a table gone stale).
+    #[command(after_help = "Examples:
+  pav results check")]
     Check,
 }
 

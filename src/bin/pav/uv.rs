@@ -9,6 +9,8 @@ use std::path::{Path, PathBuf};
 pub enum Cmd {
     /// Per-face stretch/compression of the optimizable patch: CSV, summary and heat maps
     /// (grey = none, purple = stretched, red = compressed, as MAYA shows them).
+    #[command(after_help = "Examples:
+  pav uv check -o out/uv")]
     Check {
         /// OBJ mesh with UVs.
         #[arg(long, value_parser = pav::data::arg_path, default_value = "data:pav-camou/xfl_yxz.obj")]
@@ -22,6 +24,8 @@ pub enum Cmd {
     },
     /// Re-flatten the optimizable patch automatically at one common texel density; writes the
     /// adjusted OBJ, its UV mask, and before/after heat maps.
+    #[command(after_help = "Examples:
+  pav uv adjust -o out/uv_adjusted")]
     Adjust {
         /// OBJ mesh with UVs.
         #[arg(long, value_parser = pav::data::arg_path, default_value = "data:pav-camou/xfl_yxz.obj")]

@@ -15,11 +15,17 @@ use std::path::PathBuf;
 #[derive(clap::Subcommand)]
 pub enum Cmd {
     /// Render a config's views with Blender Cycles (resumes where an earlier run stopped).
+    #[command(after_help = "Examples:
+  pav views render --config configs/views/ci.toml -o out/views
+  pav views render --config configs/views/ci.toml --shard 1/4 -o out/views")]
     Render(RenderArgs),
     /// Simulated turntable videos: the config's views with the environment turning with the
     /// camera (the car turned in a fixed room), one MP4 + angle sidecar per environment, distance
     /// and elevation, for `pav-rig evaluate` (resumes like render).
     #[cfg(feature = "video")]
+    #[command(after_help = "Examples:
+  pav views turntable --rig configs/rig/phone-etron.toml --texture out/paper/painted.png -o out/tt_camo
+  pav views turntable --rig configs/rig/phone-etron.toml --rasterizer --period 28s -o out/tt_raster")]
     Turntable(TurntableArgs),
 }
 

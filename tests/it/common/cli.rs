@@ -18,9 +18,22 @@ pub fn help(bin: &str, sub: &[String]) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
-/// The subcommands a help text lists (clap's own `help` left out).
+/// The headings the binaries list subcommands under: the user's jobs first, then the project's
+/// studies and tooling.
+pub const SUBCOMMAND_HEADINGS: &[&str] = &["Commands:", "Jobs:", "Studies:", "Project tooling:"];
+
+/// The subcommands a help text lists, under every heading (clap's own `help` left out).
 pub fn subcommands(help: &str) -> Vec<String> {
-    section(help, "Commands:").into_iter().filter_map(|l| l.split_whitespace().next().map(str::to_string)).collect()
+    SUBCOMMAND_HEADINGS
+        .iter()
+        .flat_map(|h| section(help, h))
+        .filter_map(|l| l.split_whitespace().next().map(str::to_string))
+        .collect()
+}
+
+/// The example command lines a help text ends with (under `Examples:`).
+pub fn examples(help: &str) -> Vec<String> {
+    section(help, "Examples:").into_iter().map(|l| l.trim().to_string()).collect()
 }
 
 /// The lines of a help section that name an item (two spaces in, then the item).
@@ -30,7 +43,7 @@ fn section<'a>(help: &'a str, heading: &str) -> Vec<&'a str> {
         .lines()
         .skip(1)
         .take_while(|l| l.is_empty() || l.starts_with("  "))
-        .filter(|l| l.starts_with("  ") && !l.starts_with("   ") && l.trim() != "help")
+        .filter(|l| l.starts_with("  ") && !l.starts_with("   ") && l.split_whitespace().next() != Some("help"))
         .collect()
 }
 
@@ -101,10 +114,19 @@ pub fn every_command(bin: &str) -> Vec<Vec<String>> {
 }
 
 /// Whether clap takes `args` on `bin sub…` up to the point of help: every flag known (shown or a
-/// hidden old spelling) and every value it parses accepted. `--help` ends the line, so
-/// arguments a command requires may be left out.
+/// hidden old spelling) and every value it parses accepted. `--help` ends the options (before a
+/// bare `--`, whose words are another command's), so arguments a command requires may be left
+/// out and nothing runs.
 pub fn parses(bin: &str, sub: &[String], args: &[&str]) -> Result<(), String> {
-    let o = Command::new(bin_path(bin)).args(sub).args(args).arg("--help").env("RUST_BACKTRACE", "0").output().unwrap();
+    let cut = args.iter().position(|a| *a == "--").unwrap_or(args.len());
+    let o = Command::new(bin_path(bin))
+        .args(sub)
+        .args(&args[..cut])
+        .arg("--help")
+        .args(&args[cut..])
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .unwrap();
     if o.status.success() {
         Ok(())
     } else {
@@ -116,4 +138,35 @@ pub fn parses(bin: &str, sub: &[String], args: &[&str]) -> Result<(), String> {
 pub fn knows(bin: &str, sub: &[String], flag: &str) -> bool {
     let o = Command::new(bin_path(bin)).args(sub).arg(flag).env("RUST_BACKTRACE", "0").output().unwrap();
     !String::from_utf8_lossy(&o.stderr).contains(&format!("unexpected argument '{flag}'"))
+}
+
+/// Splits a shell line into words, keeping quoted strings whole (quotes dropped).
+pub fn words(line: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut cur = String::new();
+    let mut quote = None;
+    let mut any = false;
+    for ch in line.chars() {
+        match (quote, ch) {
+            (None, '"' | '\'') => {
+                quote = Some(ch);
+                any = true;
+            }
+            (Some(q), c) if c == q => quote = None,
+            (None, c) if c.is_whitespace() => {
+                if any {
+                    out.push(std::mem::take(&mut cur));
+                }
+                any = false;
+            }
+            (_, c) => {
+                cur.push(c);
+                any = true;
+            }
+        }
+    }
+    if any {
+        out.push(cur);
+    }
+    out
 }
