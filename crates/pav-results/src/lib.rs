@@ -6,6 +6,8 @@
 //! TOML config in its values, not its comments) is marked stale, with the command that reruns it; one copied from an older document rather than
 //! made by its command says so.
 
+pub mod verdict;
+
 use pav_core::path::tidy;
 use pav_run::data::manifest::Manifest;
 use pav_run::provenance::{Input, Run};
@@ -734,8 +736,8 @@ fn next_marker(text: &str) -> Option<usize> {
     None
 }
 
-/// `text` with every results block (markers on lines of their own) regenerated from `root`'s
-/// results files.
+/// `text` with every results block (markers on lines of their own) and every verdict
+/// ([`verdict`]) regenerated from `root`'s results files.
 pub fn generate(text: &str, doc: &str, root: &Path) -> Result<String, ResultsError> {
     let mut out = String::with_capacity(text.len());
     let mut rest = text;
@@ -760,7 +762,7 @@ pub fn generate(text: &str, doc: &str, root: &Path) -> Result<String, ResultsErr
         rest = &rest[close_at..];
     }
     out.push_str(rest);
-    Ok(out)
+    verdict::generate(&out, doc, root)
 }
 
 /// The documents under `root` a user reads, where results blocks may stand: README.md, then every
@@ -790,7 +792,7 @@ pub fn regenerate(root: &Path, write: bool) -> Result<Vec<(PathBuf, String)>, Re
     let mut changed = Vec::new();
     for p in documents(root) {
         let text = std::fs::read_to_string(&p).map_err(io(&p))?;
-        if next_marker(&text).is_none() {
+        if next_marker(&text).is_none() && !text.contains("<!-- verdict:") {
             continue;
         }
         let doc = p.strip_prefix(root).unwrap_or(&p).display().to_string();
