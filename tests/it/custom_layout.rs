@@ -11,7 +11,7 @@
 //!   several anchors side by side in one row with a shared class block, scores as a product of
 //!   powers, centre offsets through tanh with sizes as shares of the input, and outputs without
 //!   a batch dimension, each from a graph built here with known outputs;
-//! - every `custom` layout the README and docs/evaluate.md show loads as written.
+//! - every `custom` layout docs/detectors.md shows loads as written.
 
 use crate::common;
 
@@ -257,7 +257,7 @@ fn inspect_guesses_both_as_custom_and_their_skeletons_load_once_completed() {
 fn every_documented_custom_layout_loads_as_written() {
     let tmp = tempfile::tempdir().unwrap();
     let mut seen = 0;
-    for doc in ["README.md", "docs/evaluate.md"] {
+    for doc in ["docs/detectors.md"] {
         let text = std::fs::read_to_string(common::repo().join(doc)).unwrap();
         for block in text.split("```toml\n").skip(1).filter_map(|b| b.split("```").next()) {
             if !block.contains("layout = \"custom\"") {
@@ -278,7 +278,7 @@ fn every_documented_custom_layout_loads_as_written() {
             seen += 1;
         }
     }
-    assert_eq!(seen, 4, "the README's YOLOv5 export, docs/evaluate.md's raw heads, SSD and own detector");
+    assert_eq!(seen, 4, "docs/detectors.md's YOLOv5 export, raw heads, SSD and own detector");
 }
 
 /// The logit of `p`.

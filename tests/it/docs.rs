@@ -63,6 +63,8 @@ struct Invocation {
     bin: &'static str,
     words: Vec<String>,
     at: String,
+    /// Prose may name a command group (`pav views`) without a subcommand.
+    partial: bool,
 }
 
 /// Whether a word names the pav or pav-rig binary (bare, or a build's path).
@@ -113,10 +115,10 @@ fn invocations(file: &str, md: &str) -> Vec<Invocation> {
                 match args.iter().position(|x| x == "--").filter(|&dd| args.get(dd + 1).is_some_and(|x| is_pav(x))) {
                     Some(dd) => {
                         let inner = if args[dd + 1].ends_with("pav-rig") { "pav-rig" } else { "pav" };
-                        out.push(Invocation { bin, words: args[..dd].to_vec(), at: at.clone() });
-                        out.push(Invocation { bin: inner, words: args[dd + 2..].to_vec(), at });
+                        out.push(Invocation { bin, words: args[..dd].to_vec(), at: at.clone(), partial: false });
+                        out.push(Invocation { bin: inner, words: args[dd + 2..].to_vec(), at, partial: false });
                     }
-                    None => out.push(Invocation { bin, words: args, at }),
+                    None => out.push(Invocation { bin, words: args, at, partial: false }),
                 }
             }
         }
@@ -151,6 +153,7 @@ fn check(inv: &Invocation, cache: &mut std::collections::HashMap<(String, Vec<St
             }
             Some(w) if w.starts_with('-') && sub.is_empty() => break,
             Some(w) => return Some(format!("{}: `{} {w}` is not a subcommand ({})", inv.at, inv.bin, subs.join(", "))),
+            None if inv.partial => break,
             None => return Some(format!("{}: `{}` needs a subcommand", inv.at, inv.bin)),
         }
     }
@@ -176,6 +179,101 @@ fn check(inv: &Invocation, cache: &mut std::collections::HashMap<(String, Vec<St
         }
     }
     None
+}
+
+/// The text of `md` outside its fenced blocks.
+fn prose(md: &str) -> String {
+    let mut out = String::new();
+    let mut fenced = false;
+    for line in md.lines() {
+        if line.trim_start().starts_with("```") {
+            fenced = !fenced;
+            continue;
+        }
+        if !fenced {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    out
+}
+
+/// The pav and pav-rig commands quoted inline in the prose of `md` (`` `pav …` ``, a span may
+/// run over a line break), each with the prose line it starts on.
+fn inline_invocations(file: &str, md: &str) -> Vec<Invocation> {
+    let text = prose(md);
+    let mut out = Vec::new();
+    let mut at = 0;
+    for (k, part) in text.split('`').enumerate() {
+        let line = text[..at].matches('\n').count() + 1;
+        at += part.len() + 1;
+        if k % 2 == 0 {
+            continue;
+        }
+        for seg in part.split("&&").flat_map(|s| s.split([';', '|'])) {
+            let w = words(&seg.replace('\n', " "));
+            // A bare `pav` names the binary, not a command.
+            let Some(first) = w.first().filter(|x| is_pav(x) && w.len() > 1) else { continue };
+            let bin = if first.ends_with("pav-rig") { "pav-rig" } else { "pav" };
+            out.push(Invocation {
+                bin,
+                words: w[1..].to_vec(),
+                at: format!("{file}: prose line {line}"),
+                partial: true,
+            });
+        }
+    }
+    out
+}
+
+/// The pav and pav-rig commands of every "Made by" line of `md`: the commands results were made
+/// with, each a whole command line.
+fn made_by(file: &str, md: &str) -> Vec<Invocation> {
+    let mut out = Vec::new();
+    for line in md.lines().filter(|l| l.starts_with("*Made by `")) {
+        let cmd = line["*Made by `".len()..].split('`').next().unwrap_or("");
+        for seg in cmd.split("&&").flat_map(|s| s.split(';')) {
+            let w = words(seg);
+            let Some(first) = w.first().filter(|x| is_pav(x)) else { continue };
+            let bin = if first.ends_with("pav-rig") { "pav-rig" } else { "pav" };
+            out.push(Invocation {
+                bin,
+                words: w[1..].to_vec(),
+                at: format!("{file}: `{}`", seg.trim()),
+                partial: false,
+            });
+        }
+    }
+    out
+}
+
+/// Inline commands name real subcommands and options (old spellings included), and every command
+/// a "Made by" line records is one clap takes whole, as it was run.
+#[test]
+fn every_inline_and_made_by_command_is_a_real_invocation() {
+    common::real_data(); // recorded commands name `data:` entries
+    let (mut inline, mut recorded) = (Vec::new(), Vec::new());
+    for f in common::doc_files(&common::repo()) {
+        let rel = f.strip_prefix(common::repo()).unwrap().display().to_string();
+        let text = std::fs::read_to_string(&f).unwrap();
+        inline.extend(inline_invocations(&rel, &text));
+        recorded.extend(made_by(&rel, &text));
+    }
+    assert!(inline.len() > 100 && recorded.len() >= 8, "{} inline, {} recorded", inline.len(), recorded.len());
+    let mut cache = std::collections::HashMap::new();
+    let mut bad: Vec<String> = inline.iter().filter_map(|i| check(i, &mut cache)).collect();
+    for inv in &recorded {
+        let args: Vec<&str> = inv.words.iter().map(String::as_str).collect();
+        if let Err(e) = cli::parses(inv.bin, &[], &args) {
+            bad.push(format!("{}: {e}", inv.at));
+        }
+    }
+    assert!(bad.is_empty(), "{} commands that are not real:\n{}", bad.len(), bad.join("\n"));
+    // The checks themselves: a made-up flag inline and a made-up subcommand recorded are caught.
+    let fake = inline_invocations("x", "Run `pav optimize --no-such-flag` first.\n");
+    assert!(check(&fake[0], &mut cache).is_some_and(|e| e.contains("--no-such-flag")));
+    let fake = made_by("x", "*Made by `pav optimise --config c.toml` at commit 0.*\n");
+    assert!(cli::parses("pav", &[], &fake[0].words.iter().map(String::as_str).collect::<Vec<_>>()).is_err());
 }
 
 #[test]
@@ -345,12 +443,12 @@ fn the_quick_start_runs_as_written() {
     assert!(record.contains("print = \"true\""), "{record}");
 }
 
-/// docs/evaluate.md's worked example of attacking a described detector, as written: its config
+/// docs/detectors.md's worked example of attacking a described detector, as written: its config
 /// blocks saved under the names their first lines give, its shell blocks run in order.
 #[test]
 fn attacking_your_own_detector_runs_as_written() {
     common::real_data();
-    let doc = std::fs::read_to_string(common::repo().join("docs/evaluate.md")).unwrap();
+    let doc = std::fs::read_to_string(common::repo().join("docs/detectors.md")).unwrap();
     let start = doc.find("## Attacking your own detector").expect("the section");
     let end = doc[start + 3..].find("\n## ").map_or(doc.len(), |e| start + 3 + e);
     let tmp = scratch();
@@ -382,6 +480,23 @@ fn attacking_your_own_detector_runs_as_written() {
     let (before, after) = (mean("initial"), mean("optimized"));
     eprintln!("my_detector on {} training views: {before:.3} → {after:.3}", train.len());
     assert!(train.len() == 6 && after < 0.5 * before, "{before} → {after}");
+}
+
+/// The README is a manual a person reads in minutes: at most 300 lines, none over 300
+/// characters, and its status is generated (the reference, the schema and the results live in
+/// docs/).
+#[test]
+fn the_readme_is_a_short_manual() {
+    let readme = std::fs::read_to_string(common::repo().join("README.md")).unwrap();
+    let n = readme.lines().count();
+    assert!(n <= 300, "README.md has {n} lines: move reference and results to docs/");
+    let long: Vec<usize> =
+        readme.lines().enumerate().filter(|(_, l)| l.chars().count() > 300).map(|(i, _)| i + 1).collect();
+    assert!(long.is_empty(), "README.md lines over 300 characters: {long:?}");
+    assert!(
+        readme.contains("<!-- verdict:") && readme.contains("Nothing has been printed and filmed"),
+        "the status box"
+    );
 }
 
 /// Reports are short papers: none runs past 400 lines (the history of how the work went stays in
