@@ -12,7 +12,7 @@ check() {
   log=$(cargo check --release "$@" --message-format short 2>&1) || { echo "$log"; status=1; return; }
   if grep -E '^(src|tests|crates)/.*(warning|error)' <<<"$log"; then status=1; fi
 }
-for f in "" video plot eval rig optimize; do
+for f in "" video plot eval rig optimize doctor; do
   check --no-default-features ${f:+--features "$f"} --lib --bins
 done
 for dir in crates/*/; do

@@ -29,6 +29,8 @@ pub use pav_attack as attack;
 pub use pav_cluster as cluster;
 pub use pav_dataset as dataset;
 pub use pav_detect as detect;
+#[cfg(feature = "doctor")]
+pub use pav_doctor as doctor;
 pub use pav_eval as eval;
 pub use pav_print as print;
 pub use pav_render as render;

@@ -31,6 +31,8 @@ mod detectors_reference;
 #[cfg(feature = "eval")]
 mod detectors_wide;
 mod docs;
+#[cfg(feature = "doctor")]
+mod doctor;
 mod evaluate_fixture;
 mod firmware_qemu;
 mod grammar;

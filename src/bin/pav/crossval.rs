@@ -1,7 +1,7 @@
 //! `pav crossval`.
 
 use crate::common::{ctrl_c_flag, Bar, ShardArgs};
-use crate::Scoring;
+use crate::scoring::Scoring;
 use anyhow::{Context, Result};
 use pav::studies::crossval::{crossval_report, CrossvalJob, Cut};
 use std::path::PathBuf;

@@ -1,7 +1,7 @@
 //! `pav eval-digital`.
 
 use crate::common::Bar;
-use crate::Scoring;
+use crate::scoring::Scoring;
 use anyhow::{Context, Result};
 use pav::studies::table2::eval_digital;
 use std::path::PathBuf;

@@ -16,6 +16,8 @@ mod cluster;
 #[cfg(feature = "optimize")]
 mod crossval;
 mod data;
+#[cfg(feature = "doctor")]
+mod doctor;
 #[cfg(feature = "optimize")]
 mod eval_digital;
 #[cfg(feature = "optimize")]
@@ -24,8 +26,14 @@ mod lofo;
 mod optimize;
 mod paint;
 mod print;
+#[cfg(feature = "video")]
+mod print_calibrate;
+#[cfg(feature = "video")]
+mod print_chart;
 mod render;
 mod results;
+#[cfg(feature = "optimize")]
+mod scoring;
 #[cfg(feature = "optimize")]
 mod table1;
 mod uv;
@@ -101,6 +109,16 @@ enum Cmd {
   pav data list
   pav data path rauca-e2e/RAUCA_E2E.png")]
     Data(data::Cmd),
+    /// Check this machine: every piece pav's jobs need, found or missing with its fix.
+    ///
+    /// ONNX Runtime, OpenCV, the data store, the shipped detectors, ffmpeg, Blender, the print
+    /// profile, serial ports (and whether you may open them) and cameras (and what they lock).
+    /// Exits non-zero when the main job cannot run.
+    #[cfg(feature = "doctor")]
+    #[command(after_help = "Examples:
+  pav doctor
+  pav doctor -d configs/detectors-wide")]
+    Doctor(doctor::Args),
     /// k-fold cross-validation of the attack: every view held out once.
     ///
     /// The texture is optimized on the rest, and the held-out views are scored by every detector
@@ -160,57 +178,6 @@ enum Cmd {
     Cluster(cluster::Cmd),
 }
 
-/// How `eval-digital` and `crossval` score composites.
-#[cfg(feature = "optimize")]
-#[derive(clap::Args, Debug)]
-struct Scoring {
-    /// Detector configs or folders of them.
-    #[arg(long = "detectors", short = 'd', default_value = "configs/detectors")]
-    detectors: Vec<std::path::PathBuf>,
-    /// A car counts as detected when its score reaches this (paper 0.5; the authors' code 0.6).
-    #[arg(long, default_value_t = 0.5)]
-    threshold: f32,
-    /// Score every texture as printed: through the config's [print] table, else Ghostscript's
-    /// CMYK profile (a config with [print] is always scored as printed).
-    #[arg(long)]
-    print: bool,
-    /// Score as printed through this ICC output profile (implies --print).
-    #[arg(long = "profile", alias = "print-profile", value_parser = pav::data::arg_path)]
-    print_profile: Option<std::path::PathBuf>,
-    /// Also score with each detector behind this input defence, named `DETECTOR+LABEL`
-    /// (`median:k=3`, `bits:b=5`, `jpeg:q=75`, `cutout:n=2,s=40`, `noise:sigma=8`; `+` chains
-    /// them); repeat for several.
-    #[arg(long = "defence", value_name = "SPEC", value_parser = common::parse_defence)]
-    defences: Vec<common::DefenceArg>,
-}
-
-#[cfg(feature = "optimize")]
-impl Scoring {
-    /// `run` with the scoring's inputs (detector configs, models, a print profile) and settings.
-    fn record(&self, run: pav::provenance::Run) -> pav::provenance::Run {
-        run.inputs(pav::detect::load::detector_inputs(&self.detectors).iter().map(|p| p.as_path()))
-            .setting("threshold", self.threshold)
-            .setting("print", self.print || self.print_profile.is_some())
-            .inputs(self.print_profile.iter().map(|p| p.as_path()))
-            .setting("defences", common::defence_chains(&self.defences).1)
-    }
-
-    /// The library's scoring options; `config` is the optimize config whose [print] table --print reads.
-    fn to_lib(&self, config: &std::path::Path) -> anyhow::Result<pav::studies::Scoring> {
-        let print = if self.print || self.print_profile.is_some() {
-            let mut p = pav::attack::config::OptimizeConfig::load(config)?.print.unwrap_or_default();
-            if let Some(f) = &self.print_profile {
-                p.profile = f.clone();
-            }
-            Some(p)
-        } else {
-            None
-        };
-        let defences = common::defence_chains(&self.defences).0;
-        Ok(pav::studies::Scoring { detectors: self.detectors.clone(), threshold: self.threshold, print, defences })
-    }
-}
-
 /// The commands that are not a user's jobs: the project's studies, and its own tooling.
 const GROUPS: &[(&str, &[&str])] = &[
     ("Studies", &["crossval", "lofo", "table1", "adv-train"]),
@@ -242,6 +209,8 @@ fn main() -> Result<()> {
         Cmd::Views(c) => views::run(&c),
         Cmd::Print(c) => print::run(&c),
         Cmd::Data(c) => data::run(&c),
+        #[cfg(feature = "doctor")]
+        Cmd::Doctor(a) => doctor::run(&a),
         Cmd::Results(c) => results::run(&c),
         Cmd::Cluster(c) => cluster::run(&c),
     }
