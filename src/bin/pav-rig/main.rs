@@ -86,6 +86,13 @@ enum Cmd {
     #[command(after_help = "Examples:
   pav-rig bench-rig --time-scales 1,4 -o out/bench")]
     BenchRig(bench_rig::Args),
+    /// Write the reference page of every command from this binary's own definition.
+    #[command(hide = true)]
+    Reference {
+        /// The folder of the pages.
+        #[arg(long, short = 'o', default_value = "docs/reference")]
+        out: std::path::PathBuf,
+    },
 }
 
 /// The commands that are not a user's jobs: the project's own tooling.
@@ -105,5 +112,10 @@ fn main() -> Result<()> {
         Cmd::Camera(c) => camera::run(c),
         Cmd::Compare(a) => compare::run(a),
         Cmd::Paired(a) => paired::run(a),
+        Cmd::Reference { out } => {
+            let pages = common::reference::write(&mut common::grouped(Cli::command(), GROUPS), out)?;
+            outln!("wrote {} pages into {}", pages.len(), out.display());
+            Ok(())
+        }
     }
 }

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 #[derive(clap::Subcommand)]
 pub enum Cmd {
     /// Write a Slurm job array for a shardable command (`pav crossval`, `pav-rig evaluate`,
-    /// `pav views render|turntable`, `pav optimize --seeds`): task K of N runs it with
+    /// `pav views render`, `pav views turntable`, `pav optimize --seeds`): task K of N runs it with
     /// `--shard K/N`, a merge job runs it with `--merge` once every task succeeded. Writes
     /// array.sbatch, merge.sbatch and submit.sh into the folder; `bash <folder>/submit.sh` submits.
     #[command(after_help = "Examples:

@@ -176,6 +176,13 @@ enum Cmd {
     #[command(after_help = "Examples:
   pav cluster slurm --tasks 6 --cpus-per-task 2 --mem 4G -o jobs/cv -- target/release/pav crossval --config configs/optimize/quick.toml -o out/cv")]
     Cluster(cluster::Cmd),
+    /// Write the reference page of every command from this binary's own definition.
+    #[command(hide = true)]
+    Reference {
+        /// The folder of the pages.
+        #[arg(long, short = 'o', default_value = "docs/reference")]
+        out: std::path::PathBuf,
+    },
 }
 
 /// The commands that are not a user's jobs: the project's studies, and its own tooling.
@@ -213,5 +220,10 @@ fn main() -> Result<()> {
         Cmd::Doctor(a) => doctor::run(&a),
         Cmd::Results(c) => results::run(&c),
         Cmd::Cluster(c) => cluster::run(&c),
+        Cmd::Reference { out } => {
+            let pages = common::reference::write(&mut common::grouped(Cli::command(), GROUPS), &out)?;
+            outln!("wrote {} pages into {}", pages.len(), out.display());
+            Ok(())
+        }
     }
 }
