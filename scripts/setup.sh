@@ -12,7 +12,17 @@
 #      checksums verified: from the mirror $PAV_DATA_MIRROR, else ../shared/data when it exists
 #      beside the repository, else from each file's public source
 # Everything else downloaded lands in .deps/ (git-ignored). Re-running skips what is already there.
+#
+#   scripts/setup.sh              everything: every job and the test command
+#   scripts/setup.sh --evaluate   only what `pav-rig capture` and `pav-rig evaluate` need: no
+#                                 Blender, Slurm, QEMU, firmware or citation check
 set -euo pipefail
+MODE=full
+case "${1:-}" in
+  "") ;;
+  --evaluate) MODE=evaluate ;;
+  *) echo "usage: scripts/setup.sh [--evaluate]" >&2; exit 2 ;;
+esac
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
 DEPS="$ROOT/.deps"
@@ -42,7 +52,8 @@ PY=${PYTHON:-python3}
 "$PY" -m pip --version >/dev/null 2>&1 \
   || need "$PY has no pip: run \`${SUDO:+sudo }apt-get install python3-pip python3-venv\` (or set PYTHON to a Python 3 with pip)"
 
-APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config ffmpeg gstreamer1.0-plugins-base gstreamer1.0-tools unzip blender curl liblcms2-dev libgs-common slurm-wlm munge python3-venv)
+APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config ffmpeg gstreamer1.0-plugins-base gstreamer1.0-tools unzip curl liblcms2-dev libgs-common)
+if [ "$MODE" = full ]; then APT_PACKAGES+=(blender slurm-wlm munge python3-venv); fi
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -93,7 +104,9 @@ else
 fi
 
 # The citation file's schema check (tests/it/project.rs): cffconvert in a virtual environment.
-if [ ! -x "$DEPS/venv/bin/cffconvert" ]; then
+if [ "$MODE" = evaluate ]; then
+  log "cffconvert, firmware and QEMU: left out (--evaluate)"
+elif [ ! -x "$DEPS/venv/bin/cffconvert" ]; then
   log "cffconvert: a virtual environment in .deps/venv"
   "$PY" -m venv "$DEPS/venv"
   "$DEPS/venv/bin/pip" install -q "cffconvert==2.0.0"
@@ -103,16 +116,18 @@ fi
 
 # Firmware: the embedded targets, and QEMU for the firmware-in-the-loop tests. The image's
 # qemu-utils may come from elsewhere than Debian's lists; qemu-system-arm needs the matching one.
-log "firmware targets and QEMU"
-rustup target add thumbv6m-none-eabi thumbv7m-none-eabi >/dev/null
-if ! command -v qemu-system-arm >/dev/null; then
-  $SUDO apt-get update -qq
-  QV=$(apt-cache madison qemu-system-arm | awk 'NR == 1 {print $3}')
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --allow-downgrades qemu-system-arm "qemu-utils=$QV"
+if [ "$MODE" = full ]; then
+  log "firmware targets and QEMU"
+  rustup target add thumbv6m-none-eabi thumbv7m-none-eabi >/dev/null
+  if ! command -v qemu-system-arm >/dev/null; then
+    $SUDO apt-get update -qq
+    QV=$(apt-cache madison qemu-system-arm | awk 'NR == 1 {print $3}')
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --allow-downgrades qemu-system-arm "qemu-utils=$QV"
+  fi
+  (cd firmware/qemu && cargo build --release)
+  log "building the RP2040 firmware"
+  (cd firmware/rp2040 && cargo build --release)
 fi
-(cd firmware/qemu && cargo build --release)
-log "building the RP2040 firmware"
-(cd firmware/rp2040 && cargo build --release)
 
 log "building pav-rig and pav (release)"
 cargo build --release --bin pav-rig --bin pav
