@@ -119,7 +119,7 @@ pub fn write_sheet(
         }
     }
     // The 10 mm bar 5 mm below the atlas, 1 mm from the left edge.
-    draw_scale_bar(&mut rgb, w, h, (1.0 * px_per_mm) as usize, side + (5.0 * px_per_mm) as usize, px_per_mm);
+    draw_scale_bar(&mut rgb, w, h, [(1.0 * px_per_mm) as usize, side + (5.0 * px_per_mm) as usize], px_per_mm, 10.0);
     save_png_dpi(path, w, h, &rgb, spec.dpi).map_err(|source| SheetError::Png { path: path.into(), source })?;
     Ok(Sheet { atlas_side_m: side_m, atlas_mm, width_px: w as u32, height_px: h as u32, density_spread: spread })
 }

@@ -374,9 +374,9 @@ mod draw {
                 bytes,
                 wu,
                 hu,
-                px(l.page_mm[0] / 2.0 - 5.0) as usize,
-                px(l.page_mm[1] - MARGIN_MM / 2.0) as usize,
+                [px(l.page_mm[0] / 2.0 - 5.0) as usize, px(l.page_mm[1] - MARGIN_MM / 2.0) as usize],
                 ppm,
+                10.0,
             );
             Ok(img)
         }

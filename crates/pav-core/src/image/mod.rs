@@ -213,9 +213,11 @@ pub fn draw_box(frame: &mut Frame, b: [f32; 4], bgr: [u8; 3], thickness: usize) 
     }
 }
 
-/// RGB image `w × h`, its left end at `(x, y)`: printed at 100 %, it measures 10 mm.
-pub fn draw_scale_bar(rgb: &mut [u8], w: usize, h: usize, x: usize, y: usize, px_per_mm: f64) {
-    let len = (10.0 * px_per_mm).round() as usize;
+/// Draws a black check bar `len_mm` long into the interleaved 8-bit image `w × h` (any channel
+/// order), its left end at `(x, y)`, with a tick every millimetre (taller every 5): printed at
+/// 100 %, it measures `len_mm`.
+pub fn draw_scale_bar(rgb: &mut [u8], w: usize, h: usize, [x, y]: [usize; 2], px_per_mm: f64, len_mm: f64) {
+    let len = (len_mm * px_per_mm).round() as usize;
     let thick = px_per_mm.round().max(1.0) as usize;
     let mut ink = |px: usize, py: usize| {
         if px < w && py < h {
@@ -227,7 +229,7 @@ pub fn draw_scale_bar(rgb: &mut [u8], w: usize, h: usize, x: usize, y: usize, px
             ink(px, py);
         }
     }
-    for k in 0..=10 {
+    for k in 0..=len_mm as usize {
         let px = x + (k as f64 * px_per_mm).round() as usize;
         let tick = if k % 5 == 0 { 2 * thick } else { thick };
         for py in y.saturating_sub(tick)..y {

@@ -84,17 +84,33 @@ pub fn resize(frame: &Frame, nw: usize, nh: usize, filter: Interpolation) -> Vec
 /// Separable bilinear or area resampling in f32 with one final rounding (OpenCV's result to
 /// within 1 LSB).
 fn resize_float(frame: &Frame, nw: usize, nh: usize, filter: Interpolation) -> Vec<f32> {
-    let (w, h) = (frame.width, frame.height);
-    let xs = axis_taps(w, nw, filter);
-    let ys = axis_taps(h, nh, filter);
-    let mut mid = vec![0f32; h * nw * 3];
-    for y in 0..h {
+    resample(frame, &axis_taps(frame.width, nw, filter), &axis_taps(frame.height, nh, filter))
+}
+
+/// The window `[x, x + w) × [y, y + h)` (`[x, y, w, h]`) of [`resize`]`(frame, nw, nh,
+/// Bilinear)`, computed alone and bit for bit the same: a page of a sheet too large to hold
+/// whole.
+pub fn resize_window(frame: &Frame, nw: usize, nh: usize, [x, y, w, h]: [usize; 4]) -> Vec<f32> {
+    let xs = axis_taps(frame.width, nw, Interpolation::Bilinear);
+    let ys = axis_taps(frame.height, nh, Interpolation::Bilinear);
+    resample(frame, &xs[x..x + w], &ys[y..y + h])
+}
+
+/// The output samples whose taps are `xs` (columns) and `ys` (rows): the horizontal pass over
+/// the source rows they read, then the vertical, then one rounding. Every resize and window of
+/// one goes through here, so a window is exactly the part of the whole it covers.
+fn resample(frame: &Frame, xs: &[Taps], ys: &[Taps]) -> Vec<f32> {
+    let (w, nw, nh) = (frame.width, xs.len(), ys.len());
+    let lo = ys.iter().map(|t| t.start).min().unwrap_or(0);
+    let hi = ys.iter().map(|t| t.start + t.weights.len()).max().unwrap_or(0);
+    let mut mid = vec![0f32; (hi - lo) * nw * 3];
+    for y in lo..hi {
         let row = &frame.bgr[y * w * 3..(y + 1) * w * 3];
         for (dx, t) in xs.iter().enumerate() {
             for (k, &wt) in t.weights.iter().enumerate() {
                 let p = &row[(t.start + k) * 3..(t.start + k) * 3 + 3];
                 for c in 0..3 {
-                    mid[(y * nw + dx) * 3 + c] += p[c] as f32 * wt as f32;
+                    mid[((y - lo) * nw + dx) * 3 + c] += p[c] as f32 * wt as f32;
                 }
             }
         }
@@ -102,7 +118,8 @@ fn resize_float(frame: &Frame, nw: usize, nh: usize, filter: Interpolation) -> V
     let mut out = vec![0f32; nh * nw * 3];
     for (dy, t) in ys.iter().enumerate() {
         for (k, &wt) in t.weights.iter().enumerate() {
-            let src = &mid[(t.start + k) * nw * 3..(t.start + k + 1) * nw * 3];
+            let r = t.start + k - lo;
+            let src = &mid[r * nw * 3..(r + 1) * nw * 3];
             for (o, s) in out[dy * nw * 3..(dy + 1) * nw * 3].iter_mut().zip(src) {
                 *o += s * wt as f32;
             }
@@ -263,6 +280,22 @@ impl Step for Resampler {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_window_of_a_resize_is_that_part_of_the_whole_bit_for_bit() {
+        let mut rng = crate::rng::Rng::new(7);
+        let frame = Frame { width: 13, height: 9, bgr: (0..13 * 9 * 3).map(|_| (rng.unit() * 255.0) as u8).collect() };
+        for (nw, nh) in [(40, 31), (7, 5), (13, 9)] {
+            let whole = resize(&frame, nw, nh, Interpolation::Bilinear);
+            for [x, y, w, h] in [[0, 0, nw, nh], [3, 2, 4, 3], [nw - 2, nh - 1, 2, 1]] {
+                let win = resize_window(&frame, nw, nh, [x, y, w, h]);
+                for r in 0..h {
+                    let row = &whole[((y + r) * nw + x) * 3..((y + r) * nw + x + w) * 3];
+                    assert_eq!(&win[r * w * 3..(r + 1) * w * 3], row, "{nw}×{nh} window {x},{y} {w}×{h} row {r}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn bilinear_matches_opencv_half_pixel_convention() {
