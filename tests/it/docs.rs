@@ -444,6 +444,10 @@ fn the_quick_start_runs_as_written() {
     assert!(digital.contains("paper-printed"), "{digital}");
     let record = std::fs::read_to_string(out.join("digital-printed/run.toml")).unwrap();
     assert!(record.contains("print = \"true\""), "{record}");
+    // Print and apply: the pieces on A4 pages, where each goes, what to paint by hand.
+    for f in ["pieces/pages/page-1.png", "pieces/pieces.csv", "pieces/by_hand.csv", "pieces/run.toml"] {
+        assert!(out.join(f).is_file(), "{f} missing: {}", common::output_text(&o));
+    }
 }
 
 /// docs/detectors.md's worked example of attacking a described detector, as written: its config

@@ -52,6 +52,7 @@ mod ortgrad_yolov8n;
 #[cfg(feature = "eval")]
 mod ortgrad_yolox;
 mod print_charts;
+mod print_pieces;
 mod project;
 mod render_fca;
 mod render_impala;

@@ -14,6 +14,7 @@ pub mod loss;
 pub mod optimize;
 #[cfg(feature = "optimize")]
 pub mod outputs;
+pub mod pieces;
 pub mod pyramid;
 pub mod setup;
 pub mod smooth;

@@ -13,4 +13,5 @@ pub mod lut;
 pub mod paper;
 #[cfg(feature = "video")]
 pub mod photo;
+pub mod pieces;
 pub mod proof;

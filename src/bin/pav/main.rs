@@ -30,6 +30,7 @@ mod print;
 mod print_calibrate;
 #[cfg(feature = "video")]
 mod print_chart;
+mod print_pieces;
 mod render;
 mod results;
 #[cfg(feature = "optimize")]

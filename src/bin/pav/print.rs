@@ -59,6 +59,17 @@ pub enum Cmd {
         #[arg(long, short = 'o')]
         out: PathBuf,
     },
+    /// The texture as numbered pieces on pages of your paper, at the model's scale.
+    ///
+    /// The config's textured region split into its connected parts (8-connected), each printed
+    /// as the printable sheet has it, with a cut line and its number; parts too large for a
+    /// page are tiled with an overlap, parts too narrow to cut are listed to paint by hand.
+    /// Writes pages/page-N.png at the DPI, pieces.csv (where each piece goes and what it is)
+    /// and by_hand.csv.
+    #[command(after_help = "Examples:
+  pav print pieces --config configs/optimize/paper.toml --texture out/paper/texture.png --paper a4 -o out/pieces
+  pav print pieces --config configs/optimize/paper.toml --texture out/paper/texture.png --paper letter --scale 1:24 -o out/pieces-24")]
+    Pieces(crate::print_pieces::Args),
     /// A printable colour chart: ArUco markers at the corners, patches spanning the RGB cube,
     /// greys and a texture's most frequent colours, each with its ID; the layout and intended
     /// colours beside it.
@@ -79,6 +90,7 @@ pub enum Cmd {
 pub fn run(c: &Cmd) -> Result<()> {
     match c {
         Cmd::Proof { config, texture, printer, out } => proof(config, texture, printer, out),
+        Cmd::Pieces(a) => crate::print_pieces::run(a),
         #[cfg(feature = "video")]
         Cmd::Chart(a) => crate::print_chart::run(a),
         #[cfg(feature = "video")]

@@ -1,0 +1,101 @@
+//! `pav print pieces`: a config's textured region and a texture laid out as numbered pieces on
+//! pages of the user's paper, at the model's scale: page PNGs at the DPI and `pieces.csv`.
+
+use crate::config::OptimizeConfig;
+use crate::export::atlas_side_m;
+use crate::setup::{mesh_and_region, SetupError};
+use pav_core::image::{save_png_dpi, to_u8, Frame, Rgb};
+use pav_print::pieces::{layout, parts, Layout, PiecesError, Sheet, Spec};
+use std::path::{Path, PathBuf};
+
+/// Why the pieces could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum PrintPiecesError {
+    /// The config, its mesh or its region.
+    #[error(transparent)]
+    Setup(#[from] SetupError),
+    /// The layout.
+    #[error(transparent)]
+    Pieces(#[from] PiecesError),
+    /// The texture.
+    #[error("{0}")]
+    Texture(String),
+    /// A file could not be written.
+    #[error("{path}: {source}")]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+}
+
+/// What was written.
+#[derive(Clone, Debug)]
+pub struct PiecesReport {
+    /// The layout.
+    pub layout: Layout,
+    /// The share of the pages' printable area the pieces cover.
+    pub paper_used: f64,
+    /// The page files, in order.
+    pub pages: Vec<PathBuf>,
+    /// `pieces.csv`.
+    pub csv: PathBuf,
+}
+
+/// Lays `texture` out over `cfg`'s region at model scale 1:`scale` with `spec`, into `out`:
+/// `pages/page-N.png` (with their DPI), `pieces.csv`, `by_hand.csv` and a one-row `summary.csv`.
+pub fn write_pieces(
+    cfg: &OptimizeConfig,
+    texture: &Path,
+    scale: f64,
+    spec: Spec,
+    out: &Path,
+) -> Result<PiecesReport, PrintPiecesError> {
+    let tex = Rgb::load(texture).map_err(|e| PrintPiecesError::Texture(format!("{}: {e}", texture.display())))?;
+    if tex.width != tex.height {
+        return Err(PrintPiecesError::Texture(format!(
+            "{} is {}×{}: a UV atlas is square",
+            texture.display(),
+            tex.width,
+            tex.height
+        )));
+    }
+    let n = tex.width;
+    let mut at_size = cfg.clone();
+    at_size.mesh.texture_size = n;
+    let (mesh, region) = mesh_and_region(&at_size)?;
+    let (side_m, _) = atlas_side_m(&mesh, &region, n, cfg.mesh.car_length_m).ok_or(PiecesError::Empty)?;
+    let sheet = Sheet::new(n, side_m * 1000.0 / scale, spec.dpi);
+    // The same 8-bit atlas the printable sheet resamples.
+    let frame = Frame { width: n, height: n, bgr: tex.rgb.iter().map(|v| to_u8(*v)).collect() };
+    let (labels, found) = parts(&region, n);
+    let l = layout(&labels, &found, &frame, sheet, spec)?;
+    let dir = out.join("pages");
+    std::fs::create_dir_all(&dir).map_err(|source| PrintPiecesError::Write { path: dir.clone(), source })?;
+    let mut pages = Vec::new();
+    for page in 1..=l.pages {
+        let path = dir.join(format!("page-{page}.png"));
+        let [w, h] = l.page_px;
+        save_png_dpi(&path, w, h, &l.render(page, &labels, &frame), spec.dpi)
+            .map_err(|e| PrintPiecesError::Write { path: path.clone(), source: std::io::Error::other(e) })?;
+        pages.push(path);
+    }
+    let csv = out.join("pieces.csv");
+    for (path, text) in [(csv.clone(), l.csv()), (out.join("by_hand.csv"), l.by_hand_csv())] {
+        std::fs::write(&path, text).map_err(|source| PrintPiecesError::Write { path: path.clone(), source })?;
+    }
+    let paper_used = l.paper_used(&labels);
+    let summary = out.join("summary.csv");
+    let row = format!(
+        "paper,scale,dpi,atlas_mm,pages,pieces,by_hand,paper_used\n{},{scale},{},{:.1},{},{},{},{paper_used:.4}\n",
+        spec.paper,
+        spec.dpi,
+        l.sheet.atlas_mm,
+        l.pages,
+        l.pieces.len(),
+        l.by_hand.len()
+    );
+    std::fs::write(&summary, row).map_err(|source| PrintPiecesError::Write { path: summary.clone(), source })?;
+    Ok(PiecesReport { layout: l, paper_used, pages, csv })
+}

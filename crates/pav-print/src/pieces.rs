@@ -1,0 +1,628 @@
+//! The texture as pieces a person can cut out and stick on: the textured region's connected
+//! parts in the atlas (8-connected: texels that touch at a corner are one piece, as the paper
+//! would hold together), each at its size on the model, packed onto pages of the user's paper
+//! with its cut line and its number, and two check bars per page.
+//!
+//! Every page pixel of a piece is the pixel of the whole printable sheet at the same DPI
+//! ([`pav_core::image::resize::resize_window`] of the same resize), so the pieces put back at
+//! their atlas positions are the sheet's region, pixel for pixel.
+
+use crate::paper::Paper;
+use pav_core::image::resize::resize_window;
+use pav_core::image::Frame;
+use std::fmt::Write as _;
+
+/// Why the pieces could not be laid out.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum PiecesError {
+    /// A setting out of its range.
+    #[error("{0}")]
+    Invalid(String),
+    /// The region has no texel.
+    #[error("the textured region is empty: nothing to print")]
+    Empty,
+}
+
+/// How the pieces are laid out.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Spec {
+    /// The paper.
+    pub paper: Paper,
+    /// Unprinted border on every side, mm (what the printer cannot reach).
+    pub margin_mm: f64,
+    /// Space between two pieces, mm (room for the scissors).
+    pub gap_mm: f64,
+    /// A part narrower than this, mm, is listed to paint by hand instead of printed.
+    pub min_mm: f64,
+    /// How far two tiles of a part too large for the page overlap, mm.
+    pub overlap_mm: f64,
+    /// Printer resolution.
+    pub dpi: f64,
+}
+
+impl Default for Spec {
+    fn default() -> Self {
+        Spec { paper: Paper::A4, margin_mm: 5.0, gap_mm: 2.0, min_mm: 3.0, overlap_mm: 5.0, dpi: 300.0 }
+    }
+}
+
+/// One connected part of the region in the atlas.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Part {
+    /// Its number in the label image (from 1).
+    pub label: u32,
+    /// Its texels.
+    pub texels: usize,
+    /// Its bounding box in texels: x0, y0, x1, y1 (ends excluded).
+    pub bbox: [usize; 4],
+}
+
+/// The 8-connected parts of the `n × n` region (on where ≥ 0.5), largest first, and the label
+/// of every texel (0: off the region).
+pub fn parts(region: &[f32], n: usize) -> (Vec<u32>, Vec<Part>) {
+    let mut labels = vec![0u32; n * n];
+    let mut out = Vec::new();
+    let mut stack = Vec::new();
+    for start in 0..n * n {
+        if region[start] < 0.5 || labels[start] != 0 {
+            continue;
+        }
+        let label = out.len() as u32 + 1;
+        let (mut texels, mut bbox) = (0, [n, n, 0, 0]);
+        labels[start] = label;
+        stack.push(start);
+        while let Some(i) = stack.pop() {
+            let (x, y) = (i % n, i / n);
+            texels += 1;
+            bbox = [bbox[0].min(x), bbox[1].min(y), bbox[2].max(x + 1), bbox[3].max(y + 1)];
+            for dy in -1i64..=1 {
+                for dx in -1i64..=1 {
+                    let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                    if nx < 0 || ny < 0 || nx >= n as i64 || ny >= n as i64 {
+                        continue;
+                    }
+                    let j = ny as usize * n + nx as usize;
+                    if region[j] >= 0.5 && labels[j] == 0 {
+                        labels[j] = label;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+        out.push(Part { label, texels, bbox });
+    }
+    out.sort_by(|a, b| b.texels.cmp(&a.texels).then(a.label.cmp(&b.label)));
+    (labels, out)
+}
+
+/// The printed atlas: `n` texels across, `side_px` pixels across at the spec's DPI.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sheet {
+    /// Texels across the atlas.
+    pub n: usize,
+    /// The atlas's side on paper, mm.
+    pub atlas_mm: f64,
+    /// The atlas's side in pixels at the DPI (as the printable sheet has it).
+    pub side_px: usize,
+}
+
+impl Sheet {
+    /// The atlas of `n` texels printed `atlas_mm` wide at `dpi`.
+    pub fn new(n: usize, atlas_mm: f64, dpi: f64) -> Sheet {
+        Sheet { n, atlas_mm, side_px: (atlas_mm * dpi / 25.4).round().max(1.0) as usize }
+    }
+
+    /// The texel a sheet pixel shows (the nearest texel whose span holds its centre).
+    fn texel(&self, px: usize) -> usize {
+        ((px as f64 + 0.5) * self.n as f64 / self.side_px as f64).floor().min((self.n - 1) as f64) as usize
+    }
+
+    /// The sheet pixels that show texels `t0..t1`.
+    fn pixels(&self, t0: usize, t1: usize) -> (usize, usize) {
+        let at = |t: usize| ((t as f64 * self.side_px as f64 / self.n as f64) - 0.5).ceil().max(0.0) as usize;
+        (at(t0), at(t1).min(self.side_px))
+    }
+}
+
+/// One piece on a page.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Piece {
+    /// Its number, printed beside it (from 1).
+    pub id: usize,
+    /// The label of the part it is (or is a tile of).
+    pub part: u32,
+    /// Its window of the sheet, pixels: x, y, width, height.
+    pub window: [usize; 4],
+    /// Its tile (column, row) when the part was too large for one page.
+    pub tile: Option<(usize, usize)>,
+    /// The page it is on (from 1).
+    pub page: usize,
+    /// Its top-left corner on the page, pixels.
+    pub at: [usize; 2],
+    /// Turned a quarter clockwise to fit.
+    pub rotated: bool,
+}
+
+impl Piece {
+    /// Its size on the page, pixels (width, height), as placed.
+    pub fn placed(&self) -> [usize; 2] {
+        if self.rotated {
+            [self.window[3], self.window[2]]
+        } else {
+            [self.window[2], self.window[3]]
+        }
+    }
+
+    /// The sheet pixel under page pixel `(u, v)` of the piece (from its top-left corner).
+    fn sheet_pixel(&self, u: usize, v: usize) -> (usize, usize) {
+        let [x, y, _, h] = self.window;
+        if self.rotated {
+            // A quarter turn clockwise: the window's left column becomes the top row.
+            (x + v, y + h - 1 - u)
+        } else {
+            (x + u, y + v)
+        }
+    }
+}
+
+/// A part too small to cut: painted by hand in its mean colour.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ByHand {
+    /// The label of the part.
+    pub part: u32,
+    /// Its mean sRGB colour.
+    pub rgb: [u8; 3],
+    /// Its size on the model, mm.
+    pub size_mm: [f64; 2],
+    /// Where it is in the atlas, as a share of its side (x, y of its centre).
+    pub at: [f64; 2],
+}
+
+/// The pieces on their pages.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Layout {
+    /// The spec it was made with.
+    pub spec: Spec,
+    /// The sheet it cuts.
+    pub sheet: Sheet,
+    /// Every piece.
+    pub pieces: Vec<Piece>,
+    /// The parts to paint by hand.
+    pub by_hand: Vec<ByHand>,
+    /// Pages.
+    pub pages: usize,
+    /// A page's size, pixels.
+    pub page_px: [usize; 2],
+}
+
+/// A piece before packing: its part, its window of the sheet (x, y, w, h) and its tile.
+type Boxed = (u32, [usize; 4], Option<(usize, usize)>);
+
+/// Height of a piece's number below it, and of the page's band of bars, in mm.
+const LABEL_MM: f64 = 4.0;
+const BAND_MM: f64 = 9.0;
+
+/// Lays the parts of `labels` out as pieces on pages.
+pub fn layout(
+    labels: &[u32],
+    parts: &[Part],
+    texture: &Frame,
+    sheet: Sheet,
+    spec: Spec,
+) -> Result<Layout, PiecesError> {
+    let px = spec.dpi / 25.4;
+    let bad = |m: String| Err(PiecesError::Invalid(m));
+    if !(spec.dpi.is_finite() && spec.dpi > 0.0) {
+        return bad(format!("the DPI must be positive, not {}", spec.dpi));
+    }
+    for (name, v) in [
+        ("margin", spec.margin_mm),
+        ("gap", spec.gap_mm),
+        ("overlap", spec.overlap_mm),
+        ("smallest piece", spec.min_mm),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            return bad(format!("the {name} is a length in mm ≥ 0, not {v}"));
+        }
+    }
+    let page_px = [(spec.paper.width_mm * px).round() as usize, (spec.paper.height_mm * px).round() as usize];
+    let usable_mm = [spec.paper.width_mm - 2.0 * spec.margin_mm, spec.paper.height_mm - 2.0 * spec.margin_mm - BAND_MM];
+    // A tile must hold more than its overlaps and its number.
+    let least = 2.0 * spec.overlap_mm + LABEL_MM + spec.gap_mm + 5.0;
+    if usable_mm[0] < least || usable_mm[1] < least {
+        return bad(format!(
+            "the printable area of {:.0} × {:.0} mm (paper less {} mm margins and the bars) holds no piece: a tile needs {least:.0} mm; use larger paper or a smaller margin",
+            usable_mm[0], usable_mm[1], spec.margin_mm
+        ));
+    }
+    if parts.is_empty() {
+        return Err(PiecesError::Empty);
+    }
+    let mm_per_texel = sheet.atlas_mm / sheet.n as f64;
+    let mut by_hand = Vec::new();
+    let mut boxes = Vec::new();
+    let (free_w, free_h) = ((usable_mm[0] * px) as usize, ((usable_mm[1] - LABEL_MM - spec.gap_mm) * px) as usize);
+    for p in parts {
+        let [x0, y0, x1, y1] = p.bbox;
+        let size_mm = [(x1 - x0) as f64 * mm_per_texel, (y1 - y0) as f64 * mm_per_texel];
+        if size_mm[0].min(size_mm[1]) < spec.min_mm {
+            by_hand.push(ByHand {
+                part: p.label,
+                rgb: mean_colour(labels, p, texture, sheet.n),
+                size_mm,
+                at: [(x0 + x1) as f64 / 2.0 / sheet.n as f64, (y0 + y1) as f64 / 2.0 / sheet.n as f64],
+            });
+            continue;
+        }
+        let (sx0, sx1) = sheet.pixels(x0, x1);
+        let (sy0, sy1) = sheet.pixels(y0, y1);
+        let (w, h) = (sx1 - sx0, sy1 - sy0);
+        let fits = |w: usize, h: usize| w <= free_w && h <= free_h;
+        if fits(w, h) || fits(h, w) {
+            boxes.push((p.label, [sx0, sy0, w, h], None));
+            continue;
+        }
+        // Too large for a page either way: tiles that overlap, each fitting upright.
+        let overlap = (spec.overlap_mm * px).round() as usize;
+        let (tw, th) = (free_w.min(w), free_h.min(h));
+        let steps = |len: usize, tile: usize| if len <= tile { 1 } else { (len - overlap).div_ceil(tile - overlap) };
+        let (cols, rows) = (steps(w, tw), steps(h, th));
+        for r in 0..rows {
+            for c in 0..cols {
+                let tx = sx0 + (c * (tw - overlap)).min(w - tw);
+                let ty = sy0 + (r * (th - overlap)).min(h - th);
+                boxes.push((p.label, [tx, ty, tw, th], Some((c + 1, r + 1))));
+            }
+        }
+    }
+    let (pieces, pages) = pack(&boxes, free_w, ((usable_mm[1]) * px) as usize, spec, px);
+    Ok(Layout { spec, sheet, pieces, by_hand, pages, page_px })
+}
+
+/// Shelf packing, tallest first: each piece turned so that it is wider than tall when that
+/// fits, put on the first shelf of the first page with room, else on a new shelf or page.
+fn pack(boxes: &[Boxed], free_w: usize, free_h: usize, spec: Spec, px: f64) -> (Vec<Piece>, usize) {
+    let label = ((LABEL_MM + spec.gap_mm) * px).round() as usize;
+    let gap = (spec.gap_mm * px).round() as usize;
+    let mut order: Vec<(usize, bool)> =
+        boxes.iter().enumerate().map(|(i, (_, [_, _, w, h], _))| (i, h > w && *h <= free_w)).collect();
+    let placed_h = |i: usize, rot: bool| if rot { boxes[i].1[2] } else { boxes[i].1[3] };
+    order.sort_by(|a, b| placed_h(b.0, b.1).cmp(&placed_h(a.0, a.1)).then(a.0.cmp(&b.0)));
+    // Per page: shelves (y, height, x filled).
+    let mut pages: Vec<Vec<(usize, usize, usize)>> = Vec::new();
+    let margin = (spec.margin_mm * px).round() as usize;
+    let mut pieces = Vec::new();
+    for (i, rot) in order {
+        let (part, window, tile) = boxes[i];
+        let (w, h) = if rot { (window[3], window[2]) } else { (window[2], window[3]) };
+        let spot = pages.iter().enumerate().find_map(|(pg, shelves)| {
+            shelves.iter().position(|s| s.2 + w <= free_w && h + label <= s.1).map(|k| (pg, Some(k)))
+        });
+        let (pg, k) = match spot {
+            Some((pg, Some(k))) => (pg, k),
+            _ => {
+                // A new shelf below the last on the first page with room, else a new page.
+                let room = pages.iter().position(|s| s.last().map_or(0, |l| l.0 + l.1) + h + label <= free_h);
+                let pg = room.unwrap_or_else(|| {
+                    pages.push(Vec::new());
+                    pages.len() - 1
+                });
+                let y = pages[pg].last().map_or(0, |l| l.0 + l.1);
+                pages[pg].push((y, h + label, 0));
+                (pg, pages[pg].len() - 1)
+            }
+        };
+        let shelf = &mut pages[pg][k];
+        pieces.push(Piece {
+            id: 0,
+            part,
+            window,
+            tile,
+            page: pg + 1,
+            at: [margin + shelf.2, margin + shelf.0],
+            rotated: rot,
+        });
+        shelf.2 += w + gap;
+    }
+    pieces.sort_by_key(|p| (p.page, p.at[1], p.at[0]));
+    for (k, p) in pieces.iter_mut().enumerate() {
+        p.id = k + 1;
+    }
+    (pieces, pages.len())
+}
+
+/// The mean sRGB colour of a part's texels.
+fn mean_colour(labels: &[u32], p: &Part, texture: &Frame, n: usize) -> [u8; 3] {
+    let mut sum = [0u64; 3];
+    for y in p.bbox[1]..p.bbox[3] {
+        for x in p.bbox[0]..p.bbox[2] {
+            if labels[y * n + x] == p.label {
+                for (c, total) in sum.iter_mut().enumerate() {
+                    *total += texture.bgr[(y * n + x) * 3 + c] as u64;
+                }
+            }
+        }
+    }
+    sum.map(|s| (s as f64 / p.texels.max(1) as f64).round() as u8)
+}
+
+impl Layout {
+    /// Whether page pixel `(u, v)` of `piece` shows its part (the sheet pixel's texel is in it).
+    fn shows(&self, piece: &Piece, labels: &[u32], u: usize, v: usize) -> bool {
+        let (sx, sy) = piece.sheet_pixel(u, v);
+        labels[self.sheet.texel(sy) * self.sheet.n + self.sheet.texel(sx)] == piece.part
+    }
+
+    /// Page `page` (from 1) as 8-bit RGB: every piece's pixels as the sheet has them, a grey
+    /// cut line just outside each, its number below it, the page number and the 10 mm and
+    /// 50 mm bars along the bottom margin.
+    pub fn render(&self, page: usize, labels: &[u32], texture: &Frame) -> Vec<u8> {
+        let [pw, ph] = self.page_px;
+        let mut rgb = vec![255u8; pw * ph * 3];
+        let px = self.spec.dpi / 25.4;
+        for piece in self.pieces.iter().filter(|p| p.page == page) {
+            let [w, h] = piece.placed();
+            let win = resize_window(texture, self.sheet.side_px, self.sheet.side_px, piece.window);
+            let ww = piece.window[2];
+            let inside = |u: i64, v: i64| {
+                u >= 0
+                    && v >= 0
+                    && (u as usize) < w
+                    && (v as usize) < h
+                    && self.shows(piece, labels, u as usize, v as usize)
+            };
+            for v in 0..h {
+                for u in 0..w {
+                    let (sx, sy) = piece.sheet_pixel(u, v);
+                    let (pu, pv) = (piece.at[0] + u, piece.at[1] + v);
+                    if inside(u as i64, v as i64) {
+                        let s = ((sy - piece.window[1]) * ww + (sx - piece.window[0])) * 3;
+                        for c in 0..3 {
+                            rgb[(pv * pw + pu) * 3 + c] = win[s + c] as u8;
+                        }
+                    }
+                }
+            }
+            // The cut line: the pixels around the piece that are not on it.
+            for v in -1..=h as i64 {
+                for u in -1..=w as i64 {
+                    if inside(u, v) {
+                        continue;
+                    }
+                    let near = (-1..=1).any(|dv| (-1..=1).any(|du| inside(u + du, v + dv)));
+                    let (pu, pv) = (piece.at[0] as i64 + u, piece.at[1] as i64 + v);
+                    if near && pu >= 0 && pv >= 0 && (pu as usize) < pw && (pv as usize) < ph {
+                        rgb[(pv as usize * pw + pu as usize) * 3..(pv as usize * pw + pu as usize) * 3 + 3].fill(96);
+                    }
+                }
+            }
+            let digit_mm = 2.5;
+            draw_number(&mut rgb, pw, [piece.at[0], piece.at[1] + h + (0.8 * px) as usize], piece.id, digit_mm * px);
+        }
+        // The band along the bottom: the page number, then the 10 mm and 50 mm bars.
+        let margin = (self.spec.margin_mm * px).round() as usize;
+        let band_y = ph - margin - (BAND_MM * px) as usize;
+        draw_number(&mut rgb, pw, [margin, band_y + (2.0 * px) as usize], page, 3.0 * px);
+        for (k, len_mm) in [10.0, 50.0].into_iter().enumerate() {
+            let x = margin + ((15.0 + k as f64 * 20.0) * px) as usize;
+            pav_core::image::draw_scale_bar(&mut rgb, pw, ph, [x, band_y + (5.0 * px) as usize], px, len_mm);
+        }
+        rgb
+    }
+
+    /// `pieces.csv`: a row per piece: its page, its place and size on the page in mm (and in
+    /// pixels at the DPI), whether it is turned, its part and tile, and the window of the
+    /// printable sheet it is, in pixels, so that it can be put back exactly.
+    pub fn csv(&self) -> String {
+        let mm = |p: usize| p as f64 * 25.4 / self.spec.dpi;
+        let mut s = String::from(
+            "piece,page,x_mm,y_mm,width_mm,height_mm,rotated,part,tile,page_x_px,page_y_px,sheet_x_px,sheet_y_px,sheet_w_px,sheet_h_px\n",
+        );
+        for p in &self.pieces {
+            let [w, h] = p.placed();
+            let tile = p.tile.map_or(String::new(), |(c, r)| format!("{c}x{r}"));
+            let [sx, sy, sw, sh] = p.window;
+            let _ = writeln!(
+                s,
+                "{},{},{:.1},{:.1},{:.1},{:.1},{},{},{tile},{},{},{sx},{sy},{sw},{sh}",
+                p.id,
+                p.page,
+                mm(p.at[0]),
+                mm(p.at[1]),
+                mm(w),
+                mm(h),
+                p.rotated,
+                p.part,
+                p.at[0],
+                p.at[1]
+            );
+        }
+        s
+    }
+
+    /// `by_hand.csv`: the parts too small to cut, each with its size on the model, its mean
+    /// colour and where its centre is in the atlas (shares of its side).
+    pub fn by_hand_csv(&self) -> String {
+        let mut s = String::from("part,width_mm,height_mm,colour,atlas_x,atlas_y\n");
+        for b in &self.by_hand {
+            let [r, g, bl] = b.rgb;
+            let _ = writeln!(
+                s,
+                "{},{:.1},{:.1},#{r:02x}{g:02x}{bl:02x},{:.4},{:.4}",
+                b.part, b.size_mm[0], b.size_mm[1], b.at[0], b.at[1]
+            );
+        }
+        s
+    }
+
+    /// The share of the pages' printable area the pieces cover.
+    pub fn paper_used(&self, labels: &[u32]) -> f64 {
+        let mut on = 0usize;
+        for p in &self.pieces {
+            let [w, h] = p.placed();
+            on += (0..h).map(|v| (0..w).filter(|&u| self.shows(p, labels, u, v)).count()).sum::<usize>();
+        }
+        let px = self.spec.dpi / 25.4;
+        let area = (self.spec.paper.width_mm - 2.0 * self.spec.margin_mm)
+            * (self.spec.paper.height_mm - 2.0 * self.spec.margin_mm);
+        on as f64 / (area * px * px * self.pages.max(1) as f64)
+    }
+}
+
+/// Seven-segment digits: which of the segments a, b, c, d, e, f, g each lights.
+const SEGMENTS: [u8; 10] = [0x3f, 0x06, 0x5b, 0x4f, 0x66, 0x6d, 0x7d, 0x07, 0x7f, 0x6f];
+
+/// Draws `number` in seven-segment digits `height` pixels tall, top-left at `at`.
+fn draw_number(rgb: &mut [u8], w: usize, at: [usize; 2], number: usize, height: f64) {
+    let (dh, dw) = (height.max(7.0) as usize, (height * 0.55).max(4.0) as usize);
+    let t = (height / 8.0).max(1.0) as usize;
+    let h = rgb.len() / 3 / w;
+    let mut fill = |x0: usize, y0: usize, x1: usize, y1: usize| {
+        for y in y0..y1.min(h) {
+            for x in x0..x1.min(w) {
+                rgb[(y * w + x) * 3..(y * w + x) * 3 + 3].fill(0);
+            }
+        }
+    };
+    for (k, ch) in number.to_string().bytes().enumerate() {
+        let seg = SEGMENTS[(ch - b'0') as usize];
+        let (x, y) = (at[0] + k * (dw + 2 * t), at[1]);
+        let mid = y + dh / 2;
+        let lit = |s: u8| seg & (1 << s) != 0;
+        if lit(0) {
+            fill(x, y, x + dw, y + t);
+        }
+        if lit(1) {
+            fill(x + dw - t, y, x + dw, mid + t);
+        }
+        if lit(2) {
+            fill(x + dw - t, mid, x + dw, y + dh);
+        }
+        if lit(3) {
+            fill(x, y + dh - t, x + dw, y + dh);
+        }
+        if lit(4) {
+            fill(x, mid, x + t, y + dh);
+        }
+        if lit(5) {
+            fill(x, y, x + t, mid + t);
+        }
+        if lit(6) {
+            fill(x, mid, x + dw, mid + t);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 16-texel atlas with three parts: a 6×5 block, a diagonal pair (one part by its
+    /// corner) and a column one texel wide, 8 long.
+    fn atlas() -> (Vec<f32>, Frame) {
+        let n = 16;
+        let mut region = vec![0.0; n * n];
+        for y in 2..7 {
+            for x in 1..7 {
+                region[y * n + x] = 1.0;
+            }
+        }
+        region[10 * n + 10] = 1.0;
+        region[11 * n + 11] = 1.0;
+        for y in 3..11 {
+            region[y * n + 14] = 1.0;
+        }
+        let bgr = (0..n * n * 3).map(|i| ((i * 37) % 251) as u8).collect();
+        (region, Frame { width: n, height: n, bgr })
+    }
+
+    #[test]
+    fn parts_are_eight_connected_and_largest_first() {
+        let (region, _) = atlas();
+        let (labels, p) = parts(&region, 16);
+        assert_eq!(p.iter().map(|p| p.texels).collect::<Vec<_>>(), [30, 8, 2]);
+        assert_eq!(p[0].bbox, [1, 2, 7, 7]);
+        assert_eq!(p[2].bbox, [10, 10, 12, 12], "touching at a corner is one part");
+        assert_eq!(labels.iter().filter(|&&l| l != 0).count(), 40);
+    }
+
+    #[test]
+    fn pieces_put_back_are_the_sheet_and_never_overlap_or_leave_the_printable_area() {
+        let (region, tex) = atlas();
+        let (labels, p) = parts(&region, 16);
+        // 16 texels on 160 mm: 10 mm a texel; the column is 10 mm wide, so printed, and every
+        // part fits the page whole.
+        let sheet = Sheet::new(16, 160.0, 25.4);
+        let spec = Spec { paper: Paper { width_mm: 100.0, height_mm: 120.0 }, dpi: 25.4, ..Spec::default() };
+        let l = layout(&labels, &p, &tex, sheet, spec).unwrap();
+        assert!(l.by_hand.is_empty() && l.pieces.iter().all(|p| p.tile.is_none()), "{:?}", l.pieces);
+        let whole = pav_core::image::resize::resize(&tex, 160, 160, pav_core::image::resize::Interpolation::Bilinear);
+        let pages: Vec<Vec<u8>> = (1..=l.pages).map(|pg| l.render(pg, &labels, &tex)).collect();
+        let [pw, _] = l.page_px;
+        let mut covered = vec![0u32; 160 * 160];
+        for piece in &l.pieces {
+            let [w, h] = piece.placed();
+            assert!(piece.at[0] >= 5 && piece.at[0] + w <= 95 && piece.at[1] >= 5, "{piece:?}");
+            for v in 0..h {
+                for u in 0..w {
+                    if !l.shows(piece, &labels, u, v) {
+                        continue;
+                    }
+                    let (sx, sy) = piece.sheet_pixel(u, v);
+                    covered[sy * 160 + sx] += 1;
+                    let page = &pages[piece.page - 1];
+                    let at = ((piece.at[1] + v) * pw + piece.at[0] + u) * 3;
+                    assert_eq!(
+                        &page[at..at + 3],
+                        whole[(sy * 160 + sx) * 3..][..3].iter().map(|&x| x as u8).collect::<Vec<_>>().as_slice()
+                    );
+                }
+            }
+        }
+        // Every sheet pixel of the region is on exactly one piece.
+        for (i, c) in covered.iter().enumerate() {
+            let on = labels[sheet.texel(i / 160) * 16 + sheet.texel(i % 160)] != 0;
+            assert_eq!(*c, on as u32, "sheet pixel {i}");
+        }
+        // No two pieces overlap on a page.
+        for a in &l.pieces {
+            for b in l.pieces.iter().filter(|b| b.id > a.id && b.page == a.page) {
+                let ([aw, ah], [bw, bh]) = (a.placed(), b.placed());
+                let apart = a.at[0] + aw <= b.at[0]
+                    || b.at[0] + bw <= a.at[0]
+                    || a.at[1] + ah <= b.at[1]
+                    || b.at[1] + bh <= a.at[1];
+                assert!(apart, "{a:?} {b:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn slivers_go_to_paint_by_hand_and_a_part_larger_than_the_page_is_tiled() {
+        let (region, tex) = atlas();
+        let (labels, p) = parts(&region, 16);
+        // 2 mm a texel: the one-texel column is a 2 mm sliver, the pair 4 mm.
+        let l = layout(&labels, &p, &tex, Sheet::new(16, 32.0, 254.0), Spec { dpi: 254.0, ..Spec::default() }).unwrap();
+        assert_eq!(l.by_hand.len(), 1);
+        assert_eq!(l.by_hand[0].size_mm, [2.0, 16.0]);
+        assert!(l.by_hand_csv().lines().nth(1).unwrap().contains(",2.0,16.0,#"), "{}", l.by_hand_csv());
+        // The 6×5 block at 100 mm a texel (600 × 500 mm) needs tiles on A4.
+        let big = layout(&labels, &p[..1], &tex, Sheet::new(16, 1600.0, 25.4), Spec { dpi: 25.4, ..Spec::default() })
+            .unwrap();
+        assert!(big.pieces.len() >= 6 && big.pieces.iter().all(|t| t.tile.is_some()), "{:?}", big.pieces);
+    }
+
+    #[test]
+    fn bad_settings_are_refused_with_their_fix() {
+        let (region, tex) = atlas();
+        let (labels, p) = parts(&region, 16);
+        let sheet = Sheet::new(16, 160.0, 300.0);
+        let tiny = Spec { paper: Paper { width_mm: 30.0, height_mm: 30.0 }, ..Spec::default() };
+        assert!(
+            matches!(layout(&labels, &p, &tex, sheet, tiny), Err(PiecesError::Invalid(m)) if m.contains("larger paper"))
+        );
+        let zero = Spec { dpi: 0.0, ..Spec::default() };
+        assert!(matches!(layout(&labels, &p, &tex, sheet, zero), Err(PiecesError::Invalid(m)) if m.contains("DPI")));
+        assert_eq!(layout(&labels, &[], &tex, sheet, Spec::default()), Err(PiecesError::Empty));
+    }
+}

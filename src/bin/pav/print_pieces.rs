@@ -1,0 +1,88 @@
+//! `pav print pieces`.
+
+use anyhow::{Context, Result};
+use pav::attack::config::OptimizeConfig;
+use pav::attack::pieces::write_pieces;
+use pav::print::paper::{parse_scale, Paper};
+use pav::print::pieces::Spec;
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// The optimize config whose region the texture covers (its mesh, region and `mesh.parts`).
+    #[arg(long, value_parser = pav::data::arg_path)]
+    config: PathBuf,
+    /// The texture: an optimized texture.png, or any square atlas of the config's mesh.
+    #[arg(long, value_parser = pav::data::arg_path)]
+    texture: PathBuf,
+    /// Paper: a4, a3, a5, letter, legal, tabloid, or WIDTHxHEIGHT in millimetres.
+    #[arg(long, default_value = "a4")]
+    paper: Paper,
+    /// Model scale: `20` or `1:20`.
+    #[arg(long, default_value = "20", value_parser = parse_scale)]
+    scale: f64,
+    /// Printer resolution of the pages.
+    #[arg(long, default_value_t = 300.0)]
+    dpi: f64,
+    /// Unprinted border on every side of a page, mm.
+    #[arg(long, default_value_t = 5.0)]
+    margin: f64,
+    /// A part narrower than this, mm, is listed to paint by hand in its colour instead of printed.
+    #[arg(long, default_value_t = 3.0)]
+    min_piece: f64,
+    /// How far the tiles of a part too large for one page overlap, mm.
+    #[arg(long, default_value_t = 5.0)]
+    overlap: f64,
+    /// Output folder: pages/page-N.png, pieces.csv, by_hand.csv, summary.csv and run.toml.
+    #[arg(long, short = 'o', default_value = "out/pieces")]
+    out: PathBuf,
+}
+
+pub fn run(a: &Args) -> Result<()> {
+    let cfg = OptimizeConfig::load(&a.config)?;
+    let spec = Spec {
+        paper: a.paper,
+        margin_mm: a.margin,
+        min_mm: a.min_piece,
+        overlap_mm: a.overlap,
+        dpi: a.dpi,
+        ..Spec::default()
+    };
+    let r = write_pieces(&cfg, &a.texture, a.scale, spec, &a.out)?;
+    let l = &r.layout;
+    let mut record = pav::provenance::Run::start()
+        .config(&a.config)
+        // What the layout reads: the mesh (the atlas's size on the car), the region, the texture.
+        .inputs([cfg.mesh.obj.as_path(), cfg.mesh.region.as_path(), a.texture.as_path()])
+        .setting("paper", a.paper)
+        .setting("scale", a.scale)
+        .setting("dpi", a.dpi)
+        .setting("margin_mm", a.margin)
+        .setting("min_piece_mm", a.min_piece)
+        .setting("overlap_mm", a.overlap);
+    record.result("pages", l.pages);
+    record.result("pieces", l.pieces.len());
+    record.result("by_hand", l.by_hand.len());
+    record.result("paper_used", format!("{:.4}", r.paper_used));
+    let path = a.out.join(pav::provenance::FILE);
+    record.write(&path).with_context(|| format!("writing {}", path.display()))?;
+    outln!(
+        "{} pieces on {} {} pages at 1:{} (the atlas {:.0} mm across; {:.0} % of the printable paper used)",
+        l.pieces.len(),
+        l.pages,
+        a.paper,
+        a.scale,
+        l.sheet.atlas_mm,
+        100.0 * r.paper_used
+    );
+    if !l.by_hand.is_empty() {
+        outln!(
+            "{} parts narrower than {} mm to paint by hand in their colour (by_hand.csv)",
+            l.by_hand.len(),
+            a.min_piece
+        );
+    }
+    outln!("print each page at 100 % (no fit to page) and check its 10 mm and 50 mm bars");
+    outln!("pages   {}\npieces  {}", a.out.join("pages").display(), r.csv.display());
+    Ok(())
+}
