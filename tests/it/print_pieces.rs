@@ -129,4 +129,6 @@ fn bad_pieces_input_is_refused_before_anything_is_written() {
     assert!(run(&[&tex[..], &["--dpi", "0"]].concat()).contains("DPI must be positive"));
     assert!(run(&[&tex[..], &["--scale", "1:0"]].concat()).contains("no model scale"));
     assert!(run(&["--texture", "docs/quickstart_polar.png"]).contains("a UV atlas is square"));
+    // A model 160 mm long is no e-tron at any common scale (1:24 would be 204 mm).
+    assert!(run(&[&tex[..], &["--model-length", "160"]].concat()).contains("probably another car"));
 }

@@ -72,6 +72,30 @@ pub fn parse_scale(s: &str) -> Result<f64, String> {
     }
 }
 
+/// The model scales die-cast and kit cars are sold at: 1:18, 1:20, 1:24, 1:43.
+pub const COMMON_SCALES: [f64; 4] = [18.0, 20.0, 24.0, 43.0];
+
+/// The scale of a model measured `model_mm` long (bumper to bumper) of a car `car_m` long.
+/// A length more than 15 % from what the nearest common scale gives is refused with both
+/// numbers: the model in hand is probably another car.
+pub fn scale_from_length(car_m: f64, model_mm: f64) -> Result<f64, String> {
+    if !(model_mm.is_finite() && model_mm > 0.0) {
+        return Err(format!("a model's length is a positive number of millimetres, not {model_mm}"));
+    }
+    let scale = car_m * 1000.0 / model_mm;
+    let (nearest, expect) = COMMON_SCALES
+        .iter()
+        .map(|&s| (s, car_m * 1000.0 / s))
+        .min_by(|a, b| (a.1 - model_mm).abs().total_cmp(&(b.1 - model_mm).abs()))
+        .expect("common scales");
+    if (model_mm - expect).abs() > 0.15 * expect {
+        return Err(format!(
+            "a model {model_mm:.0} mm long would be 1:{scale:.1} of this {car_m:.2} m car, but at the nearest common scale, 1:{nearest:.0}, the car is {expect:.0} mm long: more than 15 % apart, so the model is probably another car (measure it bumper to bumper, or give --scale)"
+        ));
+    }
+    Ok(scale)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -96,5 +120,16 @@ mod tests {
         for bad in ["1:0", "0.5", "1/20", "x", "2:20"] {
             assert!(parse_scale(bad).is_err(), "{bad}");
         }
+    }
+
+    #[test]
+    fn a_measured_model_sets_the_scale_unless_it_is_another_car() {
+        // The e-tron is 4.90 m: 245 mm at 1:20.
+        let s = scale_from_length(4.90, 250.0).unwrap();
+        assert!((s - 19.6).abs() < 1e-9, "{s}");
+        assert!((scale_from_length(4.90, 114.0).unwrap() - 4900.0 / 114.0).abs() < 1e-9, "1:43 is common too");
+        let e = scale_from_length(4.90, 160.0).unwrap_err();
+        assert!(e.contains("1:24") && e.contains("204 mm") && e.contains("another car"), "{e}");
+        assert!(scale_from_length(4.90, 0.0).is_err() && scale_from_length(4.90, f64::NAN).is_err());
     }
 }

@@ -3,7 +3,7 @@
 use anyhow::{Context, Result};
 use pav::attack::config::OptimizeConfig;
 use pav::attack::pieces::write_pieces;
-use pav::print::paper::{parse_scale, Paper};
+use pav::print::paper::{parse_scale, scale_from_length, Paper};
 use pav::print::pieces::Spec;
 use std::path::PathBuf;
 
@@ -21,6 +21,10 @@ pub struct Args {
     /// Model scale: `20` or `1:20`.
     #[arg(long, default_value = "20", value_parser = parse_scale)]
     scale: f64,
+    /// The model's length as measured bumper to bumper, mm: sets the scale instead of --scale
+    /// (refused when no common scale is within 15 % of it: probably another car).
+    #[arg(long, value_name = "MM", conflicts_with = "scale")]
+    model_length: Option<f64>,
     /// Printer resolution of the pages.
     #[arg(long, default_value_t = 300.0)]
     dpi: f64,
@@ -48,14 +52,21 @@ pub fn run(a: &Args) -> Result<()> {
         dpi: a.dpi,
         ..Spec::default()
     };
-    let r = write_pieces(&cfg, &a.texture, a.scale, spec, &a.out)?;
+    let car_m = cfg.mesh.car_length_m;
+    let scale = match a.model_length {
+        Some(mm) => scale_from_length(car_m, mm).map_err(anyhow::Error::msg)?,
+        None => a.scale,
+    };
+    outln!("scale 1:{scale:.2}: the {car_m:.2} m car is {:.0} mm long on the model", car_m * 1000.0 / scale);
+    let r = write_pieces(&cfg, &a.texture, scale, spec, &a.out)?;
     let l = &r.layout;
     let mut record = pav::provenance::Run::start()
         .config(&a.config)
         // What the layout reads: the mesh (the atlas's size on the car), the region, the texture.
         .inputs([cfg.mesh.obj.as_path(), cfg.mesh.region.as_path(), a.texture.as_path()])
         .setting("paper", a.paper)
-        .setting("scale", a.scale)
+        .setting("scale", scale)
+        .setting("model_length_mm", a.model_length.map_or("not given".into(), |m| m.to_string()))
         .setting("dpi", a.dpi)
         .setting("margin_mm", a.margin)
         .setting("min_piece_mm", a.min_piece)
@@ -71,7 +82,7 @@ pub fn run(a: &Args) -> Result<()> {
         l.pieces.len(),
         l.pages,
         a.paper,
-        a.scale,
+        format!("{scale:.2}").trim_end_matches('0').trim_end_matches('.'),
         l.sheet.atlas_mm,
         100.0 * r.paper_used
     );
