@@ -32,6 +32,7 @@ fn the_doctor_finds_every_piece_the_set_up_installs_and_names_each_hidden_one_wi
         assert!(line(&text, piece).starts_with("ok "), "{piece}: {text}");
     }
     assert!(line(&text, "detectors").contains("4 load"), "{text}");
+    assert!(line(&text, "Blender").contains("Blender 3.4") && line(&text, "Blender").contains("(Cycles,"), "{text}");
     assert!(text.contains("the main job can run"), "{text}");
 
     // No ONNX Runtime: the main job cannot run, and the fix says where the library goes.

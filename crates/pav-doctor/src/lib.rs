@@ -157,7 +157,24 @@ pub fn ffmpeg() -> Check {
 pub fn blender() -> Check {
     const PIECE: &str = "Blender";
     match pav_scene::blender::Blender::find() {
-        Ok(b) => Check::ok(PIECE, b.version().unwrap_or_else(|| "found".into()), false),
+        Ok(b) => {
+            let version = b.version().unwrap_or_else(|| "found".into());
+            match b.has_cycles() {
+                Some(true) => Check::ok(PIECE, format!("{version} (Cycles, on the CPU as pav's views render)"), false),
+                Some(false) => Check::missing(
+                    PIECE,
+                    format!("{version} without Cycles"),
+                    "apt-get install blender (Debian's build has Cycles), or set PAV_BLENDER to one that has".into(),
+                    false,
+                ),
+                None => Check::missing(
+                    PIECE,
+                    format!("{version}, but its Python did not answer"),
+                    "run `blender -b --factory-startup` to see why, or set PAV_BLENDER to another Blender".into(),
+                    false,
+                ),
+            }
+        }
         Err(e) => Check::missing(
             PIECE,
             e.to_string(),

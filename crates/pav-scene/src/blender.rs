@@ -208,6 +208,20 @@ impl Blender {
         pav_run::provenance::tool_version(&self.0.display().to_string(), &["--version"])
     }
 
+    /// Whether this Blender was built with Cycles, the engine pav's views render with (on the
+    /// CPU: the views script sets it), as Blender's Python reports it; `None` when Blender does
+    /// not answer.
+    pub fn has_cycles(&self) -> Option<bool> {
+        let expr = "import bpy; print('PAV-CYCLES', bpy.app.build_options.cycles)";
+        let out = Command::new(&self.0)
+            .args(["-b", "--factory-startup", "-noaudio", "--python-expr", expr])
+            .stderr(Stdio::null())
+            .output()
+            .ok()?;
+        let text = String::from_utf8_lossy(&out.stdout);
+        text.lines().find_map(|l| l.strip_prefix("PAV-CYCLES ")).map(|v| v.trim() == "True")
+    }
+
     /// Runs `job` in one Blender process (files in `work`); `done(name, seconds)` is called as
     /// each view is written.
     pub fn run(&self, job: &Job, work: &Path, mut done: impl FnMut(&str, f64)) -> Result<(), BlenderError> {
