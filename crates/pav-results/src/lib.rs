@@ -719,50 +719,67 @@ fn shown_command(words: &[String]) -> String {
     w.join(" ")
 }
 
-const OPEN: &str = "<!-- results:";
-const CLOSE: &str = "<!-- /results:";
-
-/// Where the next marker that begins a line starts in `text` (a marker quoted inside a line is
-/// text, not a marker).
-fn next_marker(text: &str) -> Option<usize> {
+/// Where the next `<!-- KIND:` marker (`open`) that begins a line starts in `text` (a marker
+/// quoted inside a line is text, not a marker).
+fn next_marker(text: &str, open: &str) -> Option<usize> {
     let mut from = 0;
-    while let Some(k) = text[from..].find(OPEN) {
+    while let Some(k) = text[from..].find(open) {
         let at = from + k;
         if at == 0 || text.as_bytes()[at - 1] == b'\n' {
             return Some(at);
         }
-        from = at + OPEN.len();
+        from = at + open.len();
     }
     None
+}
+
+/// `text` with the body of every `kind` block regenerated: between `<!-- KIND:SPEC -->` and
+/// `<!-- /KIND:NAME -->`, each on a line of its own (NAME is the spec's first word), the text
+/// `body(spec)` gives. Results tables and verdicts are both such blocks.
+fn regenerate_blocks(
+    text: &str,
+    kind: &str,
+    doc: &str,
+    body: impl Fn(&str) -> Result<String, String>,
+) -> Result<String, ResultsError> {
+    let bad = |msg: String| ResultsError::Marker { doc: doc.into(), msg };
+    let (open, close) = (format!("<!-- {kind}:"), format!("<!-- /{kind}:"));
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(at) = next_marker(rest, &open) {
+        let after = &rest[at + open.len()..];
+        let end = after.find("-->").ok_or_else(|| bad(format!("an unclosed `{open}` marker")))?;
+        let spec = after[..end].trim();
+        let name = spec.split_whitespace().next().unwrap_or("");
+        let closing = format!("\n{close}{name} -->");
+        let body_start = at + open.len() + end + 3;
+        let close_at = 1
+            + body_start
+            + rest[body_start..]
+                .find(&closing)
+                .ok_or_else(|| bad(format!("`{open}{spec} -->` has no `{}` on a line of its own", closing.trim())))?;
+        out.push_str(&rest[..body_start]);
+        out.push('\n');
+        out.push_str(&body(spec).map_err(bad)?);
+        rest = &rest[close_at..];
+    }
+    out.push_str(rest);
+    Ok(out)
+}
+
+/// Whether `text` holds a block of any kind [`generate`] regenerates.
+fn has_blocks(text: &str) -> bool {
+    ["results", verdict::KIND].iter().any(|k| next_marker(text, &format!("<!-- {k}:")).is_some())
 }
 
 /// `text` with every results block (markers on lines of their own) and every verdict
 /// ([`verdict`]) regenerated from `root`'s results files.
 pub fn generate(text: &str, doc: &str, root: &Path) -> Result<String, ResultsError> {
-    let mut out = String::with_capacity(text.len());
-    let mut rest = text;
-    while let Some(at) = next_marker(rest) {
-        let after = &rest[at + OPEN.len()..];
-        let end = after
-            .find("-->")
-            .ok_or_else(|| ResultsError::Marker { doc: doc.into(), msg: "an unclosed marker".into() })?;
-        let name = after[..end].trim().to_string();
-        let close = format!("\n{CLOSE}{name} -->");
-        let body_start = at + OPEN.len() + end + 3;
-        let close_at =
-            1 + rest[body_start..].find(&close).ok_or_else(|| ResultsError::Marker {
-                doc: doc.into(),
-                msg: format!("`{OPEN}{name} -->` has no `{}` on a line of its own", close.trim()),
-            })? + body_start;
-        let file =
-            ResultFile::load(root, &name).map_err(|e| ResultsError::Marker { doc: doc.into(), msg: e.to_string() })?;
-        out.push_str(&rest[..body_start]);
-        out.push('\n');
-        out.push_str(&file.render(&name, root));
-        rest = &rest[close_at..];
-    }
-    out.push_str(rest);
-    verdict::generate(&out, doc, root)
+    let tables = regenerate_blocks(text, "results", doc, |name| {
+        let file = ResultFile::load(root, name).map_err(|e| e.to_string())?;
+        Ok(file.render(name, root))
+    })?;
+    regenerate_blocks(&tables, verdict::KIND, doc, |spec| verdict::block(spec, root))
 }
 
 /// The documents under `root` a user reads, where results blocks may stand: README.md, then every
@@ -792,7 +809,7 @@ pub fn regenerate(root: &Path, write: bool) -> Result<Vec<(PathBuf, String)>, Re
     let mut changed = Vec::new();
     for p in documents(root) {
         let text = std::fs::read_to_string(&p).map_err(io(&p))?;
-        if next_marker(&text).is_none() && !text.contains("<!-- verdict:") {
+        if !has_blocks(&text) {
             continue;
         }
         let doc = p.strip_prefix(root).unwrap_or(&p).display().to_string();

@@ -4,11 +4,11 @@
 //! into ahead (the interval below zero: the trained texture hides the car better), level
 //! (across zero) and behind (above zero).
 
-use super::{cell_interval, ResultFile, ResultsError};
+use super::{cell_interval, ResultFile};
 use std::path::Path;
 
-const OPEN: &str = "<!-- verdict:";
-const CLOSE: &str = "<!-- /verdict:";
+/// The marker kind: `<!-- verdict:NAME against=LABEL -->`.
+pub const KIND: &str = "verdict";
 
 /// Rows of one table sorted by where their interval lies: (ahead, level, behind), each the
 /// first column's values.
@@ -53,32 +53,14 @@ pub fn sentence(file: &ResultFile, name: &str, against: &str) -> Result<String, 
     ))
 }
 
-/// `text` with every verdict regenerated from `root`'s results files.
-pub fn generate(text: &str, doc: &str, root: &Path) -> Result<String, ResultsError> {
-    let bad = |msg: String| ResultsError::Marker { doc: doc.into(), msg };
-    let mut out = String::with_capacity(text.len());
-    let mut rest = text;
-    while let Some(at) = rest.find(OPEN).filter(|&a| a == 0 || rest.as_bytes()[a - 1] == b'\n') {
-        let after = &rest[at + OPEN.len()..];
-        let end = after.find("-->").ok_or_else(|| bad("an unclosed verdict marker".into()))?;
-        let spec = after[..end].trim();
-        let (name, against) =
-            spec.split_once(" against=").ok_or_else(|| bad(format!("`{OPEN}{spec} -->` names no `against=LABEL`")))?;
-        let close = format!("\n{CLOSE}{name} -->");
-        let body = at + OPEN.len() + end + 3;
-        let close_at = 1
-            + body
-            + rest[body..].find(&close).ok_or_else(|| bad(format!("`{OPEN}{spec} -->` has no `{}`", close.trim())))?;
-        let file = ResultFile::load(root, name).map_err(|e| bad(e.to_string()))?;
-        let line = sentence(&file, name, against.trim()).map_err(|e| bad(format!("results/{name}.json: {e}")))?;
-        out.push_str(&rest[..body]);
-        out.push('\n');
-        out.push_str(&line);
-        out.push('\n');
-        rest = &rest[close_at..];
-    }
-    out.push_str(rest);
-    Ok(out)
+/// The body of a verdict block whose marker says `spec` (`NAME against=LABEL`): its sentence,
+/// on a line of its own.
+pub fn block(spec: &str, root: &Path) -> Result<String, String> {
+    let (name, against) =
+        spec.split_once(" against=").ok_or_else(|| format!("`<!-- {KIND}:{spec} -->` names no `against=LABEL`"))?;
+    let file = ResultFile::load(root, name).map_err(|e| e.to_string())?;
+    let line = sentence(&file, name, against.trim()).map_err(|e| format!("results/{name}.json: {e}"))?;
+    Ok(format!("{line}\n"))
 }
 
 #[cfg(test)]
@@ -118,14 +100,15 @@ mod tests {
         let tmp = tempfile::tempdir().unwrap();
         std::fs::create_dir_all(tmp.path().join("results")).unwrap();
         table(&[("a", "peer", "[−0.2, −0.1]")]).save(tmp.path(), "t").unwrap();
-        let doc = "Status:\n<!-- verdict:t against=peer -->\nstale words\n<!-- /verdict:t -->\nmore\n";
-        let new = generate(doc, "d.md", tmp.path()).unwrap();
+        // A marker quoted inside a line is text; the block after it is still written.
+        let doc = "Status (`<!-- verdict:t against=peer -->`):\n<!-- verdict:t against=peer -->\nstale words\n<!-- /verdict:t -->\nmore\n";
+        let new = crate::generate(doc, "d.md", tmp.path()).unwrap();
         assert_eq!(
             new,
-            "Status:\n<!-- verdict:t against=peer -->\nagainst peer: ahead on 1 family (a) (95 % intervals of the paired difference in car score, `results/t.json`).\n<!-- /verdict:t -->\nmore\n"
+            "Status (`<!-- verdict:t against=peer -->`):\n<!-- verdict:t against=peer -->\nagainst peer: ahead on 1 family (a) (95 % intervals of the paired difference in car score, `results/t.json`).\n<!-- /verdict:t -->\nmore\n"
         );
-        assert_eq!(generate(&new, "d.md", tmp.path()).unwrap(), new, "regenerating changes nothing");
-        let e = generate("<!-- verdict:t -->\n<!-- /verdict:t -->\n", "d.md", tmp.path()).unwrap_err();
+        assert_eq!(crate::generate(&new, "d.md", tmp.path()).unwrap(), new, "regenerating changes nothing");
+        let e = crate::generate("<!-- verdict:t -->\n<!-- /verdict:t -->\n", "d.md", tmp.path()).unwrap_err();
         assert!(e.to_string().contains("against=LABEL"), "{e}");
     }
 }
