@@ -102,7 +102,8 @@ pub fn write_sheet(
 ) -> Result<Sheet, SheetError> {
     let atlas_mm = side_m * 1000.0 / spec.scale;
     let px_per_mm = spec.dpi / 25.4;
-    let side = (atlas_mm * px_per_mm).round().max(1.0) as usize;
+    // The sheet's side as `pav print pieces` cuts it, so that its pages are this sheet's pixels.
+    let side = pav_print::pieces::Sheet::new(n, atlas_mm, spec.dpi).side_px;
     if side > 20_000 {
         return Err(SheetError::TooLarge { side_px: side, atlas_mm, dpi: spec.dpi });
     }

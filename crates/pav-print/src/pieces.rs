@@ -40,6 +40,13 @@ pub struct Spec {
     pub dpi: f64,
 }
 
+impl Spec {
+    /// Pixels per millimetre at the spec's DPI.
+    pub fn px_per_mm(&self) -> f64 {
+        self.dpi / 25.4
+    }
+}
+
 impl Default for Spec {
     fn default() -> Self {
         Spec { paper: Paper::A4, margin_mm: 5.0, gap_mm: 2.0, min_mm: 3.0, overlap_mm: 5.0, dpi: 300.0 }
@@ -210,7 +217,7 @@ pub fn layout(
     sheet: Sheet,
     spec: Spec,
 ) -> Result<Layout, PiecesError> {
-    let px = spec.dpi / 25.4;
+    let px = spec.px_per_mm();
     let bad = |m: String| Err(PiecesError::Invalid(m));
     if !(spec.dpi.is_finite() && spec.dpi > 0.0) {
         return bad(format!("the DPI must be positive, not {}", spec.dpi));
@@ -275,13 +282,14 @@ pub fn layout(
             }
         }
     }
-    let (pieces, pages) = pack(&boxes, free_w, ((usable_mm[1]) * px) as usize, spec, px);
+    let (pieces, pages) = pack(&boxes, free_w, ((usable_mm[1]) * px) as usize, spec);
     Ok(Layout { spec, sheet, pieces, by_hand, pages, page_px })
 }
 
 /// Shelf packing, tallest first: each piece turned so that it is wider than tall when that
 /// fits, put on the first shelf of the first page with room, else on a new shelf or page.
-fn pack(boxes: &[Boxed], free_w: usize, free_h: usize, spec: Spec, px: f64) -> (Vec<Piece>, usize) {
+fn pack(boxes: &[Boxed], free_w: usize, free_h: usize, spec: Spec) -> (Vec<Piece>, usize) {
+    let px = spec.px_per_mm();
     let label = ((LABEL_MM + spec.gap_mm) * px).round() as usize;
     let gap = (spec.gap_mm * px).round() as usize;
     let mut order: Vec<(usize, bool)> =
@@ -347,10 +355,18 @@ fn mean_colour(labels: &[u32], p: &Part, texture: &Frame, n: usize) -> [u8; 3] {
 }
 
 impl Layout {
-    /// Whether page pixel `(u, v)` of `piece` shows its part (the sheet pixel's texel is in it).
-    fn shows(&self, piece: &Piece, labels: &[u32], u: usize, v: usize) -> bool {
-        let (sx, sy) = piece.sheet_pixel(u, v);
-        labels[self.sheet.texel(sy) * self.sheet.n + self.sheet.texel(sx)] == piece.part
+    /// Which of `piece`'s page pixels, row by row as placed, show its part (the sheet pixel's
+    /// texel is in it): what is printed, cut around and counted.
+    fn mask(&self, piece: &Piece, labels: &[u32]) -> Vec<bool> {
+        let [w, h] = piece.placed();
+        let mut on = Vec::with_capacity(w * h);
+        for v in 0..h {
+            for u in 0..w {
+                let (sx, sy) = piece.sheet_pixel(u, v);
+                on.push(labels[self.sheet.texel(sy) * self.sheet.n + self.sheet.texel(sx)] == piece.part);
+            }
+        }
+        on
     }
 
     /// Page `page` (from 1) as 8-bit RGB: every piece's pixels as the sheet has them, a grey
@@ -359,23 +375,20 @@ impl Layout {
     pub fn render(&self, page: usize, labels: &[u32], texture: &Frame) -> Vec<u8> {
         let [pw, ph] = self.page_px;
         let mut rgb = vec![255u8; pw * ph * 3];
-        let px = self.spec.dpi / 25.4;
+        let px = self.spec.px_per_mm();
         for piece in self.pieces.iter().filter(|p| p.page == page) {
             let [w, h] = piece.placed();
             let win = resize_window(texture, self.sheet.side_px, self.sheet.side_px, piece.window);
             let ww = piece.window[2];
+            let mask = self.mask(piece, labels);
             let inside = |u: i64, v: i64| {
-                u >= 0
-                    && v >= 0
-                    && (u as usize) < w
-                    && (v as usize) < h
-                    && self.shows(piece, labels, u as usize, v as usize)
+                u >= 0 && v >= 0 && (u as usize) < w && (v as usize) < h && mask[v as usize * w + u as usize]
             };
             for v in 0..h {
                 for u in 0..w {
-                    let (sx, sy) = piece.sheet_pixel(u, v);
-                    let (pu, pv) = (piece.at[0] + u, piece.at[1] + v);
-                    if inside(u as i64, v as i64) {
+                    if mask[v * w + u] {
+                        let (sx, sy) = piece.sheet_pixel(u, v);
+                        let (pu, pv) = (piece.at[0] + u, piece.at[1] + v);
                         let s = ((sy - piece.window[1]) * ww + (sx - piece.window[0])) * 3;
                         for c in 0..3 {
                             rgb[(pv * pw + pu) * 3 + c] = win[s + c] as u8;
@@ -414,7 +427,7 @@ impl Layout {
     /// pixels at the DPI), whether it is turned, its part and tile, and the window of the
     /// printable sheet it is, in pixels, so that it can be put back exactly.
     pub fn csv(&self) -> String {
-        let mm = |p: usize| p as f64 * 25.4 / self.spec.dpi;
+        let mm = |p: usize| p as f64 / self.spec.px_per_mm();
         let mut s = String::from(
             "piece,page,x_mm,y_mm,width_mm,height_mm,rotated,part,tile,page_x_px,page_y_px,sheet_x_px,sheet_y_px,sheet_w_px,sheet_h_px\n",
         );
@@ -457,12 +470,8 @@ impl Layout {
 
     /// The share of the pages' printable area the pieces cover.
     pub fn paper_used(&self, labels: &[u32]) -> f64 {
-        let mut on = 0usize;
-        for p in &self.pieces {
-            let [w, h] = p.placed();
-            on += (0..h).map(|v| (0..w).filter(|&u| self.shows(p, labels, u, v)).count()).sum::<usize>();
-        }
-        let px = self.spec.dpi / 25.4;
+        let on: usize = self.pieces.iter().map(|p| self.mask(p, labels).iter().filter(|&&m| m).count()).sum();
+        let px = self.spec.px_per_mm();
         let area = (self.spec.paper.width_mm - 2.0 * self.spec.margin_mm)
             * (self.spec.paper.height_mm - 2.0 * self.spec.margin_mm);
         on as f64 / (area * px * px * self.pages.max(1) as f64)
@@ -562,10 +571,11 @@ mod tests {
         let mut covered = vec![0u32; 160 * 160];
         for piece in &l.pieces {
             let [w, h] = piece.placed();
+            let mask = l.mask(piece, &labels);
             assert!(piece.at[0] >= 5 && piece.at[0] + w <= 95 && piece.at[1] >= 5, "{piece:?}");
             for v in 0..h {
                 for u in 0..w {
-                    if !l.shows(piece, &labels, u, v) {
+                    if !mask[v * w + u] {
                         continue;
                     }
                     let (sx, sy) = piece.sheet_pixel(u, v);
