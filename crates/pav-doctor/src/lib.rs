@@ -45,6 +45,11 @@ impl Check {
     fn missing(piece: &'static str, found: String, fix: String, main_job: bool) -> Check {
         Check { piece, status: Status::Missing, found, fix: Some(fix), main_job }
     }
+
+    /// Hardware no job needs here: the simulated one stands in.
+    fn absent(piece: &'static str, found: &str, fix: &str) -> Check {
+        Check { piece, status: Status::Absent, found: found.into(), fix: Some(fix.into()), main_job: false }
+    }
 }
 
 /// Every check, in the order of the jobs: what the main job needs first, then rendering,
@@ -245,13 +250,7 @@ pub fn serial_ports() -> Check {
 pub fn ports_check(ports: &[PathBuf], uid: u32, groups: &[u32]) -> Check {
     const PIECE: &str = "serial ports";
     if ports.is_empty() {
-        return Check {
-            piece: PIECE,
-            status: Status::Absent,
-            found: "none plugged in".into(),
-            fix: Some("plug the turntable's USB in; `--port sim` simulates one".into()),
-            main_job: false,
-        };
+        return Check::absent(PIECE, "none plugged in", "plug the turntable's USB in; `--port sim` simulates one");
     }
     let mut denied = Vec::new();
     for p in ports {
@@ -278,13 +277,7 @@ pub fn cameras() -> Check {
     const PIECE: &str = "cameras";
     let found = pav_rig::v4l2::capture_devices();
     if found.is_empty() {
-        return Check {
-            piece: PIECE,
-            status: Status::Absent,
-            found: "no V4L2 camera".into(),
-            fix: Some("plug a camera in; `--camera sim` simulates one".into()),
-            main_job: false,
-        };
+        return Check::absent(PIECE, "no V4L2 camera", "plug a camera in; `--camera sim` simulates one");
     }
     let shown: Vec<String> = found
         .iter()
