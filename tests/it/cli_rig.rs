@@ -104,16 +104,17 @@ fn missing_hardware_is_a_clear_error() {
         "{}",
         common::output_text(&o)
     );
-    // Without --camera, none or several cameras are refused, never guessed (on a machine with
-    // exactly one, the capture would film it: the choice itself is port.rs's unit test).
-    let cameras = pav::rig::v4l2::capture_devices().len();
-    if cameras != 1 {
-        let o = pav_rig().args(["capture", "--port", "sim", "-o", "/tmp/never.mp4"]).output().unwrap();
-        let said = common::output_text(&o);
-        let why = if cameras == 0 { "no V4L2 camera found" } else { "pav does not guess" };
-        assert!(!o.status.success() && said.contains(why), "{said}");
-        assert!(!std::path::Path::new("/tmp/never.mp4").exists());
-    }
+    // Without --camera, the one camera there is is taken and said; none or several are refused,
+    // never guessed. The port does not exist, so nothing is filmed whatever the machine has.
+    let o = pav_rig().args(["capture", "--port", "/dev/no-such-tty", "-o", "/tmp/never.mp4"]).output().unwrap();
+    let said = common::output_text(&o);
+    let why = match pav::rig::v4l2::capture_devices().len() {
+        0 => "no V4L2 camera found",
+        1 => "the only one; name it with --camera",
+        _ => "pav does not guess",
+    };
+    assert!(!o.status.success() && said.contains(why), "{said}");
+    assert!(!std::path::Path::new("/tmp/never.mp4").exists());
 }
 
 #[test]
