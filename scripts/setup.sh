@@ -52,7 +52,7 @@ PY=${PYTHON:-python3}
 "$PY" -m pip --version >/dev/null 2>&1 \
   || need "$PY has no pip: run \`${SUDO:+sudo }apt-get install python3-pip python3-venv\` (or set PYTHON to a Python 3 with pip)"
 
-APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config ffmpeg gstreamer1.0-plugins-base gstreamer1.0-tools unzip curl liblcms2-dev libgs-common)
+APT_PACKAGES=(libopencv-dev clang libclang-dev pkg-config ffmpeg gstreamer1.0-plugins-base gstreamer1.0-tools unzip curl liblcms2-dev libgs-common poppler-utils)
 if [ "$MODE" = full ]; then APT_PACKAGES+=(blender slurm-wlm munge python3-venv); fi
 missing=()
 for p in "${APT_PACKAGES[@]}"; do

@@ -1,6 +1,7 @@
 //! `pav print pieces` on the e-tron at 1:20: numbered pieces on A4 pages at 300 dpi, which,
 //! put back where `pieces.csv` says they came from, are the printable sheet's region pixel for
-//! pixel; bad input is refused with its fix before anything is written.
+//! pixel; the PDF has A4 pages that Poppler renders as the page PNGs, with bars of 10 and 50 mm;
+//! bad input is refused with its fix before anything is written.
 
 use crate::common::{self, pav};
 use pav::attack::config::OptimizeConfig;
@@ -24,6 +25,8 @@ fn pieces_on_a4_put_back_are_the_printable_sheets_region() {
             "data:rauca-e2e/RAUCA_E2E.png",
             "--paper",
             "a4",
+            "--bleed",
+            "1",
             "-o",
         ])
         .arg(&out)
@@ -51,6 +54,8 @@ fn pieces_on_a4_put_back_are_the_printable_sheets_region() {
     let col = |r: &csv::StringRecord, k: &str| r[head.iter().position(|h| h == k).unwrap()].to_string();
     let mut pages = std::collections::HashMap::new();
     let mut covered = vec![0u8; side * side];
+    // Page pixels on a piece, per page.
+    let mut on_piece: std::collections::HashMap<usize, std::collections::HashSet<(usize, usize)>> = Default::default();
     let rows: Vec<csv::StringRecord> = rd.records().map(|r| r.unwrap()).collect();
     assert!(!rows.is_empty());
     for r in &rows {
@@ -80,6 +85,7 @@ fn pieces_on_a4_put_back_are_the_printable_sheets_region() {
                     py + v
                 );
                 covered[sy * side + sx] = covered[sy * side + sx].saturating_add(1);
+                on_piece.entry(num("page")).or_default().insert((px + u, py + v));
             }
         }
     }
@@ -105,6 +111,139 @@ fn pieces_on_a4_put_back_are_the_printable_sheets_region() {
     let run = common::run_record(&out.join("run.toml"));
     let pages_used: usize = run["result"]["pages"].as_str().unwrap().parse().unwrap();
     assert_eq!(pages_used, pages.len());
+    for (k, page) in &pages {
+        bleed_surrounds_each_piece(page, &on_piece[k]);
+    }
+    pdf_is_the_pages_at_their_size(&out, &pages, &on_piece);
+}
+
+/// With a 1 mm bleed (12 px at 300 dpi) the pixel 6 px outside a piece's edge, where that is
+/// not another piece, is printed, not white paper.
+fn bleed_surrounds_each_piece(page: &image::RgbImage, on: &std::collections::HashSet<(usize, usize)>) {
+    let (mut outside, mut inked) = (0, 0);
+    for &(x, y) in on {
+        if !on.contains(&(x + 1, y)) && !on.contains(&(x + 6, y)) {
+            outside += 1;
+            inked += (page.get_pixel(x as u32 + 6, y as u32).0 != [255, 255, 255]) as usize;
+        }
+    }
+    assert!(outside > 0);
+    // A piece pixel the sheet has white would carry white outward: allow a few.
+    assert!(inked as f64 >= 0.98 * outside as f64, "{inked} of {outside} bleed pixels printed");
+}
+
+/// `pieces.pdf`: Poppler reads one A4 page per page PNG; its raster is the PNG's pixels, one
+/// for one, away from the cut lines; rendered at 300 dpi, its check bars measure 10 and 50 mm
+/// to one pixel.
+fn pdf_is_the_pages_at_their_size(
+    out: &std::path::Path,
+    pages: &std::collections::HashMap<usize, image::RgbImage>,
+    on: &std::collections::HashMap<usize, std::collections::HashSet<(usize, usize)>>,
+) {
+    let pdf = out.join("pieces.pdf");
+    let info = std::process::Command::new("pdfinfo")
+        .args(["-f", "1", "-l", "99"])
+        .arg(&pdf)
+        .output()
+        .expect("pdfinfo (poppler-utils, installed by scripts/setup.sh)");
+    let info = common::output_text(&info);
+    let sizes: Vec<(f64, f64)> = info
+        .lines()
+        .filter(|l| l.starts_with("Page") && l.contains(" size:"))
+        .map(|l| {
+            let w: Vec<&str> = l.split_whitespace().collect();
+            let at = w.iter().position(|t| *t == "size:").unwrap();
+            (w[at + 1].parse().unwrap(), w[at + 3].parse().unwrap())
+        })
+        .collect();
+    assert_eq!(sizes.len(), pages.len(), "{info}");
+    for (w, h) in sizes {
+        assert!((w - 595.276).abs() <= 0.5 && (h - 841.89).abs() <= 0.5, "{w} × {h} pt is no A4 page");
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let render = |page: usize, args: &[String], name: &str| {
+        let o = std::process::Command::new("pdftoppm")
+            .args(["-png", "-singlefile", "-f", &page.to_string(), "-l", &page.to_string()])
+            .args(args)
+            .arg(&pdf)
+            .arg(tmp.path().join(name))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", common::output_text(&o));
+        image::open(tmp.path().join(format!("{name}.png"))).unwrap().to_rgb8()
+    };
+    for (&k, png) in pages {
+        let (w, h) = png.dimensions();
+        // Poppler smooths an image drawn near one to one, and draws it by nearest pixel from
+        // four times up: so at four times the PNG's size each PNG pixel is a 4 × 4 block, and
+        // its centre is the PNG's pixel. A 500-pixel window where the page's pieces are.
+        let inner: Vec<(usize, usize)> = on[&k]
+            .iter()
+            .copied()
+            .filter(|&(x, y)| [(x + 1, y), (x - 1, y), (x, y + 1), (x, y - 1)].iter().all(|q| on[&k].contains(q)))
+            .collect();
+        let mean = |f: fn(&(usize, usize)) -> usize| inner.iter().map(f).sum::<usize>() / inner.len();
+        let side = 500;
+        let (x0, y0) = (mean(|p| p.0).saturating_sub(side / 2), mean(|p| p.1).saturating_sub(side / 2));
+        let (x0, y0) = (x0.min(w as usize - side), y0.min(h as usize - side));
+        let args: Vec<String> = [
+            ("-scale-to-x", 4 * w as usize),
+            ("-scale-to-y", 4 * h as usize),
+            ("-x", 4 * x0),
+            ("-y", 4 * y0),
+            ("-W", 4 * side),
+            ("-H", 4 * side),
+        ]
+        .iter()
+        .flat_map(|(a, v)| [a.to_string(), v.to_string()])
+        .collect();
+        let zoom = render(k, &args, &format!("zoom-{k}"));
+        let window: Vec<&(usize, usize)> =
+            inner.iter().filter(|p| (x0..x0 + side).contains(&p.0) && (y0..y0 + side).contains(&p.1)).collect();
+        assert!(window.len() > 10_000, "page {k}: {} piece pixels in the window", window.len());
+        let same = window
+            .iter()
+            .filter(|&&&(x, y)| {
+                let a = zoom.get_pixel((4 * (x - x0) + 2) as u32, (4 * (y - y0) + 2) as u32).0;
+                let b = png.get_pixel(x as u32, y as u32).0;
+                (0..3).all(|c| a[c].abs_diff(b[c]) <= 1)
+            })
+            .count();
+        // Cut lines are drawn over the pieces' edge pixels: the few inner pixels they touch.
+        assert!(same as f64 >= 0.99 * window.len() as f64, "page {k}: {same} of {} pixels the PNG's", window.len());
+        // The bars, rendered at 300 dpi.
+        let shown = render(k, &["-r".into(), "300".into()], &format!("page-{k}"));
+        let (png_bars, pdf_bars) = (dark_runs_at_bottom(png), dark_runs_at_bottom(&shown));
+        for bar_mm in [10.0, 50.0] {
+            let px = bar_mm * 300.0 / 25.4;
+            for (what, runs) in [("png", &png_bars), ("pdf", &pdf_bars)] {
+                assert!(
+                    runs.iter().any(|&r| (r as f64 - px).abs() <= 1.0),
+                    "{what} page {k}: no {bar_mm} mm bar in {runs:?}"
+                );
+            }
+        }
+    }
+}
+
+/// The lengths of the horizontal dark runs in the bottom 20 mm of a 300 dpi page.
+fn dark_runs_at_bottom(page: &image::RgbImage) -> Vec<usize> {
+    let (w, h) = page.dimensions();
+    let mut runs = Vec::new();
+    for y in h - 236..h {
+        let mut run = 0;
+        for x in 0..w {
+            if page.get_pixel(x, y).0.iter().all(|&c| c < 100) {
+                run += 1;
+            } else if run > 0 {
+                runs.push(run);
+                run = 0;
+            }
+        }
+    }
+    runs.sort_unstable();
+    runs.dedup();
+    runs
 }
 
 #[test]

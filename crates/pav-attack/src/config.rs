@@ -3,6 +3,7 @@
 use super::loss::{Proposals, Reduce};
 use super::smooth::SmoothNorm;
 use pav_core::geometry::camera::CameraConvention;
+use pav_core::geometry::parts::Axis;
 use pav_print::channel::PrintConfig;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -32,6 +33,24 @@ pub struct MeshConfig {
     /// A face belongs to a part when |cos| between its normal and the part's axis reaches this.
     #[serde(default = "parts_min_cos")]
     pub parts_min_cos: f32,
+    /// Which way the car's front points in the mesh (`+x`, `-z`, …): names the panel each
+    /// printed piece goes on (left side, front end, …) and points its arrows.
+    #[serde(default)]
+    pub front: Option<Axis>,
+    /// Which way is up in the mesh; by default the camera convention's (`+z` for fca, `+y` for
+    /// pav-camou).
+    #[serde(default)]
+    pub up: Option<Axis>,
+}
+
+impl MeshConfig {
+    /// The mesh's up axis: as set, else the camera convention's.
+    pub fn up_axis(&self) -> Axis {
+        self.up.unwrap_or(match self.camera {
+            CameraConvention::Fca => Axis { index: 2, positive: true },
+            CameraConvention::PavCamou => Axis { index: 1, positive: true },
+        })
+    }
 }
 
 fn parts_min_cos() -> f32 {

@@ -1,5 +1,6 @@
 //! `pav print pieces`: a config's textured region and a texture laid out as numbered pieces on
-//! pages of the user's paper, at the model's scale: page PNGs at the DPI and `pieces.csv`.
+//! pages of the user's paper, at the model's scale: a PDF at physical size, page PNGs at the DPI
+//! and `pieces.csv`.
 
 use crate::config::OptimizeConfig;
 use crate::export::atlas_side_m;
@@ -20,6 +21,9 @@ pub enum PrintPiecesError {
     /// The texture.
     #[error("{0}")]
     Texture(String),
+    /// The PDF.
+    #[error(transparent)]
+    Pdf(#[from] pav_print::pdf::PdfError),
     /// A file could not be written.
     #[error("{path}: {source}")]
     Write {
@@ -37,14 +41,19 @@ pub struct PiecesReport {
     pub layout: Layout,
     /// The share of the pages' printable area the pieces cover.
     pub paper_used: f64,
+    /// The length of paper the pages take, m (what a roll needs).
+    pub length_m: f64,
     /// The page files, in order.
     pub pages: Vec<PathBuf>,
     /// `pieces.csv`.
     pub csv: PathBuf,
+    /// `pieces.pdf`.
+    pub pdf: PathBuf,
 }
 
 /// Lays `texture` out over `cfg`'s region at model scale 1:`scale` with `spec`, into `out`:
-/// `pages/page-N.png` (with their DPI), `pieces.csv`, `by_hand.csv` and a one-row `summary.csv`.
+/// `pieces.pdf`, `pages/page-N.png` (with their DPI), `pieces.csv`, `by_hand.csv` and a one-row
+/// `summary.csv`.
 pub fn write_pieces(
     cfg: &OptimizeConfig,
     texture: &Path,
@@ -66,11 +75,17 @@ pub fn write_pieces(
     at_size.mesh.texture_size = n;
     let (mesh, region) = mesh_and_region(&at_size)?;
     let (side_m, _) = atlas_side_m(&mesh, &region, n, cfg.mesh.car_length_m).ok_or(PiecesError::Empty)?;
-    let sheet = Sheet::new(n, side_m * 1000.0 / scale, spec.dpi);
+    let atlas_mm = side_m * 1000.0 / scale;
+    // Past four pixels a texel, resampling adds nothing a printer's own interpolation would
+    // not; the cap keeps a full-size layout (a texel of about 7 mm) small.
+    let carried = 4.0 * n as f64 / (atlas_mm / 25.4);
+    let spec = Spec { dpi: if spec.dpi > carried { carried.floor().max(1.0) } else { spec.dpi }, ..spec };
+    let sheet = Sheet::new(n, atlas_mm, spec.dpi);
     // The same 8-bit atlas the printable sheet resamples.
     let frame = Frame { width: n, height: n, bgr: tex.rgb.iter().map(|v| to_u8(*v)).collect() };
     let (labels, found) = parts(&region, n);
-    let l = layout(&labels, &found, &frame, sheet, spec)?;
+    let orient = pav_print::panels::orient(&mesh, &labels, n, found.len(), cfg.mesh.front, cfg.mesh.up_axis());
+    let l = layout(&labels, &found, &frame, sheet, spec, orient)?;
     let dir = out.join("pages");
     std::fs::create_dir_all(&dir).map_err(|source| PrintPiecesError::Write { path: dir.clone(), source })?;
     let mut pages = Vec::new();
@@ -81,21 +96,26 @@ pub fn write_pieces(
             .map_err(|e| PrintPiecesError::Write { path: path.clone(), source: std::io::Error::other(e) })?;
         pages.push(path);
     }
+    let pdf = out.join("pieces.pdf");
+    let bytes = pav_print::pdf::pieces_pdf(&l, &labels, &frame)?;
+    std::fs::write(&pdf, bytes).map_err(|source| PrintPiecesError::Write { path: pdf.clone(), source })?;
     let csv = out.join("pieces.csv");
     for (path, text) in [(csv.clone(), l.csv()), (out.join("by_hand.csv"), l.by_hand_csv())] {
         std::fs::write(&path, text).map_err(|source| PrintPiecesError::Write { path: path.clone(), source })?;
     }
     let paper_used = l.paper_used(&labels);
+    let length_m = l.page_mm[1] * l.pages as f64 / 1000.0;
     let summary = out.join("summary.csv");
     let row = format!(
-        "paper,scale,dpi,atlas_mm,pages,pieces,by_hand,paper_used\n{},{scale},{},{:.1},{},{},{},{paper_used:.4}\n",
+        "paper,scale,dpi,bleed_mm,atlas_mm,pages,pieces,by_hand,paper_used,paper_length_m\n{},{scale},{},{},{:.1},{},{},{},{paper_used:.4},{length_m:.3}\n",
         spec.paper,
         spec.dpi,
+        spec.bleed_mm,
         l.sheet.atlas_mm,
         l.pages,
         l.pieces.len(),
         l.by_hand.len()
     );
     std::fs::write(&summary, row).map_err(|source| PrintPiecesError::Write { path: summary.clone(), source })?;
-    Ok(PiecesReport { layout: l, paper_used, pages, csv })
+    Ok(PiecesReport { layout: l, paper_used, length_m, pages, csv, pdf })
 }

@@ -427,11 +427,7 @@ pub fn mesh_and_region(cfg: &OptimizeConfig) -> Result<(Mesh, Vec<f32>), SetupEr
     let mut region = resample_region(&mask.white_mask(), mask.width, mask.height, ts);
     let parts = cfg.parts()?;
     if !parts.is_empty() {
-        let up = match cfg.mesh.camera {
-            CameraConvention::Fca => 2,
-            CameraConvention::PavCamou => 1,
-        };
-        let faces = select_faces(&mesh, up, &parts, cfg.mesh.parts_min_cos);
+        let faces = select_faces(&mesh, cfg.mesh.up_axis().index, &parts, cfg.mesh.parts_min_cos);
         // Conservative: a face thinner than a texel still keeps the texels its corners read.
         for (r, on) in region.iter_mut().zip(faces_mask(&mesh, &faces, ts)) {
             if !on {

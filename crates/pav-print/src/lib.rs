@@ -10,7 +10,9 @@ pub mod chart;
 pub mod colorchecker;
 pub mod fit;
 pub mod lut;
+pub mod panels;
 pub mod paper;
+pub mod pdf;
 #[cfg(feature = "video")]
 pub mod photo;
 pub mod pieces;

@@ -1,16 +1,19 @@
-//! Paper sizes by name (`a4`, `letter`, …) or as `WIDTHxHEIGHT` in millimetres: `--paper` on
-//! every command that lays something out on a page; model scales (`--scale 20` or `1:20`).
+//! Paper sizes by name (`a4`, `letter`, …), as `WIDTHxHEIGHT` in millimetres, or a roll
+//! `roll:WIDTHmm` for a wide-format or wrap printer: `--paper` on every command that lays
+//! something out on a page; model scales (`--scale 20` or `1:20`).
 
 use std::fmt;
 use std::str::FromStr;
 
-/// A sheet of paper, portrait, in millimetres.
+/// A sheet of paper, portrait, in millimetres, or a roll.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Paper {
-    /// Width in millimetres (the shorter side for a named size).
+    /// Width in millimetres (the shorter side for a named size; across a roll).
     pub width_mm: f64,
-    /// Height in millimetres.
+    /// Height in millimetres (on a roll: the most one length may take).
     pub height_mm: f64,
+    /// A roll: cut to the length a layout uses.
+    pub roll: bool,
 }
 
 /// The named sizes `--paper` knows: ISO 216 and the North American ones.
@@ -25,7 +28,15 @@ pub const NAMED: &[(&str, f64, f64)] = &[
 
 impl Paper {
     /// ISO A4, the default.
-    pub const A4: Paper = Paper { width_mm: 210.0, height_mm: 297.0 };
+    pub const A4: Paper = Paper { width_mm: 210.0, height_mm: 297.0, roll: false };
+
+    /// The longest length a roll layout takes before it starts another, mm.
+    pub const ROLL_MM: f64 = 50_000.0;
+
+    /// A sheet `w × h` mm.
+    pub fn sheet(width_mm: f64, height_mm: f64) -> Paper {
+        Paper { width_mm, height_mm, roll: false }
+    }
 
     /// The size as `[width, height]` millimetres.
     pub fn mm(&self) -> [f64; 2] {
@@ -39,21 +50,33 @@ impl FromStr for Paper {
     fn from_str(s: &str) -> Result<Self, String> {
         let key = s.trim().to_ascii_lowercase();
         if let Some(&(_, w, h)) = NAMED.iter().find(|(n, ..)| *n == key) {
-            return Ok(Paper { width_mm: w, height_mm: h });
+            return Ok(Paper::sheet(w, h));
         }
         let names = NAMED.iter().map(|n| n.0).collect::<Vec<_>>().join(", ");
-        let bad = || format!("`{s}` is no paper size: use {names}, or WIDTHxHEIGHT in millimetres (e.g. 210x297)");
+        let bad = || {
+            format!("`{s}` is no paper size: use {names}, WIDTHxHEIGHT in millimetres (e.g. 210x297), or roll:WIDTHmm (e.g. roll:1370mm)")
+        };
+        if let Some(w) = key.strip_prefix("roll:") {
+            let w: f64 = w.trim().trim_end_matches("mm").trim().parse().map_err(|_| bad())?;
+            if !(w.is_finite() && w > 0.0) {
+                return Err(bad());
+            }
+            return Ok(Paper { width_mm: w, height_mm: Paper::ROLL_MM, roll: true });
+        }
         let (w, h) = key.split_once('x').ok_or_else(bad)?;
         let (w, h): (f64, f64) = (w.trim().parse().map_err(|_| bad())?, h.trim().parse().map_err(|_| bad())?);
         if !(w.is_finite() && h.is_finite() && w > 0.0 && h > 0.0) {
             return Err(format!("a paper of {w} × {h} mm has no area: {}", bad()));
         }
-        Ok(Paper { width_mm: w, height_mm: h })
+        Ok(Paper::sheet(w, h))
     }
 }
 
 impl fmt::Display for Paper {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.roll {
+            return write!(f, "roll:{}mm", self.width_mm);
+        }
         match NAMED.iter().find(|(_, w, h)| *w == self.width_mm && *h == self.height_mm) {
             Some((name, ..)) => f.write_str(name),
             None => write!(f, "{}x{}", self.width_mm, self.height_mm),
@@ -106,7 +129,10 @@ mod tests {
         assert_eq!("letter".parse::<Paper>().unwrap().mm(), [215.9, 279.4]);
         assert_eq!("210x297".parse::<Paper>().unwrap().to_string(), "a4");
         assert_eq!("100 x 150".parse::<Paper>().unwrap().to_string(), "100x150");
-        for bad in ["b5", "210", "0x297", "-1x2", "axb", ""] {
+        let roll = "roll:1370mm".parse::<Paper>().unwrap();
+        assert!(roll.roll && roll.width_mm == 1370.0 && roll.to_string() == "roll:1370mm");
+        assert_eq!("ROLL:610".parse::<Paper>().unwrap().to_string(), "roll:610mm");
+        for bad in ["b5", "210", "0x297", "-1x2", "axb", "", "roll:", "roll:0mm", "roll:wide"] {
             let e = bad.parse::<Paper>().unwrap_err();
             assert!(e.contains("a4") || e.contains("no area"), "{bad}: {e}");
         }

@@ -7,6 +7,7 @@
 //! ([`pav_core::image::resize::resize_window`] of the same resize), so the pieces put back at
 //! their atlas positions are the sheet's region, pixel for pixel.
 
+use crate::panels::Orientation;
 use crate::paper::Paper;
 use pav_core::image::resize::resize_window;
 use pav_core::image::Frame;
@@ -36,6 +37,9 @@ pub struct Spec {
     pub min_mm: f64,
     /// How far two tiles of a part too large for the page overlap, mm.
     pub overlap_mm: f64,
+    /// How far a piece's own texels are printed past its cut line, mm, so that a cut a little
+    /// off the line shows no white paper.
+    pub bleed_mm: f64,
     /// Printer resolution.
     pub dpi: f64,
 }
@@ -45,11 +49,16 @@ impl Spec {
     pub fn px_per_mm(&self) -> f64 {
         self.dpi / 25.4
     }
+
+    /// The bleed in pixels at the DPI.
+    pub fn bleed_px(&self) -> usize {
+        (self.bleed_mm * self.px_per_mm()).round() as usize
+    }
 }
 
 impl Default for Spec {
     fn default() -> Self {
-        Spec { paper: Paper::A4, margin_mm: 5.0, gap_mm: 2.0, min_mm: 3.0, overlap_mm: 5.0, dpi: 300.0 }
+        Spec { paper: Paper::A4, margin_mm: 5.0, gap_mm: 2.0, min_mm: 3.0, overlap_mm: 5.0, bleed_mm: 0.0, dpi: 300.0 }
     }
 }
 
@@ -148,6 +157,8 @@ pub struct Piece {
     pub at: [usize; 2],
     /// Turned a quarter clockwise to fit.
     pub rotated: bool,
+    /// Printed mirror-imaged, because its UV island is mirrored on the car.
+    pub mirrored: bool,
 }
 
 impl Piece {
@@ -160,14 +171,26 @@ impl Piece {
         }
     }
 
-    /// The sheet pixel under page pixel `(u, v)` of the piece (from its top-left corner).
+    /// The sheet pixel under page pixel `(u, v)` of the piece (from its top-left corner):
+    /// mirrored first, then turned.
     fn sheet_pixel(&self, u: usize, v: usize) -> (usize, usize) {
+        let u = if self.mirrored { self.placed()[0] - 1 - u } else { u };
         let [x, y, _, h] = self.window;
         if self.rotated {
             // A quarter turn clockwise: the window's left column becomes the top row.
             (x + v, y + h - 1 - u)
         } else {
             (x + u, y + v)
+        }
+    }
+
+    /// A direction across the sheet (x right, y down) as it runs across the piece on its page.
+    pub fn on_page(&self, d: [f64; 2]) -> [f64; 2] {
+        let [dx, dy] = if self.rotated { [-d[1], d[0]] } else { d };
+        if self.mirrored {
+            [-dx, dy]
+        } else {
+            [dx, dy]
         }
     }
 }
@@ -200,6 +223,43 @@ pub struct Layout {
     pub pages: usize,
     /// A page's size, pixels.
     pub page_px: [usize; 2],
+    /// A page's size, mm (on a roll, the length the pieces take).
+    pub page_mm: [f64; 2],
+    /// How each part lies on the car, by label − 1 (empty: not known).
+    pub orient: Vec<Orientation>,
+}
+
+/// A number or bar on a page, in page pixels.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Mark {
+    /// A number `height` pixels tall, its top-left at `at`.
+    Text {
+        /// Top-left corner.
+        at: [usize; 2],
+        /// Height in pixels.
+        height: f64,
+        /// What it says.
+        text: String,
+    },
+    /// A check bar `len_mm` long, its left end's top at `at`.
+    Bar {
+        /// Left end, top.
+        at: [usize; 2],
+        /// Length, mm.
+        len_mm: f64,
+    },
+    /// An arrow `len` pixels long centred on `at`, pointing `dir` (x right, y down), with its
+    /// letter (`F` the car's front, `U` its up) right of it.
+    Arrow {
+        /// Centre.
+        at: [usize; 2],
+        /// Unit direction.
+        dir: [f64; 2],
+        /// Length in pixels.
+        len: f64,
+        /// Its letter.
+        letter: char,
+    },
 }
 
 /// A piece before packing: its part, its window of the sheet (x, y, w, h) and its tile.
@@ -207,6 +267,8 @@ type Boxed = (u32, [usize; 4], Option<(usize, usize)>);
 
 /// Height of a piece's number below it, and of the page's band of bars, in mm.
 const LABEL_MM: f64 = 4.0;
+/// Width of a piece's label: its number (two digits) and two arrows with their letters, mm.
+const LABEL_W_MM: f64 = 17.0;
 const BAND_MM: f64 = 9.0;
 
 /// Lays the parts of `labels` out as pieces on pages.
@@ -216,6 +278,7 @@ pub fn layout(
     texture: &Frame,
     sheet: Sheet,
     spec: Spec,
+    orient: Vec<Orientation>,
 ) -> Result<Layout, PiecesError> {
     let px = spec.px_per_mm();
     let bad = |m: String| Err(PiecesError::Invalid(m));
@@ -226,6 +289,7 @@ pub fn layout(
         ("margin", spec.margin_mm),
         ("gap", spec.gap_mm),
         ("overlap", spec.overlap_mm),
+        ("bleed", spec.bleed_mm),
         ("smallest piece", spec.min_mm),
     ] {
         if !(v.is_finite() && v >= 0.0) {
@@ -235,7 +299,7 @@ pub fn layout(
     let page_px = [(spec.paper.width_mm * px).round() as usize, (spec.paper.height_mm * px).round() as usize];
     let usable_mm = [spec.paper.width_mm - 2.0 * spec.margin_mm, spec.paper.height_mm - 2.0 * spec.margin_mm - BAND_MM];
     // A tile must hold more than its overlaps and its number.
-    let least = 2.0 * spec.overlap_mm + LABEL_MM + spec.gap_mm + 5.0;
+    let least = 2.0 * spec.overlap_mm + 2.0 * spec.bleed_mm + LABEL_MM + spec.gap_mm + 5.0;
     if usable_mm[0] < least || usable_mm[1] < least {
         return bad(format!(
             "the printable area of {:.0} × {:.0} mm (paper less {} mm margins and the bars) holds no piece: a tile needs {least:.0} mm; use larger paper or a smaller margin",
@@ -248,7 +312,12 @@ pub fn layout(
     let mm_per_texel = sheet.atlas_mm / sheet.n as f64;
     let mut by_hand = Vec::new();
     let mut boxes = Vec::new();
-    let (free_w, free_h) = ((usable_mm[0] * px) as usize, ((usable_mm[1] - LABEL_MM - spec.gap_mm) * px) as usize);
+    // What a piece's own pixels may span: the printable area less its bleed on both sides.
+    let bleed = 2 * spec.bleed_px();
+    let (free_w, free_h) = (
+        ((usable_mm[0] * px) as usize).saturating_sub(bleed),
+        (((usable_mm[1] - LABEL_MM - spec.gap_mm) * px) as usize).saturating_sub(bleed),
+    );
     for p in parts {
         let [x0, y0, x1, y1] = p.bbox;
         let size_mm = [(x1 - x0) as f64 * mm_per_texel, (y1 - y0) as f64 * mm_per_texel];
@@ -282,8 +351,19 @@ pub fn layout(
             }
         }
     }
-    let (pieces, pages) = pack(&boxes, free_w, ((usable_mm[1]) * px) as usize, spec);
-    Ok(Layout { spec, sheet, pieces, by_hand, pages, page_px })
+    let (mut pieces, pages) = pack(&boxes, free_w + bleed, (usable_mm[1] * px) as usize, spec);
+    for p in &mut pieces {
+        p.mirrored = orient.get(p.part as usize - 1).is_some_and(|o| o.mirrored);
+    }
+    let (mut page_mm, mut page_px) = (spec.paper.mm(), page_px);
+    if spec.paper.roll {
+        // A roll is cut below its lowest label: the margins and the band of bars under that.
+        let b = spec.bleed_px() as f64;
+        let low = pieces.iter().map(|p| p.at[1] as f64 + p.placed()[1] as f64 + b).fold(0.0, f64::max);
+        page_mm[1] = ((low / px + LABEL_MM + spec.gap_mm + spec.margin_mm + BAND_MM) * 10.0).ceil() / 10.0;
+        page_px[1] = (page_mm[1] * px).round() as usize;
+    }
+    Ok(Layout { spec, sheet, pieces, by_hand, pages, page_px, page_mm, orient })
 }
 
 /// Shelf packing, tallest first: each piece turned so that it is wider than tall when that
@@ -292,8 +372,11 @@ fn pack(boxes: &[Boxed], free_w: usize, free_h: usize, spec: Spec) -> (Vec<Piece
     let px = spec.px_per_mm();
     let label = ((LABEL_MM + spec.gap_mm) * px).round() as usize;
     let gap = (spec.gap_mm * px).round() as usize;
+    let bleed = spec.bleed_px();
+    // A piece's label under it is as wide as this at least.
+    let label_w = (LABEL_W_MM * px).round() as usize;
     let mut order: Vec<(usize, bool)> =
-        boxes.iter().enumerate().map(|(i, (_, [_, _, w, h], _))| (i, h > w && *h <= free_w)).collect();
+        boxes.iter().enumerate().map(|(i, (_, [_, _, w, h], _))| (i, h > w && *h + 2 * bleed <= free_w)).collect();
     let placed_h = |i: usize, rot: bool| if rot { boxes[i].1[2] } else { boxes[i].1[3] };
     order.sort_by(|a, b| placed_h(b.0, b.1).cmp(&placed_h(a.0, a.1)).then(a.0.cmp(&b.0)));
     // Per page: shelves (y, height, x filled).
@@ -303,6 +386,8 @@ fn pack(boxes: &[Boxed], free_w: usize, free_h: usize, spec: Spec) -> (Vec<Piece
     for (i, rot) in order {
         let (part, window, tile) = boxes[i];
         let (w, h) = if rot { (window[3], window[2]) } else { (window[2], window[3]) };
+        // The footprint: the piece and its bleed all round, and its label under it.
+        let (w, h) = ((w + 2 * bleed).max(label_w), h + 2 * bleed);
         let spot = pages.iter().enumerate().find_map(|(pg, shelves)| {
             shelves.iter().position(|s| s.2 + w <= free_w && h + label <= s.1).map(|k| (pg, Some(k)))
         });
@@ -327,8 +412,9 @@ fn pack(boxes: &[Boxed], free_w: usize, free_h: usize, spec: Spec) -> (Vec<Piece
             window,
             tile,
             page: pg + 1,
-            at: [margin + shelf.2, margin + shelf.0],
+            at: [margin + shelf.2 + bleed, margin + shelf.0 + bleed],
             rotated: rot,
+            mirrored: false,
         });
         shelf.2 += w + gap;
     }
@@ -369,33 +455,144 @@ impl Layout {
         on
     }
 
-    /// Page `page` (from 1) as 8-bit RGB: every piece's pixels as the sheet has them, a grey
-    /// cut line just outside each, its number below it, the page number and the 10 mm and
-    /// 50 mm bars along the bottom margin.
-    pub fn render(&self, page: usize, labels: &[u32], texture: &Frame) -> Vec<u8> {
-        let [pw, ph] = self.page_px;
-        let mut rgb = vec![255u8; pw * ph * 3];
-        let px = self.spec.px_per_mm();
+    /// Page `page` (from 1) as 8-bit RGB on white: every piece's pixels as the sheet has them,
+    /// and around each its bleed (its own edge pixels carried outward). What the PDF embeds.
+    pub fn raster(&self, page: usize, labels: &[u32], texture: &Frame) -> Vec<u8> {
+        let [pw, _] = self.page_px;
+        let mut rgb = vec![255u8; pw * self.page_px[1] * 3];
+        let b = self.spec.bleed_px();
         for piece in self.pieces.iter().filter(|p| p.page == page) {
             let [w, h] = piece.placed();
             let win = resize_window(texture, self.sheet.side_px, self.sheet.side_px, piece.window);
-            let ww = piece.window[2];
             let mask = self.mask(piece, labels);
-            let inside = |u: i64, v: i64| {
-                u >= 0 && v >= 0 && (u as usize) < w && (v as usize) < h && mask[v as usize * w + u as usize]
-            };
+            // The footprint (piece and bleed), each pixel the colour of its nearest piece pixel
+            // within the bleed: a breadth-first spread from the piece, one ring a step.
+            let (fw, fh) = (w + 2 * b, h + 2 * b);
+            let mut colour: Vec<Option<[u8; 3]>> = vec![None; fw * fh];
+            let mut ring = Vec::new();
             for v in 0..h {
                 for u in 0..w {
                     if mask[v * w + u] {
                         let (sx, sy) = piece.sheet_pixel(u, v);
-                        let (pu, pv) = (piece.at[0] + u, piece.at[1] + v);
-                        let s = ((sy - piece.window[1]) * ww + (sx - piece.window[0])) * 3;
-                        for c in 0..3 {
-                            rgb[(pv * pw + pu) * 3 + c] = win[s + c] as u8;
-                        }
+                        let s = ((sy - piece.window[1]) * piece.window[2] + (sx - piece.window[0])) * 3;
+                        let i = (v + b) * fw + u + b;
+                        colour[i] = Some([win[s] as u8, win[s + 1] as u8, win[s + 2] as u8]);
+                        ring.push(i);
                     }
                 }
             }
+            for _ in 0..b {
+                let mut next = Vec::new();
+                for &i in &ring {
+                    let (x, y) = ((i % fw) as i64, (i / fw) as i64);
+                    for (dx, dy) in [(-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, -1), (-1, 1), (1, 1)] {
+                        let (nx, ny) = (x + dx, y + dy);
+                        if nx >= 0 && ny >= 0 && (nx as usize) < fw && (ny as usize) < fh {
+                            let j = ny as usize * fw + nx as usize;
+                            if colour[j].is_none() {
+                                colour[j] = colour[i];
+                                next.push(j);
+                            }
+                        }
+                    }
+                }
+                ring = next;
+            }
+            for (i, c) in colour.iter().enumerate() {
+                if let Some(c) = c {
+                    let (pu, pv) = (piece.at[0] + i % fw - b, piece.at[1] + i / fw - b);
+                    rgb[(pv * pw + pu) * 3..][..3].copy_from_slice(c);
+                }
+            }
+        }
+        rgb
+    }
+
+    /// The numbers and bars of page `page`, placed in page pixels: what the PNG draws as
+    /// pixels and the PDF as text and vectors.
+    pub fn marks(&self, page: usize) -> Vec<Mark> {
+        let px = self.spec.px_per_mm();
+        let b = self.spec.bleed_px();
+        let mut marks = Vec::new();
+        for piece in self.pieces.iter().filter(|p| p.page == page) {
+            let h = piece.placed()[1];
+            let (x, y) = (piece.at[0].saturating_sub(b), piece.at[1] + h + b + (0.8 * px) as usize);
+            let text = piece.id.to_string();
+            let mut x_end = x + (text_width(&text, 2.5 * px)).ceil() as usize;
+            marks.push(Mark::Text { at: [x, y], height: 2.5 * px, text });
+            let o = self.orient.get(piece.part as usize - 1);
+            for (dir, letter) in [(o.and_then(|o| o.front), 'F'), (o.and_then(|o| o.up), 'U')] {
+                if let Some(d) = dir {
+                    let centre = [x_end + (3.0 * px) as usize, y + (1.25 * px) as usize];
+                    marks.push(Mark::Arrow { at: centre, dir: piece.on_page(d), len: 2.6 * px, letter });
+                    x_end += (6.5 * px) as usize;
+                }
+            }
+        }
+        // The band along the bottom: the page number, then the 10 mm and 50 mm bars.
+        let margin = (self.spec.margin_mm * px).round() as usize;
+        let band_y = self.page_px[1] - margin - (BAND_MM * px) as usize;
+        marks.push(Mark::Text { at: [margin, band_y + (2.0 * px) as usize], height: 3.0 * px, text: page.to_string() });
+        for (k, len_mm) in [10.0, 50.0].into_iter().enumerate() {
+            let x = margin + ((15.0 + k as f64 * 20.0) * px) as usize;
+            marks.push(Mark::Bar { at: [x, band_y + (5.0 * px) as usize], len_mm });
+        }
+        marks
+    }
+
+    /// The cut line of `piece`: the edges between its pixels and the rest, merged into runs,
+    /// in page pixels (x0, y0, x1, y1 on pixel corners).
+    pub fn cut_line(&self, piece: &Piece, labels: &[u32]) -> Vec<[usize; 4]> {
+        let [w, h] = piece.placed();
+        let mask = self.mask(piece, labels);
+        let on = |u: i64, v: i64| {
+            u >= 0 && v >= 0 && (u as usize) < w && (v as usize) < h && mask[v as usize * w + u as usize]
+        };
+        let [x, y] = piece.at;
+        let mut out = Vec::new();
+        // Horizontal edges lie on row lines 0..=h, vertical ones on column lines 0..=w.
+        for line in 0..=h as i64 {
+            let mut run: Option<usize> = None;
+            for u in 0..=w {
+                let edge = u < w && on(u as i64, line - 1) != on(u as i64, line);
+                match (edge, run) {
+                    (true, None) => run = Some(u),
+                    (false, Some(s)) => {
+                        out.push([x + s, y + line as usize, x + u, y + line as usize]);
+                        run = None;
+                    }
+                    _ => {}
+                }
+            }
+        }
+        for line in 0..=w as i64 {
+            let mut run: Option<usize> = None;
+            for v in 0..=h {
+                let edge = v < h && on(line - 1, v as i64) != on(line, v as i64);
+                match (edge, run) {
+                    (true, None) => run = Some(v),
+                    (false, Some(s)) => {
+                        out.push([x + line as usize, y + s, x + line as usize, y + v]);
+                        run = None;
+                    }
+                    _ => {}
+                }
+            }
+        }
+        out
+    }
+
+    /// Page `page` (from 1) as 8-bit RGB, the PNG: the raster, a grey cut line just outside
+    /// each piece, and the marks.
+    pub fn render(&self, page: usize, labels: &[u32], texture: &Frame) -> Vec<u8> {
+        let [pw, ph] = self.page_px;
+        let mut rgb = self.raster(page, labels, texture);
+        for piece in self.pieces.iter().filter(|p| p.page == page) {
+            let [w, h] = piece.placed();
+            let mask = self.mask(piece, labels);
+            let inside = |u: i64, v: i64| {
+                u >= 0 && v >= 0 && (u as usize) < w && (v as usize) < h && mask[v as usize * w + u as usize]
+            };
             // The cut line: the pixels around the piece that are not on it.
             for v in -1..=h as i64 {
                 for u in -1..=w as i64 {
@@ -405,20 +602,22 @@ impl Layout {
                     let near = (-1..=1).any(|dv| (-1..=1).any(|du| inside(u + du, v + dv)));
                     let (pu, pv) = (piece.at[0] as i64 + u, piece.at[1] as i64 + v);
                     if near && pu >= 0 && pv >= 0 && (pu as usize) < pw && (pv as usize) < ph {
-                        rgb[(pv as usize * pw + pu as usize) * 3..(pv as usize * pw + pu as usize) * 3 + 3].fill(96);
+                        rgb[(pv as usize * pw + pu as usize) * 3..][..3].fill(96);
                     }
                 }
             }
-            let digit_mm = 2.5;
-            draw_number(&mut rgb, pw, [piece.at[0], piece.at[1] + h + (0.8 * px) as usize], piece.id, digit_mm * px);
         }
-        // The band along the bottom: the page number, then the 10 mm and 50 mm bars.
-        let margin = (self.spec.margin_mm * px).round() as usize;
-        let band_y = ph - margin - (BAND_MM * px) as usize;
-        draw_number(&mut rgb, pw, [margin, band_y + (2.0 * px) as usize], page, 3.0 * px);
-        for (k, len_mm) in [10.0, 50.0].into_iter().enumerate() {
-            let x = margin + ((15.0 + k as f64 * 20.0) * px) as usize;
-            pav_core::image::draw_scale_bar(&mut rgb, pw, ph, [x, band_y + (5.0 * px) as usize], px, len_mm);
+        let px = self.spec.px_per_mm();
+        for mark in self.marks(page) {
+            match mark {
+                Mark::Text { at, height, text } => draw_text(&mut rgb, pw, at, &text, height),
+                Mark::Bar { at, len_mm } => pav_core::image::draw_scale_bar(&mut rgb, pw, ph, at, px, len_mm),
+                Mark::Arrow { at, dir, len, letter } => {
+                    draw_arrow(&mut rgb, pw, at, dir, len);
+                    let x = at[0] + (len / 2.0 + 0.5 * px) as usize;
+                    draw_text(&mut rgb, pw, [x, at[1] - (px as usize)], &letter.to_string(), 2.0 * px);
+                }
+            }
         }
         rgb
     }
@@ -429,15 +628,24 @@ impl Layout {
     pub fn csv(&self) -> String {
         let mm = |p: usize| p as f64 / self.spec.px_per_mm();
         let mut s = String::from(
-            "piece,page,x_mm,y_mm,width_mm,height_mm,rotated,part,tile,page_x_px,page_y_px,sheet_x_px,sheet_y_px,sheet_w_px,sheet_h_px\n",
+            "piece,page,x_mm,y_mm,width_mm,height_mm,rotated,mirrored,part,panel,front_deg,up_deg,tile,page_x_px,page_y_px,sheet_x_px,sheet_y_px,sheet_w_px,sheet_h_px\n",
         );
         for p in &self.pieces {
             let [w, h] = p.placed();
             let tile = p.tile.map_or(String::new(), |(c, r)| format!("{c}x{r}"));
             let [sx, sy, sw, sh] = p.window;
+            let o = self.orient.get(p.part as usize - 1);
+            let panel = o.and_then(|o| o.panel).map_or(String::new(), |p| p.to_string());
+            // Counter-clockwise from the page's right, as a person reads an arrow on paper.
+            let deg = |d: Option<[f64; 2]>| {
+                d.map_or(String::new(), |d| {
+                    let d = p.on_page(d);
+                    format!("{:.0}", (-d[1]).atan2(d[0]).to_degrees().rem_euclid(360.0))
+                })
+            };
             let _ = writeln!(
                 s,
-                "{},{},{:.1},{:.1},{:.1},{:.1},{},{},{tile},{},{},{sx},{sy},{sw},{sh}",
+                "{},{},{:.1},{:.1},{:.1},{:.1},{},{},{},{panel},{},{},{tile},{},{},{sx},{sy},{sw},{sh}",
                 p.id,
                 p.page,
                 mm(p.at[0]),
@@ -445,7 +653,10 @@ impl Layout {
                 mm(w),
                 mm(h),
                 p.rotated,
+                p.mirrored,
                 p.part,
+                deg(o.and_then(|o| o.front)),
+                deg(o.and_then(|o| o.up)),
                 p.at[0],
                 p.at[1]
             );
@@ -472,52 +683,85 @@ impl Layout {
     pub fn paper_used(&self, labels: &[u32]) -> f64 {
         let on: usize = self.pieces.iter().map(|p| self.mask(p, labels).iter().filter(|&&m| m).count()).sum();
         let px = self.spec.px_per_mm();
-        let area = (self.spec.paper.width_mm - 2.0 * self.spec.margin_mm)
-            * (self.spec.paper.height_mm - 2.0 * self.spec.margin_mm);
+        let area = (self.page_mm[0] - 2.0 * self.spec.margin_mm) * (self.page_mm[1] - 2.0 * self.spec.margin_mm);
         on as f64 / (area * px * px * self.pages.max(1) as f64)
     }
 }
 
-/// Seven-segment digits: which of the segments a, b, c, d, e, f, g each lights.
-const SEGMENTS: [u8; 10] = [0x3f, 0x06, 0x5b, 0x4f, 0x66, 0x6d, 0x7d, 0x07, 0x7f, 0x6f];
+/// A 5 × 7 bitmap font for what the pages say: digits, and F and U for the arrows; each row's
+/// five bits, the leftmost the highest.
+fn glyph(ch: char) -> Option<[u8; 7]> {
+    Some(match ch {
+        '0' => [0x0e, 0x11, 0x13, 0x15, 0x19, 0x11, 0x0e],
+        '1' => [0x04, 0x0c, 0x04, 0x04, 0x04, 0x04, 0x0e],
+        '2' => [0x0e, 0x11, 0x01, 0x02, 0x04, 0x08, 0x1f],
+        '3' => [0x1f, 0x02, 0x04, 0x02, 0x01, 0x11, 0x0e],
+        '4' => [0x02, 0x06, 0x0a, 0x12, 0x1f, 0x02, 0x02],
+        '5' => [0x1f, 0x10, 0x1e, 0x01, 0x01, 0x11, 0x0e],
+        '6' => [0x06, 0x08, 0x10, 0x1e, 0x11, 0x11, 0x0e],
+        '7' => [0x1f, 0x01, 0x02, 0x04, 0x08, 0x08, 0x08],
+        '8' => [0x0e, 0x11, 0x11, 0x0e, 0x11, 0x11, 0x0e],
+        '9' => [0x0e, 0x11, 0x11, 0x0f, 0x01, 0x02, 0x0c],
+        'F' => [0x1f, 0x10, 0x10, 0x1e, 0x10, 0x10, 0x10],
+        'U' => [0x11, 0x11, 0x11, 0x11, 0x11, 0x11, 0x0e],
+        _ => return None,
+    })
+}
 
-/// Draws `number` in seven-segment digits `height` pixels tall, top-left at `at`.
-fn draw_number(rgb: &mut [u8], w: usize, at: [usize; 2], number: usize, height: f64) {
-    let (dh, dw) = (height.max(7.0) as usize, (height * 0.55).max(4.0) as usize);
-    let t = (height / 8.0).max(1.0) as usize;
+/// Width in pixels of `text` drawn `height` pixels tall (six glyph columns a character).
+fn text_width(text: &str, height: f64) -> f64 {
+    text.chars().count() as f64 * 6.0 * height / 7.0
+}
+
+/// Draws `text` in black, `height` pixels tall, top-left at `at`.
+fn draw_text(rgb: &mut [u8], w: usize, at: [usize; 2], text: &str, height: f64) {
     let h = rgb.len() / 3 / w;
-    let mut fill = |x0: usize, y0: usize, x1: usize, y1: usize| {
-        for y in y0..y1.min(h) {
-            for x in x0..x1.min(w) {
-                rgb[(y * w + x) * 3..(y * w + x) * 3 + 3].fill(0);
+    let cell = height / 7.0;
+    for (k, ch) in text.chars().enumerate() {
+        let Some(rows) = glyph(ch) else { continue };
+        let x0 = at[0] as f64 + k as f64 * 6.0 * cell;
+        for (r, bits) in rows.iter().enumerate() {
+            for c in 0..5 {
+                if bits & (0x10 >> c) == 0 {
+                    continue;
+                }
+                let (xa, ya) = ((x0 + c as f64 * cell) as usize, (at[1] as f64 + r as f64 * cell) as usize);
+                let (xb, yb) = ((x0 + (c + 1) as f64 * cell) as usize, (at[1] as f64 + (r + 1) as f64 * cell) as usize);
+                for y in ya..yb.max(ya + 1).min(h) {
+                    for x in xa..xb.max(xa + 1).min(w) {
+                        rgb[(y * w + x) * 3..][..3].fill(0);
+                    }
+                }
             }
         }
+    }
+}
+
+/// Draws an arrow `len` pixels long centred on `at`, pointing `dir`: a shaft and a head.
+fn draw_arrow(rgb: &mut [u8], w: usize, at: [usize; 2], dir: [f64; 2], len: f64) {
+    let h = rgb.len() / 3 / w;
+    let thick = (len / 12.0).max(1.0);
+    let (cx, cy) = (at[0] as f64, at[1] as f64);
+    let tip = [cx + dir[0] * len / 2.0, cy + dir[1] * len / 2.0];
+    let tail = [cx - dir[0] * len / 2.0, cy - dir[1] * len / 2.0];
+    // The head: two strokes back from the tip at ±30°.
+    let back = |a: f64| {
+        let (c, s) = (a.cos(), a.sin());
+        [tip[0] - (dir[0] * c - dir[1] * s) * len * 0.4, tip[1] - (dir[0] * s + dir[1] * c) * len * 0.4]
     };
-    for (k, ch) in number.to_string().bytes().enumerate() {
-        let seg = SEGMENTS[(ch - b'0') as usize];
-        let (x, y) = (at[0] + k * (dw + 2 * t), at[1]);
-        let mid = y + dh / 2;
-        let lit = |s: u8| seg & (1 << s) != 0;
-        if lit(0) {
-            fill(x, y, x + dw, y + t);
-        }
-        if lit(1) {
-            fill(x + dw - t, y, x + dw, mid + t);
-        }
-        if lit(2) {
-            fill(x + dw - t, mid, x + dw, y + dh);
-        }
-        if lit(3) {
-            fill(x, y + dh - t, x + dw, y + dh);
-        }
-        if lit(4) {
-            fill(x, mid, x + t, y + dh);
-        }
-        if lit(5) {
-            fill(x, y, x + t, mid + t);
-        }
-        if lit(6) {
-            fill(x, mid, x + dw, mid + t);
+    for (a, b) in [(tail, tip), (back(0.5), tip), (back(-0.5), tip)] {
+        let steps = ((b[0] - a[0]).hypot(b[1] - a[1]) * 2.0).ceil() as usize + 1;
+        for i in 0..=steps {
+            let t = i as f64 / steps as f64;
+            let (x, y) = (a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t);
+            for dy in 0..thick as usize {
+                for dx in 0..thick as usize {
+                    let (px, py) = ((x - thick / 2.0) as i64 + dx as i64, (y - thick / 2.0) as i64 + dy as i64);
+                    if px >= 0 && py >= 0 && (px as usize) < w && (py as usize) < h {
+                        rgb[(py as usize * w + px as usize) * 3..][..3].fill(0);
+                    }
+                }
+            }
         }
     }
 }
@@ -562,8 +806,8 @@ mod tests {
         // 16 texels on 160 mm: 10 mm a texel; the column is 10 mm wide, so printed, and every
         // part fits the page whole.
         let sheet = Sheet::new(16, 160.0, 25.4);
-        let spec = Spec { paper: Paper { width_mm: 100.0, height_mm: 120.0 }, dpi: 25.4, ..Spec::default() };
-        let l = layout(&labels, &p, &tex, sheet, spec).unwrap();
+        let spec = Spec { paper: Paper::sheet(100.0, 120.0), dpi: 25.4, ..Spec::default() };
+        let l = layout(&labels, &p, &tex, sheet, spec, Vec::new()).unwrap();
         assert!(l.by_hand.is_empty() && l.pieces.iter().all(|p| p.tile.is_none()), "{:?}", l.pieces);
         let whole = pav_core::image::resize::resize(&tex, 160, 160, pav_core::image::resize::Interpolation::Bilinear);
         let pages: Vec<Vec<u8>> = (1..=l.pages).map(|pg| l.render(pg, &labels, &tex)).collect();
@@ -612,13 +856,22 @@ mod tests {
         let (region, tex) = atlas();
         let (labels, p) = parts(&region, 16);
         // 2 mm a texel: the one-texel column is a 2 mm sliver, the pair 4 mm.
-        let l = layout(&labels, &p, &tex, Sheet::new(16, 32.0, 254.0), Spec { dpi: 254.0, ..Spec::default() }).unwrap();
+        let l =
+            layout(&labels, &p, &tex, Sheet::new(16, 32.0, 254.0), Spec { dpi: 254.0, ..Spec::default() }, Vec::new())
+                .unwrap();
         assert_eq!(l.by_hand.len(), 1);
         assert_eq!(l.by_hand[0].size_mm, [2.0, 16.0]);
         assert!(l.by_hand_csv().lines().nth(1).unwrap().contains(",2.0,16.0,#"), "{}", l.by_hand_csv());
         // The 6×5 block at 100 mm a texel (600 × 500 mm) needs tiles on A4.
-        let big = layout(&labels, &p[..1], &tex, Sheet::new(16, 1600.0, 25.4), Spec { dpi: 25.4, ..Spec::default() })
-            .unwrap();
+        let big = layout(
+            &labels,
+            &p[..1],
+            &tex,
+            Sheet::new(16, 1600.0, 25.4),
+            Spec { dpi: 25.4, ..Spec::default() },
+            Vec::new(),
+        )
+        .unwrap();
         assert!(big.pieces.len() >= 6 && big.pieces.iter().all(|t| t.tile.is_some()), "{:?}", big.pieces);
     }
 
@@ -627,12 +880,14 @@ mod tests {
         let (region, tex) = atlas();
         let (labels, p) = parts(&region, 16);
         let sheet = Sheet::new(16, 160.0, 300.0);
-        let tiny = Spec { paper: Paper { width_mm: 30.0, height_mm: 30.0 }, ..Spec::default() };
+        let tiny = Spec { paper: Paper::sheet(30.0, 30.0), ..Spec::default() };
         assert!(
-            matches!(layout(&labels, &p, &tex, sheet, tiny), Err(PiecesError::Invalid(m)) if m.contains("larger paper"))
+            matches!(layout(&labels, &p, &tex, sheet, tiny, Vec::new()), Err(PiecesError::Invalid(m)) if m.contains("larger paper"))
         );
         let zero = Spec { dpi: 0.0, ..Spec::default() };
-        assert!(matches!(layout(&labels, &p, &tex, sheet, zero), Err(PiecesError::Invalid(m)) if m.contains("DPI")));
-        assert_eq!(layout(&labels, &[], &tex, sheet, Spec::default()), Err(PiecesError::Empty));
+        assert!(
+            matches!(layout(&labels, &p, &tex, sheet, zero, Vec::new()), Err(PiecesError::Invalid(m)) if m.contains("DPI"))
+        );
+        assert_eq!(layout(&labels, &[], &tex, sheet, Spec::default(), Vec::new()), Err(PiecesError::Empty));
     }
 }

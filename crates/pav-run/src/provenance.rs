@@ -125,6 +125,14 @@ impl Run {
         self.result.insert(key.into(), value.to_string());
     }
 
+    /// Records the process's peak resident memory so far as `peak_memory_mib`, where the
+    /// system tells it (Linux's `VmHWM`): a job with a stated memory bound shows it kept it.
+    pub fn peak_memory(&mut self) {
+        if let Some(mib) = peak_memory_mib() {
+            self.result("peak_memory_mib", format!("{mib:.0}"));
+        }
+    }
+
     /// Writes the record to `path` (a `run.toml` in a folder, or beside a file).
     pub fn write(&self, path: &Path) -> std::io::Result<()> {
         if let Some(d) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
@@ -220,6 +228,14 @@ fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
             out.push(p);
         }
     }
+}
+
+/// The process's peak resident memory so far, MiB (Linux's `VmHWM`; none elsewhere).
+pub fn peak_memory_mib() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib / 1024.0)
 }
 
 #[cfg(test)]

@@ -15,7 +15,8 @@ pub struct Args {
     /// The texture: an optimized texture.png, or any square atlas of the config's mesh.
     #[arg(long, value_parser = pav::data::arg_path)]
     texture: PathBuf,
-    /// Paper: a4, a3, a5, letter, legal, tabloid, or WIDTHxHEIGHT in millimetres.
+    /// Paper: a4, a3, a5, letter, legal, tabloid, WIDTHxHEIGHT in millimetres, or roll:WIDTHmm
+    /// (a wide-format or wrap printer's roll, cut to the length the pieces take).
     #[arg(long, default_value = "a4")]
     paper: Paper,
     /// Model scale: `20` or `1:20`.
@@ -25,7 +26,8 @@ pub struct Args {
     /// (refused when no common scale is within 15 % of it: probably another car).
     #[arg(long, value_name = "MM", conflicts_with = "scale")]
     model_length: Option<f64>,
-    /// Printer resolution of the pages.
+    /// Printer resolution of the pages (lowered to four pixels a texel where the texture
+    /// carries less: a full-size layout).
     #[arg(long, default_value_t = 300.0)]
     dpi: f64,
     /// Unprinted border on every side of a page, mm.
@@ -37,7 +39,11 @@ pub struct Args {
     /// How far the tiles of a part too large for one page overlap, mm.
     #[arg(long, default_value_t = 5.0)]
     overlap: f64,
-    /// Output folder: pages/page-N.png, pieces.csv, by_hand.csv, summary.csv and run.toml.
+    /// How far each piece's own texels are printed past its cut line, mm (a cut a little off
+    /// the line then shows no white paper).
+    #[arg(long, default_value_t = 0.0)]
+    bleed: f64,
+    /// Output folder: pieces.pdf, pages/page-N.png, pieces.csv, by_hand.csv, summary.csv and run.toml.
     #[arg(long, short = 'o', default_value = "out/pieces")]
     out: PathBuf,
 }
@@ -49,6 +55,7 @@ pub fn run(a: &Args) -> Result<()> {
         margin_mm: a.margin,
         min_mm: a.min_piece,
         overlap_mm: a.overlap,
+        bleed_mm: a.bleed,
         dpi: a.dpi,
         ..Spec::default()
     };
@@ -70,11 +77,15 @@ pub fn run(a: &Args) -> Result<()> {
         .setting("dpi", a.dpi)
         .setting("margin_mm", a.margin)
         .setting("min_piece_mm", a.min_piece)
-        .setting("overlap_mm", a.overlap);
+        .setting("overlap_mm", a.overlap)
+        .setting("bleed_mm", a.bleed);
     record.result("pages", l.pages);
     record.result("pieces", l.pieces.len());
     record.result("by_hand", l.by_hand.len());
     record.result("paper_used", format!("{:.4}", r.paper_used));
+    record.result("paper_length_m", format!("{:.3}", r.length_m));
+    record.result("dpi", l.spec.dpi);
+    record.peak_memory();
     let path = a.out.join(pav::provenance::FILE);
     record.write(&path).with_context(|| format!("writing {}", path.display()))?;
     outln!(
@@ -86,6 +97,12 @@ pub fn run(a: &Args) -> Result<()> {
         l.sheet.atlas_mm,
         100.0 * r.paper_used
     );
+    if l.spec.dpi < a.dpi {
+        outln!("{} dpi: the texture's texels carry no more at this scale (four pixels a texel)", l.spec.dpi);
+    }
+    if a.paper.roll {
+        outln!("{:.2} m of the {} roll", r.length_m, a.paper);
+    }
     if !l.by_hand.is_empty() {
         outln!(
             "{} parts narrower than {} mm to paint by hand in their colour (by_hand.csv)",
@@ -94,6 +111,6 @@ pub fn run(a: &Args) -> Result<()> {
         );
     }
     outln!("print each page at 100 % (no fit to page) and check its 10 mm and 50 mm bars");
-    outln!("pages   {}\npieces  {}", a.out.join("pages").display(), r.csv.display());
+    outln!("pdf     {}\npages   {}\npieces  {}", r.pdf.display(), a.out.join("pages").display(), r.csv.display());
     Ok(())
 }

@@ -66,6 +66,114 @@ impl fmt::Display for Part {
     }
 }
 
+/// A signed mesh axis, written `+x`, `-z`, …: which way the car's front or up points in the
+/// mesh's coordinates (a mesh file says neither).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize)]
+#[serde(try_from = "String")]
+pub struct Axis {
+    /// 0, 1 or 2 for x, y, z.
+    pub index: usize,
+    /// Points along +index (else −index).
+    pub positive: bool,
+}
+
+impl Axis {
+    /// The unit vector.
+    pub fn vector(self) -> [f32; 3] {
+        let mut v = [0.0; 3];
+        v[self.index] = if self.positive { 1.0 } else { -1.0 };
+        v
+    }
+}
+
+impl TryFrom<String> for Axis {
+    type Error = String;
+    fn try_from(s: String) -> Result<Axis, String> {
+        s.parse()
+    }
+}
+
+impl std::str::FromStr for Axis {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Axis, String> {
+        let t = s.trim().to_ascii_lowercase();
+        let (positive, name) = match t.as_bytes().first() {
+            Some(b'+') => (true, &t[1..]),
+            Some(b'-') => (false, &t[1..]),
+            _ => (true, t.as_str()),
+        };
+        let index = ["x", "y", "z"]
+            .iter()
+            .position(|a| *a == name)
+            .ok_or_else(|| format!("`{s}` is no mesh axis: write +x, -x, +y, -y, +z or -z"))?;
+        Ok(Axis { index, positive })
+    }
+}
+
+impl fmt::Display for Axis {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}{}", if self.positive { '+' } else { '-' }, ["x", "y", "z"][self.index])
+    }
+}
+
+/// The panel of the car a surface lies on, from which way it looks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Panel {
+    /// Looks up: hood, roof, trunk lid.
+    Top,
+    /// Looks down: the floor.
+    Bottom,
+    /// Looks to the driver's left.
+    LeftSide,
+    /// Looks to the driver's right.
+    RightSide,
+    /// Looks forward.
+    FrontEnd,
+    /// Looks back.
+    RearEnd,
+}
+
+impl Panel {
+    /// The panel an outward normal `n` looks at, for a car whose front and up are `front`
+    /// and `up` (left is up × front, as for a driver facing front).
+    pub fn facing(n: [f32; 3], front: Axis, up: Axis) -> Panel {
+        let (f, u) = (front.vector(), up.vector());
+        let l = super::vec3::cross(u, f);
+        let dot = |a: [f32; 3]| a[0] * n[0] + a[1] * n[1] + a[2] * n[2];
+        let (df, du, dl) = (dot(f), dot(u), dot(l));
+        if du.abs() >= df.abs() && du.abs() >= dl.abs() {
+            if du >= 0.0 {
+                Panel::Top
+            } else {
+                Panel::Bottom
+            }
+        } else if dl.abs() >= df.abs() {
+            if dl >= 0.0 {
+                Panel::LeftSide
+            } else {
+                Panel::RightSide
+            }
+        } else if df >= 0.0 {
+            Panel::FrontEnd
+        } else {
+            Panel::RearEnd
+        }
+    }
+}
+
+impl fmt::Display for Panel {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Panel::Top => "top",
+            Panel::Bottom => "bottom",
+            Panel::LeftSide => "left side",
+            Panel::RightSide => "right side",
+            Panel::FrontEnd => "front end",
+            Panel::RearEnd => "rear end",
+        })
+    }
+}
+
 /// Faces belonging to any of `parts`. `up` is the mesh's up axis (0, 1 or 2); the length axis is
 /// the longer of the other two. A face "looks" along an axis when |cos| between its geometric
 /// normal and that axis is at least `min_cos`; face winding is not trusted, hence |cos| and the
@@ -107,6 +215,22 @@ pub fn select_faces(mesh: &Mesh, up: usize, parts: &[Part], min_cos: f32) -> Vec
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn axes_parse_and_name_the_panels_a_normal_looks_at() {
+        let (front, up): (Axis, Axis) = ("+x".parse().unwrap(), "z".parse().unwrap());
+        assert_eq!((front.to_string(), up.to_string()), ("+x".into(), "+z".into()));
+        assert!("w".parse::<Axis>().unwrap_err().contains("+x, -x"));
+        // Facing +x with +z up, the driver's left is +y.
+        assert_eq!(Panel::facing([0.0, 1.0, 0.1], front, up), Panel::LeftSide);
+        assert_eq!(Panel::facing([0.0, -1.0, 0.1], front, up), Panel::RightSide);
+        assert_eq!(Panel::facing([0.9, 0.1, 0.3], front, up), Panel::FrontEnd);
+        assert_eq!(Panel::facing([-0.9, 0.1, 0.3], front, up), Panel::RearEnd);
+        assert_eq!(Panel::facing([0.3, 0.1, 0.9], front, up), Panel::Top);
+        // The Impala's frame: front −z, up +y: its left is +y × −z = −x.
+        let (front, up): (Axis, Axis) = ("-z".parse().unwrap(), "+y".parse().unwrap());
+        assert_eq!(Panel::facing([-1.0, 0.0, 0.0], front, up), Panel::LeftSide);
+    }
 
     /// A 4 × 1 × 2 box (length x, width y, height z) with 12 outward triangles.
     fn box_mesh() -> Mesh {

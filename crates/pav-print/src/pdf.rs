@@ -1,0 +1,133 @@
+//! The pieces as a PDF at physical size: one page per sheet of paper, the pieces' pixels as one
+//! sRGB raster at the layout's DPI (its ICC profile embedded, so that a colour-managed driver
+//! prints the colours the texture was optimized in, never a soft proof), and the cut lines,
+//! numbers and check bars as vectors, sharp at any printer resolution.
+//!
+//! Written with `pdf-writer` (typst's step-by-step writer): it only serializes, so the layout
+//! stays the one description of every page, and it pulls in no font or image stack.
+
+use crate::pieces::{Layout, Mark};
+use pav_core::image::Frame;
+use pdf_writer::{Content, Filter, Finish, Name, Pdf, Rect, Ref, Str};
+
+/// Points per millimetre (a point is 1/72 inch).
+const PT_PER_MM: f64 = 72.0 / 25.4;
+
+/// Why the PDF could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum PdfError {
+    /// LittleCMS could not serialize the sRGB profile.
+    #[error("the sRGB profile: {0}")]
+    Profile(String),
+}
+
+/// The layout's pages as one PDF: what `pieces.pdf` holds.
+pub fn pieces_pdf(layout: &Layout, labels: &[u32], texture: &Frame) -> Result<Vec<u8>, PdfError> {
+    let icc = lcms2::Profile::new_srgb().icc().map_err(|e| PdfError::Profile(e.to_string()))?;
+    let level = miniz_oxide::deflate::CompressionLevel::DefaultLevel as u8;
+    let mut pdf = Pdf::new();
+    let (catalog, tree, icc_id, font, bold) = (Ref::new(1), Ref::new(2), Ref::new(3), Ref::new(4), Ref::new(5));
+    // Three objects a page: the page, its content and its raster.
+    let page_ref = |k: usize, o: i32| Ref::new(6 + 3 * k as i32 + o);
+    pdf.catalog(catalog).pages(tree);
+    pdf.pages(tree).kids((0..layout.pages).map(|k| page_ref(k, 0))).count(layout.pages as i32);
+    let packed = miniz_oxide::deflate::compress_to_vec_zlib(&icc, level);
+    let mut profile = pdf.icc_profile(icc_id, &packed);
+    profile.filter(Filter::FlateDecode);
+    profile.n(3).range([0.0, 1.0, 0.0, 1.0, 0.0, 1.0]);
+    profile.finish();
+    // Two of the fourteen fonts every reader has: nothing to embed.
+    pdf.type1_font(font).base_font(Name(b"Helvetica"));
+    pdf.type1_font(bold).base_font(Name(b"Helvetica-Bold"));
+    let [mm_w, mm_h] = layout.page_mm;
+    let (page_w, page_h) = ((mm_w * PT_PER_MM) as f32, (mm_h * PT_PER_MM) as f32);
+    let pt = |px: f64| (px / layout.spec.dpi * 72.0) as f32;
+    // Page pixels (x right, y down) to PDF points (y up from the bottom).
+    let at = |x: f64, y: f64| (pt(x), page_h - pt(y));
+    for k in 0..layout.pages {
+        let page = k + 1;
+        let mut p = pdf.page(page_ref(k, 0));
+        p.media_box(Rect::new(0.0, 0.0, page_w, page_h));
+        p.parent(tree);
+        p.contents(page_ref(k, 1));
+        let mut res = p.resources();
+        res.x_objects().pair(Name(b"Im"), page_ref(k, 2));
+        res.fonts().pair(Name(b"F"), font).pair(Name(b"B"), bold);
+        res.finish();
+        p.finish();
+
+        let [pw, ph] = layout.page_px;
+        let raster = layout.raster(page, labels, texture);
+        let data = miniz_oxide::deflate::compress_to_vec_zlib(&raster, level);
+        let mut image = pdf.image_xobject(page_ref(k, 2), &data);
+        image.filter(Filter::FlateDecode);
+        image.width(pw as i32).height(ph as i32).bits_per_component(8);
+        image.color_space().icc_based(icc_id);
+        image.finish();
+
+        let mut c = Content::new();
+        // The raster spans the page: its pixels are the page's rounded to whole ones (under
+        // 0.1 mm off on any paper), and a renderer at the PNG's resolution maps them one to one
+        // instead of resampling every pixel by a fraction.
+        c.save_state().transform([page_w, 0.0, 0.0, page_h, 0.0, 0.0]);
+        c.x_object(Name(b"Im")).restore_state();
+        // Cut lines: a hairline of 0.25 pt in mid grey, on the pieces' own edges.
+        c.set_line_width(0.25).set_stroke_gray(0.4);
+        for piece in layout.pieces.iter().filter(|p| p.page == page) {
+            for [ax, ay, bx, by] in layout.cut_line(piece, labels) {
+                let ((x, y), (u, v)) = (at(ax as f64, ay as f64), at(bx as f64, by as f64));
+                c.move_to(x, y).line_to(u, v);
+            }
+        }
+        c.stroke();
+        c.set_fill_gray(0.0);
+        let px_per_mm = layout.spec.px_per_mm();
+        for mark in layout.marks(page) {
+            match mark {
+                Mark::Text { at: [x, y], height, text } => {
+                    // The top of the text where the PNG's digits start: cap height ≈ 0.72 em.
+                    let size = pt(height) / 0.72;
+                    let (tx, ty) = at(x as f64, y as f64 + height);
+                    c.begin_text().set_font(Name(b"B"), size).next_line(tx, ty);
+                    c.show(Str(text.as_bytes())).end_text();
+                }
+                Mark::Bar { at: [x, y], len_mm } => {
+                    // The bar as the PNG draws it: 1 mm thick, a tick each mm, longer every 5.
+                    let thick = px_per_mm.round().max(1.0);
+                    let len = (len_mm * px_per_mm).round();
+                    let (bx, by) = at(x as f64, y as f64 + thick);
+                    c.rect(bx, by, pt(len), pt(thick));
+                    for m in 0..=len_mm as usize {
+                        let tick = if m % 5 == 0 { 2.0 * thick } else { thick };
+                        let tx = (x as f64 + (m as f64 * px_per_mm).round()).min(x as f64 + len - 1.0);
+                        let (tx, ty) = at(tx, y as f64);
+                        c.rect(tx, ty, pt(1.0).max(0.24), pt(tick));
+                    }
+                    c.fill_nonzero();
+                    let (lx, ly) = at(x as f64, y as f64 + thick + 3.0 * px_per_mm);
+                    c.begin_text().set_font(Name(b"F"), 6.0).next_line(lx, ly);
+                    c.show(Str(format!("{len_mm} mm").as_bytes())).end_text();
+                }
+                Mark::Arrow { at: [x, y], dir, len, letter } => {
+                    let (cx, cy) = (x as f64, y as f64);
+                    let tip = at(cx + dir[0] * len / 2.0, cy + dir[1] * len / 2.0);
+                    let tail = at(cx - dir[0] * len / 2.0, cy - dir[1] * len / 2.0);
+                    let back = |a: f64| {
+                        let (co, si) = (a.cos(), a.sin());
+                        let d = [dir[0] * co - dir[1] * si, dir[0] * si + dir[1] * co];
+                        at(cx + dir[0] * len / 2.0 - d[0] * len * 0.4, cy + dir[1] * len / 2.0 - d[1] * len * 0.4)
+                    };
+                    c.set_line_width(pt(len / 12.0)).set_stroke_gray(0.0);
+                    c.move_to(tail.0, tail.1).line_to(tip.0, tip.1).stroke();
+                    let (l, r) = (back(0.5), back(-0.5));
+                    c.move_to(l.0, l.1).line_to(tip.0, tip.1).line_to(r.0, r.1).close_path().fill_nonzero();
+                    let (lx, ly) = at(cx + len / 2.0 + 0.5 * px_per_mm, cy + px_per_mm);
+                    c.begin_text().set_font(Name(b"B"), 7.0).next_line(lx, ly);
+                    c.show(Str(letter.to_string().as_bytes())).end_text();
+                }
+            }
+        }
+        pdf.stream(page_ref(k, 1), &c.finish());
+    }
+    Ok(pdf.finish())
+}
