@@ -1,7 +1,8 @@
 //! `pav print pieces` on the e-tron at 1:20: numbered pieces on A4 pages at 300 dpi, which,
 //! put back where `pieces.csv` says they came from, are the printable sheet's region pixel for
 //! pixel; the PDF has A4 pages that Poppler renders as the page PNGs, with bars of 10 and 50 mm;
-//! bad input is refused with its fix before anything is written.
+//! the placement guide highlights each piece where it is on the car; a full-size car goes on a
+//! roll within its memory bound; bad input is refused with its fix before anything is written.
 
 use crate::common::{self, pav};
 use pav::attack::config::OptimizeConfig;
@@ -115,6 +116,42 @@ fn pieces_on_a4_put_back_are_the_printable_sheets_region() {
         bleed_surrounds_each_piece(page, &on_piece[k]);
     }
     pdf_is_the_pages_at_their_size(&out, &pages, &on_piece);
+    // The placement guide: the piece it shows largest is highlighted where a flat render of a
+    // texture black on that piece's part, white elsewhere, is black.
+    let mut guide = csv::Reader::from_path(out.join("placement.csv")).unwrap();
+    let (id, side, _) = guide
+        .records()
+        .map(|r| r.unwrap())
+        .map(|r| (r[0].parse::<usize>().unwrap(), r[1].to_string(), r[2].parse::<usize>().unwrap()))
+        .max_by_key(|r| r.2)
+        .unwrap();
+    let part = rows
+        .iter()
+        .find(|r| col(r, "piece") == id.to_string())
+        .map(|r| col(r, "part").parse::<u32>().unwrap())
+        .unwrap();
+    let black_on_part: Vec<f32> = labels.iter().flat_map(|&l| [if l == part { 0.0 } else { 1.0 }; 3]).collect();
+    let tex = Rgb { width: n, height: n, rgb: black_on_part };
+    let up = cfg.mesh.up_axis();
+    let cam =
+        pav::attack::placement::sides(cfg.mesh.front.unwrap(), up).into_iter().find(|s| s.name == side).unwrap().camera;
+    let size = 480;
+    let flat = pav::render::preview::textured(&mesh, &tex, &cam, size);
+    let shown = image::open(out.join(format!("placement/piece-{id}.png"))).unwrap().to_rgb8();
+    let band = pav::attack::placement::band(size);
+    assert_eq!(shown.dimensions(), (size as u32, (size + band) as u32));
+    let (mut both, mut either) = (0, 0);
+    for i in 0..size * size {
+        let lit = shown.get_pixel((i % size) as u32, (i / size + band) as u32).0 == pav::attack::placement::HIGHLIGHT;
+        let dark = flat.rgb[i * 3] < 0.5;
+        both += (lit && dark) as usize;
+        either += (lit || dark) as usize;
+    }
+    // The render samples the texture bilinearly, the guide by texel: they part on the edge.
+    assert!(both > 2000 && both as f64 >= 0.95 * either as f64, "piece {id} from the {side}: {both} of {either}");
+    let info =
+        common::output_text(&std::process::Command::new("pdfinfo").arg(out.join("placement.pdf")).output().unwrap());
+    assert!(info.contains("Pages:") && info.contains("(A4)"), "{info}");
 }
 
 /// With a 1 mm bleed (12 px at 300 dpi) the pixel 6 px outside a piece's edge, where that is
@@ -270,4 +307,48 @@ fn bad_pieces_input_is_refused_before_anything_is_written() {
     assert!(run(&["--texture", "docs/quickstart_polar.png"]).contains("a UV atlas is square"));
     // A model 160 mm long is no e-tron at any common scale (1:24 would be 204 mm).
     assert!(run(&[&tex[..], &["--model-length", "160"]].concat()).contains("probably another car"));
+}
+
+/// The e-tron at full size on a 1370 mm wrap-printer roll: the DPI is capped at four pixels a
+/// texel, every page is the roll's width and at most 200 inches long, the metres of roll are
+/// reported, and the run stays within its memory bound of 2 GiB.
+#[test]
+fn a_full_size_car_goes_on_a_roll_within_two_gibibytes() {
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("roll");
+    let o = pav()
+        .args(["print", "pieces", "--config", "configs/optimize/paper.toml", "--texture"])
+        .args(["data:rauca-e2e/RAUCA_E2E.png", "--scale", "1", "--paper", "roll:1370mm", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let said = common::output_text(&o);
+    assert!(o.status.success(), "{said}");
+    assert!(said.contains("m of the roll:1370mm roll") && said.contains("four pixels a texel"), "{said}");
+    let run = common::run_record(&out.join("run.toml"));
+    let result = |k: &str| run["result"][k].as_str().unwrap().parse::<f64>().unwrap();
+    // 2048 texels over the 6.8 m atlas: 7.7 texels an inch, so 30 dpi.
+    assert_eq!(result("dpi"), 30.0);
+    assert!(result("peak_memory_mib") < 2048.0, "{}", result("peak_memory_mib"));
+    let pages = result("pages") as usize;
+    let length = result("paper_length_m");
+    assert!(length > 5.0 && pages >= 2, "{length} m on {pages} pages");
+    let info = std::process::Command::new("pdfinfo")
+        .args(["-f", "1", "-l", "99"])
+        .arg(out.join("pieces.pdf"))
+        .output()
+        .unwrap();
+    let sizes: Vec<(f64, f64)> = common::output_text(&info)
+        .lines()
+        .filter(|l| l.starts_with("Page") && l.contains(" size:"))
+        .map(|l| {
+            let w: Vec<f64> = l.split_whitespace().filter_map(|t| t.parse().ok()).collect();
+            (w[1], w[2])
+        })
+        .collect();
+    assert_eq!(sizes.len(), pages);
+    for (w, h) in sizes {
+        assert!((w - 1370.0 * 72.0 / 25.4).abs() <= 0.5 && h <= 200.0 * 72.0 + 0.5, "{w} × {h} pt");
+    }
 }

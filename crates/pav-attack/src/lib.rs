@@ -15,6 +15,7 @@ pub mod optimize;
 #[cfg(feature = "optimize")]
 pub mod outputs;
 pub mod pieces;
+pub mod placement;
 pub mod pyramid;
 pub mod setup;
 pub mod smooth;

@@ -4,7 +4,9 @@
 
 use crate::config::OptimizeConfig;
 use crate::export::atlas_side_m;
+use crate::placement::{figures, sides, Shot};
 use crate::setup::{mesh_and_region, SetupError};
+use pav_core::geometry::parts::Axis;
 use pav_core::image::{save_png_dpi, to_u8, Frame, Rgb};
 use pav_print::pieces::{layout, parts, Layout, PiecesError, Sheet, Spec};
 use std::path::{Path, PathBuf};
@@ -49,11 +51,15 @@ pub struct PiecesReport {
     pub csv: PathBuf,
     /// `pieces.pdf`.
     pub pdf: PathBuf,
+    /// `placement.pdf`.
+    pub guide: PathBuf,
+    /// The config names the mesh's front (else the guide takes its longest axis for it).
+    pub front_known: bool,
 }
 
 /// Lays `texture` out over `cfg`'s region at model scale 1:`scale` with `spec`, into `out`:
-/// `pieces.pdf`, `pages/page-N.png` (with their DPI), `pieces.csv`, `by_hand.csv` and a one-row
-/// `summary.csv`.
+/// `pieces.pdf`, `pages/page-N.png` (with their DPI), `pieces.csv`, `by_hand.csv`, a one-row
+/// `summary.csv` and the placement guide (`placement.pdf`, `placement/`, `placement.csv`).
 pub fn write_pieces(
     cfg: &OptimizeConfig,
     texture: &Path,
@@ -91,7 +97,7 @@ pub fn write_pieces(
     let mut pages = Vec::new();
     for page in 1..=l.pages {
         let path = dir.join(format!("page-{page}.png"));
-        let [w, h] = l.page_px;
+        let [w, h] = l.page_px(page);
         save_png_dpi(&path, w, h, &l.render(page, &labels, &frame), spec.dpi)
             .map_err(|e| PrintPiecesError::Write { path: path.clone(), source: std::io::Error::other(e) })?;
         pages.push(path);
@@ -104,7 +110,7 @@ pub fn write_pieces(
         std::fs::write(&path, text).map_err(|source| PrintPiecesError::Write { path: path.clone(), source })?;
     }
     let paper_used = l.paper_used(&labels);
-    let length_m = l.page_mm[1] * l.pages as f64 / 1000.0;
+    let length_m = l.length_mm() / 1000.0;
     let summary = out.join("summary.csv");
     let row = format!(
         "paper,scale,dpi,bleed_mm,atlas_mm,pages,pieces,by_hand,paper_used,paper_length_m\n{},{scale},{},{},{:.1},{},{},{},{paper_used:.4},{length_m:.3}\n",
@@ -117,5 +123,61 @@ pub fn write_pieces(
         l.by_hand.len()
     );
     std::fs::write(&summary, row).map_err(|source| PrintPiecesError::Write { path: summary.clone(), source })?;
-    Ok(PiecesReport { layout: l, paper_used, length_m, pages, csv, pdf })
+    let front = cfg.mesh.front.unwrap_or_else(|| length_axis(&mesh, cfg.mesh.up_axis()));
+    let guide = write_guide(&mesh, &labels, &frame, &l, front, cfg.mesh.up_axis(), spec.paper, out)?;
+    Ok(PiecesReport { layout: l, paper_used, length_m, pages, csv, pdf, guide, front_known: cfg.mesh.front.is_some() })
+}
+
+/// The mesh's longest axis across `up`, pointing +: the guide's front where the config names
+/// none (its sides are then named as if it were).
+fn length_axis(mesh: &pav_core::geometry::mesh::Mesh, up: Axis) -> Axis {
+    let (lo, hi) = mesh.bounds();
+    let index =
+        (0..3).filter(|&k| k != up.index).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap_or(0);
+    Axis { index, positive: true }
+}
+
+/// Side of each view of the placement guide, pixels.
+const GUIDE_PX: usize = 480;
+
+/// The placement guide into `out`: `placement/overview-SIDE.png` per side,
+/// `placement/piece-N.png` per piece, `placement.csv` (the side each piece is shown from and
+/// how many pixels of it show) and `placement.pdf` on `paper` (A4 for a roll).
+#[allow(clippy::too_many_arguments)]
+fn write_guide(
+    mesh: &pav_core::geometry::mesh::Mesh,
+    labels: &[u32],
+    texture: &Frame,
+    l: &Layout,
+    front: Axis,
+    up: Axis,
+    paper: pav_print::paper::Paper,
+    out: &Path,
+) -> Result<PathBuf, PrintPiecesError> {
+    let sides = sides(front, up);
+    let parts = l.orient.len().max(labels.iter().copied().max().unwrap_or(0) as usize);
+    let shots: Vec<Shot> =
+        sides.iter().map(|s| Shot::take(mesh, &s.camera, GUIDE_PX, labels, texture, parts)).collect();
+    let (figs, chosen) = figures(l, &sides, &shots, front, up);
+    let dir = out.join("placement");
+    std::fs::create_dir_all(&dir).map_err(|source| PrintPiecesError::Write { path: dir.clone(), source })?;
+    let names = sides
+        .iter()
+        .map(|s| format!("overview-{}.png", s.name))
+        .chain(chosen.iter().map(|c| format!("piece-{}.png", c.0)));
+    for (fig, name) in figs.iter().zip(names) {
+        let path = dir.join(name);
+        save_png_dpi(&path, fig.width, fig.height, &fig.rgb, 96.0)
+            .map_err(|e| PrintPiecesError::Write { path: path.clone(), source: std::io::Error::other(e) })?;
+    }
+    let mut csv = String::from("piece,side,pixels\n");
+    for (id, side, px) in &chosen {
+        csv.push_str(&format!("{id},{side},{px}\n"));
+    }
+    let path = out.join("placement.csv");
+    std::fs::write(&path, csv).map_err(|source| PrintPiecesError::Write { path: path.clone(), source })?;
+    let pdf = out.join("placement.pdf");
+    std::fs::write(&pdf, pav_print::pdf::figures_pdf(&figs, paper, 2))
+        .map_err(|source| PrintPiecesError::Write { path: pdf.clone(), source })?;
+    Ok(pdf)
 }

@@ -82,8 +82,8 @@ pub fn orient(mesh: &Mesh, labels: &[u32], n: usize, parts: usize, front: Option
             ([g[0] / len * area, -g[1] / len * area], along * area)
         };
         let v = &mut votes[label as usize - 1];
-        for k in 0..3 {
-            v.normal[k] += normal[k] * area;
+        for (sum, n) in v.normal.iter_mut().zip(normal) {
+            *sum += n * area;
         }
         if let Some(front) = front {
             let (g, along) = across(front.vector());

@@ -30,8 +30,9 @@ impl Paper {
     /// ISO A4, the default.
     pub const A4: Paper = Paper { width_mm: 210.0, height_mm: 297.0, roll: false };
 
-    /// The longest length a roll layout takes before it starts another, mm.
-    pub const ROLL_MM: f64 = 50_000.0;
+    /// The longest length of roll one page takes, mm: 200 inches, the largest page PDF
+    /// readers open (a longer layout goes on to another page of the roll).
+    pub const ROLL_MM: f64 = 5080.0;
 
     /// A sheet `w × h` mm.
     pub fn sheet(width_mm: f64, height_mm: f64) -> Paper {

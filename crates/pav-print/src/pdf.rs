@@ -39,13 +39,13 @@ pub fn pieces_pdf(layout: &Layout, labels: &[u32], texture: &Frame) -> Result<Ve
     // Two of the fourteen fonts every reader has: nothing to embed.
     pdf.type1_font(font).base_font(Name(b"Helvetica"));
     pdf.type1_font(bold).base_font(Name(b"Helvetica-Bold"));
-    let [mm_w, mm_h] = layout.page_mm;
-    let (page_w, page_h) = ((mm_w * PT_PER_MM) as f32, (mm_h * PT_PER_MM) as f32);
     let pt = |px: f64| (px / layout.spec.dpi * 72.0) as f32;
-    // Page pixels (x right, y down) to PDF points (y up from the bottom).
-    let at = |x: f64, y: f64| (pt(x), page_h - pt(y));
     for k in 0..layout.pages {
         let page = k + 1;
+        let [mm_w, mm_h] = layout.page_mm[k];
+        let (page_w, page_h) = ((mm_w * PT_PER_MM) as f32, (mm_h * PT_PER_MM) as f32);
+        // Page pixels (x right, y down) to PDF points (y up from the bottom).
+        let at = |x: f64, y: f64| (pt(x), page_h - pt(y));
         let mut p = pdf.page(page_ref(k, 0));
         p.media_box(Rect::new(0.0, 0.0, page_w, page_h));
         p.parent(tree);
@@ -56,7 +56,7 @@ pub fn pieces_pdf(layout: &Layout, labels: &[u32], texture: &Frame) -> Result<Ve
         res.finish();
         p.finish();
 
-        let [pw, ph] = layout.page_px;
+        let [pw, ph] = layout.page_px(page);
         let raster = layout.raster(page, labels, texture);
         let data = miniz_oxide::deflate::compress_to_vec_zlib(&raster, level);
         let mut image = pdf.image_xobject(page_ref(k, 2), &data);
@@ -130,4 +130,84 @@ pub fn pieces_pdf(layout: &Layout, labels: &[u32], texture: &Frame) -> Result<Ve
         pdf.stream(page_ref(k, 1), &c.finish());
     }
     Ok(pdf.finish())
+}
+
+/// An image with a caption, for a PDF of figures.
+pub struct Figure {
+    /// Interleaved 8-bit RGB.
+    pub rgb: Vec<u8>,
+    /// Width, pixels.
+    pub width: usize,
+    /// Height, pixels.
+    pub height: usize,
+    /// What it shows.
+    pub caption: String,
+}
+
+/// `figures` on pages of `paper`, `columns` across, each as wide as a column allows with its
+/// caption under it: the placement guide's PDF.
+pub fn figures_pdf(figures: &[Figure], paper: crate::paper::Paper, columns: usize) -> Vec<u8> {
+    let level = miniz_oxide::deflate::CompressionLevel::DefaultLevel as u8;
+    let (margin, gap, caption) = (12.0 * PT_PER_MM, 6.0 * PT_PER_MM, 12.0);
+    let [w_mm, h_mm] = if paper.roll { crate::paper::Paper::A4.mm() } else { paper.mm() };
+    let (page_w, page_h) = ((w_mm * PT_PER_MM) as f32, (h_mm * PT_PER_MM) as f32);
+    let columns = columns.max(1);
+    let col_w = (page_w as f64 - 2.0 * margin - (columns - 1) as f64 * gap) / columns as f64;
+    // Rows a page holds: the tallest figure's height at column width, and its caption.
+    let tallest = figures.iter().map(|f| f.height as f64 / f.width.max(1) as f64).fold(1.0, f64::max) * col_w;
+    let rows = (((page_h as f64 - 2.0 * margin + gap) / (tallest + caption + gap)).floor() as usize).max(1);
+    let per_page = rows * columns;
+    let pages = figures.len().div_ceil(per_page).max(1);
+    let mut pdf = Pdf::new();
+    let (catalog, tree, font) = (Ref::new(1), Ref::new(2), Ref::new(3));
+    let mut next = 4;
+    let mut alloc = || {
+        next += 1;
+        Ref::new(next - 1)
+    };
+    let page_refs: Vec<(Ref, Ref)> = (0..pages).map(|_| (alloc(), alloc())).collect();
+    let image_refs: Vec<Ref> = figures.iter().map(|_| alloc()).collect();
+    pdf.catalog(catalog).pages(tree);
+    pdf.pages(tree).kids(page_refs.iter().map(|r| r.0)).count(pages as i32);
+    pdf.type1_font(font).base_font(Name(b"Helvetica"));
+    for (k, &(page_id, content_id)) in page_refs.iter().enumerate() {
+        let on = k * per_page..((k + 1) * per_page).min(figures.len());
+        let mut p = pdf.page(page_id);
+        p.media_box(Rect::new(0.0, 0.0, page_w, page_h));
+        p.parent(tree);
+        p.contents(content_id);
+        let mut res = p.resources();
+        let mut xo = res.x_objects();
+        let names: Vec<String> = on.clone().map(|i| format!("Im{i}")).collect();
+        for (i, name) in on.clone().zip(&names) {
+            xo.pair(Name(name.as_bytes()), image_refs[i]);
+        }
+        xo.finish();
+        res.fonts().pair(Name(b"F"), font);
+        res.finish();
+        p.finish();
+        let mut c = Content::new();
+        for (slot, i) in on.clone().enumerate() {
+            let f = &figures[i];
+            let (row, col) = (slot / columns, slot % columns);
+            let h = col_w * f.height as f64 / f.width.max(1) as f64;
+            let x = margin + col as f64 * (col_w + gap);
+            let top = page_h as f64 - margin - row as f64 * (tallest + caption + gap);
+            c.save_state().transform([col_w as f32, 0.0, 0.0, h as f32, x as f32, (top - h) as f32]);
+            c.x_object(Name(names[slot].as_bytes())).restore_state();
+            c.begin_text().set_font(Name(b"F"), 8.0).next_line(x as f32, (top - h - 9.0) as f32);
+            // Helvetica's standard encoding has no ×: an x reads the same.
+            c.show(Str(f.caption.replace('×', "x").as_bytes())).end_text();
+        }
+        pdf.stream(content_id, &c.finish());
+    }
+    for (f, &id) in figures.iter().zip(&image_refs) {
+        let data = miniz_oxide::deflate::compress_to_vec_zlib(&f.rgb, level);
+        let mut image = pdf.image_xobject(id, &data);
+        image.filter(Filter::FlateDecode);
+        image.width(f.width as i32).height(f.height as i32).bits_per_component(8);
+        image.color_space().device_rgb();
+        image.finish();
+    }
+    pdf.finish()
 }

@@ -9,6 +9,7 @@
 
 use crate::panels::Orientation;
 use crate::paper::Paper;
+use pav_core::image::marks::{draw_arrow, draw_text, text_width};
 use pav_core::image::resize::resize_window;
 use pav_core::image::Frame;
 use std::fmt::Write as _;
@@ -221,10 +222,8 @@ pub struct Layout {
     pub by_hand: Vec<ByHand>,
     /// Pages.
     pub pages: usize,
-    /// A page's size, pixels.
-    pub page_px: [usize; 2],
-    /// A page's size, mm (on a roll, the length the pieces take).
-    pub page_mm: [f64; 2],
+    /// Each page's size, mm: the paper's, or on a roll its width by the length its pieces take.
+    pub page_mm: Vec<[f64; 2]>,
     /// How each part lies on the car, by label − 1 (empty: not known).
     pub orient: Vec<Orientation>,
 }
@@ -296,7 +295,6 @@ pub fn layout(
             return bad(format!("the {name} is a length in mm ≥ 0, not {v}"));
         }
     }
-    let page_px = [(spec.paper.width_mm * px).round() as usize, (spec.paper.height_mm * px).round() as usize];
     let usable_mm = [spec.paper.width_mm - 2.0 * spec.margin_mm, spec.paper.height_mm - 2.0 * spec.margin_mm - BAND_MM];
     // A tile must hold more than its overlaps and its number.
     let least = 2.0 * spec.overlap_mm + 2.0 * spec.bleed_mm + LABEL_MM + spec.gap_mm + 5.0;
@@ -355,15 +353,19 @@ pub fn layout(
     for p in &mut pieces {
         p.mirrored = orient.get(p.part as usize - 1).is_some_and(|o| o.mirrored);
     }
-    let (mut page_mm, mut page_px) = (spec.paper.mm(), page_px);
-    if spec.paper.roll {
-        // A roll is cut below its lowest label: the margins and the band of bars under that.
-        let b = spec.bleed_px() as f64;
-        let low = pieces.iter().map(|p| p.at[1] as f64 + p.placed()[1] as f64 + b).fold(0.0, f64::max);
-        page_mm[1] = ((low / px + LABEL_MM + spec.gap_mm + spec.margin_mm + BAND_MM) * 10.0).ceil() / 10.0;
-        page_px[1] = (page_mm[1] * px).round() as usize;
-    }
-    Ok(Layout { spec, sheet, pieces, by_hand, pages, page_px, page_mm, orient })
+    let page_mm = (1..=pages)
+        .map(|page| {
+            if !spec.paper.roll {
+                return spec.paper.mm();
+            }
+            // A roll is cut below its lowest label, with the margin and the band of bars.
+            let b = spec.bleed_px() as f64;
+            let on = pieces.iter().filter(|p| p.page == page);
+            let low = on.map(|p| p.at[1] as f64 + p.placed()[1] as f64 + b).fold(0.0, f64::max);
+            [spec.paper.width_mm, ((low / px + LABEL_MM + spec.gap_mm + spec.margin_mm + BAND_MM) * 10.0).ceil() / 10.0]
+        })
+        .collect();
+    Ok(Layout { spec, sheet, pieces, by_hand, pages, page_mm, orient })
 }
 
 /// Shelf packing, tallest first: each piece turned so that it is wider than tall when that
@@ -441,6 +443,16 @@ fn mean_colour(labels: &[u32], p: &Part, texture: &Frame, n: usize) -> [u8; 3] {
 }
 
 impl Layout {
+    /// Page `page`'s size (from 1) in pixels at the DPI.
+    pub fn page_px(&self, page: usize) -> [usize; 2] {
+        self.page_mm[page - 1].map(|mm| (mm * self.spec.px_per_mm()).round() as usize)
+    }
+
+    /// The length of paper the pages take, mm (what a roll needs).
+    pub fn length_mm(&self) -> f64 {
+        self.page_mm.iter().map(|p| p[1]).sum()
+    }
+
     /// Which of `piece`'s page pixels, row by row as placed, show its part (the sheet pixel's
     /// texel is in it): what is printed, cut around and counted.
     fn mask(&self, piece: &Piece, labels: &[u32]) -> Vec<bool> {
@@ -458,8 +470,8 @@ impl Layout {
     /// Page `page` (from 1) as 8-bit RGB on white: every piece's pixels as the sheet has them,
     /// and around each its bleed (its own edge pixels carried outward). What the PDF embeds.
     pub fn raster(&self, page: usize, labels: &[u32], texture: &Frame) -> Vec<u8> {
-        let [pw, _] = self.page_px;
-        let mut rgb = vec![255u8; pw * self.page_px[1] * 3];
+        let [pw, ph] = self.page_px(page);
+        let mut rgb = vec![255u8; pw * ph * 3];
         let b = self.spec.bleed_px();
         for piece in self.pieces.iter().filter(|p| p.page == page) {
             let [w, h] = piece.placed();
@@ -531,7 +543,7 @@ impl Layout {
         }
         // The band along the bottom: the page number, then the 10 mm and 50 mm bars.
         let margin = (self.spec.margin_mm * px).round() as usize;
-        let band_y = self.page_px[1] - margin - (BAND_MM * px) as usize;
+        let band_y = self.page_px(page)[1] - margin - (BAND_MM * px) as usize;
         marks.push(Mark::Text { at: [margin, band_y + (2.0 * px) as usize], height: 3.0 * px, text: page.to_string() });
         for (k, len_mm) in [10.0, 50.0].into_iter().enumerate() {
             let x = margin + ((15.0 + k as f64 * 20.0) * px) as usize;
@@ -585,7 +597,7 @@ impl Layout {
     /// Page `page` (from 1) as 8-bit RGB, the PNG: the raster, a grey cut line just outside
     /// each piece, and the marks.
     pub fn render(&self, page: usize, labels: &[u32], texture: &Frame) -> Vec<u8> {
-        let [pw, ph] = self.page_px;
+        let [pw, ph] = self.page_px(page);
         let mut rgb = self.raster(page, labels, texture);
         for piece in self.pieces.iter().filter(|p| p.page == page) {
             let [w, h] = piece.placed();
@@ -683,86 +695,9 @@ impl Layout {
     pub fn paper_used(&self, labels: &[u32]) -> f64 {
         let on: usize = self.pieces.iter().map(|p| self.mask(p, labels).iter().filter(|&&m| m).count()).sum();
         let px = self.spec.px_per_mm();
-        let area = (self.page_mm[0] - 2.0 * self.spec.margin_mm) * (self.page_mm[1] - 2.0 * self.spec.margin_mm);
-        on as f64 / (area * px * px * self.pages.max(1) as f64)
-    }
-}
-
-/// A 5 × 7 bitmap font for what the pages say: digits, and F and U for the arrows; each row's
-/// five bits, the leftmost the highest.
-fn glyph(ch: char) -> Option<[u8; 7]> {
-    Some(match ch {
-        '0' => [0x0e, 0x11, 0x13, 0x15, 0x19, 0x11, 0x0e],
-        '1' => [0x04, 0x0c, 0x04, 0x04, 0x04, 0x04, 0x0e],
-        '2' => [0x0e, 0x11, 0x01, 0x02, 0x04, 0x08, 0x1f],
-        '3' => [0x1f, 0x02, 0x04, 0x02, 0x01, 0x11, 0x0e],
-        '4' => [0x02, 0x06, 0x0a, 0x12, 0x1f, 0x02, 0x02],
-        '5' => [0x1f, 0x10, 0x1e, 0x01, 0x01, 0x11, 0x0e],
-        '6' => [0x06, 0x08, 0x10, 0x1e, 0x11, 0x11, 0x0e],
-        '7' => [0x1f, 0x01, 0x02, 0x04, 0x08, 0x08, 0x08],
-        '8' => [0x0e, 0x11, 0x11, 0x0e, 0x11, 0x11, 0x0e],
-        '9' => [0x0e, 0x11, 0x11, 0x0f, 0x01, 0x02, 0x0c],
-        'F' => [0x1f, 0x10, 0x10, 0x1e, 0x10, 0x10, 0x10],
-        'U' => [0x11, 0x11, 0x11, 0x11, 0x11, 0x11, 0x0e],
-        _ => return None,
-    })
-}
-
-/// Width in pixels of `text` drawn `height` pixels tall (six glyph columns a character).
-fn text_width(text: &str, height: f64) -> f64 {
-    text.chars().count() as f64 * 6.0 * height / 7.0
-}
-
-/// Draws `text` in black, `height` pixels tall, top-left at `at`.
-fn draw_text(rgb: &mut [u8], w: usize, at: [usize; 2], text: &str, height: f64) {
-    let h = rgb.len() / 3 / w;
-    let cell = height / 7.0;
-    for (k, ch) in text.chars().enumerate() {
-        let Some(rows) = glyph(ch) else { continue };
-        let x0 = at[0] as f64 + k as f64 * 6.0 * cell;
-        for (r, bits) in rows.iter().enumerate() {
-            for c in 0..5 {
-                if bits & (0x10 >> c) == 0 {
-                    continue;
-                }
-                let (xa, ya) = ((x0 + c as f64 * cell) as usize, (at[1] as f64 + r as f64 * cell) as usize);
-                let (xb, yb) = ((x0 + (c + 1) as f64 * cell) as usize, (at[1] as f64 + (r + 1) as f64 * cell) as usize);
-                for y in ya..yb.max(ya + 1).min(h) {
-                    for x in xa..xb.max(xa + 1).min(w) {
-                        rgb[(y * w + x) * 3..][..3].fill(0);
-                    }
-                }
-            }
-        }
-    }
-}
-
-/// Draws an arrow `len` pixels long centred on `at`, pointing `dir`: a shaft and a head.
-fn draw_arrow(rgb: &mut [u8], w: usize, at: [usize; 2], dir: [f64; 2], len: f64) {
-    let h = rgb.len() / 3 / w;
-    let thick = (len / 12.0).max(1.0);
-    let (cx, cy) = (at[0] as f64, at[1] as f64);
-    let tip = [cx + dir[0] * len / 2.0, cy + dir[1] * len / 2.0];
-    let tail = [cx - dir[0] * len / 2.0, cy - dir[1] * len / 2.0];
-    // The head: two strokes back from the tip at ±30°.
-    let back = |a: f64| {
-        let (c, s) = (a.cos(), a.sin());
-        [tip[0] - (dir[0] * c - dir[1] * s) * len * 0.4, tip[1] - (dir[0] * s + dir[1] * c) * len * 0.4]
-    };
-    for (a, b) in [(tail, tip), (back(0.5), tip), (back(-0.5), tip)] {
-        let steps = ((b[0] - a[0]).hypot(b[1] - a[1]) * 2.0).ceil() as usize + 1;
-        for i in 0..=steps {
-            let t = i as f64 / steps as f64;
-            let (x, y) = (a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t);
-            for dy in 0..thick as usize {
-                for dx in 0..thick as usize {
-                    let (px, py) = ((x - thick / 2.0) as i64 + dx as i64, (y - thick / 2.0) as i64 + dy as i64);
-                    if px >= 0 && py >= 0 && (px as usize) < w && (py as usize) < h {
-                        rgb[(py as usize * w + px as usize) * 3..][..3].fill(0);
-                    }
-                }
-            }
-        }
+        let margin = 2.0 * self.spec.margin_mm;
+        let area: f64 = self.page_mm.iter().map(|[w, h]| (w - margin) * (h - margin)).sum();
+        on as f64 / (area * px * px).max(f64::MIN_POSITIVE)
     }
 }
 
@@ -811,7 +746,7 @@ mod tests {
         assert!(l.by_hand.is_empty() && l.pieces.iter().all(|p| p.tile.is_none()), "{:?}", l.pieces);
         let whole = pav_core::image::resize::resize(&tex, 160, 160, pav_core::image::resize::Interpolation::Bilinear);
         let pages: Vec<Vec<u8>> = (1..=l.pages).map(|pg| l.render(pg, &labels, &tex)).collect();
-        let [pw, _] = l.page_px;
+        let [pw, _] = l.page_px(1);
         let mut covered = vec![0u32; 160 * 160];
         for piece in &l.pieces {
             let [w, h] = piece.placed();
@@ -873,6 +808,37 @@ mod tests {
         )
         .unwrap();
         assert!(big.pieces.len() >= 6 && big.pieces.iter().all(|t| t.tile.is_some()), "{:?}", big.pieces);
+    }
+
+    #[test]
+    fn a_mirrored_piece_prints_mirror_imaged_and_a_roll_is_cut_to_its_pieces() {
+        let (region, tex) = atlas();
+        let (labels, p) = parts(&region, 16);
+        let sheet = Sheet::new(16, 160.0, 25.4);
+        let spec = Spec { paper: Paper::sheet(100.0, 120.0), dpi: 25.4, ..Spec::default() };
+        let mirrored = Orientation { panel: None, front: Some([1.0, 0.0]), up: None, mirrored: true };
+        let plain = Orientation { mirrored: false, ..mirrored };
+        let orient: Vec<Orientation> = p.iter().map(|q| if q.label == p[0].label { mirrored } else { plain }).collect();
+        let l = layout(&labels, &p, &tex, sheet, spec, orient).unwrap();
+        let big = l.pieces.iter().find(|q| q.part == p[0].label).unwrap();
+        assert!(big.mirrored && !big.rotated, "{big:?}");
+        // Its page row is the sheet's row read right to left, and its front points left.
+        let [w, _] = big.placed();
+        let page = l.render(big.page, &labels, &tex);
+        let whole = pav_core::image::resize::resize(&tex, 160, 160, pav_core::image::resize::Interpolation::Bilinear);
+        let (sx, sy) = (big.window[0], big.window[1] + 5);
+        for u in 0..w {
+            let at = ((big.at[1] + 5) * l.page_px(1)[0] + big.at[0] + u) * 3;
+            let s = (sy * 160 + sx + w - 1 - u) * 3;
+            assert_eq!(page[at..at + 3], whole[s..s + 3].iter().map(|&v| v as u8).collect::<Vec<_>>()[..]);
+        }
+        assert_eq!(big.on_page([1.0, 0.0]), [-1.0, 0.0]);
+        // A roll 100 mm wide takes the length its pieces need, not a fixed page.
+        let roll = Spec { paper: "roll:100mm".parse().unwrap(), ..spec };
+        let r = layout(&labels, &p, &tex, sheet, roll, Vec::new()).unwrap();
+        let low = r.pieces.iter().map(|q| q.at[1] + q.placed()[1]).max().unwrap() as f64;
+        assert_eq!(r.pages, 1);
+        assert!(r.page_mm[0][1] > low && r.page_mm[0][1] < low + 30.0, "{:?} below {low} mm", r.page_mm);
     }
 
     #[test]

@@ -43,7 +43,7 @@ pub struct Args {
     /// the line then shows no white paper).
     #[arg(long, default_value_t = 0.0)]
     bleed: f64,
-    /// Output folder: pieces.pdf, pages/page-N.png, pieces.csv, by_hand.csv, summary.csv and run.toml.
+    /// Output folder: pieces.pdf, placement.pdf, pages/page-N.png, placement/, pieces.csv, by_hand.csv, summary.csv and run.toml.
     #[arg(long, short = 'o', default_value = "out/pieces")]
     out: PathBuf,
 }
@@ -111,6 +111,15 @@ pub fn run(a: &Args) -> Result<()> {
         );
     }
     outln!("print each page at 100 % (no fit to page) and check its 10 mm and 50 mm bars");
-    outln!("pdf     {}\npages   {}\npieces  {}", r.pdf.display(), a.out.join("pages").display(), r.csv.display());
+    if !r.front_known {
+        outln!("the config names no [mesh] front: the guide takes the mesh's longest axis for it, and names no panels");
+    }
+    outln!(
+        "pdf     {}\npages   {}\npieces  {}\nguide   {} (where each piece goes)",
+        r.pdf.display(),
+        a.out.join("pages").display(),
+        r.csv.display(),
+        r.guide.display()
+    );
     Ok(())
 }

@@ -2,6 +2,7 @@
 //! image that textures, masks and renders use, PNG I/O, and resampling ([`resize`]).
 
 pub mod filter;
+pub mod marks;
 pub mod resize;
 
 use std::path::{Path, PathBuf};
