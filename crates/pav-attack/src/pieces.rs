@@ -8,7 +8,7 @@ use crate::placement::{figures, sides, Shot};
 use crate::setup::{mesh_and_region, SetupError};
 use pav_core::geometry::parts::Axis;
 use pav_core::image::{save_png_dpi, to_u8, Frame, Rgb};
-use pav_print::pieces::{layout, parts, Layout, PiecesError, Sheet, Spec};
+use pav_print::pieces::{layout, parts, split_by_chart, Layout, PiecesError, Sheet, Spec};
 use std::path::{Path, PathBuf};
 
 /// Why the pieces could not be written.
@@ -89,8 +89,11 @@ pub fn write_pieces(
     let sheet = Sheet::new(n, atlas_mm, spec.dpi);
     // The same 8-bit atlas the printable sheet resamples.
     let frame = Frame { width: n, height: n, bgr: tex.rgb.iter().map(|v| to_u8(*v)).collect() };
-    let (labels, found) = parts(&region, n);
-    let orient = pav_print::panels::orient(&mesh, &labels, n, found.len(), cfg.mesh.front, cfg.mesh.up_axis());
+    let (mut labels, found) = parts(&region, n);
+    let charts = pav_print::panels::uv_charts(&mesh, n);
+    let found = split_by_chart(&mut labels, found, &charts, sheet, spec);
+    let count = found.iter().map(|p| p.label as usize).max().unwrap_or(0);
+    let orient = pav_print::panels::orient(&mesh, &labels, n, count, cfg.mesh.front, cfg.mesh.up_axis());
     let l = layout(&labels, &found, &frame, sheet, spec, orient)?;
     let dir = out.join("pages");
     std::fs::create_dir_all(&dir).map_err(|source| PrintPiecesError::Write { path: dir.clone(), source })?;

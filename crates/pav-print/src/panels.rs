@@ -116,6 +116,40 @@ pub fn orient(mesh: &Mesh, labels: &[u32], n: usize, parts: usize, front: Option
         .collect()
 }
 
+/// The UV chart of every texel of an `n × n` atlas (numbered from 1; 0 where no face lies): the
+/// faces joined by shared UV corners, painted into the atlas.
+pub fn uv_charts(mesh: &Mesh, n: usize) -> Vec<u32> {
+    let mut parent: Vec<usize> = (0..mesh.uvs.len()).collect();
+    fn root(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    for t in &mesh.face_uvs {
+        let a = root(&mut parent, t[0] as usize);
+        for &c in &t[1..] {
+            let b = root(&mut parent, c as usize);
+            parent[b] = a;
+        }
+    }
+    // Charts numbered in order of first face, as 24-bit colours for the painter.
+    let mut number = std::collections::HashMap::new();
+    let faces: Vec<(usize, [u8; 3])> = (0..mesh.face_uvs.len())
+        .map(|f| {
+            let r = root(&mut parent, mesh.face_uvs[f][0] as usize);
+            let next = number.len() as u32 + 1;
+            let id = *number.entry(r).or_insert(next);
+            (f, [(id >> 16) as u8, (id >> 8) as u8, id as u8])
+        })
+        .collect();
+    pav_core::geometry::uv::paint_uv(mesh, &faces, n, [0; 3])
+        .chunks(3)
+        .map(|c| (c[0] as u32) << 16 | (c[1] as u32) << 8 | c[2] as u32)
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -133,6 +167,15 @@ mod tests {
             faces.extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
         }
         Mesh::from_triangles(pos, uvs, faces)
+    }
+
+    #[test]
+    fn the_two_faces_of_the_box_are_two_charts_where_their_uvs_lie() {
+        let c = uv_charts(&box_mesh(), 20);
+        // Row 10 (v = 0.475): the +y face's chart over u 0.05–0.45, the −y face's over 0.55–0.95.
+        let row: Vec<u32> = c[10 * 20..11 * 20].to_vec();
+        assert_eq!(row[0], 0);
+        assert!(row[2..8].iter().all(|&k| k == 1) && row[12..18].iter().all(|&k| k == 2), "{row:?}");
     }
 
     #[test]

@@ -82,7 +82,7 @@ pub fn pieces_pdf(layout: &Layout, labels: &[u32], texture: &Frame) -> Result<Ve
         c.stroke();
         c.set_fill_gray(0.0);
         let px_per_mm = layout.spec.px_per_mm();
-        for mark in layout.marks(page) {
+        for mark in layout.marks(page, labels) {
             match mark {
                 Mark::Text { at: [x, y], height, text } => {
                     // The top of the text where the PNG's digits start: cap height ≈ 0.72 em.
@@ -107,6 +107,13 @@ pub fn pieces_pdf(layout: &Layout, labels: &[u32], texture: &Frame) -> Result<Ve
                     let (lx, ly) = at(x as f64, y as f64 + thick + 3.0 * px_per_mm);
                     c.begin_text().set_font(Name(b"F"), 6.0).next_line(lx, ly);
                     c.show(Str(format!("{len_mm} mm").as_bytes())).end_text();
+                }
+                Mark::Cross { at: [x, y], arm } => {
+                    let (cx, cy) = (x as f64 + 0.5, y as f64 + 0.5);
+                    let ((l, m), (r, n)) = (at(cx - arm, cy), at(cx + arm, cy));
+                    let ((t, u), (b, v)) = (at(cx, cy - arm), at(cx, cy + arm));
+                    c.set_line_width(0.3).set_stroke_gray(0.0);
+                    c.move_to(l, m).line_to(r, n).move_to(t, u).line_to(b, v).stroke();
                 }
                 Mark::Arrow { at: [x, y], dir, len, letter } => {
                     let (cx, cy) = (x as f64, y as f64);

@@ -9,7 +9,7 @@
 
 use crate::panels::Orientation;
 use crate::paper::Paper;
-use pav_core::image::marks::{draw_arrow, draw_text, text_width};
+use pav_core::image::marks::{draw_arrow, draw_line, draw_text, text_width};
 use pav_core::image::resize::resize_window;
 use pav_core::image::Frame;
 use std::fmt::Write as _;
@@ -55,6 +55,27 @@ impl Spec {
     pub fn bleed_px(&self) -> usize {
         (self.bleed_mm * self.px_per_mm()).round() as usize
     }
+
+    /// The printable area of a page, mm: the paper less its margins and the band of bars.
+    fn usable_mm(&self) -> [f64; 2] {
+        [self.paper.width_mm - 2.0 * self.margin_mm, self.paper.height_mm - 2.0 * self.margin_mm - BAND_MM]
+    }
+
+    /// What one piece's own pixels may span on a page: the printable area less its label
+    /// below it and its bleed all round.
+    fn free_px(&self) -> [usize; 2] {
+        let (px, bleed, usable) = (self.px_per_mm(), 2 * self.bleed_px(), self.usable_mm());
+        [
+            ((usable[0] * px) as usize).saturating_sub(bleed),
+            (((usable[1] - LABEL_MM - self.gap_mm) * px) as usize).saturating_sub(bleed),
+        ]
+    }
+
+    /// A piece `w × h` pixels fits on one page, upright or turned.
+    pub fn fits(&self, w: usize, h: usize) -> bool {
+        let [fw, fh] = self.free_px();
+        (w <= fw && h <= fh) || (h <= fw && w <= fh)
+    }
 }
 
 impl Default for Spec {
@@ -72,6 +93,8 @@ pub struct Part {
     pub texels: usize,
     /// Its bounding box in texels: x0, y0, x1, y1 (ends excluded).
     pub bbox: [usize; 4],
+    /// The UV chart it is, when a part too large for a page was split along its charts.
+    pub chart: Option<u32>,
 }
 
 /// The 8-connected parts of the `n × n` region (on where ≥ 0.5), largest first, and the label
@@ -106,10 +129,80 @@ pub fn parts(region: &[f32], n: usize) -> (Vec<u32>, Vec<Part>) {
                 }
             }
         }
-        out.push(Part { label, texels, bbox });
+        out.push(Part { label, texels, bbox, chart: None });
     }
     out.sort_by(|a, b| b.texels.cmp(&a.texels).then(a.label.cmp(&b.label)));
     (labels, out)
+}
+
+/// Splits every part too large for one page of `spec` along the UV charts it joins
+/// (`charts`: each texel's chart, 0 where no face lies; such texels go with the nearest chart of
+/// their part), relabelling `labels`: so that a door and a fender that touch in the atlas
+/// print as two pieces rather than as tiles cut across both. Parts that fit stay whole.
+pub fn split_by_chart(labels: &mut [u32], parts: Vec<Part>, charts: &[u32], sheet: Sheet, spec: Spec) -> Vec<Part> {
+    let n = sheet.n;
+    let mut next = parts.iter().map(|p| p.label).max().unwrap_or(0) + 1;
+    let mut out = Vec::new();
+    for p in parts {
+        let [x0, y0, x1, y1] = p.bbox;
+        let (w, h) = (sheet.pixels(x0, x1), sheet.pixels(y0, y1));
+        if spec.fits(w.1 - w.0, h.1 - h.0) {
+            out.push(p);
+            continue;
+        }
+        // Each texel's chart, spread breadth-first within the part to the texels without one.
+        let mut chart: Vec<(usize, u32)> = Vec::new();
+        let mut seen = std::collections::HashMap::new();
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let i = y * n + x;
+                if labels[i] == p.label && charts[i] != 0 {
+                    seen.insert(i, charts[i]);
+                    chart.push((i, charts[i]));
+                }
+            }
+        }
+        let mut ring: Vec<usize> = chart.iter().map(|c| c.0).collect();
+        while !ring.is_empty() {
+            let mut grown = Vec::new();
+            for &i in &ring {
+                let (x, y) = ((i % n) as i64, (i / n) as i64);
+                for (dx, dy) in [(-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, -1), (-1, 1), (1, 1)] {
+                    let (nx, ny) = (x + dx, y + dy);
+                    if nx < 0 || ny < 0 || nx >= n as i64 || ny >= n as i64 {
+                        continue;
+                    }
+                    let j = ny as usize * n + nx as usize;
+                    if labels[j] == p.label && !seen.contains_key(&j) {
+                        seen.insert(j, seen[&i]);
+                        grown.push(j);
+                    }
+                }
+            }
+            ring = grown;
+        }
+        let mut ids: Vec<u32> = seen.values().copied().collect();
+        ids.sort_unstable();
+        ids.dedup();
+        if ids.len() < 2 {
+            out.push(p);
+            continue;
+        }
+        for c in ids {
+            let label = next;
+            next += 1;
+            let (mut texels, mut bbox) = (0, [n, n, 0, 0]);
+            for (&i, _) in seen.iter().filter(|(_, &k)| k == c) {
+                let (x, y) = (i % n, i / n);
+                labels[i] = label;
+                texels += 1;
+                bbox = [bbox[0].min(x), bbox[1].min(y), bbox[2].max(x + 1), bbox[3].max(y + 1)];
+            }
+            out.push(Part { label, texels, bbox, chart: Some(c) });
+        }
+    }
+    out.sort_by(|a, b| b.texels.cmp(&a.texels).then(a.label.cmp(&b.label)));
+    out
 }
 
 /// The printed atlas: `n` texels across, `side_px` pixels across at the spec's DPI.
@@ -160,6 +253,8 @@ pub struct Piece {
     pub rotated: bool,
     /// Printed mirror-imaged, because its UV island is mirrored on the car.
     pub mirrored: bool,
+    /// The UV chart it is, where its part was split along its charts.
+    pub chart: Option<u32>,
 }
 
 impl Piece {
@@ -182,6 +277,18 @@ impl Piece {
             (x + v, y + h - 1 - u)
         } else {
             (x + u, y + v)
+        }
+    }
+
+    /// Where sheet pixel `(sx, sy)` of the piece's window is on the piece (from its top-left):
+    /// [`Piece::sheet_pixel`] undone.
+    pub fn page_pixel(&self, sx: usize, sy: usize) -> [usize; 2] {
+        let [x, y, _, h] = self.window;
+        let [u, v] = if self.rotated { [y + h - 1 - sy, sx - x] } else { [sx - x, sy - y] };
+        if self.mirrored {
+            [self.placed()[0] - 1 - u, v]
+        } else {
+            [u, v]
         }
     }
 
@@ -247,6 +354,13 @@ pub enum Mark {
         /// Length, mm.
         len_mm: f64,
     },
+    /// An alignment cross centred on `at`, its arms `arm` pixels long.
+    Cross {
+        /// Centre.
+        at: [usize; 2],
+        /// Arm length in pixels.
+        arm: f64,
+    },
     /// An arrow `len` pixels long centred on `at`, pointing `dir` (x right, y down), with its
     /// letter (`F` the car's front, `U` its up) right of it.
     Arrow {
@@ -295,7 +409,7 @@ pub fn layout(
             return bad(format!("the {name} is a length in mm ≥ 0, not {v}"));
         }
     }
-    let usable_mm = [spec.paper.width_mm - 2.0 * spec.margin_mm, spec.paper.height_mm - 2.0 * spec.margin_mm - BAND_MM];
+    let usable_mm = spec.usable_mm();
     // A tile must hold more than its overlaps and its number.
     let least = 2.0 * spec.overlap_mm + 2.0 * spec.bleed_mm + LABEL_MM + spec.gap_mm + 5.0;
     if usable_mm[0] < least || usable_mm[1] < least {
@@ -310,12 +424,8 @@ pub fn layout(
     let mm_per_texel = sheet.atlas_mm / sheet.n as f64;
     let mut by_hand = Vec::new();
     let mut boxes = Vec::new();
-    // What a piece's own pixels may span: the printable area less its bleed on both sides.
     let bleed = 2 * spec.bleed_px();
-    let (free_w, free_h) = (
-        ((usable_mm[0] * px) as usize).saturating_sub(bleed),
-        (((usable_mm[1] - LABEL_MM - spec.gap_mm) * px) as usize).saturating_sub(bleed),
-    );
+    let [free_w, free_h] = spec.free_px();
     for p in parts {
         let [x0, y0, x1, y1] = p.bbox;
         let size_mm = [(x1 - x0) as f64 * mm_per_texel, (y1 - y0) as f64 * mm_per_texel];
@@ -331,8 +441,7 @@ pub fn layout(
         let (sx0, sx1) = sheet.pixels(x0, x1);
         let (sy0, sy1) = sheet.pixels(y0, y1);
         let (w, h) = (sx1 - sx0, sy1 - sy0);
-        let fits = |w: usize, h: usize| w <= free_w && h <= free_h;
-        if fits(w, h) || fits(h, w) {
+        if spec.fits(w, h) {
             boxes.push((p.label, [sx0, sy0, w, h], None));
             continue;
         }
@@ -352,6 +461,7 @@ pub fn layout(
     let (mut pieces, pages) = pack(&boxes, free_w + bleed, (usable_mm[1] * px) as usize, spec);
     for p in &mut pieces {
         p.mirrored = orient.get(p.part as usize - 1).is_some_and(|o| o.mirrored);
+        p.chart = parts.iter().find(|q| q.label == p.part).and_then(|q| q.chart);
     }
     let page_mm = (1..=pages)
         .map(|page| {
@@ -417,6 +527,7 @@ fn pack(boxes: &[Boxed], free_w: usize, free_h: usize, spec: Spec) -> (Vec<Piece
             at: [margin + shelf.2 + bleed, margin + shelf.0 + bleed],
             rotated: rot,
             mirrored: false,
+            chart: None,
         });
         shelf.2 += w + gap;
     }
@@ -522,10 +633,10 @@ impl Layout {
 
     /// The numbers and bars of page `page`, placed in page pixels: what the PNG draws as
     /// pixels and the PDF as text and vectors.
-    pub fn marks(&self, page: usize) -> Vec<Mark> {
+    pub fn marks(&self, page: usize, labels: &[u32]) -> Vec<Mark> {
         let px = self.spec.px_per_mm();
         let b = self.spec.bleed_px();
-        let mut marks = Vec::new();
+        let mut marks = self.alignment(page, labels);
         for piece in self.pieces.iter().filter(|p| p.page == page) {
             let h = piece.placed()[1];
             let (x, y) = (piece.at[0].saturating_sub(b), piece.at[1] + h + b + (0.8 * px) as usize);
@@ -548,6 +659,36 @@ impl Layout {
         for (k, len_mm) in [10.0, 50.0].into_iter().enumerate() {
             let x = margin + ((15.0 + k as f64 * 20.0) * px) as usize;
             marks.push(Mark::Bar { at: [x, band_y + (5.0 * px) as usize], len_mm });
+        }
+        marks
+    }
+
+    /// The alignment crosses on page `page`'s tiles: where two tiles of a part overlap, three
+    /// points on the middle line of the overlap (on the part), marked on both tiles, so that
+    /// laid over each other the crosses meet.
+    fn alignment(&self, page: usize, labels: &[u32]) -> Vec<Mark> {
+        let arm = 1.5 * self.spec.px_per_mm();
+        let mut marks = Vec::new();
+        for piece in self.pieces.iter().filter(|p| p.page == page && p.tile.is_some()) {
+            for other in self.pieces.iter().filter(|o| o.part == piece.part && o.id != piece.id && o.tile.is_some()) {
+                let ([ax, ay, aw, ah], [bx, by, bw, bh]) = (piece.window, other.window);
+                let (x0, x1, y0, y1) = (ax.max(bx), (ax + aw).min(bx + bw), ay.max(by), (ay + ah).min(by + bh));
+                if x0 >= x1 || y0 >= y1 {
+                    continue;
+                }
+                // The overlap runs along the longer of its sides; the marks sit on its middle.
+                let along_x = x1 - x0 > y1 - y0;
+                let len = if along_x { x1 - x0 } else { y1 - y0 };
+                for k in 1..=3 {
+                    let t = len * k / 4;
+                    let (sx, sy) = if along_x { (x0 + t, (y0 + y1) / 2) } else { ((x0 + x1) / 2, y0 + t) };
+                    if labels[self.sheet.texel(sy) * self.sheet.n + self.sheet.texel(sx)] != piece.part {
+                        continue;
+                    }
+                    let [u, v] = piece.page_pixel(sx, sy);
+                    marks.push(Mark::Cross { at: [piece.at[0] + u, piece.at[1] + v], arm });
+                }
+            }
         }
         marks
     }
@@ -620,10 +761,15 @@ impl Layout {
             }
         }
         let px = self.spec.px_per_mm();
-        for mark in self.marks(page) {
+        for mark in self.marks(page, labels) {
             match mark {
                 Mark::Text { at, height, text } => draw_text(&mut rgb, pw, at, &text, height),
                 Mark::Bar { at, len_mm } => pav_core::image::draw_scale_bar(&mut rgb, pw, ph, at, px, len_mm),
+                Mark::Cross { at, arm } => {
+                    for d in [[1.0, 0.0], [0.0, 1.0]] {
+                        draw_line(&mut rgb, pw, at, d, 2.0 * arm);
+                    }
+                }
                 Mark::Arrow { at, dir, len, letter } => {
                     draw_arrow(&mut rgb, pw, at, dir, len);
                     let x = at[0] + (len / 2.0 + 0.5 * px) as usize;
@@ -640,7 +786,7 @@ impl Layout {
     pub fn csv(&self) -> String {
         let mm = |p: usize| p as f64 / self.spec.px_per_mm();
         let mut s = String::from(
-            "piece,page,x_mm,y_mm,width_mm,height_mm,rotated,mirrored,part,panel,front_deg,up_deg,tile,page_x_px,page_y_px,sheet_x_px,sheet_y_px,sheet_w_px,sheet_h_px\n",
+            "piece,page,x_mm,y_mm,width_mm,height_mm,rotated,mirrored,part,chart,panel,front_deg,up_deg,tile,page_x_px,page_y_px,sheet_x_px,sheet_y_px,sheet_w_px,sheet_h_px\n",
         );
         for p in &self.pieces {
             let [w, h] = p.placed();
@@ -648,6 +794,7 @@ impl Layout {
             let [sx, sy, sw, sh] = p.window;
             let o = self.orient.get(p.part as usize - 1);
             let panel = o.and_then(|o| o.panel).map_or(String::new(), |p| p.to_string());
+            let chart = p.chart.map_or(String::new(), |c| c.to_string());
             // Counter-clockwise from the page's right, as a person reads an arrow on paper.
             let deg = |d: Option<[f64; 2]>| {
                 d.map_or(String::new(), |d| {
@@ -657,7 +804,7 @@ impl Layout {
             };
             let _ = writeln!(
                 s,
-                "{},{},{:.1},{:.1},{:.1},{:.1},{},{},{},{panel},{},{},{tile},{},{},{sx},{sy},{sw},{sh}",
+                "{},{},{:.1},{:.1},{:.1},{:.1},{},{},{},{chart},{panel},{},{},{tile},{},{},{sx},{sy},{sw},{sh}",
                 p.id,
                 p.page,
                 mm(p.at[0]),
@@ -808,6 +955,32 @@ mod tests {
         )
         .unwrap();
         assert!(big.pieces.len() >= 6 && big.pieces.iter().all(|t| t.tile.is_some()), "{:?}", big.pieces);
+        // Every alignment cross is on a pixel its tile shares with a neighbour, and that
+        // neighbour marks the same sheet pixel.
+        let crosses = |piece: &Piece| -> Vec<(usize, usize)> {
+            big.alignment(piece.page, &labels)
+                .into_iter()
+                .filter_map(|m| match m {
+                    Mark::Cross { at, .. } => Some(at),
+                    _ => None,
+                })
+                .filter(|at| {
+                    let [w, h] = piece.placed();
+                    (piece.at[0]..piece.at[0] + w).contains(&at[0]) && (piece.at[1]..piece.at[1] + h).contains(&at[1])
+                })
+                .map(|at| piece.sheet_pixel(at[0] - piece.at[0], at[1] - piece.at[1]))
+                .collect()
+        };
+        let marked: Vec<Vec<(usize, usize)>> = big.pieces.iter().map(crosses).collect();
+        assert!(marked.iter().all(|m| !m.is_empty()), "{marked:?}");
+        for (k, m) in marked.iter().enumerate() {
+            for s in m {
+                assert!(
+                    marked.iter().enumerate().any(|(j, o)| j != k && o.contains(s)),
+                    "tile {k}'s cross at {s:?} is alone"
+                );
+            }
+        }
     }
 
     #[test]
@@ -839,6 +1012,33 @@ mod tests {
         let low = r.pieces.iter().map(|q| q.at[1] + q.placed()[1]).max().unwrap() as f64;
         assert_eq!(r.pages, 1);
         assert!(r.page_mm[0][1] > low && r.page_mm[0][1] < low + 30.0, "{:?} below {low} mm", r.page_mm);
+    }
+
+    #[test]
+    fn a_part_too_large_for_the_page_is_split_along_its_charts_before_it_is_tiled() {
+        let (region, tex) = atlas();
+        let (mut labels, p) = parts(&region, 16);
+        // The 6 × 5 block is two charts, its left 3 columns and its right 3, and one texel of
+        // it lies under no face. At 10 mm a texel on a 60 × 80 mm page the 60 mm block fits
+        // no page, its 30 mm halves do.
+        let mut charts = vec![0u32; 256];
+        for y in 2..7 {
+            for x in 1..7 {
+                charts[y * 16 + x] = if x < 4 { 7 } else { 9 };
+            }
+        }
+        charts[2 * 16 + 6] = 0;
+        let sheet = Sheet::new(16, 160.0, 25.4);
+        let spec = Spec { paper: Paper::sheet(60.0, 80.0), dpi: 25.4, min_mm: 0.0, ..Spec::default() };
+        let split = split_by_chart(&mut labels, p.clone(), &charts, sheet, spec);
+        let halves: Vec<&Part> = split.iter().filter(|q| q.chart.is_some()).collect();
+        assert_eq!(halves.len(), 2, "{split:?}");
+        assert_eq!(halves.iter().map(|q| q.texels).sum::<usize>(), 30, "the texel under no face went with a chart");
+        assert_eq!(labels.iter().filter(|&&l| l != 0).count(), 40);
+        let l = layout(&labels, &split, &tex, sheet, spec, Vec::new()).unwrap();
+        // The halves print whole; the column, one chart 80 mm long, is still tiled.
+        let whole: Vec<&Piece> = l.pieces.iter().filter(|q| q.chart.is_some()).collect();
+        assert!(whole.len() == 2 && whole.iter().all(|q| q.tile.is_none()), "{:?}", l.pieces);
     }
 
     #[test]

@@ -51,6 +51,19 @@ pub fn draw_text(rgb: &mut [u8], w: usize, at: [usize; 2], text: &str, height: f
     }
 }
 
+/// Draws a line `len` pixels long centred on `at` along `dir`, a pixel thick.
+pub fn draw_line(rgb: &mut [u8], w: usize, at: [usize; 2], dir: [f64; 2], len: f64) {
+    let h = rgb.len() / 3 / w;
+    let steps = (len * 2.0).ceil() as i64;
+    for i in 0..=steps {
+        let t = i as f64 / steps.max(1) as f64 - 0.5;
+        let (x, y) = ((at[0] as f64 + dir[0] * len * t).round(), (at[1] as f64 + dir[1] * len * t).round());
+        if x >= 0.0 && y >= 0.0 && (x as usize) < w && (y as usize) < h {
+            rgb[(y as usize * w + x as usize) * 3..][..3].fill(0);
+        }
+    }
+}
+
 /// Draws an arrow `len` pixels long centred on `at`, pointing `dir`: a shaft and a head.
 pub fn draw_arrow(rgb: &mut [u8], w: usize, at: [usize; 2], dir: [f64; 2], len: f64) {
     let h = rgb.len() / 3 / w;
