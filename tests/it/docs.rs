@@ -405,12 +405,13 @@ fn the_main_job_scores_the_turntable_fixture() {
     assert_eq!(fresh.command, recorded.command);
 }
 
-/// The quick start, block by block as the README has it, in a scratch folder.
+/// The quick start, then printing and applying its texture, block by block as the README has
+/// them, in a scratch folder.
 #[test]
 fn the_quick_start_runs_as_written() {
     common::real_data();
     let readme = std::fs::read_to_string(common::repo().join("README.md")).unwrap();
-    let script = runnable(&readme, "## Quick start");
+    let script = runnable(&readme, "## Quick start") + "\n" + &runnable(&readme, "## Print and apply");
     assert!(script.contains("pav optimize") && script.contains("pav-rig evaluate"), "{script}");
     let tmp = scratch();
     let o = run_script(tmp.path(), &script);
@@ -445,7 +446,14 @@ fn the_quick_start_runs_as_written() {
     let record = std::fs::read_to_string(out.join("digital-printed/run.toml")).unwrap();
     assert!(record.contains("print = \"true\""), "{record}");
     // Print and apply: the pieces on A4 pages, where each goes, what to paint by hand.
-    for f in ["pieces/pages/page-1.png", "pieces/pieces.csv", "pieces/by_hand.csv", "pieces/run.toml"] {
+    for f in [
+        "pieces/pieces.pdf",
+        "pieces/placement.pdf",
+        "pieces/pages/page-1.png",
+        "pieces/pieces.csv",
+        "pieces/by_hand.csv",
+        "pieces/run.toml",
+    ] {
         assert!(out.join(f).is_file(), "{f} missing: {}", common::output_text(&o));
     }
 }

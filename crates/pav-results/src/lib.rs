@@ -576,9 +576,20 @@ fn content_sha_at(root: &Path, commit: &str, key: &str, read: &str) -> Option<St
     table_sha(&toml::from_str(std::str::from_utf8(&shown).ok()?).ok()?)
 }
 
-/// `toml:` and the sha256 of `table`'s values written out.
+/// Config keys no table's numbers depend on, left out of a config's content hash: setting
+/// them marks nothing stale. `mesh.front` names the car's front for the printed pieces' panel
+/// names, arrows and placement views; no count, score or size reads it.
+const NOT_IN_RESULTS: &[[&str; 2]] = &[["mesh", "front"]];
+
+/// `toml:` and the sha256 of `table`'s values written out, less [`NOT_IN_RESULTS`].
 fn table_sha(table: &toml::Table) -> Option<String> {
-    Some(format!("{CONTENT}{}", pav_run::data::store::sha256_hex(toml::to_string(table).ok()?.as_bytes())))
+    let mut table = table.clone();
+    for [section, key] in NOT_IN_RESULTS {
+        if let Some(toml::Value::Table(t)) = table.get_mut(*section) {
+            t.remove(*key);
+        }
+    }
+    Some(format!("{CONTENT}{}", pav_run::data::store::sha256_hex(toml::to_string(&table).ok()?.as_bytes())))
 }
 
 /// The sha256 of input `key` (a path under `root`, or `data:NAME` in `manifest`) now, taken the
@@ -841,6 +852,15 @@ mod tests {
         assert!(Column::parse("a/b/d", &head, Path::new("t.csv")).is_err());
         let e = Column::parse("nope", &head, Path::new("t.csv")).err().unwrap().to_string();
         assert!(e.contains("no column `nope`") && e.contains("d, lo, hi, a, b"), "{e}");
+    }
+
+    #[test]
+    fn a_configs_hash_ignores_the_mesh_front_and_nothing_else() {
+        let t = |s: &str| table_sha(&toml::from_str(s).unwrap()).unwrap();
+        let base = "[mesh]\nobj = \"a.obj\"\ntexture_size = 256\n";
+        assert_eq!(t(base), t(&format!("{base}front = \"+x\"\n")));
+        assert_ne!(t(base), t(&format!("{base}up = \"+y\"\n")));
+        assert_ne!(t(base), t("[mesh]\nobj = \"a.obj\"\ntexture_size = 512\n"));
     }
 
     #[test]
