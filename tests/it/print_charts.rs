@@ -1,7 +1,8 @@
 //! The print channel on real data, as a user runs it: the ColorChecker photos are read and fitted
 //! (camera alone; by their marker sheet, or by OpenCV's mcc without one or when the markers do not
 //! frame the checker), photos of other charts are refused with what they show, a chart is written
-//! and read back, texture proofs match LittleCMS, and bad profiles and configs are clear errors.
+//! (as a PNG and as a PDF whose patches Poppler shows in their colours) and read back, texture
+//! proofs match LittleCMS, and bad profiles and configs are clear errors.
 
 use crate::common;
 use crate::common::pav;
@@ -164,6 +165,27 @@ fn a_chart_carries_the_texture_colours_and_its_pixels_its_intended_colours() {
         checked += 1;
     }
     assert_eq!(checked, 437);
+    // chart.pdf, rendered by Poppler at the PNG's size through its sRGB profile, has every
+    // patch in its intended colour (to a level: the profile's round trip).
+    let o = std::process::Command::new("pdftoppm")
+        .args(["-scale-to-x", "2480", "-scale-to-y", "3508", "-png", "-singlefile"])
+        .arg(dir.join("chart.pdf"))
+        .arg(tmp.path().join("shown"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", common::output_text(&o));
+    let shown = image::open(tmp.path().join("shown.png")).unwrap().to_rgb8();
+    let mut rd = csv::Reader::from_path(dir.join("chart.csv")).unwrap();
+    for rec in rd.records() {
+        let r = rec.unwrap();
+        let f = |i: usize| r[i].parse::<f64>().unwrap();
+        let (x, y) = (((f(1) + 4.0) * ppm) as u32, ((f(2) + 4.0) * ppm) as u32);
+        let px = shown.get_pixel(x, y).0;
+        let want = [f(3), f(4), f(5)];
+        assert!((0..3).all(|c| (px[c] as f64 - want[c]).abs() <= 1.0), "patch {}: {px:?} for {want:?}", &r[0]);
+    }
+    let (ok, text) = run(&["print", "chart", "--paper", "roll:610mm", "-o", dir.to_str().unwrap()]);
+    assert!(!ok && text.contains("not a roll"), "{text}");
     let (ok, text) = run(&["print", "chart", "--paper", "100x100", "-o", dir.to_str().unwrap()]);
     assert!(!ok && text.contains("fewer than the 216"), "{text}");
 }

@@ -95,6 +95,9 @@ pub enum ChartError {
     #[cfg(feature = "video")]
     #[error("OpenCV: {0}")]
     OpenCv(#[from] opencv::Error),
+    /// The PDF.
+    #[error(transparent)]
+    Pdf(#[from] crate::pdf::PdfError),
     /// The PNG encoder.
     #[error("{path}: {source}")]
     Png {
@@ -297,6 +300,10 @@ pub const PATCHES_FILE: &str = "chart.csv";
 /// The printable image in a chart's folder.
 pub const IMAGE_FILE: &str = "chart.png";
 
+/// The chart as a PDF in a chart folder: print this one, from the program that prints the
+/// pieces' PDF, with the same settings.
+pub const PDF_FILE: &str = "chart.pdf";
+
 #[cfg(feature = "video")]
 mod draw {
     use super::*;
@@ -381,7 +388,8 @@ mod draw {
             Ok(img)
         }
 
-        /// Writes the layout, the patch table and the printable PNG (pHYs at the DPI) into `dir`.
+        /// Writes the layout, the patch table, the printable PNG (pHYs at the DPI) and the same
+        /// page as `chart.pdf` (sRGB-tagged, as `pieces.pdf` is) into `dir`.
         pub fn write(&self, dir: &Path) -> Result<PathBuf, ChartError> {
             self.save(dir)?;
             let img = self.render()?;
@@ -390,6 +398,9 @@ mod draw {
             let path = dir.join(IMAGE_FILE);
             pav_core::image::save_png_dpi(&path, w, h, &rgb, self.layout.dpi)
                 .map_err(|source| ChartError::Png { path: path.clone(), source })?;
+            let pdf = dir.join(PDF_FILE);
+            let bytes = crate::pdf::raster_pdf(&rgb, [w, h], self.layout.page_mm)?;
+            std::fs::write(&pdf, bytes).map_err(|source| ChartError::Io { path: pdf.clone(), source })?;
             Ok(path)
         }
     }

@@ -21,21 +21,66 @@ pub enum PdfError {
     Profile(String),
 }
 
+/// Writes LittleCMS's sRGB profile as object `id`, the colour space every printed raster is
+/// tagged with.
+fn srgb_profile(pdf: &mut Pdf, id: Ref) -> Result<(), PdfError> {
+    let icc = lcms2::Profile::new_srgb().icc().map_err(|e| PdfError::Profile(e.to_string()))?;
+    let packed = miniz_oxide::deflate::compress_to_vec_zlib(&icc, LEVEL);
+    let mut profile = pdf.icc_profile(id, &packed);
+    profile.filter(Filter::FlateDecode);
+    profile.n(3).range([0.0, 1.0, 0.0, 1.0, 0.0, 1.0]);
+    profile.finish();
+    Ok(())
+}
+
+/// Writes `rgb` (`w × h`, 8-bit sRGB) as image object `id` in the colour space of the profile
+/// `icc`: one colour path for the chart and the pieces, so that pieces print as the chart the
+/// calibration measured did.
+fn srgb_image(pdf: &mut Pdf, id: Ref, icc: Ref, rgb: &[u8], [w, h]: [usize; 2]) {
+    let data = miniz_oxide::deflate::compress_to_vec_zlib(rgb, LEVEL);
+    let mut image = pdf.image_xobject(id, &data);
+    image.filter(Filter::FlateDecode);
+    image.width(w as i32).height(h as i32).bits_per_component(8);
+    image.color_space().icc_based(icc);
+    image.finish();
+}
+
+/// Deflate's level for every stream.
+const LEVEL: u8 = miniz_oxide::deflate::CompressionLevel::DefaultLevel as u8;
+
+/// One page of `page_mm` that is the raster `rgb` (`w × h`, 8-bit sRGB): what `chart.pdf`
+/// holds.
+pub fn raster_pdf(rgb: &[u8], size: [usize; 2], page_mm: [f64; 2]) -> Result<Vec<u8>, PdfError> {
+    let mut pdf = Pdf::new();
+    let (catalog, tree, icc, page, content, image) =
+        (Ref::new(1), Ref::new(2), Ref::new(3), Ref::new(4), Ref::new(5), Ref::new(6));
+    pdf.catalog(catalog).pages(tree);
+    pdf.pages(tree).kids([page]).count(1);
+    srgb_profile(&mut pdf, icc)?;
+    let (w, h) = ((page_mm[0] * PT_PER_MM) as f32, (page_mm[1] * PT_PER_MM) as f32);
+    let mut p = pdf.page(page);
+    p.media_box(Rect::new(0.0, 0.0, w, h));
+    p.parent(tree);
+    p.contents(content);
+    p.resources().x_objects().pair(Name(b"Im"), image);
+    p.finish();
+    srgb_image(&mut pdf, image, icc, rgb, size);
+    let mut c = Content::new();
+    c.save_state().transform([w, 0.0, 0.0, h, 0.0, 0.0]);
+    c.x_object(Name(b"Im")).restore_state();
+    pdf.stream(content, &c.finish());
+    Ok(pdf.finish())
+}
+
 /// The layout's pages as one PDF: what `pieces.pdf` holds.
 pub fn pieces_pdf(layout: &Layout, labels: &[u32], texture: &Frame) -> Result<Vec<u8>, PdfError> {
-    let icc = lcms2::Profile::new_srgb().icc().map_err(|e| PdfError::Profile(e.to_string()))?;
-    let level = miniz_oxide::deflate::CompressionLevel::DefaultLevel as u8;
     let mut pdf = Pdf::new();
     let (catalog, tree, icc_id, font, bold) = (Ref::new(1), Ref::new(2), Ref::new(3), Ref::new(4), Ref::new(5));
     // Three objects a page: the page, its content and its raster.
     let page_ref = |k: usize, o: i32| Ref::new(6 + 3 * k as i32 + o);
     pdf.catalog(catalog).pages(tree);
     pdf.pages(tree).kids((0..layout.pages).map(|k| page_ref(k, 0))).count(layout.pages as i32);
-    let packed = miniz_oxide::deflate::compress_to_vec_zlib(&icc, level);
-    let mut profile = pdf.icc_profile(icc_id, &packed);
-    profile.filter(Filter::FlateDecode);
-    profile.n(3).range([0.0, 1.0, 0.0, 1.0, 0.0, 1.0]);
-    profile.finish();
+    srgb_profile(&mut pdf, icc_id)?;
     // Two of the fourteen fonts every reader has: nothing to embed.
     pdf.type1_font(font).base_font(Name(b"Helvetica"));
     pdf.type1_font(bold).base_font(Name(b"Helvetica-Bold"));
@@ -56,14 +101,7 @@ pub fn pieces_pdf(layout: &Layout, labels: &[u32], texture: &Frame) -> Result<Ve
         res.finish();
         p.finish();
 
-        let [pw, ph] = layout.page_px(page);
-        let raster = layout.raster(page, labels, texture);
-        let data = miniz_oxide::deflate::compress_to_vec_zlib(&raster, level);
-        let mut image = pdf.image_xobject(page_ref(k, 2), &data);
-        image.filter(Filter::FlateDecode);
-        image.width(pw as i32).height(ph as i32).bits_per_component(8);
-        image.color_space().icc_based(icc_id);
-        image.finish();
+        srgb_image(&mut pdf, page_ref(k, 2), icc_id, &layout.raster(page, labels, texture), layout.page_px(page));
 
         let mut c = Content::new();
         // The raster spans the page: its pixels are the page's rounded to whole ones (under
@@ -154,7 +192,6 @@ pub struct Figure {
 /// `figures` on pages of `paper`, `columns` across, each as wide as a column allows with its
 /// caption under it: the placement guide's PDF.
 pub fn figures_pdf(figures: &[Figure], paper: crate::paper::Paper, columns: usize) -> Vec<u8> {
-    let level = miniz_oxide::deflate::CompressionLevel::DefaultLevel as u8;
     let (margin, gap, caption) = (12.0 * PT_PER_MM, 6.0 * PT_PER_MM, 12.0);
     let [w_mm, h_mm] = if paper.roll { crate::paper::Paper::A4.mm() } else { paper.mm() };
     let (page_w, page_h) = ((w_mm * PT_PER_MM) as f32, (h_mm * PT_PER_MM) as f32);
@@ -209,7 +246,7 @@ pub fn figures_pdf(figures: &[Figure], paper: crate::paper::Paper, columns: usiz
         pdf.stream(content_id, &c.finish());
     }
     for (f, &id) in figures.iter().zip(&image_refs) {
-        let data = miniz_oxide::deflate::compress_to_vec_zlib(&f.rgb, level);
+        let data = miniz_oxide::deflate::compress_to_vec_zlib(&f.rgb, LEVEL);
         let mut image = pdf.image_xobject(id, &data);
         image.filter(Filter::FlateDecode);
         image.width(f.width as i32).height(f.height as i32).bits_per_component(8);

@@ -9,7 +9,8 @@ use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Output folder: chart.png (print it at 100 %), chart.toml (layout), chart.csv (intended colours).
+    /// Output folder: chart.pdf and chart.png (print one at 100 %), chart.toml (layout), chart.csv
+    /// (intended colours).
     #[arg(long, short = 'o', default_value = "out/chart")]
     out: PathBuf,
     /// Add the most frequent colours of this texture (over its config's region with --config).
@@ -30,6 +31,9 @@ pub struct Args {
 }
 
 pub fn run(a: &Args) -> Result<()> {
+    if a.paper.roll {
+        anyhow::bail!("a chart goes on a sheet, not a roll: give --paper a4 (or the sheet size the pieces print on)");
+    }
     let mut spec = ChartSpec { page_mm: a.paper.mm(), dpi: a.dpi, patch_mm: a.patch_mm, ..Default::default() };
     if let Some(t) = &a.texture {
         let tex = Rgb::load(t)?;
