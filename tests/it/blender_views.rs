@@ -361,7 +361,14 @@ fn rendered_views_whose_car_goes_unseen_are_dropped() {
         })
         .collect();
     eprintln!("car scores as rendered: {scores:?}");
-    let k = s.keep_detected_pbr(&wb, 0.5).unwrap();
+    // A stop before the first view scores none and keeps the views untouched for the rerun.
+    let go = std::sync::atomic::AtomicBool::new(false);
+    let halt = std::sync::atomic::AtomicBool::new(true);
+    let mut stopped = Setup::load(&cfg, None).unwrap();
+    let e = stopped.keep_detected_pbr(&wb, 0.5, &halt).unwrap_err();
+    assert!(matches!(e, pav::attack::setup::KeepError::Stopped { scored: 0, total: 2 }), "{e}");
+    assert!(e.to_string().contains("the same command goes on"), "{e}");
+    let k = s.keep_detected_pbr(&wb, 0.5, &go).unwrap();
     assert_eq!((k.kept, k.total), (1, 2), "{k}");
     assert_eq!(k.seen_by, vec![("yolov3-tiny".to_string(), 1)]);
     assert_eq!(s.pbr.len(), 1);
@@ -369,7 +376,7 @@ fn rendered_views_whose_car_goes_unseen_are_dropped() {
     // Streamed views are filtered alike.
     cfg.views.stream = true;
     let mut ss = Setup::load(&cfg, None).unwrap();
-    assert_eq!(ss.keep_detected_pbr(&wb, 0.5).unwrap(), k);
+    assert_eq!(ss.keep_detected_pbr(&wb, 0.5, &go).unwrap(), k);
     assert_eq!(ss.pbr[0].name(), s.pbr[0].name());
     cfg.views.stream = false;
     // Each white box's score of each image is kept beside the images, as computed, and a later
@@ -394,11 +401,11 @@ fn rendered_views_whose_car_goes_unseen_are_dropped() {
     files.iter().for_each(|(f, h)| doctored.put(&id, f, h, 0.0));
     doctored.save(&images).unwrap();
     let mut none = Setup::load(&cfg, None).unwrap();
-    assert_eq!(none.keep_detected_pbr(&wb, 0.5).unwrap().kept, 0);
+    assert_eq!(none.keep_detected_pbr(&wb, 0.5, &go).unwrap().kept, 0);
     // Without the file the white box runs again and writes it anew.
     std::fs::remove_file(images.join(pav::attack::view_scores::FILE)).unwrap();
     let mut again = Setup::load(&cfg, None).unwrap();
-    assert_eq!(again.keep_detected_pbr(&wb, 0.5).unwrap(), k);
+    assert_eq!(again.keep_detected_pbr(&wb, 0.5, &go).unwrap(), k);
     assert_eq!(s.train.len(), 1, "photos are kept whatever they score");
     // A threshold outside (0, 1) is refused by the config's check.
     cfg.views.pbr_min_score = Some(1.5);

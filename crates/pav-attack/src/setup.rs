@@ -223,6 +223,14 @@ pub enum KeepError {
     /// Keeping the scores beside the images.
     #[error(transparent)]
     Scores(#[from] crate::view_scores::ViewScoresError),
+    /// A stop was asked for; the scores computed so far are kept.
+    #[error("stopped while scoring the rendered views ({scored} scored, {total} in all); the scores so far are kept beside the images, and the same command goes on from them")]
+    Stopped {
+        /// Views scored by this run before the stop.
+        scored: usize,
+        /// Rendered views in all.
+        total: usize,
+    },
 }
 
 /// What [`Setup::keep_detected_pbr`] kept.
@@ -236,6 +244,8 @@ pub struct PbrKept {
     pub min_score: f32,
     /// Per white box: in how many of the `total` views it found the car.
     pub seen_by: Vec<(String, usize)>,
+    /// Cached scores that did not read (a crash's torn rows), scored again.
+    pub damaged: usize,
 }
 
 impl std::fmt::Display for PbrKept {
@@ -248,7 +258,11 @@ impl std::fmt::Display for PbrKept {
             self.total,
             self.min_score,
             by.join(", ")
-        )
+        )?;
+        if self.damaged > 0 {
+            write!(f, "; {} damaged rows of the score cache scored again", self.damaged)?;
+        }
+        Ok(())
     }
 }
 
@@ -687,16 +701,31 @@ impl Setup {
 
     /// Drops the rendered views in which no white box of `wb` finds a car at `min_score` as they
     /// were rendered (`views.pbr_min_score`); the photos are kept whatever they score. Each
-    /// white box's score of each image is kept beside the images ([`crate::view_scores`]), so
-    /// a later run with the same white boxes reads it instead of running them again.
+    /// white box's score of each image is kept beside the images ([`crate::view_scores`]) as
+    /// it is computed, so a later run with the same white boxes reads it instead of running
+    /// them again. A raised `stop` ends the scoring after the view in progress, keeping the
+    /// scores so far, with [`KeepError::Stopped`].
     #[cfg(feature = "optimize")]
-    pub fn keep_detected_pbr(&mut self, wb: &Ensemble, min_score: f32) -> Result<PbrKept, KeepError> {
+    pub fn keep_detected_pbr(
+        &mut self,
+        wb: &Ensemble,
+        min_score: f32,
+        stop: &std::sync::atomic::AtomicBool,
+    ) -> Result<PbrKept, KeepError> {
         use crate::view_scores::ViewScores;
         let total = self.pbr.len();
         let mut seen_by = vec![0usize; wb.members.len()];
         let mut kept = Vec::with_capacity(total);
         let mut caches: HashMap<PathBuf, ViewScores> = HashMap::new();
-        for p in std::mem::take(&mut self.pbr) {
+        let (mut scored, mut saved) = (0, std::time::Instant::now());
+        let all = std::mem::take(&mut self.pbr);
+        for p in all {
+            if stop.load(std::sync::atomic::Ordering::SeqCst) {
+                for (folder, cache) in &mut caches {
+                    cache.save(folder)?;
+                }
+                return Err(KeepError::Stopped { scored, total });
+            }
             let image = p.image();
             let folder = image.parent().unwrap_or(Path::new(".")).to_path_buf();
             let file = image.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
@@ -723,8 +752,19 @@ impl Setup {
                     any = true;
                 }
             }
+            let fresh = built.is_some();
+            drop(built);
             if any {
                 kept.push(p);
+            }
+            if fresh {
+                scored += 1;
+                // Kept as they come (every 15 s at most: a save rewrites the folder's file), so
+                // that a crash loses at most that much scoring.
+                if saved.elapsed().as_secs() >= 15 {
+                    caches.get_mut(&folder).expect("the folder's cache").save(&folder)?;
+                    saved = std::time::Instant::now();
+                }
             }
         }
         for (folder, cache) in &mut caches {
@@ -732,7 +772,8 @@ impl Setup {
         }
         self.pbr = kept;
         let seen_by = wb.members.iter().map(|(m, _)| m.name().to_string()).zip(seen_by).collect();
-        Ok(PbrKept { kept: self.pbr.len(), total, min_score, seen_by })
+        let damaged = caches.values().map(|c| c.damaged()).sum();
+        Ok(PbrKept { kept: self.pbr.len(), total, min_score, seen_by, damaged })
     }
 
     /// The same problem over other views (cross-validation folds).

@@ -42,16 +42,25 @@ pub struct ViewScores {
     rows: HashMap<(String, String), (String, f32)>,
     /// Scores added since reading.
     added: Vec<Row>,
+    /// Rows of the file that did not read (a crash's torn tail): their views are scored again.
+    damaged: usize,
 }
 
 impl ViewScores {
     /// The scores cached in `folder` (none when the file is missing or unreadable).
     pub fn read(folder: &Path) -> Self {
         let mut out = ViewScores::default();
-        for r in read_rows(&folder.join(FILE)) {
+        let (rows, damaged) = read_rows(&folder.join(FILE));
+        for r in rows {
             out.rows.insert((r.white_box, r.image), (r.image_sha256, r.max_score));
         }
+        out.damaged = damaged;
         out
+    }
+
+    /// Rows of the file that did not read when it was read, and are scored again.
+    pub fn damaged(&self) -> usize {
+        self.damaged
     }
 
     /// The score `white_box` gave `image` when its bytes hashed to `sha256`.
@@ -78,7 +87,7 @@ impl ViewScores {
             return Ok(());
         }
         let path = folder.join(FILE);
-        let mut rows: Vec<Row> = read_rows(&path);
+        let mut rows: Vec<Row> = read_rows(&path).0;
         let fresh: std::collections::HashSet<(&str, &str)> =
             self.added.iter().map(|r| (r.white_box.as_str(), r.image.as_str())).collect();
         rows.retain(|r| !fresh.contains(&(r.white_box.as_str(), r.image.as_str())));
@@ -98,10 +107,19 @@ impl ViewScores {
     }
 }
 
-/// The rows of a cache file; a missing or damaged file reads as none (the scores are recomputed).
-fn read_rows(path: &Path) -> Vec<Row> {
-    let Ok(mut r) = csv::Reader::from_path(path) else { return Vec::new() };
-    r.deserialize().collect::<Result<Vec<Row>, _>>().unwrap_or_default()
+/// The rows of a cache file that read, and how many did not: a damaged row (a torn last line
+/// after a crash) costs only its own score. A missing file, or one whose header is not the
+/// cache's, reads as none.
+fn read_rows(path: &Path) -> (Vec<Row>, usize) {
+    let Ok(mut r) = csv::Reader::from_path(path) else { return (Vec::new(), 0) };
+    let (mut rows, mut bad) = (Vec::new(), 0);
+    for row in r.deserialize::<Row>() {
+        match row {
+            Ok(row) => rows.push(row),
+            Err(_) => bad += 1,
+        }
+    }
+    (rows, bad)
 }
 
 #[cfg(test)]
@@ -124,7 +142,13 @@ mod tests {
         assert_eq!(back.get("wb2", "v.png", "h1"), Some(0.5));
         // The same image name with other bytes is not the same view.
         assert_eq!(back.get("wb", "v.png", "h2"), None);
-        // A damaged file is an empty cache, and a save replaces it.
+        // A torn last row costs only itself.
+        let text = std::fs::read_to_string(dir.path().join(FILE)).unwrap();
+        std::fs::write(dir.path().join(FILE), &text[..text.rfind(",h1,").unwrap() + 2]).unwrap();
+        let torn = ViewScores::read(dir.path());
+        assert_eq!(torn.damaged(), 1);
+        assert_eq!(torn.get("wb2", "v.png", "h1").is_some() as u8 + torn.get("wb", "v.png", "h1").is_some() as u8, 1);
+        // A file that is not the cache reads as empty, and a save replaces it.
         std::fs::write(dir.path().join(FILE), "white_box,image\nx").unwrap();
         let mut c = ViewScores::read(dir.path());
         assert_eq!(c.get("wb", "v.png", "h1"), None);

@@ -527,7 +527,7 @@ pub fn crossval_report(
     }
     scoring.apply_print(&mut setup)?;
     let wb = Ensemble::load(&cfg, cfg.views.size)?;
-    let pbr_kept = cfg.views.pbr_min_score.map(|t| setup.keep_detected_pbr(&wb, t)).transpose()?;
+    let pbr_kept = cfg.views.pbr_min_score.map(|t| setup.keep_detected_pbr(&wb, t, stop)).transpose()?;
     if let Some(k) = &pbr_kept {
         progress.note(&format!("views.pbr: {k}"));
     }

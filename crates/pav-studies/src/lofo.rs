@@ -117,7 +117,7 @@ pub fn train(
     if finished(dir) {
         return Ok(false);
     }
-    let mut p = Prepared::load(&arm.config, None)?;
+    let mut p = Prepared::load(&arm.config, None, stop)?;
     p.cfg.optimizer.seed = seed;
     create_dir(dir)?;
     let record = Run::start()

@@ -103,14 +103,14 @@ pub struct Prepared {
 
 impl Prepared {
     /// Loads `config` with its views (synthetic ones included) rendered at `size` (default: the
-    /// config's).
-    pub fn load(config: &Path, size: Option<usize>) -> Result<Prepared, ExperimentError> {
+    /// config's); a raised `stop` ends the scoring of rendered views with what it scored kept.
+    pub fn load(config: &Path, size: Option<usize>, stop: &AtomicBool) -> Result<Prepared, ExperimentError> {
         let mut cfg = OptimizeConfig::load(config)?;
         cfg.views.size = size.unwrap_or(cfg.views.size);
         let t = Instant::now();
         let mut setup = Setup::load(&cfg, None)?;
         let wb = Ensemble::load(&cfg, cfg.views.size)?;
-        let pbr_kept = cfg.views.pbr_min_score.map(|t| setup.keep_detected_pbr(&wb, t)).transpose()?;
+        let pbr_kept = cfg.views.pbr_min_score.map(|t| setup.keep_detected_pbr(&wb, t, stop)).transpose()?;
         Ok(Prepared { path: config.into(), cfg, setup, wb, pbr_kept, seconds: t.elapsed().as_secs_f64() })
     }
 

@@ -71,7 +71,8 @@ pub fn run(a: &Args) -> Result<()> {
         eprintln!("rendering {} into {}", views.display(), m.dir.display());
         crate::views::render_config(views, &m.dir)?;
     }
-    let p = Prepared::load(&a.config, a.size)?;
+    let stop = ctrl_c_flag()?;
+    let p = Prepared::load(&a.config, a.size, &stop)?;
     let s = &p.setup;
     eprintln!(
         "{} training (+{} synthetic, +{} rendered) and {} held-out views at {}², texture {}² ({} optimizable values, {:.1} % of the atlas), scene {}; prepared in {:.1} s",
@@ -115,7 +116,6 @@ pub fn run(a: &Args) -> Result<()> {
         .inputs(p.cfg.inputs().iter().map(|p| p.as_path()))
         .setting("resume", a.resume)
         .tool("onnxruntime", pav_onnx::runtime::runtime_version());
-    let stop = ctrl_c_flag()?;
     let once = |p: &Prepared, out: &std::path::Path, record: pav::provenance::Run| -> Result<()> {
         let record_path = out.join(pav::provenance::FILE);
         record.write(&record_path).with_context(|| format!("writing {}", record_path.display()))?;
