@@ -133,3 +133,43 @@ fn a_white_box_identity_follows_what_its_scores_depend_on() {
     assert_ne!(id("yolov3-tiny", 600, 0), base);
     assert_ne!(id("yolox_nano", 416, 0), base);
 }
+
+/// A white box's identity, which keys the cached scores of rendered views, is what its scores
+/// depend on: the same model and settings under another name, from another folder, or with the
+/// model's path spelled otherwise share it; another model or input size does not.
+#[test]
+fn a_white_boxs_identity_is_its_model_and_settings_not_its_name_or_folder() {
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let identity = |path: &Path| {
+        let cfg = DetectorConfig::load(path).unwrap();
+        let loss = DetectionLoss {
+            box_threshold: 0.05,
+            target: cfg.target_classes.clone(),
+            reduce: Reduce::Mean,
+            proposals: Proposals::ArgMax,
+            iou: false,
+            box_gradient: false,
+        };
+        WhiteBox::load(&cfg, loss, 416).unwrap().identity().to_string()
+    };
+    let shipped = identity(&common::detector_config("yolov3-tiny"));
+    // Another folder, another name, the model by its absolute path.
+    let model = DetectorConfig::load(&common::detector_config("yolov3-tiny")).unwrap().model;
+    let elsewhere = tmp.path().join("study/detectors");
+    std::fs::create_dir_all(&elsewhere).unwrap();
+    let copied = yolov3_tiny_with(&elsewhere, "mine", &format!("model = {:?}\n", model.display().to_string()));
+    assert_eq!(identity(&copied), shipped);
+    let smaller = yolov3_tiny_with(tmp.path(), "smaller", "[input]\nwidth = 320\nheight = 320\n");
+    assert_ne!(identity(&smaller), shipped);
+    let other = tmp.path().join("other.toml");
+    std::fs::write(
+        &other,
+        format!(
+            "extends = {:?}\nname = \"yolov3-tiny\"\n",
+            common::detector_config("yolox_nano").display().to_string()
+        ),
+    )
+    .unwrap();
+    assert_ne!(identity(&other), shipped);
+}

@@ -265,11 +265,20 @@ impl WhiteBox {
         };
         let gain = [0, 1, 2].map(|c| 255.0 * i.scale / i.std[c]);
         let offset = [0, 1, 2].map(|c| -i.mean[c] / i.std[c]);
-        // The model's bytes and every setting read above; paths only name files already hashed.
-        // The thread count is left out: it does not change a score.
+        // The model's bytes and every setting read above, and nothing that only names or locates
+        // them: the same models under other names or in other folders share cached scores. The
+        // thread count is left out too: it does not change a score.
         let settings = WhiteBoxOptions { threads: 0, ..o };
+        let scored = DetectorConfig {
+            name: String::new(),
+            description: String::new(),
+            model: PathBuf::new(),
+            source: PathBuf::new(),
+            bases: Vec::new(),
+            ..cfg.clone()
+        };
         let identity = pav_run::data::store::sha256_hex(
-            format!("{}\n{cfg:?}\n{loss:?}\n{settings:?}", pav_run::data::store::sha256_hex(&bytes)).as_bytes(),
+            format!("{}\n{scored:?}\n{loss:?}\n{settings:?}", pav_run::data::store::sha256_hex(&bytes)).as_bytes(),
         );
         Ok(WhiteBox {
             name: cfg.name.clone(),
