@@ -2,7 +2,8 @@
 //! YOLOv3-tiny with its heads decoded in the graph and flattened to rows (`layout = "custom"`,
 //! `custom_layout::flattened_yolov3_tiny`) gives the darknet preset's loss and input gradient on
 //! real photos, and as the only white box of a short `pav optimize` it lowers its own car score
-//! as the preset does.
+//! as the preset does; written as exporters write graphs (`Constant` nodes, reshape sizes
+//! computed at run time) it gives the same loss and gradient.
 
 use crate::common;
 use crate::custom_layout::{config_like_yolov3_tiny, flattened_yolov3_tiny, FLAT};
@@ -64,6 +65,76 @@ fn a_flattened_model_as_a_white_box_gives_the_darknet_presets_loss_and_gradient(
             // Not vacuous: there is a gradient, and the car is seen.
             assert!(gb.grad.iter().any(|g| g.abs() > 1e-6) && gb.loss.max_score > 0.5, "{}", v.name);
         }
+    }
+}
+
+/// The flattened YOLOv3-tiny as an exporter writes such graphs: its reshape sizes as `Constant`
+/// nodes, and the first head's computed at run time from the head's shape (Shape, Gather,
+/// Concat), as PyTorch exports a `view(batch, ...)`.
+fn exported_like_pytorch(dir: &Path) -> std::path::PathBuf {
+    use pav_onnx::proto::{Attr, Initializer, Model, Node};
+    let flat = flattened_yolov3_tiny(dir);
+    let mut m = Model::from_bytes(&std::fs::read(&flat).unwrap()).unwrap();
+    let constant =
+        |init: Initializer| Node::new("Constant", &[], &[&init.name.clone()]).attr("value", Attr::Tensor(init));
+    let mut front = Vec::new();
+    for name in ["head0_s2", "head1_s1", "head1_s2"] {
+        let k = m.initializers.iter().position(|i| i.name == name).unwrap();
+        front.push(constant(m.initializers.remove(k)));
+    }
+    m.initializers.retain(|i| i.name != "head0_s1");
+    for (name, v) in [("zero", 0), ("axis0", 0), ("three", 3), ("row", 85), ("cells", 169)] {
+        let dims: &[i64] = if name == "zero" { &[] } else { &[1] };
+        front.push(constant(Initializer::i64(name, dims, vec![v])));
+    }
+    let at = m.nodes.iter().position(|n| n.inputs.iter().any(|i| i == "head0_s1")).unwrap();
+    let runtime = [
+        Node::new("Shape", &["head0"], &["head0_shape"]),
+        Node::new("Gather", &["head0_shape", "zero"], &["batch"]).attr("axis", Attr::Int(0)),
+        Node::new("Unsqueeze", &["batch", "axis0"], &["batch1"]),
+        Node::new("Concat", &["batch1", "three", "row", "cells"], &["head0_s1"]).attr("axis", Attr::Int(0)),
+    ];
+    m.nodes.splice(at..at, runtime);
+    m.nodes.splice(0..0, front);
+    let path = dir.join("yolov3-tiny-exported.onnx");
+    std::fs::write(&path, m.to_bytes()).unwrap();
+    path
+}
+
+/// An export with `Constant` nodes and run-time shape arithmetic, described at its own
+/// outputs, is a white box as it comes: its loss and gradient are the plain graph's.
+#[test]
+fn constant_nodes_and_shape_arithmetic_are_folded_for_the_white_box() {
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let plain = config_like_yolov3_tiny(tmp.path(), &flattened_yolov3_tiny(tmp.path()), FLAT);
+    let exported_dir = tmp.path().join("exported");
+    std::fs::create_dir_all(&exported_dir).unwrap();
+    let exported = config_like_yolov3_tiny(&exported_dir, &exported_like_pytorch(&exported_dir), FLAT);
+    let mut cfg = OptimizeConfig::load(&common::repo().join("configs/optimize/paper.toml")).unwrap();
+    cfg.views.train.truncate(2);
+    cfg.views.test.clear();
+    let s = Setup::load(&cfg, Some(416)).unwrap();
+    let loss = DetectionLoss {
+        box_threshold: 0.05,
+        target: vec![2],
+        reduce: Reduce::LogMax,
+        proposals: Proposals::ArgMax,
+        iou: true,
+        box_gradient: true,
+    };
+    let o = WhiteBoxOptions { composite: 416, input: None, threads: 2, surrogate: false };
+    let a = WhiteBox::with_options(&exported, loss.clone(), o).unwrap();
+    let b = WhiteBox::with_options(&plain, loss, o).unwrap();
+    for v in &s.train {
+        let (ga, gb) = (
+            a.loss_and_grad(&v.photo, 416, 1.0, v.car_box).unwrap(),
+            b.loss_and_grad(&v.photo, 416, 1.0, v.car_box).unwrap(),
+        );
+        let (la, lb) = (ga.loss.l1 + ga.loss.l2, gb.loss.l1 + gb.loss.l2);
+        assert!(((la - lb) / lb).abs() < 1e-6, "{}: loss {la} vs {lb}", v.name);
+        assert!(relative(&ga.grad, &gb.grad) < 1e-6, "{}", v.name);
+        assert!(gb.grad.iter().any(|g| g.abs() > 1e-6), "{}", v.name);
     }
 }
 

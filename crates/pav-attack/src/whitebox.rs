@@ -245,13 +245,19 @@ impl WhiteBox {
                 }
             }
         }
-        if named.iter().any(|(n, _)| !model.outputs.iter().any(|o| o.name == *n)) {
-            model = cut_before_post(model, &named, &i.extra, side, &cfg.name)?;
-        }
         if let Some(x) = model.inputs.first() {
             if x.dims.len() == 4 && x.dims[2..].iter().any(|d| matches!(d, Dim::Fixed(v) if *v != side as i64)) {
                 return Err(unsupported(format!("the graph's input is fixed at {:?}, not {side}²", x.dims)));
             }
+        }
+        if named.iter().any(|(n, _)| !model.outputs.iter().any(|o| o.name == *n)) {
+            model = cut_before_post(model, &named, &i.extra, side, &cfg.name)?;
+        } else {
+            // Described at its own outputs, a graph is folded alike: exports carry `Constant`
+            // nodes and run-time shape arithmetic (Shape, Gather, Concat into a Reshape), which
+            // have no derivative and need none once the input's size is fixed.
+            let x = model.inputs.first().map(|i| i.name.clone()).unwrap_or_default();
+            model = fold_shapes(&model, &[(x.as_str(), vec![1, 3, side as i64, side as i64])], &cfg.name)?.0;
         }
         // The outputs the loss differentiates (scores, objectness; the boxes too under
         // `loss.box_gradient`), then those it reads forward only (the boxes under `loss.iou`).
