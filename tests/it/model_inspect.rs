@@ -1,7 +1,7 @@
 //! `pav-rig model inspect` on every detector in the data set: the four pav decodes are guessed as
 //! their shipped configs' layouts and their skeletons load as detector configs, NanoDet's GFL head
-//! too; PicoDet's in-graph NMS is guessed as `rows` with its scale-factor input; a non-model is a
-//! clear error. `pav-rig model check` tells a finished config from a wrong one on real images.
+//! too; PicoDet's in-graph NMS is guessed as `rows` with its scale-factor input, and `--values`
+//! lists the values inside its graph that a white box reads; a non-model is a clear error. `pav-rig model check` tells a finished config from a wrong one on real images.
 
 use crate::common;
 
@@ -72,6 +72,26 @@ fn gfl_and_in_graph_nms_are_guessed_and_bad_files_refused() {
         skeleton.output
     );
     assert_eq!(skeleton.input.extra.len(), 1, "{:?}", skeleton.input.extra);
+    // `--values` lists what the shipped config names inside the graph for its white box: the
+    // class-major scores and the boxes the NMS reads, with their shapes.
+    let o = common::pav_rig()
+        .args(["model", "inspect", "data:models-picodet/picodet_xs_320_lcnet_postprocessed.onnx", "--values"])
+        .output()
+        .unwrap();
+    let text = common::output_text(&o);
+    let line = |v: &str| text.lines().find(|l| l.split_whitespace().nth(1) == Some(v)).unwrap_or_default().to_string();
+    assert!(o.status.success() && line("concat_4.tmp_0").ends_with("[1, 80, 2125]"), "{}", line("concat_4.tmp_0"));
+    assert!(line("tmp_17").ends_with("[1, 2125, 4]"), "{}", line("tmp_17"));
+    // And the white box's refusal of final rows names the keys that give it a gradient.
+    let rows = OutputLayout::Rows {
+        output: None,
+        columns: pav::detect::config::Column::xyxy_rows(),
+        frame: Default::default(),
+        scores: None,
+        boxes: None,
+    };
+    let why = rows.gradient(80).unwrap_err();
+    assert!(why.contains("set `scores`") && why.contains("--values"), "{why}");
     let junk = tmp.path().join("junk.onnx");
     std::fs::write(&junk, b"not a model").unwrap();
     let (ok, text) = inspect(junk.to_str().unwrap(), &tmp.path().join("j.toml"));

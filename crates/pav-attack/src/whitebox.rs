@@ -234,7 +234,7 @@ impl WhiteBox {
         neutral_extras(&mut model, &i.extra, side);
         // As evaluate decodes: the config's class list; the loss checks the outputs against it.
         let classes = cfg.class_names.len();
-        let description = cfg.output.describe(classes).gradient().map_err(&unsupported)?.clone();
+        let description = cfg.output.gradient(classes).map_err(&unsupported)?;
         // Values the description names inside the graph: its post-processor (top-k, NMS) has no
         // gradient, so the graph is cut there. The boxes are read only under `loss.iou`.
         let mut named: Vec<(String, &str)> = Vec::new();

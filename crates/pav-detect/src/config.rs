@@ -485,7 +485,27 @@ fn named(output: &Option<String>) -> Vec<String> {
     output.iter().cloned().collect()
 }
 
+/// Why final rows give a white box no gradient, and the keys that give one.
+const ROWS_GRADIENT: &str = "the rows are final detections, which have no gradient: set `scores` (the class-major [1, C, N] scores the graph's NMS reads) and, for `loss.iou`, `boxes` in [output] (`pav-rig model inspect --values` lists the graph's values), or describe the graph as `custom` with [output.raw]";
+
+/// Why a DETR's queries give a white box no gradient, and the keys that give one.
+const DETR_GRADIENT: &str = "the queries' labels and scores come after a top-k, which has no gradient: set `logits` and, for `loss.iou`, `pred_boxes` in [output] (`pav-rig model inspect --values` lists the graph's values)";
+
 impl OutputLayout {
+    /// The description a white box differentiates, or why there is none, with the keys of
+    /// this layout that give one.
+    pub fn gradient(&self, classes: usize) -> Result<Description, String> {
+        let d = self.describe(classes);
+        match d.gradient() {
+            Ok(g) => Ok(g.clone()),
+            Err(why) => Err(match self {
+                OutputLayout::Rows { .. } => ROWS_GRADIENT.to_string(),
+                OutputLayout::Detr { .. } => DETR_GRADIENT.to_string(),
+                _ => why,
+            }),
+        }
+    }
+
     /// The layout as a [`Description`]; the named layouts are presets of one.
     pub fn describe(&self, classes: usize) -> Description {
         let grid =

@@ -386,19 +386,17 @@ impl Inspection {
     }
 }
 
-/// Runs the model once on a blank image of side `side` (every other input fed a plausible
-/// constant: an int64 size input the side, a float input of two values the scale 1) and records
-/// each output's shape.
+/// A blank image of side `side` for the model's image input, and a plausible constant for each
+/// other input (an int64 size input the side, a float input of two values the scale 1).
 #[cfg(feature = "eval")]
-pub fn probe(model: &Path, insp: &mut Inspection, side: usize) -> Result<(), super::DetectError> {
+fn blank_feed(
+    insp: &Inspection,
+    side: usize,
+    err: impl Fn(ort::Error) -> super::DetectError + Copy,
+) -> Result<Vec<(String, ort::session::SessionInputValue<'static>)>, super::DetectError> {
     use ort::value::Tensor;
-    let name = model.display().to_string();
-    let err = super::onnx::session_err(&name, "probing the model");
-    let mut session = pav_onnx::runtime::session_builder(&name, 1)?
-        .commit_from_file(model)
-        .map_err(super::onnx::session_err(&name, "loading the ONNX model"))?;
     let image = insp.image_input().map(|p| p.name.clone());
-    let mut feed: Vec<(String, ort::session::SessionInputValue<'_>)> = Vec::new();
+    let mut feed: Vec<(String, ort::session::SessionInputValue<'static>)> = Vec::new();
     for p in &insp.inputs {
         let dims: Vec<usize> = p
             .declared
@@ -407,16 +405,28 @@ pub fn probe(model: &Path, insp: &mut Inspection, side: usize) -> Result<(), sup
             .map(|(i, d)| d.parse().unwrap_or(if Some(&p.name) == image.as_ref() && i >= 2 { side } else { 1 }))
             .collect();
         let n: usize = dims.iter().product();
-        let value: ort::session::SessionInputValue<'_> = if p.dtype == "int64" {
-            Tensor::from_array((dims, vec![side as i64; n])).map_err(&err)?.into()
+        let value: ort::session::SessionInputValue<'static> = if p.dtype == "int64" {
+            Tensor::from_array((dims, vec![side as i64; n])).map_err(err)?.into()
         } else if Some(&p.name) == image.as_ref() {
-            Tensor::from_array((dims, vec![0.5f32; n])).map_err(&err)?.into()
+            Tensor::from_array((dims, vec![0.5f32; n])).map_err(err)?.into()
         } else {
-            Tensor::from_array((dims, vec![1f32; n])).map_err(&err)?.into()
+            Tensor::from_array((dims, vec![1f32; n])).map_err(err)?.into()
         };
         feed.push((p.name.clone(), value));
     }
-    let outputs = session.run(feed).map_err(&err)?;
+    Ok(feed)
+}
+
+/// Runs the model once on a blank image of side `side` ([`blank_feed`]) and records each
+/// output's shape.
+#[cfg(feature = "eval")]
+pub fn probe(model: &Path, insp: &mut Inspection, side: usize) -> Result<(), super::DetectError> {
+    let name = model.display().to_string();
+    let err = super::onnx::session_err(&name, "probing the model");
+    let mut session = pav_onnx::runtime::session_builder(&name, 1)?
+        .commit_from_file(model)
+        .map_err(super::onnx::session_err(&name, "loading the ONNX model"))?;
+    let outputs = session.run(blank_feed(insp, side, &err)?).map_err(&err)?;
     for (oname, value) in outputs.iter() {
         if let ort::value::ValueType::Tensor { shape, .. } = value.dtype() {
             if let Some(p) = insp.outputs.iter_mut().find(|p| p.name == oname) {
@@ -425,6 +435,49 @@ pub fn probe(model: &Path, insp: &mut Inspection, side: usize) -> Result<(), sup
         }
     }
     Ok(())
+}
+
+/// One value a graph computes: what a description may name inside the graph (the scores and
+/// boxes a post-processor reads, the logits before a top-k).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Value {
+    /// Its name.
+    pub name: String,
+    /// The operator that computes it.
+    pub op: String,
+    /// Its shape in one run on a blank image.
+    pub shape: Vec<usize>,
+}
+
+/// Every tensor value the graph computes, in node order, with its shape in one run on a blank
+/// image of side `side`.
+#[cfg(feature = "eval")]
+pub fn values(model: &Path, insp: &Inspection, side: usize) -> Result<Vec<Value>, super::DetectError> {
+    use pav_onnx::proto::{Model, ValueInfo};
+    let name = model.display().to_string();
+    let unread = |msg: String| super::DetectError::Model { detector: name.clone(), path: name.clone(), msg };
+    let bytes = std::fs::read(model).map_err(|e| unread(format!("cannot be read: {e}")))?;
+    let mut m = Model::from_bytes(&bytes).map_err(|e| unread(format!("is no ONNX graph pav reads: {e}")))?;
+    let made: Vec<(String, String)> = m
+        .nodes
+        .iter()
+        .filter(|n| n.op_type != "Constant")
+        .flat_map(|n| n.outputs.iter().filter(|o| !o.is_empty()).map(|o| (o.clone(), n.op_type.clone())))
+        .collect();
+    m.outputs = made.iter().map(|(o, _)| ValueInfo { name: o.clone(), elem_type: 0, dims: vec![] }).collect();
+    let err = super::onnx::session_err(&name, "running the graph for its values");
+    let mut session = pav_onnx::runtime::session_builder(&name, 1)?
+        .commit_from_memory(&m.to_bytes())
+        .map_err(super::onnx::session_err(&name, "loading the ONNX model"))?;
+    let outputs = session.run(blank_feed(insp, side, &err)?).map_err(&err)?;
+    let mut out = Vec::new();
+    for (value, op) in made {
+        let Some(v) = outputs.get(value.as_str()) else { continue };
+        if let ort::value::ValueType::Tensor { shape, .. } = v.dtype() {
+            out.push(Value { name: value, op, shape: shape.iter().map(|&d| d.max(0) as usize).collect() });
+        }
+    }
+    Ok(out)
 }
 
 /// What ONNX Runtime reports of a model's inputs and outputs, for a graph pav's own reader does

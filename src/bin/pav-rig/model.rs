@@ -14,7 +14,8 @@ pub enum Cmd {
     /// layout, and a detector-config skeleton to complete.
     #[command(after_help = "Examples:
   pav-rig model inspect data:models-yolox/yolox_nano.onnx --size 416
-  pav-rig model inspect data:models-yolox/yolox_nano.onnx -o my_detector.toml")]
+  pav-rig model inspect data:models-yolox/yolox_nano.onnx -o my_detector.toml
+  pav-rig model inspect data:models-picodet/picodet_xs_320_lcnet_postprocessed.onnx --values")]
     Inspect {
         /// The ONNX model (`data:NAME` for a manifest entry).
         #[arg(value_parser = pav::data::arg_path)]
@@ -28,6 +29,10 @@ pub enum Cmd {
         /// Write the skeleton config here instead of printing it.
         #[arg(long, short = 'o')]
         out: Option<PathBuf>,
+        /// Also list every value the graph computes, with its operator and shape in one run: the
+        /// names a description may give inside the graph (the scores a post-processor reads).
+        #[arg(long, conflicts_with = "no_run")]
+        values: bool,
     },
     /// Try a finished detector config on images with a car: every detection above a score, the
     /// target's best, and each image with its boxes drawn (targets green, others orange), so that a
@@ -79,7 +84,7 @@ pub enum Cmd {
 
 pub fn run(c: &Cmd) -> Result<()> {
     match c {
-        Cmd::Inspect { model, size, no_run, out } => inspect(model, *size, *no_run, out.as_deref())?,
+        Cmd::Inspect { model, size, no_run, out, values } => inspect(model, *size, *no_run, *values, out.as_deref())?,
         Cmd::Check { config, images, min_score, out } => {
             let (config, images) = match config {
                 Some(c) => (c.clone(), &images[..]),
@@ -185,7 +190,13 @@ fn check(config: &std::path::Path, images: &[String], min_score: f32, out: Optio
     Ok(())
 }
 
-fn inspect(model: &std::path::Path, size: usize, no_run: bool, out: Option<&std::path::Path>) -> Result<()> {
+fn inspect(
+    model: &std::path::Path,
+    size: usize,
+    no_run: bool,
+    values: bool,
+    out: Option<&std::path::Path>,
+) -> Result<()> {
     use pav::detect::inspect::{from_session, inspect_file, probe};
     let mut insp = match inspect_file(model) {
         Ok(i) => i,
@@ -216,6 +227,11 @@ fn inspect(model: &std::path::Path, size: usize, no_run: bool, out: Option<&std:
     }
     let ops: Vec<String> = insp.ops.iter().map(|(o, n)| format!("{o} {n}")).collect();
     outln!("  operators: {}", ops.join(", "));
+    if values {
+        for v in pav::detect::inspect::values(model, &insp, side)? {
+            outln!("  value  {:28} {:12} {:?}", v.name, v.op, v.shape);
+        }
+    }
     let guess = insp.guess(side);
     outln!("layout: {} ({})", guess.layout.unwrap_or("none of pav's"), guess.why);
     let stem = model.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "model".into());
