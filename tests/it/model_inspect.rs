@@ -105,7 +105,7 @@ fn check(config: &std::path::Path, images: &[&str], out: &std::path::Path) -> (b
 
 /// `model check` on a photo and a turntable frame: the right config finds the car and draws it; a
 /// config with a wrong scale (inputs in [0, 1] for a model that reads 0–255) finds none and says
-/// what to check; an unreadable image is named.
+/// what to check; a wrong box encoding or score column is warned of; an unreadable image is named.
 #[test]
 fn check_shows_a_wrong_config_at_once() {
     let data = common::real_data();
@@ -137,6 +137,30 @@ fn check_shows_a_wrong_config_at_once() {
     let (ok, text) = check(&wrong, &[&photo, frame], &tmp.path().join("wrong"));
     assert!(ok, "{text}");
     assert!(text.contains("no car on 2 of 2 images") && text.contains("check the config's channels, scale"), "{text}");
+    // A right config gives nothing a right description cannot; YOLOX-Nano's rows read with
+    // the wrong box encoding give confident boxes of a few pixels or none, with the wrong
+    // objectness column scores outside [0, 1]: each is named.
+    let (_, text) = check(&good, &[&photo, frame], &tmp.path().join("good"));
+    assert!(!text.contains("warning:"), "{text}");
+    let shipped = std::fs::read_to_string(&good).unwrap();
+    let inputs = shipped.split("[output]").next().unwrap();
+    let custom = |name: &str, encoding: &str, objectness: usize| {
+        let path = tmp.path().join(format!("{name}.toml"));
+        let levels = "[[output.levels]]\nstride = 8\n[[output.levels]]\nstride = 16\n[[output.levels]]\nstride = 32\n";
+        std::fs::write(
+            &path,
+            format!(
+                "{inputs}[output]\nlayout = \"custom\"\n{levels}[output.boxes]\nencoding = \"{encoding}\"\n[output.objectness]\ncolumn = {objectness}\n[output.scores]\ncolumn = 5\n[classes]\nnames = \"coco80\"\ntarget = [\"car\"]\n"
+            ),
+        )
+        .unwrap();
+        path
+    };
+    let (ok, text) = check(&custom("encoding", "xyxy", 4), &[&photo, frame], &tmp.path().join("e"));
+    assert!(ok && text.contains("the box encoding or the columns' order is likely wrong"), "{text}");
+    assert!(text.contains("2 of 2 images gave values a right description cannot"), "{text}");
+    let (ok, text) = check(&custom("objectness", "grid", 2), &[&photo, frame], &tmp.path().join("o"));
+    assert!(ok && text.contains("outside [0, 1]: the layout reads a column that is not a probability"), "{text}");
     let (ok, text) = check(&good, &["no/such.jpg"], &tmp.path().join("x"));
     assert!(!ok && text.contains("no/such.jpg") && text.contains("cannot be read"), "{text}");
 }

@@ -2,6 +2,7 @@
 //! and the picture with its boxes drawn, so that a wrong channel order, scale or layout shows at
 //! once (`pav-rig model check`).
 
+use super::decode::Proposals;
 use super::onnx::OnnxDetector;
 use super::{DetectError, Detection, Detector, TargetScore};
 use pav_core::image::{draw_box, Frame};
@@ -31,6 +32,10 @@ pub struct Checked {
     pub detections: Vec<Detection>,
     /// The best box of the target classes, at any score.
     pub best: Option<TargetScore>,
+    /// What a right description cannot give (scores outside [0, 1], a confident best box
+    /// without area, a few pixels across or off the frame): each a sign that the layout reads
+    /// the wrong columns or encoding.
+    pub warnings: Vec<String>,
 }
 
 /// Reads `spec`: an image file (any format OpenCV reads), an FCA `.npz` sample, or frame K of a
@@ -61,7 +66,45 @@ pub fn check(det: &mut OnnxDetector, frame: &Frame, min_score: f32) -> Result<Ch
     let props = det.propose(frame)?;
     let mut detections = props.detections(min_score, det.nms_iou());
     detections.sort_by(|a, b| b.score.total_cmp(&a.score));
-    Ok(Checked { best: props.best(det.target_classes()), detections })
+    let best = props.best(det.target_classes());
+    let warnings = implausible(&props, best.as_ref(), frame);
+    Ok(Checked { best, detections, warnings })
+}
+
+/// What `props` and its `best` target show that a right description cannot give on `frame`.
+pub fn implausible(props: &Proposals, best: Option<&TargetScore>, frame: &Frame) -> Vec<String> {
+    let mut out = Vec::new();
+    let (lo, hi) = props.scores.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
+    // A little past 1 is rounding in an exported sigmoid or softmax.
+    if !props.scores.is_empty() && (hi > 1.001 || lo < -0.001 || !(hi.is_finite() && lo.is_finite())) {
+        out.push(format!(
+            "scores run from {lo:.3} to {hi:.3}, outside [0, 1]: the layout reads a column that is not a probability (a box coordinate, or logits that need their activation)"
+        ));
+    }
+    if let Some(b) = best {
+        let [x1, y1, x2, y2] = b.bbox;
+        let (w, h) = (x2 - x1, y2 - y1);
+        if !(w >= 1.0 && h >= 1.0) {
+            out.push(format!(
+                "the best box, [{x1:.0}, {y1:.0}, {x2:.0}, {y2:.0}], has no area: the box encoding or the columns' order is likely wrong"
+            ));
+        } else if b.score >= 0.5 && w.min(h) < (0.01 * frame.width.min(frame.height) as f32).max(4.0) {
+            out.push(format!(
+                "the best box, [{x1:.0}, {y1:.0}, {x2:.0}, {y2:.0}], is a few pixels across at a score of {:.2}: the box encoding or the columns' order is likely wrong",
+                b.score
+            ));
+        } else {
+            let (fw, fh) = (frame.width as f32, frame.height as f32);
+            let inside = (x2.min(fw) - x1.max(0.0)).max(0.0) * (y2.min(fh) - y1.max(0.0)).max(0.0);
+            if inside < 0.5 * w * h {
+                out.push(format!(
+                    "the best box, [{x1:.0}, {y1:.0}, {x2:.0}, {y2:.0}], lies mostly off the {}x{} frame: the box encoding, its frame (input or image pixels) or the resize is likely wrong",
+                    frame.width, frame.height
+                ));
+            }
+        }
+    }
+    out
 }
 
 /// `frame` with each detection's box drawn: the target classes in green, the others in orange.

@@ -135,7 +135,7 @@ fn check(config: &std::path::Path, images: &[String], min_score: f32, out: Optio
     if let Some(o) = out {
         std::fs::create_dir_all(o).with_context(|| format!("creating {}", o.display()))?;
     }
-    let mut missed = 0;
+    let (mut missed, mut warned) = (0, 0);
     for spec in images {
         let frame = read_input(spec)?;
         let c = check(&mut det, &frame, min_score)?;
@@ -167,6 +167,10 @@ fn check(config: &std::path::Path, images: &[String], min_score: f32, out: Optio
                 outln!("  no {target} from {min_score} (best {:.3})", best.map_or(0.0, |b| b.score));
             }
         }
+        for w in &c.warnings {
+            outln!("  warning: {w}");
+        }
+        warned += !c.warnings.is_empty() as usize;
         if let Some(o) = out {
             // `VIDEO#K` is named `VIDEO_K`.
             let (file, frame_no) = spec.rsplit_once('#').map_or((spec.as_str(), None), |(f, k)| (f, Some(k)));
@@ -180,6 +184,9 @@ fn check(config: &std::path::Path, images: &[String], min_score: f32, out: Optio
             annotate(&frame, &c.detections, det.target_classes()).save_png(&path)?;
             outln!("  wrote {}", path.display());
         }
+    }
+    if warned > 0 {
+        outln!("\n{warned} of {} images gave values a right description cannot: see the warnings above", images.len());
     }
     if missed > 0 {
         outln!(
