@@ -107,6 +107,17 @@ pub fn implausible(props: &Proposals, best: Option<&TargetScore>, frame: &Frame)
     out
 }
 
+/// The file an image given as `spec` is drawn into: its stem as a PNG, frame K of a video
+/// (`VIDEO#K`) as `VIDEO_K.png`.
+pub fn drawn_name(spec: &str) -> String {
+    let (file, frame) = spec.rsplit_once('#').map_or((spec, None), |(f, k)| (f, Some(k)));
+    let stem = Path::new(file).file_stem().map_or_else(|| "image".into(), |s| s.to_string_lossy().into_owned());
+    match frame {
+        Some(k) => format!("{stem}_{k}.png"),
+        None => format!("{stem}.png"),
+    }
+}
+
 /// `frame` with each detection's box drawn: the target classes in green, the others in orange.
 pub fn annotate(frame: &Frame, detections: &[Detection], targets: &[usize]) -> Frame {
     let mut out = frame.clone();

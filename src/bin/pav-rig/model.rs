@@ -123,7 +123,7 @@ pub fn run(c: &Cmd) -> Result<()> {
 }
 
 fn check(config: &std::path::Path, images: &[String], min_score: f32, out: Option<&std::path::Path>) -> Result<()> {
-    use pav::detect::check::{annotate, check, read_input};
+    use pav::detect::check::{annotate, check, drawn_name, read_input};
     use pav::detect::Detector;
     if !(0.0..=1.0).contains(&min_score) {
         anyhow::bail!("--min-score {min_score} must be within [0, 1]");
@@ -172,15 +172,7 @@ fn check(config: &std::path::Path, images: &[String], min_score: f32, out: Optio
         }
         warned += !c.warnings.is_empty() as usize;
         if let Some(o) = out {
-            // `VIDEO#K` is named `VIDEO_K`.
-            let (file, frame_no) = spec.rsplit_once('#').map_or((spec.as_str(), None), |(f, k)| (f, Some(k)));
-            let stem = std::path::Path::new(file)
-                .file_stem()
-                .map_or_else(|| "image".into(), |s| s.to_string_lossy().into_owned());
-            let path = o.join(match frame_no {
-                Some(k) => format!("{stem}_{k}.png"),
-                None => format!("{stem}.png"),
-            });
+            let path = o.join(drawn_name(spec));
             annotate(&frame, &c.detections, det.target_classes()).save_png(&path)?;
             outln!("  wrote {}", path.display());
         }
