@@ -97,6 +97,16 @@ pub struct Part {
     pub chart: Option<u32>,
 }
 
+/// The up to eight pixels that touch pixel `i` of a `w × h` image, at a side or a corner.
+fn neighbours(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
+    let (x, y) = ((i % w) as i64, (i / w) as i64);
+    [(-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, -1), (-1, 1), (1, 1)]
+        .into_iter()
+        .map(move |(dx, dy)| (x + dx, y + dy))
+        .filter(move |&(nx, ny)| nx >= 0 && ny >= 0 && nx < w as i64 && ny < h as i64)
+        .map(move |(nx, ny)| ny as usize * w + nx as usize)
+}
+
 /// The 8-connected parts of the `n × n` region (on where ≥ 0.5), largest first, and the label
 /// of every texel (0: off the region).
 pub fn parts(region: &[f32], n: usize) -> (Vec<u32>, Vec<Part>) {
@@ -115,17 +125,10 @@ pub fn parts(region: &[f32], n: usize) -> (Vec<u32>, Vec<Part>) {
             let (x, y) = (i % n, i / n);
             texels += 1;
             bbox = [bbox[0].min(x), bbox[1].min(y), bbox[2].max(x + 1), bbox[3].max(y + 1)];
-            for dy in -1i64..=1 {
-                for dx in -1i64..=1 {
-                    let (nx, ny) = (x as i64 + dx, y as i64 + dy);
-                    if nx < 0 || ny < 0 || nx >= n as i64 || ny >= n as i64 {
-                        continue;
-                    }
-                    let j = ny as usize * n + nx as usize;
-                    if region[j] >= 0.5 && labels[j] == 0 {
-                        labels[j] = label;
-                        stack.push(j);
-                    }
+            for j in neighbours(i, n, n) {
+                if region[j] >= 0.5 && labels[j] == 0 {
+                    labels[j] = label;
+                    stack.push(j);
                 }
             }
         }
@@ -166,13 +169,7 @@ pub fn split_by_chart(labels: &mut [u32], parts: Vec<Part>, charts: &[u32], shee
         while !ring.is_empty() {
             let mut grown = Vec::new();
             for &i in &ring {
-                let (x, y) = ((i % n) as i64, (i / n) as i64);
-                for (dx, dy) in [(-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, -1), (-1, 1), (1, 1)] {
-                    let (nx, ny) = (x + dx, y + dy);
-                    if nx < 0 || ny < 0 || nx >= n as i64 || ny >= n as i64 {
-                        continue;
-                    }
-                    let j = ny as usize * n + nx as usize;
+                for j in neighbours(i, n, n) {
                     if labels[j] == p.label && !seen.contains_key(&j) {
                         seen.insert(j, seen[&i]);
                         grown.push(j);
@@ -607,15 +604,10 @@ impl Layout {
             for _ in 0..b {
                 let mut next = Vec::new();
                 for &i in &ring {
-                    let (x, y) = ((i % fw) as i64, (i / fw) as i64);
-                    for (dx, dy) in [(-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, -1), (-1, 1), (1, 1)] {
-                        let (nx, ny) = (x + dx, y + dy);
-                        if nx >= 0 && ny >= 0 && (nx as usize) < fw && (ny as usize) < fh {
-                            let j = ny as usize * fw + nx as usize;
-                            if colour[j].is_none() {
-                                colour[j] = colour[i];
-                                next.push(j);
-                            }
+                    for j in neighbours(i, fw, fh) {
+                        if colour[j].is_none() {
+                            colour[j] = colour[i];
+                            next.push(j);
                         }
                     }
                 }
