@@ -8,7 +8,7 @@
 //! | 0 base | `pav-core`: [`colour`], [`extends`], [`path`], [`image`], [`video`], [`geometry`], [`rng`], [`sidecar`], [`step`], [`table`], [`plot`], [`progress`]; `pav-run`: [`data`], [`provenance`], [`shard`] (what a run reads and records); `pav-onnx` (ONNX graphs and their gradients, no pav dependency) |
 //! | 1 method blocks | `pav-print` ([`print`]), `pav-render` ([`render`]), `pav-scene` ([`scene`]), `pav-dataset` ([`dataset`]), `pav-detect` ([`detect`]), `pav-uv` ([`uv`]) |
 //! | 2 jobs | `pav-attack` ([`attack`], the optimizer), `pav-eval` ([`eval`], scoring), `pav-rig` ([`rig`], turntable and capture) |
-//! | 3 studies and tooling | `pav-studies` ([`studies`]): the paper's tables and the studies, which combine the optimizer and scoring; `pav-results` ([`results`]): results tables as data; `pav-cluster` ([`cluster`]): job scripts for a cluster |
+//! | 3 studies and tooling | `pav-studies` ([`studies`]): the paper's tables and the studies, which combine the optimizer and scoring; `pav-results` ([`results`]): results tables as data; `pav-cluster` ([`cluster`]): job scripts for a cluster; `pav-reference` ([`reference`]): the reference pages |
 //! | 4 binaries | this crate: `pav` and `pav-rig`, clap and printing, one file per command |
 //!
 //! This crate re-exports each lower crate under its module name, so `pav::detect` is
@@ -33,6 +33,7 @@ pub use pav_detect as detect;
 pub use pav_doctor as doctor;
 pub use pav_eval as eval;
 pub use pav_print as print;
+pub use pav_reference as reference;
 pub use pav_render as render;
 pub use pav_results as results;
 #[cfg(feature = "rig")]

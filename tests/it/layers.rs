@@ -17,7 +17,7 @@ const LAYERS: [&[&str]; 4] = [
     ],
     &["print", "render", "scene", "dataset", "detect", "uv"],
     &["attack", "eval", "rig"],
-    &["studies", "results", "cluster", "doctor"],
+    &["studies", "results", "cluster", "doctor", "reference"],
 ];
 /// Layer whose modules must not use each other.
 const JOBS: usize = 2;

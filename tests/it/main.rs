@@ -18,6 +18,7 @@ mod capture_sim;
 mod cli_evaluate;
 mod cli_pav;
 mod cli_rig;
+mod config_reference;
 #[cfg(feature = "eval")]
 mod custom_layout;
 mod custom_white_box;

@@ -9,7 +9,7 @@ use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
 /// The car and its optimizable region.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MeshConfig {
     /// OBJ with UVs.
@@ -58,7 +58,7 @@ fn parts_min_cos() -> f32 {
 }
 
 /// The texture an optimization starts from.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(untagged)]
 pub enum Init {
     /// Every value this grey.
@@ -70,7 +70,7 @@ pub enum Init {
 }
 
 /// Named initial textures.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum InitName {
     /// Uniform random colours in blocks 1/64 of the atlas side: the "random" baseline as a starting point.
@@ -84,7 +84,7 @@ impl Default for Init {
 }
 
 /// The PBR views.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ViewsConfig {
     /// Training npz files (FCA format); may be empty when `pbr` lists rendered views.
@@ -128,7 +128,7 @@ pub struct ViewsConfig {
 }
 
 /// One white-box detector of the ensemble.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct WhiteBoxEntry {
     /// Its detector config (configs/detectors/*.toml, as `evaluate` reads them); the target
@@ -164,7 +164,7 @@ fn one() -> f32 {
 }
 
 /// Loss weights and shape: L = Σ_d w_d (L1 + β·L2) + γ·Ls.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LossConfig {
     /// β.
@@ -199,7 +199,7 @@ fn mean() -> Reduce {
 }
 
 /// Adam and the schedule.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct OptimizerConfig {
     /// Learning rate.
@@ -239,7 +239,7 @@ pub struct OptimizerConfig {
 }
 
 /// `optimizer.average`: which iterates the output texture averages.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct AverageConfig {
     /// The first step counted (steps done, as snapshot names count them).
@@ -273,7 +273,7 @@ fn clamp_default() -> [f32; 2] {
 /// A whole optimization config. `extends = "base.toml"` (relative to the file) starts from
 /// another config: tables merge key by key, and every value the file sets (arrays included)
 /// replaces the base's.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct OptimizeConfig {
     /// Scene TOML (lighting and EoT effects).

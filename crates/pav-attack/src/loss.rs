@@ -82,7 +82,7 @@ pub fn iou_and_grad(a: &[f32; 4], b: &[f32; 4]) -> (f32, [f32; 4]) {
 }
 
 /// How the set of predictions becomes one number per term.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum Reduce {
     /// The paper's means over thresholded sets.
@@ -100,7 +100,7 @@ pub enum Reduce {
 const LOG_MAX_CAP: f32 = 1.0 - 1e-4;
 
 /// Which predictions L2 averages over under [`Reduce::Mean`].
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Deserialize, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Proposals {
     /// The paper's: boxes (objectness ≥ the threshold) whose most likely class is a target.

@@ -3,7 +3,7 @@
 //! (the paper's Eq. 12, which grows with the texture size, so its γ must shrink with it).
 
 /// How the squared differences are normalized.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum SmoothNorm {
     /// Divided by the texel count (the authors' code).

@@ -11,7 +11,7 @@ use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
 /// Channel order the model expects.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum ChannelOrder {
     /// Red, green, blue.
@@ -21,7 +21,7 @@ pub enum ChannelOrder {
 }
 
 /// How a frame is fitted to the model input.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum Resize {
     /// Keep aspect ratio, pad the rest with `pad_value`.
@@ -31,7 +31,7 @@ pub enum Resize {
 }
 
 /// Where a letterboxed image sits in the input.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum Align {
     /// Image at the top-left corner, padding right and bottom (YOLOX).
@@ -42,7 +42,7 @@ pub enum Align {
 }
 
 /// Model input description.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct InputConfig {
     /// Input tensor name; the model's first input when absent.
@@ -83,7 +83,7 @@ pub struct InputConfig {
 }
 
 /// A model input beside the image (PicoDet's `scale_factor`), fed per frame.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ExtraInput {
     /// The input's name in the model.
@@ -93,7 +93,7 @@ pub struct ExtraInput {
 }
 
 /// The value of an [`ExtraInput`].
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum ExtraValue {
     /// float32 `[1, 2]`: input height / frame height, input width / frame width (PaddleDetection's
@@ -104,7 +104,7 @@ pub enum ExtraValue {
 }
 
 /// One column of a [`OutputLayout::Rows`] output.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Column {
     /// The class index (a negative one marks an empty row).
@@ -144,7 +144,7 @@ fn default_strides() -> Vec<usize> {
 }
 
 /// One darknet YOLO head.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct HeadConfig {
     /// Output tensor name.
@@ -154,7 +154,7 @@ pub struct HeadConfig {
 }
 
 /// Output layout: how to turn the model's raw outputs into proposals.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, schemars::JsonSchema)]
 #[serde(tag = "layout", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum OutputLayout {
     /// Darknet YOLOv3 heads `[N, A·(5+C), H, W]` raw logits; sigmoid and anchors applied here.
@@ -238,7 +238,7 @@ pub enum OutputLayout {
 }
 
 /// Class names and which classes count as "the car".
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ClassConfig {
     /// `coco80` for the built-in list, or a path to a names file (one per line).
@@ -266,19 +266,29 @@ impl Default for ClassConfig {
     }
 }
 
-#[derive(Clone, Debug, Deserialize)]
+/// A detector config as written: the keys of `configs/detectors/*.toml`.
+#[derive(Clone, Debug, Deserialize, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(rename = "DetectorConfig")]
 struct RawConfig {
+    /// Short name used in reports.
     name: String,
+    /// The ONNX model: a path relative to the config, or `data:NAME/FILE` in pav's data store.
     model: PathBuf,
+    /// Free text: where the model comes from, its licence, what was checked.
     #[serde(default)]
     description: String,
+    /// How a frame becomes the model's input.
     input: InputConfig,
+    /// How the model's outputs become boxes and scores.
     output: OutputLayout,
+    /// Class names and the target classes.
     #[serde(default)]
     classes: ClassConfig,
+    /// IoU above which non-maximum suppression keeps only the higher-scored of two boxes of one class.
     #[serde(default = "nms_default")]
     nms_iou: f32,
+    /// Defences in front of the model (docs/defences.md), applied in the order listed.
     #[serde(default)]
     defence: Vec<Defence>,
 }
@@ -334,6 +344,11 @@ pub struct DetectorConfig {
 }
 
 impl DetectorConfig {
+    /// The keys a detector config file takes, with their types, defaults and meanings.
+    pub fn schema() -> schemars::Schema {
+        schemars::schema_for!(RawConfig)
+    }
+
     /// Reads and validates a TOML config; relative paths in it are relative to its directory.
     pub fn load(path: &Path) -> Result<Self, DetectError> {
         let cfg_err = |msg: String| DetectError::Config { path: path.display().to_string(), msg };

@@ -10,7 +10,7 @@ use pav_onnx::proto::Model;
 use serde::Deserialize;
 
 /// One input transform, as a detector config's `[[defence]]` entry or a `--defence` spec names it.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Defence {
     /// Spatial smoothing: the median of each `k × k` window (`k` odd, at least 3).

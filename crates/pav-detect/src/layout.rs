@@ -6,7 +6,7 @@
 use serde::{Deserialize, Deserializer};
 
 /// Which pixels boxes are in.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum BoxFrame {
     /// The model's input (mapped back through the resize and padding).
@@ -17,7 +17,7 @@ pub enum BoxFrame {
 }
 
 /// How a part's tensor holds its proposals.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum Arrange {
     /// `[.., R, W]`: a row of W values per proposal (a rank-1 `[R]` when W is 1).
@@ -31,7 +31,7 @@ pub enum Arrange {
 }
 
 /// The order of one level's rows.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum CellOrder {
     /// Anchor by anchor, each a whole grid row-major (YOLOv5's and darknet's order).
@@ -45,7 +45,7 @@ pub enum CellOrder {
 }
 
 /// Where a grid cell's point is, for encodings measured from it.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum Centre {
     /// `(x + 0.5)·stride`: the cell's centre.
@@ -58,7 +58,7 @@ pub enum Centre {
 /// How a box's four values become corners, in input pixels. `(gx, gy)` is the row's cell,
 /// `s` its level's stride, `(aw, ah)` its anchor (the stride for an anchor-free grid), `c` the
 /// cell's point (see [`Centre`]), σ the logistic sigmoid.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum Encoding {
     /// Corners `x1, y1, x2, y2`.
@@ -114,7 +114,7 @@ impl Encoding {
 }
 
 /// The function a model's scores still need.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Activation {
     /// Already probabilities.
@@ -142,7 +142,7 @@ impl Activation {
 }
 
 /// One grid level.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Level {
     /// Input pixels per cell; read from the map for `planes` tensors when absent.
@@ -154,7 +154,7 @@ pub struct Level {
 }
 
 /// Where one part of the proposals (boxes, scores, objectness, labels) lies, and how to read it.
-#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Part {
     /// Output names: one, or one per level with `per_level`; matched by shape when empty.
@@ -217,7 +217,7 @@ pub struct Part {
 }
 
 fn one_or_many<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<String>, D::Error> {
-    #[derive(Deserialize)]
+    #[derive(Deserialize, serde::Serialize, schemars::JsonSchema)]
     #[serde(untagged)]
     enum OneOrMany {
         One(String),
@@ -232,7 +232,7 @@ fn one_or_many<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<String>, D::Error>
 /// A whole output layout: proposals on an optional grid, each with a box, class scores, and
 /// optionally an objectness (multiplying the scores) or a label (final detections: the score
 /// is the labelled class's, rows with a label outside the classes are padding).
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Description {
     /// Grid levels in row order; none when rows are not on a grid.

@@ -12,7 +12,7 @@ use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
 /// `[print]` in an optimize config: the texture is seen by the detectors as this printer prints it.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PrintConfig {
     /// The printer's ICC output profile (default: Ghostscript's `default_cmyk.icc`).

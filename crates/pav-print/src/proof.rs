@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 pub const DEFAULT_PROFILE: &str = "/usr/share/color/icc/ghostscript/default_cmyk.icc";
 
 /// How colours outside the printer's gamut are brought inside (ICC rendering intents).
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum RenderingIntent {
     /// Compresses the whole gamut, keeping relations between colours.

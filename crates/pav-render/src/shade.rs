@@ -15,7 +15,7 @@ use pav_core::rng::Rng;
 use pav_core::step::{accumulate, Step};
 
 /// Light intensities (white light) and the material's shininess; a scene's `[lighting]` table.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Lights {
     /// Ambient intensity.

@@ -35,7 +35,7 @@ use serde::Deserialize;
 use std::path::Path;
 
 /// How often an effect's random factor is drawn.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Per {
     /// One draw per pixel and channel (the authors' EoT).
@@ -46,7 +46,7 @@ pub enum Per {
 }
 
 /// One EoT effect on the textured render `I_d`.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
 pub enum Effect {
     /// Multiply by U(min, max).
@@ -85,7 +85,7 @@ pub enum Effect {
 }
 
 /// A scene: lighting of the textured render and the EoT effects.
-#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Scene {
     /// Phong lighting (the renderer's light set, read as is); `None` renders the albedo.

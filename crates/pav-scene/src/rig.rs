@@ -67,7 +67,7 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// The camera of the rig.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RigCamera {
     /// Focal length, mm (with `sensor_mm`).
@@ -111,7 +111,7 @@ pub struct RigCamera {
 }
 
 /// A real camera's settings, each locked with its automatic mode off when given.
-#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Controls {
     /// Exposure time in V4L2's units of 100 µs.
@@ -143,7 +143,7 @@ fn bitrate() -> f64 {
 }
 
 /// Where the camera stands.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Placement {
     /// Horizontal distance from the camera to the table's axis, metres.
@@ -157,7 +157,7 @@ pub struct Placement {
 }
 
 /// The model car.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Model {
     /// The model is 1:`scale`.
@@ -167,7 +167,7 @@ pub struct Model {
 }
 
 /// The turntable.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Table {
     /// Seconds per turn.
@@ -179,7 +179,7 @@ pub struct Table {
 }
 
 /// The room.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Room {
     /// The light map that lights the model (a studio light's name or an .exr/.hdr path); the
@@ -203,7 +203,7 @@ fn backdrop_m() -> f64 {
 }
 
 /// What the texture is printed on.
-#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum StickerMaterial {
     /// Uncoated paper: diffuse, a faint sheen.
@@ -241,7 +241,7 @@ impl StickerMaterial {
 }
 
 /// The sticker.
-#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Sticker {
     /// Its stock.
@@ -250,7 +250,7 @@ pub struct Sticker {
 }
 
 /// How the simulation renders.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RigRender {
     /// Simulated frame width (height keeps the camera's aspect); default the camera's.
@@ -278,7 +278,7 @@ impl Default for RigRender {
 }
 
 /// A camera effect; each is simulated only when the rig lists it.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Hash, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum CameraEffect {
     /// Thin-lens blur at the aperture and focus distance.
@@ -295,7 +295,7 @@ pub enum CameraEffect {
 }
 
 /// A rig config.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RigConfig {
     /// The car.

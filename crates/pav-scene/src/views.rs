@@ -106,7 +106,7 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ViewsError + '_ {
 }
 
 /// How the mesh is normalized (which fixes the units of the pose grid).
-#[derive(Clone, Copy, Debug, Default, Deserialize, serde::Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, serde::Serialize, PartialEq, Eq, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Normalize {
     /// PAV-Camou: vertex-mean centring, max-abs scaling.
@@ -117,7 +117,7 @@ pub enum Normalize {
 }
 
 /// The car.
-#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ViewMesh {
     /// OBJ with UVs.
@@ -138,7 +138,7 @@ fn plus_y() -> String {
 }
 
 /// An effect the PBR render simulates; everything not listed is off.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Hash, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum PbrEffect {
     /// A shadow-catcher ground plane under the car.
@@ -149,7 +149,7 @@ pub enum PbrEffect {
 }
 
 /// Image settings.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RenderSettings {
     /// Image side in pixels (square).
@@ -170,7 +170,7 @@ pub struct RenderSettings {
 }
 
 /// What draws a view set.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Renderer {
     /// Blender Cycles: path-traced under the environment, with the listed effects.
@@ -183,7 +183,7 @@ pub enum Renderer {
 }
 
 /// A lighting environment.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Environment {
     /// A studio light name (`city`, `courtyard`, `forest`, `interior`, `night`, `studio`,
@@ -199,7 +199,7 @@ fn one() -> f64 {
 }
 
 /// A grid of cameras on spheres around a target, looking at it with +Y up.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PoseGrid {
     /// Camera distances (normalized mesh units).
@@ -237,7 +237,7 @@ fn unmoved() -> Vec<f32> {
 }
 
 /// Background plates: real photos with their car painted out, the rendered car laid over them.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Plates {
     /// FCA-format CARLA samples (`.npz`: photo and poses).
@@ -266,7 +266,7 @@ pub struct Plates {
 }
 
 /// A `pav views render` config.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ViewsConfig {
     /// The car.

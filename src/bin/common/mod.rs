@@ -10,7 +10,6 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 mod args;
-pub mod reference;
 pub use args::*;
 
 /// A progress bar on stderr, one per stage, notes printed above it. When stderr is not a

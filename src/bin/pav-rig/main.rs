@@ -113,7 +113,7 @@ fn main() -> Result<()> {
         Cmd::Compare(a) => compare::run(a),
         Cmd::Paired(a) => paired::run(a),
         Cmd::Reference { out } => {
-            let pages = common::reference::write(&mut common::grouped(Cli::command(), GROUPS), out)?;
+            let pages = pav::reference::commands::write(&mut common::grouped(Cli::command(), GROUPS), out)?;
             outln!("wrote {} pages into {}", pages.len(), out.display());
             Ok(())
         }

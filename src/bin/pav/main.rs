@@ -177,7 +177,8 @@ enum Cmd {
     #[command(after_help = "Examples:
   pav cluster slurm --tasks 6 --cpus-per-task 2 --mem 4G -o jobs/cv -- target/release/pav crossval --config configs/optimize/quick.toml -o out/cv")]
     Cluster(cluster::Cmd),
-    /// Write the reference page of every command from this binary's own definition.
+    /// Write the reference page of every command from this binary's own definition, and of
+    /// every config file's keys from the config types.
     #[command(hide = true)]
     Reference {
         /// The folder of the pages.
@@ -222,7 +223,8 @@ fn main() -> Result<()> {
         Cmd::Results(c) => results::run(&c),
         Cmd::Cluster(c) => cluster::run(&c),
         Cmd::Reference { out } => {
-            let pages = common::reference::write(&mut common::grouped(Cli::command(), GROUPS), &out)?;
+            let mut pages = pav::reference::commands::write(&mut common::grouped(Cli::command(), GROUPS), &out)?;
+            pages.extend(pav::reference::config::write(&out)?);
             outln!("wrote {} pages into {}", pages.len(), out.display());
             Ok(())
         }

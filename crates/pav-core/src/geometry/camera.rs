@@ -116,7 +116,7 @@ pub fn moved_away(cam_trans: [[f64; 3]; 2], factor: f64) -> [[f64; 3]; 2] {
 }
 
 /// How a mesh is normalized, which fixes the camera convention that fits a CARLA pose.
-#[derive(Clone, Copy, Debug, serde::Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, serde::Deserialize, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum CameraConvention {
     /// FCA/DAS: neural_renderer's bbox normalization, 90° FoV (FCA's CARLA samples).

@@ -68,8 +68,8 @@ impl fmt::Display for Part {
 
 /// A signed mesh axis, written `+x`, `-z`, …: which way the car's front or up points in the
 /// mesh's coordinates (a mesh file says neither).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize)]
-#[serde(try_from = "String")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema)]
+#[serde(try_from = "String", into = "String")]
 pub struct Axis {
     /// 0, 1 or 2 for x, y, z.
     pub index: usize,
@@ -83,6 +83,12 @@ impl Axis {
         let mut v = [0.0; 3];
         v[self.index] = if self.positive { 1.0 } else { -1.0 };
         v
+    }
+}
+
+impl From<Axis> for String {
+    fn from(a: Axis) -> String {
+        a.to_string()
     }
 }
 

@@ -7,7 +7,7 @@ use crate::step::{accumulate, Step};
 use serde::Deserialize;
 
 /// Resampling filter.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default)]
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum Interpolation {
     /// 2-tap bilinear with half-pixel centres, no antialiasing (OpenCV `INTER_LINEAR`).

@@ -123,8 +123,8 @@ fn page(cmd: &mut clap::Command, path: &[String], siblings: &[String]) -> String
 }
 
 /// Writes the page of `cmd` and of every command under it into `dir`; returns the files.
-pub fn write(cmd: &mut clap::Command, dir: &Path) -> std::io::Result<Vec<String>> {
-    std::fs::create_dir_all(dir)?;
+pub fn write(cmd: &mut clap::Command, dir: &Path) -> Result<Vec<String>, crate::ReferenceError> {
+    std::fs::create_dir_all(dir).map_err(|source| crate::ReferenceError::Write { path: dir.to_path_buf(), source })?;
     cmd.build();
     let mut written = Vec::new();
     walk(cmd, &[cmd.get_name().to_string()], &[], dir, &mut written)?;
@@ -137,9 +137,11 @@ fn walk(
     siblings: &[String],
     dir: &Path,
     out: &mut Vec<String>,
-) -> std::io::Result<()> {
+) -> Result<(), crate::ReferenceError> {
     let name = file(path);
-    std::fs::write(dir.join(&name), page(cmd, path, siblings))?;
+    let at = dir.join(&name);
+    std::fs::write(&at, page(cmd, path, siblings))
+        .map_err(|source| crate::ReferenceError::Write { path: at, source })?;
     out.push(name);
     let names = listed(cmd);
     for n in &names {
