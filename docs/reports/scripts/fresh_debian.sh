@@ -18,12 +18,17 @@ fi
 mkdir -p "$root/work/shared"
 [ -d "$root/work/pav" ] || git clone -q "$here" "$root/work/pav"
 cp /etc/resolv.conf "$root/etc/resolv.conf"
+# The network's own certificate authorities (a TLS-inspecting proxy's), which any machine on it
+# is given.
+mkdir -p "$root/usr/local/share/ca-certificates"
+cp /usr/local/share/ca-certificates/*.crt "$root/usr/local/share/ca-certificates/" 2>/dev/null || true
 mounted=()
 bind() { mount --bind "$1" "$2" && mounted=("$2" "${mounted[@]}"); }
 cleanup() { for m in "${mounted[@]}"; do umount -l "$m" || true; done; }
 trap cleanup EXIT
 mount -t proc proc "$root/proc" && mounted=("$root/proc")
 bind /dev "$root/dev"
+bind /dev/pts "$root/dev/pts"
 bind /sys "$root/sys"
 bind "$shared" "$root/work/shared"
 mount -o remount,bind,ro "$root/work/shared"
@@ -37,7 +42,11 @@ s=$(date +%s)
 apt-get update -qq
 DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
   ca-certificates curl git python3-pip python3-venv > /dev/null
-curl -sSf https://sh.rustup.rs | sh -s -- -y --profile minimal --default-toolchain stable > /dev/null
+update-ca-certificates > /dev/null
+# rustup-init itself, as rustup.rs's "other installation methods" give it.
+curl -sSf -o /tmp/rustup-init https://static.rust-lang.org/rustup/dist/x86_64-unknown-linux-gnu/rustup-init
+chmod +x /tmp/rustup-init
+/tmp/rustup-init -y --profile minimal --default-toolchain stable > /dev/null
 . "$HOME/.cargo/env"
 t=$(date +%s); echo "prerequisites,$((t - s))" >> "$csv"; s=$t
 bash scripts/setup.sh --evaluate
