@@ -211,6 +211,86 @@ fn bad_or_incomplete_sidecars_get_error_rows_and_fail_the_run() {
     assert!(md.contains("backwards") && md.contains("gaps"), "{md}");
 }
 
+/// A clip without a sidecar that spans part of a turn at the period given says so in its status
+/// and lists the sectors it holds; at its own length as the period it is a whole turn. Neither
+/// fails the run.
+#[test]
+fn a_clip_shorter_than_the_period_says_which_part_of_the_turn_it_holds() {
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let clip = tmp.path().join("clip.mp4");
+    std::fs::copy(fixture(), &clip).unwrap();
+    let eval = |period: &str, out: &str| {
+        let o = pav_rig()
+            .args(["evaluate", &clip.display().to_string(), "-d", &cfg("yolox_nano")])
+            .args(["--period", period, "--no-plots", "-o"])
+            .arg(tmp.path().join(out))
+            .output()
+            .unwrap();
+        let (stdout, err) = text(&o);
+        assert!(o.status.success(), "{stdout}\n{err}");
+        let md = std::fs::read_to_string(tmp.path().join(out).join("summary.md")).unwrap();
+        (std::fs::read_to_string(tmp.path().join(out).join("summary.csv")).unwrap(), md, stdout)
+    };
+    // 45 frames at 10 fps: 4.5 s of a 28 s turn.
+    let (csv, md, stdout) = eval("28s", "short");
+    let want = "less than one turn: 4.5 s of a 28 s period, 0–58° (no sidecar; is --period right?)";
+    assert!(csv.contains(want) && md.contains(want) && stdout.contains("less than one turn"), "{csv}\n{stdout}");
+    assert!(md.contains("Frames in 2 of 12 sectors: 0–30°, 30–60°."), "{md}");
+    let (csv, md, _) = eval("4.5", "whole");
+    assert!(csv.contains(",complete,") && !md.contains("Frames in"), "{csv}\n{md}");
+}
+
+/// YOLOX-Nano's rows described as a custom layout with the given box `encoding` and objectness
+/// `column`, written into `dir`.
+fn yolox_as_custom(dir: &Path, name: &str, encoding: &str, column: usize) -> String {
+    let shipped = std::fs::read_to_string(common::detector_config("yolox_nano")).unwrap();
+    let inputs =
+        shipped.split("[output]").next().unwrap().replace("name = \"yolox_nano\"", &format!("name = \"{name}\""));
+    let levels = "[[output.levels]]\nstride = 8\n[[output.levels]]\nstride = 16\n[[output.levels]]\nstride = 32\n";
+    let path = dir.join(format!("{name}.toml"));
+    std::fs::write(
+        &path,
+        format!("{inputs}[output]\nlayout = \"custom\"\n{levels}[output.boxes]\nencoding = \"{encoding}\"\n[output.objectness]\ncolumn = {column}\n[output.scores]\ncolumn = 5\n"),
+    )
+    .unwrap();
+    path.display().to_string()
+}
+
+/// A description whose scores leave [0, 1] (the objectness read from a box column) stops that
+/// detector at its first frame and fails the run, the right one scoring on; one whose confident
+/// boxes have no area (the wrong box encoding) is scored, and its status says so.
+#[test]
+fn evaluate_refuses_scores_outside_0_1_and_doubts_boxes_without_area() {
+    common::real_data();
+    let tmp = tempfile::tempdir().unwrap();
+    let wrong = yolox_as_custom(tmp.path(), "column", "grid", 2);
+    let o = pav_rig()
+        .args(["evaluate", &fixture(), "-d", &wrong, "-d", &cfg("yolox_nano"), "--stride", "9", "--no-plots", "-o"])
+        .arg(tmp.path().join("column"))
+        .output()
+        .unwrap();
+    assert_clean_failure(&o, "column: frame 0: scores run from");
+    let summary = std::fs::read_to_string(tmp.path().join("column/summary.csv")).unwrap();
+    let row = |who: &str| summary.lines().find(|l| l.starts_with(&format!("carla_orbit,{who},"))).unwrap().to_string();
+    assert!(
+        row("column").contains("stopped at frame 0: scores run from") && row("column").contains("outside [0, 1]"),
+        "{summary}"
+    );
+    assert!(row("yolox_nano").contains(",complete,"), "{summary}");
+    let encoding = yolox_as_custom(tmp.path(), "encoding", "xyxy", 4);
+    let o = pav_rig()
+        .args(["evaluate", &fixture(), "-d", &encoding, "--stride", "9", "--no-plots", "-o"])
+        .arg(tmp.path().join("encoding"))
+        .output()
+        .unwrap();
+    let (out, err) = text(&o);
+    assert!(o.status.success(), "{out}\n{err}");
+    let summary = std::fs::read_to_string(tmp.path().join("encoding/summary.csv")).unwrap();
+    assert!(summary.contains("detection(s) with a doubtful box, first at frame 0: the best box, ["), "{summary}");
+    assert!(summary.contains("the box encoding or the columns' order is likely wrong"), "{summary}");
+}
+
 #[test]
 fn out_of_range_settings_are_refused_before_any_work() {
     for (flag, value, needle) in [

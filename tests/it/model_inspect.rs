@@ -105,7 +105,8 @@ fn check(config: &std::path::Path, images: &[&str], out: &std::path::Path) -> (b
 
 /// `model check` on a photo and a turntable frame: the right config finds the car and draws it; a
 /// config with a wrong scale (inputs in [0, 1] for a model that reads 0–255) finds none and says
-/// what to check; a wrong box encoding or score column is warned of; an unreadable image is named.
+/// what to check; a wrong box encoding is warned of and a score column outside [0, 1] refused; an
+/// unreadable image is named.
 #[test]
 fn check_shows_a_wrong_config_at_once() {
     let data = common::real_data();
@@ -138,8 +139,8 @@ fn check_shows_a_wrong_config_at_once() {
     assert!(ok, "{text}");
     assert!(text.contains("no car on 2 of 2 images") && text.contains("check the config's channels, scale"), "{text}");
     // A right config gives nothing a right description cannot; YOLOX-Nano's rows read with
-    // the wrong box encoding give confident boxes of a few pixels or none, with the wrong
-    // objectness column scores outside [0, 1]: each is named.
+    // the wrong box encoding give confident boxes of a few pixels or none (a warning), with the
+    // wrong objectness column scores outside [0, 1] (an error): each is named.
     let (_, text) = check(&good, &[&photo, frame], &tmp.path().join("good"));
     assert!(!text.contains("warning:"), "{text}");
     let shipped = std::fs::read_to_string(&good).unwrap();
@@ -158,9 +159,11 @@ fn check_shows_a_wrong_config_at_once() {
     };
     let (ok, text) = check(&custom("encoding", "xyxy", 4), &[&photo, frame], &tmp.path().join("e"));
     assert!(ok && text.contains("the box encoding or the columns' order is likely wrong"), "{text}");
-    assert!(text.contains("2 of 2 images gave values a right description cannot"), "{text}");
+    assert!(text.contains("2 of 2 images gave boxes a right description is unlikely to give"), "{text}");
     let (ok, text) = check(&custom("objectness", "grid", 2), &[&photo, frame], &tmp.path().join("o"));
-    assert!(ok && text.contains("outside [0, 1]: the layout reads a column that is not a probability"), "{text}");
+    assert!(!ok && text.contains("error: scores run from"), "{text}");
+    assert!(text.contains("outside [0, 1]: the layout reads a column that is not a probability"), "{text}");
+    assert!(text.contains("2 of 2 images gave scores outside [0, 1]: the description is wrong"), "{text}");
     let (ok, text) = check(&good, &["no/such.jpg"], &tmp.path().join("x"));
     assert!(!ok && text.contains("no/such.jpg") && text.contains("cannot be read"), "{text}");
 }

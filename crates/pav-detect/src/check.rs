@@ -32,9 +32,11 @@ pub struct Checked {
     pub detections: Vec<Detection>,
     /// The best box of the target classes, at any score.
     pub best: Option<TargetScore>,
-    /// What a right description cannot give (scores outside [0, 1], a confident best box
-    /// without area, a few pixels across or off the frame): each a sign that the layout reads
-    /// the wrong columns or encoding.
+    /// Scores outside [0, 1]: the description is wrong, and nothing it scores can be trusted.
+    pub refused: Option<String>,
+    /// What a right description is unlikely to give (a confident best box without area, a few
+    /// pixels across or off the frame): each a sign that the layout reads the wrong columns or
+    /// encoding.
     pub warnings: Vec<String>,
 }
 
@@ -67,42 +69,68 @@ pub fn check(det: &mut OnnxDetector, frame: &Frame, min_score: f32) -> Result<Ch
     let mut detections = props.detections(min_score, det.nms_iou());
     detections.sort_by(|a, b| b.score.total_cmp(&a.score));
     let best = props.best(det.target_classes());
-    let warnings = implausible(&props, best.as_ref(), frame);
-    Ok(Checked { best, detections, warnings })
+    let refused = scores_out_of_range(&props);
+    let warnings =
+        best.as_ref().and_then(|b| box_doubt(b.bbox, b.score, frame.width, frame.height)).into_iter().collect();
+    Ok(Checked { best, detections, refused, warnings })
 }
 
-/// What `props` and its `best` target show that a right description cannot give on `frame`.
-pub fn implausible(props: &Proposals, best: Option<&TargetScore>, frame: &Frame) -> Vec<String> {
-    let mut out = Vec::new();
+/// Why the scores of `props` cannot come from a right description: some lie outside [0, 1]
+/// (a little past 1 is rounding in an exported sigmoid or softmax). `model check` and `evaluate`
+/// both refuse such a description.
+pub fn scores_out_of_range(props: &Proposals) -> Option<String> {
     let (lo, hi) = props.scores.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
-    // A little past 1 is rounding in an exported sigmoid or softmax.
-    if !props.scores.is_empty() && (hi > 1.001 || lo < -0.001 || !(hi.is_finite() && lo.is_finite())) {
-        out.push(format!(
+    (!props.scores.is_empty() && (hi > 1.001 || lo < -0.001 || !(hi.is_finite() && lo.is_finite()))).then(|| {
+        format!(
             "scores run from {lo:.3} to {hi:.3}, outside [0, 1]: the layout reads a column that is not a probability (a box coordinate, or logits that need their activation)"
+        )
+    })
+}
+
+/// Why a best box `[x1, y1, x2, y2]` at `score` on a `width` × `height` frame is unlikely from a
+/// right description: it has no area; it is a few pixels across at a confident score; or it lies
+/// mostly off the frame.
+pub fn box_doubt(bbox: [f32; 4], score: f32, width: usize, height: usize) -> Option<String> {
+    let [x1, y1, x2, y2] = bbox;
+    let (w, h) = (x2 - x1, y2 - y1);
+    let shown = format!("[{x1:.0}, {y1:.0}, {x2:.0}, {y2:.0}]");
+    if !(w >= 1.0 && h >= 1.0) {
+        return Some(format!(
+            "the best box, {shown}, has no area: the box encoding or the columns' order is likely wrong"
         ));
     }
-    if let Some(b) = best {
-        let [x1, y1, x2, y2] = b.bbox;
-        let (w, h) = (x2 - x1, y2 - y1);
-        if !(w >= 1.0 && h >= 1.0) {
-            out.push(format!(
-                "the best box, [{x1:.0}, {y1:.0}, {x2:.0}, {y2:.0}], has no area: the box encoding or the columns' order is likely wrong"
-            ));
-        } else if b.score >= 0.5 && w.min(h) < (0.01 * frame.width.min(frame.height) as f32).max(4.0) {
-            out.push(format!(
-                "the best box, [{x1:.0}, {y1:.0}, {x2:.0}, {y2:.0}], is a few pixels across at a score of {:.2}: the box encoding or the columns' order is likely wrong",
-                b.score
-            ));
-        } else {
-            let (fw, fh) = (frame.width as f32, frame.height as f32);
-            let inside = (x2.min(fw) - x1.max(0.0)).max(0.0) * (y2.min(fh) - y1.max(0.0)).max(0.0);
-            if inside < 0.5 * w * h {
-                out.push(format!(
-                    "the best box, [{x1:.0}, {y1:.0}, {x2:.0}, {y2:.0}], lies mostly off the {}x{} frame: the box encoding, its frame (input or image pixels) or the resize is likely wrong",
-                    frame.width, frame.height
-                ));
-            }
-        }
+    if score >= 0.5 && w.min(h) < (0.01 * width.min(height) as f32).max(4.0) {
+        return Some(format!(
+            "the best box, {shown}, is a few pixels across at a score of {score:.2}: the box encoding or the columns' order is likely wrong"
+        ));
+    }
+    let (fw, fh) = (width as f32, height as f32);
+    let inside = (x2.min(fw) - x1.max(0.0)).max(0.0) * (y2.min(fh) - y1.max(0.0)).max(0.0);
+    (inside < 0.5 * w * h).then(|| {
+        format!(
+            "the best box, {shown}, lies mostly off the {width}x{height} frame: the box encoding, its frame (input or image pixels) or the resize is likely wrong"
+        )
+    })
+}
+
+/// The closing lines of `model check` over `images`: how many were refused, how many gave
+/// boxes a right description is unlikely to give, and how many showed no target.
+pub fn closing(refused: usize, warned: usize, missed: usize, images: usize, target: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    if refused > 0 {
+        out.push(format!(
+            "{refused} of {images} images gave scores outside [0, 1]: the description is wrong (see above)"
+        ));
+    }
+    if warned > 0 {
+        out.push(format!(
+            "{warned} of {images} images gave boxes a right description is unlikely to give: see the warnings above"
+        ));
+    }
+    if missed > 0 {
+        out.push(format!(
+            "no {target} on {missed} of {images} images: if they show one, check the config's channels, scale, mean/std, resize and align, and its output layout"
+        ));
     }
     out
 }

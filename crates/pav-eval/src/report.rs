@@ -100,7 +100,8 @@ pub struct SummaryRow {
     pub videos: usize,
     /// `complete`, or what cut the run short.
     pub status: String,
-    /// How far the light outside the car drifted over the turn (none: fewer than two frames).
+    /// How far the light of the still part of the scene drifted over the turn (none: fewer than
+    /// two frames).
     #[serde(default)]
     pub drift: Option<Drift>,
 }
@@ -132,6 +133,16 @@ pub(crate) struct ReportSettings {
     pub angle_sources: Vec<(String, String)>,
     /// The limits of the light's drift.
     pub drift: DriftLimits,
+}
+
+/// `value` with at least `digits` decimals, and more (up to four past them) until it no longer
+/// prints as `limit` unless it is the limit: a drift of 4.96 % beside a 5 % limit prints as
+/// 4.96, not 5.0.
+fn beside(value: f64, limit: f64, digits: usize) -> String {
+    (digits..=digits + 4)
+        .map(|d| format!("{value:.d$}"))
+        .find(|t| value == limit || t.parse::<f64>().is_ok_and(|r| r != limit && (r > limit) == (value > limit)))
+        .unwrap_or_else(|| format!("{value}"))
 }
 
 fn pct(x: Option<f64>) -> String {
@@ -249,14 +260,18 @@ pub(crate) fn summary_markdown(rows: &[SummaryRow], records: &[FrameRecord], s: 
     let _ = writeln!(
         md,
         "\nValues in %.{}\n",
-        if drifted { " ⚠: the light outside the car drifted past its limits over the turn (below)." } else { "" }
+        if drifted {
+            " ⚠: the light of the scene around the car drifted past its limits over the turn (below)."
+        } else {
+            ""
+        }
     );
     let _ = writeln!(md, "## Light over the turn\n");
     let _ = writeln!(
         md,
-        "Outside the car's boxes, per frame: the mean luminance's spread (5th to 95th percentile) as a share of its median, and the larger spread of the grey-world red and blue shares. Limits: {:.0} % and {:.3}.\n",
-        100.0 * s.drift.luminance,
-        s.drift.colour
+        "Over the still half of the scene (the cells that change least once each frame's level is taken out; docs/evaluate.md), per frame: the mean luminance's spread (5th to 95th percentile) as a share of its median, and the larger spread of the grey-world red and blue shares. Limits: {} % and {}.\n",
+        beside(100.0 * s.drift.luminance, 100.0 * s.drift.luminance, 0),
+        beside(s.drift.colour, s.drift.colour, 3)
     );
     let _ = writeln!(md, "| Video | Luminance drift % | Colour drift | Flag |");
     let _ = writeln!(md, "|---|---:|---:|---|");
@@ -264,8 +279,8 @@ pub(crate) fn summary_markdown(rows: &[SummaryRow], records: &[FrameRecord], s: 
         let d = rows.iter().find(|r| &&r.video == v).and_then(|r| r.drift);
         let (l, c, flag) = match d {
             Some(d) => (
-                format!("{:.1}", 100.0 * d.luminance),
-                format!("{:.4}", d.colour),
+                beside(100.0 * d.luminance, 100.0 * s.drift.luminance, 1),
+                beside(d.colour, s.drift.colour, 4),
                 if d.flagged { "⚠ drifted" } else { "steady" },
             ),
             None => ("n/a".into(), "n/a".into(), "fewer than two frames"),
@@ -321,6 +336,14 @@ pub(crate) fn summary_markdown(rows: &[SummaryRow], records: &[FrameRecord], s: 
                 .collect();
             let _ = writeln!(md, "| {:.0}–{:.0}° | {} |", b.start_deg, b.end_deg, cells.join(" | "));
         }
+        // Which sectors hold frames, when not all do: a part of a turn, or a sidecar with gaps.
+        let held: Vec<String> = (0..s.sectors.max(1))
+            .filter(|&k| per_det.iter().any(|bins| bins[k].accuracy.total > 0))
+            .map(|k| format!("{:.0}–{:.0}°", per_det[0][k].start_deg, per_det[0][k].end_deg))
+            .collect();
+        if held.len() < s.sectors.max(1) {
+            let _ = writeln!(md, "\nFrames in {} of {} sectors: {}.", held.len(), s.sectors.max(1), held.join(", "));
+        }
         let _ = writeln!(md);
     }
     md
@@ -367,4 +390,19 @@ pub fn summary_table(rows: &[SummaryRow], threshold: f32) -> String {
         );
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::beside;
+
+    #[test]
+    fn a_value_beside_its_limit_shows_which_side_it_falls() {
+        assert_eq!(beside(4.96, 5.0, 1), "4.96");
+        assert_eq!(beside(5.04, 5.0, 1), "5.04");
+        assert_eq!(beside(4.9996, 5.0, 1), "4.9996");
+        assert_eq!(beside(3.21, 5.0, 1), "3.2");
+        assert_eq!(beside(5.0, 5.0, 0), "5");
+        assert_eq!(beside(0.00996, 0.01, 4), "0.00996");
+    }
 }

@@ -4,7 +4,7 @@
 //! was scored, so a corrupt video, a failing detector or Ctrl-C never loses finished work.
 
 use super::charts::{accuracy_bars, polar_video};
-use super::drift::{Drift, DriftLimits, FrameLight, Light};
+use super::drift::{frame_lights, Drift, DriftLimits, Light};
 use super::physical::{Accuracy, FrameRecord};
 use super::report::{
     summary_markdown, write_angles_csv, write_summary_csv, write_text, FrameCsv, ReportError, ReportSettings,
@@ -15,6 +15,7 @@ use pav_core::progress::Progress;
 use pav_core::sidecar::{self, AngleSample};
 use pav_core::table::unique;
 use pav_core::video::{Prefetch, Step, VideoReader};
+use pav_detect::check::{box_doubt, scores_out_of_range};
 use pav_detect::config::InputConfig;
 use pav_detect::defence::DefenceError;
 use pav_detect::preprocess::{prepare, InputMap};
@@ -487,6 +488,9 @@ struct Scoring {
     first_record: usize,
     /// Each scored frame's light, by frame index.
     lights: Vec<(usize, Light)>,
+    /// Per detector, its detections whose box a right description is unlikely to give, and the
+    /// first one's frame and reason (`check::box_doubt`).
+    doubtful: Vec<(usize, Option<(usize, String)>)>,
 }
 
 /// Scores the frames of one opened video in batches of one frame per lane, flushing each record
@@ -512,6 +516,7 @@ fn score_video(
         failed: vec![None; n_det],
         first_record: out.records.len(),
         lights: Vec::new(),
+        doubtful: vec![(0, None); n_det],
     };
     loop {
         if stop.load(Ordering::Relaxed) {
@@ -564,15 +569,26 @@ fn score_video(
                 // ones too; as one frame at a time, they are not kept.
                 let Some((result, seconds)) = result.filter(|_| s.failed[k].is_none()) else { continue };
                 out.timing.detector_s[k] += seconds;
-                let props = match result {
+                // Scores outside [0, 1] mean a wrong description: none of its scores is kept.
+                let checked =
+                    result.map_err(|e| e.to_string()).and_then(|p| scores_out_of_range(&p).map_or(Ok(p), Err));
+                let props = match checked {
                     Ok(p) => p,
                     Err(e) => {
-                        out.failures.push(format!("{}: frame {idx}: {e}", job.label));
+                        out.failures.push(format!("{}: {}: frame {idx}: {e}", job.label, det.name()));
                         s.failed[k] = Some(format!("stopped at frame {idx}: {e}"));
                         continue;
                     }
                 };
                 let rec = frame_record(job, file, idx, time_s, angle_deg, det.as_ref(), &props, opts.threshold);
+                if let (true, Some(x1), Some(y1), Some(x2), Some(y2)) = (rec.detected, rec.x1, rec.y1, rec.x2, rec.y2) {
+                    let doubt = box_doubt([x1, y1, x2, y2], rec.max_score, video.info.width, video.info.height);
+                    if let Some(why) = doubt {
+                        let d = &mut s.doubtful[k];
+                        d.0 += 1;
+                        d.1.get_or_insert((idx, why));
+                    }
+                }
                 csv.push(&rec)?;
                 out.records.push(rec);
             }
@@ -664,11 +680,15 @@ fn close_video(
         }
     }
     let recs = &out.records[s.first_record..];
-    let drift = Drift::of(&frame_lights(&s.lights, recs), limits);
+    if let Some(msg) = part_of_a_turn(&video.angles, recs, video.info.fps).filter(|_| !out.interrupted) {
+        status = if status == "complete" { msg } else { format!("{status}; {msg}") };
+    }
+    let drift = Drift::of(&frame_lights(&s.lights), limits);
     let rows: Vec<SummaryRow> = detectors
         .iter()
         .zip(&s.failed)
-        .map(|(det, failed)| SummaryRow {
+        .zip(&s.doubtful)
+        .map(|((det, failed), doubt)| SummaryRow {
             video: job.label.clone(),
             detector: det.name().to_string(),
             classes: det.target_label(),
@@ -676,28 +696,43 @@ fn close_video(
             decoded_frames: decoded,
             declared_frames: declared,
             videos: 1,
-            status: failed.clone().unwrap_or_else(|| status.clone()),
+            status: failed.clone().unwrap_or_else(|| with_doubt(&status, doubt)),
             drift,
         })
         .collect();
     out.rows.extend(rows);
 }
 
-/// Each scored frame's light outside the boxes any detector found the car in on it.
-fn frame_lights(lights: &[(usize, Light)], recs: &[FrameRecord]) -> Vec<FrameLight> {
-    let mut boxes: HashMap<usize, Vec<[f32; 4]>> = HashMap::new();
-    for r in recs.iter().filter(|r| r.detected) {
-        if let (Some(x1), Some(y1), Some(x2), Some(y2)) = (r.x1, r.y1, r.x2, r.y2) {
-            boxes.entry(r.frame).or_default().push([x1, y1, x2, y2]);
+/// A detector's status on a video: the video's, and how many of its detections had a box a right
+/// description is unlikely to give, with the first.
+fn with_doubt(status: &str, doubt: &(usize, Option<(usize, String)>)) -> String {
+    match doubt {
+        (n, Some((frame, why))) => {
+            let msg = format!("{n} detection(s) with a doubtful box, first at frame {frame}: {why}");
+            if status == "complete" {
+                msg
+            } else {
+                format!("{status}; {msg}")
+            }
         }
+        _ => status.to_string(),
     }
-    lights
-        .iter()
-        .map(|(frame, light)| {
-            let (luminance, r, b) = light.outside(boxes.get(frame).map_or(&[][..], Vec::as_slice));
-            FrameLight { frame: *frame, luminance, r, b }
-        })
-        .collect()
+}
+
+/// For a video whose angles come from the period (no sidecar) and whose scored frames span less
+/// than one turn at it: how much they span, for its status, since its per-angle table then holds
+/// only some sectors (a clip of a few seconds, or a period given wrong).
+fn part_of_a_turn(angles: &Angles, recs: &[FrameRecord], fps: f64) -> Option<String> {
+    let Angles::Period { period_s, start_deg } = *angles else { return None };
+    let last = recs.iter().map(|r| r.frame).max()?;
+    // A turn of n frames ends one frame before the first again: frames 0..n span n/fps seconds.
+    let span_s = (last + 1) as f64 / fps;
+    (span_s + 0.5 / fps < period_s).then(|| {
+        let end = start_deg + 360.0 * span_s / period_s;
+        format!(
+            "less than one turn: {span_s:.1} s of a {period_s} s period, {start_deg:.0}–{end:.0}° (no sidecar; is --period right?)"
+        )
+    })
 }
 
 /// What each video added to `out`, from where each one's rows, records, failures and angle

@@ -81,9 +81,10 @@ pub struct Args {
     /// With --squeeze: one fixed threshold for every detector instead.
     #[arg(long, requires = "squeeze", conflicts_with = "squeeze_clean")]
     squeeze_threshold: Option<f32>,
-    /// Flag a video whose light outside the car drifts more than this over the turn: the spread
-    /// of its mean luminance (5th to 95th percentile) as a share of the median. A camera on
-    /// automatic exposure that follows the car drifts; its A_physical is marked ⚠.
+    /// Flag a video whose light drifts more than this over the turn, measured on the half of the
+    /// scene that stands still (read from the video, not the detectors): the spread of its mean
+    /// luminance (5th to 95th percentile) as a share of the median. A camera on automatic
+    /// exposure that follows the car drifts; its A_physical is marked ⚠.
     #[arg(long, default_value_t = 0.05)]
     drift_luminance: f64,
     /// Flag a video whose grey-world colour (red or blue share) spreads more than this over the

@@ -135,7 +135,7 @@ fn check(config: &std::path::Path, images: &[String], min_score: f32, out: Optio
     if let Some(o) = out {
         std::fs::create_dir_all(o).with_context(|| format!("creating {}", o.display()))?;
     }
-    let (mut missed, mut warned) = (0, 0);
+    let (mut missed, mut warned, mut refused) = (0, 0, 0);
     for spec in images {
         let frame = read_input(spec)?;
         let c = check(&mut det, &frame, min_score)?;
@@ -167,24 +167,24 @@ fn check(config: &std::path::Path, images: &[String], min_score: f32, out: Optio
                 outln!("  no {target} from {min_score} (best {:.3})", best.map_or(0.0, |b| b.score));
             }
         }
+        if let Some(r) = &c.refused {
+            outln!("  error: {r}");
+        }
         for w in &c.warnings {
             outln!("  warning: {w}");
         }
-        warned += !c.warnings.is_empty() as usize;
+        (warned, refused) = (warned + !c.warnings.is_empty() as usize, refused + c.refused.is_some() as usize);
         if let Some(o) = out {
             let path = o.join(drawn_name(spec));
             annotate(&frame, &c.detections, det.target_classes()).save_png(&path)?;
             outln!("  wrote {}", path.display());
         }
     }
-    if warned > 0 {
-        outln!("\n{warned} of {} images gave values a right description cannot: see the warnings above", images.len());
+    for line in pav::detect::check::closing(refused, warned, missed, images.len(), &target) {
+        outln!("\n{line}");
     }
-    if missed > 0 {
-        outln!(
-            "\nno {target} on {missed} of {} images: if they show one, check the config's channels, scale, mean/std, resize and align, and its output layout",
-            images.len()
-        );
+    if refused > 0 {
+        anyhow::bail!("the description of {} gives scores outside [0, 1]", config.display());
     }
     Ok(())
 }
