@@ -4,7 +4,7 @@
 //! checksummed so a damaged file is refused instead of resumed with another texture.
 
 use super::adam::Adam;
-use std::io::{Read, Write};
+use std::io::Read;
 use std::path::Path;
 
 /// Version 3 adds the running average after Adam's moments; version 2 ends with an FNV-1a
@@ -108,11 +108,7 @@ impl Checkpoint {
         put_f32s(&mut b, &self.average.sum);
         let sum = fingerprint(&b);
         b.extend_from_slice(&sum.to_le_bytes());
-        let tmp = path.with_extension("tmp");
-        let mut f = std::fs::File::create(&tmp).map_err(io)?;
-        f.write_all(&b).map_err(io)?;
-        f.sync_all().map_err(io)?;
-        std::fs::rename(&tmp, path).map_err(io)
+        pav_core::durable::write(path, &b).map_err(io)
     }
 
     /// Reads `path`.

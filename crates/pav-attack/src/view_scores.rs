@@ -92,16 +92,14 @@ impl ViewScores {
             self.added.iter().map(|r| (r.white_box.as_str(), r.image.as_str())).collect();
         rows.retain(|r| !fresh.contains(&(r.white_box.as_str(), r.image.as_str())));
         rows.extend(self.added.iter().cloned());
-        let tmp = folder.join(format!(".{FILE}.{}", std::process::id()));
-        let write = || -> std::io::Result<()> {
-            let mut w = csv::Writer::from_path(&tmp)?;
+        let write = pav_core::durable::write_with(&path, |f| {
+            let mut w = csv::Writer::from_writer(f);
             for r in &rows {
                 w.serialize(r).map_err(std::io::Error::other)?;
             }
-            w.flush()?;
-            std::fs::rename(&tmp, &path)
-        };
-        write().map_err(|source| ViewScoresError::Write { path: path.clone(), source })?;
+            w.flush()
+        });
+        write.map_err(|source| ViewScoresError::Write { path: path.clone(), source })?;
         self.added.clear();
         Ok(())
     }

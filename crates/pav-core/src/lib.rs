@@ -5,6 +5,7 @@
 #![warn(missing_docs)]
 
 pub mod colour;
+pub mod durable;
 pub mod extends;
 pub mod geometry;
 pub mod image;

@@ -129,7 +129,7 @@ impl ResultFile {
         std::fs::create_dir_all(&dir).map_err(io(&dir))?;
         let path = dir.join(format!("{name}.json"));
         let text = serde_json::to_string_pretty(self).expect("a results file serializes") + "\n";
-        std::fs::write(&path, text).map_err(io(&path))?;
+        pav_core::durable::write(&path, text).map_err(io(&path))?;
         Ok(path)
     }
 

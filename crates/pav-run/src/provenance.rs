@@ -139,9 +139,7 @@ impl Run {
             std::fs::create_dir_all(d)?;
         }
         let text = toml::to_string(self).map_err(std::io::Error::other)?;
-        let tmp = path.with_extension("toml.part");
-        std::fs::write(&tmp, format!("# What made this output (pav run provenance).\n{text}"))?;
-        std::fs::rename(&tmp, path)
+        pav_core::durable::write(path, format!("# What made this output (pav run provenance).\n{text}"))
     }
 }
 

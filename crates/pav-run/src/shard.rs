@@ -243,14 +243,12 @@ pub fn owner_dir(shards: &[(Shard, PathBuf)], unit: usize) -> PathBuf {
     shards.iter().find(|s| s.0 == owner).map_or_else(|| owner.dir_name().into(), |s| s.1.clone())
 }
 
-/// Writes `value` as JSON to `path` whole or not at all (written beside it, then renamed), so a
-/// shard killed mid-write never leaves a file that a merge would read as finished.
+/// Writes `value` as JSON to `path` whole or not at all (`durable::write`), so a shard killed
+/// mid-write never leaves a file that a merge would read as finished.
 pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), ShardError> {
     let bad = |path: &Path, why: String| ShardError::Record { path: path.to_path_buf(), why };
     let text = serde_json::to_vec(value).map_err(|e| bad(path, e.to_string()))?;
-    let part = path.with_extension("json.part");
-    std::fs::write(&part, text).map_err(|e| bad(&part, e.to_string()))?;
-    std::fs::rename(&part, path).map_err(|e| bad(path, e.to_string()))
+    pav_core::durable::write(path, text).map_err(|e| bad(path, e.to_string()))
 }
 
 /// Reads a file written by [`write_json`].

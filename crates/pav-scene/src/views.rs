@@ -778,6 +778,21 @@ fn append_row(path: &Path, row: &ViewRecord) -> Result<(), ViewsError> {
         .map_err(|e| ViewsError::Config { path: path.into(), msg: e.to_string() })
 }
 
+/// Writes a whole manifest, its header and `rows`, at once (`durable::write_with`): a kill in
+/// mid-write leaves the old manifest, never a header without its rows.
+fn write_manifest(path: &Path, rows: &[ViewRecord]) -> Result<(), ViewsError> {
+    pav_core::durable::write_with(path, |f| {
+        use std::io::Write as _;
+        writeln!(f, "{MANIFEST_HEADER}")?;
+        let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(f);
+        for r in rows {
+            w.serialize(r).map_err(std::io::Error::other)?;
+        }
+        w.flush()
+    })
+    .map_err(io(path))
+}
+
 /// Names in a manifest whose image exists (what a resumed run skips). A manifest missing is an
 /// empty one; a row cut short by a kill in mid-write is dropped first, so the next row does not
 /// run into it, and an older header is brought up to date.
@@ -785,15 +800,12 @@ pub fn rendered(manifest: &Path, dir: &Path) -> Result<HashSet<String>, ViewsErr
     let Ok(text) = std::fs::read_to_string(manifest) else { return Ok(HashSet::new()) };
     if !text.ends_with('\n') {
         let keep = text.rfind('\n').map_or(0, |i| i + 1);
-        std::fs::write(manifest, &text[..keep]).map_err(io(manifest))?;
+        pav_core::durable::write(manifest, &text[..keep]).map_err(io(manifest))?;
     }
     let rows = read_manifest(manifest)?;
     if text.lines().next().is_some_and(|h| h != MANIFEST_HEADER) {
         // Written before a column was added: rewritten under today's header so new rows fit.
-        std::fs::write(manifest, format!("{MANIFEST_HEADER}\n")).map_err(io(manifest))?;
-        for r in &rows {
-            append_row(manifest, r)?;
-        }
+        write_manifest(manifest, &rows)?;
     }
     Ok(rows.into_iter().filter(|r| dir.join(&r.image).exists()).map(|r| r.name).collect())
 }
@@ -878,11 +890,11 @@ pub fn render_views(
                 });
             }
         }
-        Err(_) => std::fs::write(&info_path, &info_text).map_err(io(&info_path))?,
+        Err(_) => pav_core::durable::write(&info_path, &info_text).map_err(io(&info_path))?,
     }
     // A rig's camera effects may differ from the folder's: the videos are cut with these.
     if info.rig.is_some() {
-        std::fs::write(&info_path, &info_text).map_err(io(&info_path))?;
+        pav_core::durable::write(&info_path, &info_text).map_err(io(&info_path))?;
     }
     let rot = up_rotation(&cfg.mesh.up).expect("checked by load");
     let all = cfg.views();
@@ -899,7 +911,7 @@ pub fn render_views(
     let manifest = manifest_path(dir);
     let done = rendered(&manifest, dir)?;
     if std::fs::metadata(&manifest).map_or(true, |m| m.len() == 0) {
-        std::fs::write(&manifest, format!("{MANIFEST_HEADER}\n")).map_err(io(&manifest))?;
+        write_manifest(&manifest, &[])?;
     }
     let total = mine.len();
     let resumed = mine.iter().filter(|v| done.contains(&v.name)).count();
@@ -1161,10 +1173,7 @@ pub fn merge_shards(cfg: &ViewsConfig, shards: &[(Shard, PathBuf)], out: &Path) 
     let mut rows: Vec<ViewRecord> = rows.into_values().map(|r| r.0).collect();
     rows.sort_by_key(|r| order[r.name.as_str()]);
     let path = manifest_path(out);
-    std::fs::write(&path, format!("{MANIFEST_HEADER}\n")).map_err(io(&path))?;
-    for row in &rows {
-        append_row(&path, row)?;
-    }
+    write_manifest(&path, &rows)?;
     Ok(rows.len())
 }
 

@@ -118,7 +118,7 @@ fn write_markdown(out: &Path, name: &str, md: &str) -> Result<(), ExperimentErro
     write_file(&out.join(name), md)
 }
 
-/// Writes `bytes` to `path`, naming the file in the error.
+/// Writes `bytes` to `path` whole or not at all, naming the file in the error.
 fn write_file(path: &Path, bytes: impl AsRef<[u8]>) -> Result<(), ExperimentError> {
-    std::fs::write(path, bytes).map_err(|source| ExperimentError::Io { path: path.into(), source })
+    pav_core::durable::write(path, bytes).map_err(|source| ExperimentError::Io { path: path.into(), source })
 }

@@ -150,8 +150,7 @@ pub fn strip_png_text(path: &Path) -> Result<(), ImageError> {
     if out.len() == bytes.len() {
         return Ok(());
     }
-    let tmp = path.with_extension("png.tmp");
-    std::fs::write(&tmp, &out).and_then(|_| std::fs::rename(&tmp, path)).map_err(|e| fail(e.to_string()))
+    crate::durable::write(path, &out).map_err(|e| fail(e.to_string()))
 }
 
 /// Reads an RGBA image as straight (not premultiplied) RGB and alpha, both in [0, 1], as
