@@ -166,6 +166,33 @@ fn motion_blur(rgb: &mut [f32], g: &GBuffer, cam: &Camera, turn_rad: f32) {
     }
 }
 
+/// The camera's development of a square RGB render in [0, 1] of the model at `cam` (side `side`)
+/// into a `size` frame, in the order a camera works: the optics the rig lists, the cut to the
+/// frame, the automatic exposure (when listed, and `auto_exposure`: a real camera's locked
+/// exposure has none), the sensor noise drawn from `seed` ([`noise_seed`]). Both simulated
+/// turntables develop their frames here, so an effect added to it reaches both; the codec is
+/// the video writer's ([`codec_kbps`]).
+#[allow(clippy::too_many_arguments)]
+pub fn develop(
+    rig: &RigConfig,
+    shot: &Shot,
+    mesh: &Mesh,
+    cam: &Camera,
+    rgb: &mut [f32],
+    side: usize,
+    size: (usize, usize),
+    auto_exposure: bool,
+    seed: u64,
+) -> Frame {
+    apply_optics(rig, shot, mesh, cam, rgb, side);
+    let mut frame = cut(rgb, side, size);
+    if auto_exposure {
+        apply_auto_exposure(rig, &mut frame);
+    }
+    apply_noise(rig, &mut frame, seed);
+    frame
+}
+
 /// The optical effects the rig lists, on a square RGB render in [0, 1] of the model at `cam`
 /// (defocus, then motion blur); unlisted ones leave it untouched.
 pub fn apply_optics(rig: &RigConfig, shot: &Shot, mesh: &Mesh, cam: &Camera, rgb: &mut [f32], side: usize) {

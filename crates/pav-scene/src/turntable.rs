@@ -7,7 +7,7 @@
 
 #[cfg(feature = "video")]
 use super::camera_effects::codec_kbps;
-use super::camera_effects::{apply_auto_exposure, apply_noise, apply_optics, behind, cut, noise_seed, Behind};
+use super::camera_effects::{behind, cut, develop, noise_seed, Behind};
 use super::rig::{RigConfig, Shot};
 #[cfg(feature = "video")]
 use super::views::{read_manifest, ViewRecord, ViewSetInfo};
@@ -127,20 +127,19 @@ pub fn write_videos(dir: &Path, period_s: f64) -> Result<Vec<TurntableVideo>, Vi
                     }
                     // Rendered as the frame's rows alone: back into the square the optics see.
                     img = img.into_square(false);
-                    apply_optics(rig, shot, mesh, cam, &mut img.rgb, side);
-                    let mut f = cut(&img.rgb, side, shot.size);
-                    apply_auto_exposure(rig, &mut f);
-                    apply_noise(rig, &mut f, noise_seed(r.azimuth_deg, r.elevation_deg));
-                    f
+                    let seed = noise_seed(r.azimuth_deg, r.elevation_deg);
+                    develop(rig, shot, mesh, cam, &mut img.rgb, side, shot.size, true, seed)
                 }
                 None => cut(&img.rgb, img.width, (img.width, img.height)),
             };
             let v = match &mut video {
                 Some(v) => v,
-                None => video.insert(match rig.as_ref().and_then(|(rig, ..)| codec_kbps(rig)) {
-                    Some(kbps) => VideoWriter::create_at_bitrate(&path, fps, (frame.width, frame.height), kbps)?,
-                    None => VideoWriter::create(&path, ['a', 'v', 'c', '1'], fps, (frame.width, frame.height))?,
-                }),
+                None => video.insert(film(
+                    rig.as_ref().map(|(rig, ..)| rig.as_ref()),
+                    &path,
+                    fps,
+                    (frame.width, frame.height),
+                )?),
             };
             v.write(&frame)?;
             let s = AngleSample {
@@ -162,6 +161,16 @@ pub fn write_videos(dir: &Path, period_s: f64) -> Result<Vec<TurntableVideo>, Vi
         });
     }
     Ok(out)
+}
+
+/// The video a simulated turntable films into: at the rig's bitrate when it lists the codec
+/// ([`codec_kbps`]), else H.264 at the writer's own quality; the same for both back-ends.
+#[cfg(feature = "video")]
+fn film(rig: Option<&RigConfig>, path: &Path, fps: f64, size: (usize, usize)) -> Result<VideoWriter, ViewsError> {
+    Ok(match rig.and_then(codec_kbps) {
+        Some(kbps) => VideoWriter::create_at_bitrate(path, fps, size, kbps)?,
+        None => VideoWriter::create(path, ['a', 'v', 'c', '1'], fps, size)?,
+    })
 }
 
 /// A turntable video's file stem: its environment, camera distance and elevation, the same for
@@ -195,10 +204,7 @@ pub fn write_raster_videos(
         let size = rig.frame_size();
         let name = video_stem(&env, scene.distance, scene.elevation_deg);
         let path = out_dir.join(format!("{name}.mp4"));
-        let mut video = match codec_kbps(rig) {
-            Some(kbps) => VideoWriter::create_at_bitrate(&path, fps, size, kbps)?,
-            None => VideoWriter::create(&path, ['a', 'v', 'c', '1'], fps, size)?,
-        };
+        let mut video = film(Some(rig), &path, fps, size)?;
         let mut angles = sidecar::Writer::create(&sidecar::sidecar_path(&path))?;
         for i in 0..n {
             // The same angles as the views of RigConfig::views_config.
@@ -345,13 +351,8 @@ impl CarScene {
         let side = width.max(height);
         let mut rgb = pav_core::image::halve(&self.render(angle_deg, 2 * side), 2 * side, 2 * side);
         let Some((rig, shot)) = &self.rig else { return cut(&rgb, side, (width, height)) };
-        apply_optics(rig, shot, &self.mesh, &self.camera(angle_deg), &mut rgb, side);
-        let mut frame = cut(&rgb, side, (width, height));
-        if auto_exposure {
-            apply_auto_exposure(rig, &mut frame);
-        }
-        apply_noise(rig, &mut frame, noise_seed(angle_deg.rem_euclid(360.0), self.elevation_deg));
-        frame
+        let seed = noise_seed(angle_deg.rem_euclid(360.0), self.elevation_deg);
+        develop(rig, shot, &self.mesh, &self.camera(angle_deg), &mut rgb, side, (width, height), auto_exposure, seed)
     }
 
     /// The rig this scene films, if it was made from one.
