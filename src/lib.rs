@@ -5,7 +5,7 @@
 //!
 //! | layer | crates (modules of this crate) |
 //! |---|---|
-//! | 0 base | `pav-core`: [`colour`], [`extends`], [`path`], [`image`], [`video`], [`geometry`], [`rng`], [`sidecar`], [`step`], [`table`], [`plot`], [`progress`]; `pav-run`: [`data`], [`provenance`], [`shard`] (what a run reads and records); `pav-onnx` (ONNX graphs and their gradients, no pav dependency) |
+//! | 0 base | `pav-core`: [`colour`], [`durable`], [`extends`], [`path`], [`image`], [`video`], [`geometry`], [`rng`], [`sidecar`], [`step`], [`table`], [`plot`], [`progress`]; `pav-run`: [`data`], [`provenance`], [`shard`], [`stop`] (what a run reads and records, and how it stops); `pav-onnx` (ONNX graphs and their gradients, no pav dependency) |
 //! | 1 method blocks | `pav-print` ([`print`]), `pav-render` ([`render`]), `pav-scene` ([`scene`]), `pav-dataset` ([`dataset`]), `pav-detect` ([`detect`]), `pav-uv` ([`uv`]) |
 //! | 2 jobs | `pav-attack` ([`attack`], the optimizer), `pav-eval` ([`eval`], scoring), `pav-rig` ([`rig`], turntable and capture) |
 //! | 3 studies and tooling | `pav-studies` ([`studies`]): the paper's tables and the studies, which combine the optimizer and scoring; `pav-results` ([`results`]): results tables as data; `pav-cluster` ([`cluster`]): job scripts for a cluster; `pav-reference` ([`reference`]): the reference pages |
@@ -22,8 +22,8 @@
 pub use pav_core::plot;
 #[cfg(feature = "video")]
 pub use pav_core::video;
-pub use pav_core::{colour, extends, geometry, image, path, progress, rng, sidecar, step, table};
-pub use pav_run::{data, provenance, shard};
+pub use pav_core::{colour, durable, extends, geometry, image, path, progress, rng, sidecar, step, table};
+pub use pav_run::{data, provenance, shard, stop};
 
 pub use pav_attack as attack;
 pub use pav_cluster as cluster;

@@ -144,6 +144,7 @@ fn ctrl_c_keeps_every_scored_frame_and_a_summary() {
     assert!(ok.success());
     let o = child.wait_with_output().unwrap();
     assert_clean_failure(&o, "interrupted");
+    assert!(text(&o).1.contains("stopping after the unit in progress (Ctrl-C again to stop at once)"));
     let scored = std::fs::read_to_string(&frames).unwrap().lines().count() - 1;
     assert!((4..3 * 45 * 2).contains(&scored), "{scored} rows");
     let summary = std::fs::read_to_string(tmp.path().join("summary.csv")).unwrap();

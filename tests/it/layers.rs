@@ -12,8 +12,8 @@ use std::path::{Path, PathBuf};
 
 const LAYERS: [&[&str]; 4] = [
     &[
-        "onnx", "run", "colour", "extends", "path", "image", "video", "geometry", "rng", "sidecar", "step", "table",
-        "plot", "progress",
+        "onnx", "run", "stop", "colour", "durable", "extends", "path", "image", "video", "geometry", "rng", "sidecar",
+        "step", "table", "plot", "progress",
     ],
     &["print", "render", "scene", "dataset", "detect", "uv"],
     &["attack", "eval", "rig"],

@@ -5,7 +5,7 @@ use anyhow::{Context, Result};
 use indicatif::{HumanDuration, ProgressBar, ProgressStyle};
 use pav::progress::Progress;
 use std::io::IsTerminal;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -109,13 +109,21 @@ impl Progress for Bar {
     }
 }
 
-/// A flag that Ctrl-C, SIGTERM or SIGHUP raises, so long runs save their state and stop between
-/// steps (a service manager's stop or a closed terminal loses nothing either).
+/// A flag that Ctrl-C, SIGTERM or SIGHUP raises, so long runs save their state and stop after
+/// the unit in progress (a service manager's stop or a closed terminal loses nothing either); a
+/// second signal ends the process at once (`pav::stop`).
 pub fn ctrl_c_flag() -> Result<Arc<AtomicBool>> {
+    use pav::stop::{on_signal, OnSignal, QUIT_STATUS};
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
-    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
-        .context("installing the Ctrl-C and SIGTERM handler")?;
+    ctrlc::set_handler(move || match on_signal(&flag) {
+        OnSignal::Finish => eprintln!("\nstopping after the unit in progress (Ctrl-C again to stop at once)"),
+        OnSignal::Quit => {
+            eprintln!("\nstopped at once: the unit in progress is lost, what finished before it is kept");
+            std::process::exit(QUIT_STATUS);
+        }
+    })
+    .context("installing the Ctrl-C and SIGTERM handler")?;
     Ok(stop)
 }
 
