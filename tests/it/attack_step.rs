@@ -9,7 +9,7 @@ use pav::attack::config::OptimizeConfig;
 use pav::attack::loss::{DetectionLoss, Proposals, Reduce};
 use pav::attack::setup::Setup;
 use pav::attack::whitebox::{Ensemble, WhiteBox};
-use pav::detect::defence::Defence;
+use pav::detect::defence::{Clip, Defence, Median};
 use pav::detect::DetectorConfig;
 use pav::rng::Rng;
 use pav::scene::{Effect, Scene};
@@ -61,8 +61,8 @@ fn texture_gradient_matches_finite_differences_through_a_zoom_out_and_yolov3_tin
 /// into the graph), the chain checked end to end as above.
 #[test]
 fn texture_gradient_matches_finite_differences_through_median_smoothing_and_clipping() {
-    let clip = Defence::Clip { layers: ["781", "841", "886"].map(String::from).to_vec(), level: 1.0 };
-    check_defended_chain("yolox_nano", None, &[Defence::Median { k: 3 }, clip]);
+    let clip = Defence::Clip(Clip { layers: ["781", "841", "886"].map(String::from).to_vec(), level: 1.0 });
+    check_defended_chain("yolox_nano", None, &[Defence::Median(Median { k: 3 }), clip]);
 }
 
 #[test]

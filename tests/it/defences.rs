@@ -63,7 +63,7 @@ fn defences_match_opencv_and_numpy_on_photos_and_turntable_frames() {
 /// 1e-4 at each level (measured: 4e-6); at an infinite level, every proposal exactly as without clipping.
 #[test]
 fn feature_norm_clipping_matches_an_independent_rewrite() {
-    use pav::detect::defence::Defence;
+    use pav::detect::defence::{Clip, Defence};
     use pav::detect::onnx::OnnxDetector;
     use pav::detect::{Detector, DetectorConfig};
     common::real_data();
@@ -77,7 +77,7 @@ fn feature_norm_clipping_matches_an_independent_rewrite() {
         let f: Vec<&str> = line.split('\t').collect();
         let (label, level, want): (&str, f32, f32) = (f[0], f[1].parse().unwrap(), f[2].parse().unwrap());
         let det = clipped.entry(f[1].to_string()).or_insert_with(|| {
-            let cfg = plain_cfg.defended(&[Defence::Clip { layers: layers.clone(), level }]).unwrap();
+            let cfg = plain_cfg.defended(&[Defence::Clip(Clip { layers: layers.clone(), level })]).unwrap();
             OnnxDetector::new(cfg, 1).unwrap()
         });
         let image = common::reference_image(label);

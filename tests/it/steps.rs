@@ -11,7 +11,7 @@ use pav::attack::config::OptimizeConfig;
 use pav::attack::defended::Defended;
 use pav::attack::pyramid::Pyramid;
 use pav::attack::setup::Setup;
-use pav::detect::defence::Defence;
+use pav::detect::defence::{Defence, Median};
 use pav::image::resize::{Interpolation, Resampler};
 use pav::print::channel::{PrintChannel, PrintConfig, Printing};
 use pav::render::shade::Shading;
@@ -82,7 +82,7 @@ fn every_step_agrees_with_its_adjoint() {
     for i in (1..n).rev() {
         spread.swap(i, (r.next_u64() % (i as u64 + 1)) as usize);
     }
-    let median = [Defence::Median { k: 3 }];
+    let median = [Defence::Median(Median { k: 3 })];
     holds("median", &Defended { chain: &median, side: 24 }, &spread, 2e-4, 5e-3);
     // A texture lookup of its own: samples anywhere on a small texture.
     let mut r = Rng::new(5);

@@ -787,8 +787,8 @@ mod tests {
         // The base's relative paths keep meaning the base's folder.
         assert_eq!(pav_core::path::tidy(&c.model), pav_core::path::tidy(&d.path().join("m.onnx")));
         assert_eq!(c.class_names, ["car", "truck"]);
-        assert_eq!(c.input.defence, [Defence::Median { k: 3 }]);
-        assert_eq!(c.model_defence, [Defence::Clip { layers: vec!["f".into()], level: 1.0 }]);
+        assert_eq!(c.input.defence, [Defence::Median(crate::defence::Median { k: 3 })]);
+        assert_eq!(c.model_defence, [Defence::Clip(crate::defence::Clip { layers: vec!["f".into()], level: 1.0 })]);
         assert_eq!(c.bases, [pav_core::path::tidy(&base)]);
         std::fs::write(sub.join("w.toml"), "extends = 'v.toml'\n[[defence]]\nkind = 'median'\nk = 2\n").unwrap();
         let e = DetectorConfig::load(&sub.join("w.toml")).unwrap_err().to_string();

@@ -298,9 +298,9 @@ mod tests {
             let mut c = cfg(resize, align, ChannelOrder::Rgb);
             (c.width, c.height) = (20, 16);
             let plain = prepare(&f, &c).unwrap();
-            c.defence = vec![crate::defence::Defence::Bits { b: 8 }];
+            c.defence = vec![crate::defence::Defence::Bits(crate::defence::Bits { b: 8 })];
             assert_eq!(prepare(&f, &c).unwrap(), plain);
-            c.defence = vec![crate::defence::Defence::Bits { b: 1 }];
+            c.defence = vec![crate::defence::Defence::Bits(crate::defence::Bits { b: 1 })];
             let (t, m) = prepare(&f, &c).unwrap();
             assert_eq!(m, plain.1);
             assert!(t.iter().all(|&v| v == 0.0 || v == 255.0));

@@ -1,7 +1,6 @@
 //! Images: the 8-bit BGR [`Frame`] that cameras, videos and detectors exchange, the float RGB
 //! image that textures, masks and renders use, PNG I/O, and resampling ([`resize`]).
 
-pub mod filter;
 pub mod marks;
 pub mod resize;
 
