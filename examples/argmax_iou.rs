@@ -4,7 +4,7 @@
 //! IoU-weighted score, its box's IoU. Run from the repository root:
 //! `cargo run --release --features optimize --example argmax_iou > out/argmax_iou.csv`.
 use pav::attack::config::OptimizeConfig;
-use pav::attack::loss::{DetectionLoss, Proposals, Reduce};
+use pav::attack::loss::{DetectionLoss, ProposalSet, Reduce};
 use pav::attack::setup::Setup;
 use pav::attack::whitebox::{WhiteBox, WhiteBoxOptions};
 use pav::detect::nms::iou;
@@ -22,7 +22,7 @@ fn main() {
             box_threshold: 0.05,
             target: d.target_classes.clone(),
             reduce: Reduce::LogMax,
-            proposals: Proposals::ArgMax,
+            proposals: ProposalSet::ArgMax,
             iou: true,
             box_gradient: false,
         };

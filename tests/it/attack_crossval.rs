@@ -176,7 +176,7 @@ fn every_view_is_held_out_once_and_finished_folds_resume() {
     let md = t.markdown();
     assert!(md.contains(&format!("**{:.3} / ", held("optimized").mean_score)), "{md}");
     // Per held-out view: the label's scores are the run's own, the random rows their seeds' mean.
-    let view_of = |tex: &str, r: &pav::studies::per_view::ViewRecord| {
+    let view_of = |tex: &str, r: &pav::studies::per_view::ScoredView| {
         t.views
             .iter()
             .find(|v| v.texture == tex && (v.fold, &v.view, &v.detector) == (r.fold, &r.view, &r.detector))

@@ -6,7 +6,7 @@
 use crate::common;
 
 use pav::attack::config::OptimizeConfig;
-use pav::attack::loss::{DetectionLoss, Proposals, Reduce};
+use pav::attack::loss::{DetectionLoss, ProposalSet, Reduce};
 use pav::attack::setup::Setup;
 use pav::attack::whitebox::{Ensemble, WhiteBox};
 use pav::detect::defence::{Clip, Defence, Median};
@@ -33,7 +33,7 @@ fn setup_defended(size: usize, detector: &str, defence: &[Defence]) -> (Optimize
         box_threshold: 0.05,
         target: d.target_classes.clone(),
         reduce: Reduce::Mean,
-        proposals: Proposals::ArgMax,
+        proposals: ProposalSet::ArgMax,
         iou: false,
         box_gradient: false,
     };

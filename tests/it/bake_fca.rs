@@ -8,7 +8,7 @@ use pav::attack::setup::Setup;
 use pav::dataset::fca::CarlaSample;
 use pav::geometry::camera::fca;
 use pav::geometry::mesh::Mesh;
-use pav::render::bake::{bake, car_mask, Plate, Shot, BAKE_SIZE};
+use pav::render::bake::{bake, car_mask, Plate, PosedPhoto, BAKE_SIZE};
 use pav::render::fill::shrink;
 use pav::studies::table2::detect_view;
 
@@ -20,8 +20,8 @@ fn baked_appearance_predicts_a_photo_it_never_saw() {
     let load = |n: u32| CarlaSample::load(&shared.join(format!("fca/carla_dataset/test/data{n}.npz"))).unwrap();
     let held = load(12503);
     let others: Vec<CarlaSample> = (12501..=12510).filter(|n| *n != 12503).map(load).collect();
-    let shots: Vec<Shot> =
-        others.iter().map(|s| Shot { cam: fca(s.cam_trans, s.veh_trans), photo: &s.image }).collect();
+    let shots: Vec<PosedPhoto> =
+        others.iter().map(|s| PosedPhoto { cam: fca(s.cam_trans, s.veh_trans), photo: &s.image }).collect();
     let app = bake(&mesh, &shots, BAKE_SIZE, 4).unwrap();
     let cam = fca(held.cam_trans, held.veh_trans);
     let out = Plate::new(&mesh, &held.image, &cam, 16).unwrap().with_car(&mesh, &app, &cam);

@@ -9,7 +9,7 @@ use crate::common;
 use crate::custom_layout::{config_like_yolov3_tiny, flattened_yolov3_tiny, FLAT};
 
 use pav::attack::config::OptimizeConfig;
-use pav::attack::loss::{DetectionLoss, Proposals, Reduce};
+use pav::attack::loss::{DetectionLoss, ProposalSet, Reduce};
 use pav::attack::optimize::{optimize_texture, RunOptions};
 use pav::attack::setup::Setup;
 use pav::attack::whitebox::{Ensemble, WhiteBox, WhiteBoxOptions};
@@ -44,7 +44,7 @@ fn a_flattened_model_as_a_white_box_gives_the_darknet_presets_loss_and_gradient(
             box_threshold: 0.05,
             target: vec![2],
             reduce,
-            proposals: Proposals::ArgMax,
+            proposals: ProposalSet::ArgMax,
             iou,
             box_gradient: iou,
         };
@@ -119,7 +119,7 @@ fn constant_nodes_and_shape_arithmetic_are_folded_for_the_white_box() {
         box_threshold: 0.05,
         target: vec![2],
         reduce: Reduce::LogMax,
-        proposals: Proposals::ArgMax,
+        proposals: ProposalSet::ArgMax,
         iou: true,
         box_gradient: true,
     };

@@ -6,7 +6,7 @@
 use crate::common;
 
 use pav::attack::config::OptimizeConfig;
-use pav::attack::loss::{DetectionLoss, Proposals, Reduce};
+use pav::attack::loss::{DetectionLoss, ProposalSet, Reduce};
 use pav::attack::setup::Setup;
 use pav::attack::whitebox::{WhiteBox, WhiteBoxOptions};
 use pav::detect::onnx::OnnxDetector;
@@ -63,7 +63,7 @@ fn readings(path: &Path, frame: &pav::image::Frame, composite: &[f32], car: [f32
         box_threshold: 0.05,
         target: cfg.target_classes.clone(),
         reduce: Reduce::LogMax,
-        proposals: Proposals::ArgMax,
+        proposals: ProposalSet::ArgMax,
         iou: true,
         box_gradient: false,
     };
@@ -118,7 +118,7 @@ fn a_white_box_identity_follows_what_its_scores_depend_on() {
         box_threshold: 0.05,
         target: vec![2],
         reduce: Reduce::LogMax,
-        proposals: Proposals::ArgMax,
+        proposals: ProposalSet::ArgMax,
         iou: false,
         box_gradient: false,
     };
@@ -147,7 +147,7 @@ fn a_white_boxs_identity_is_its_model_and_settings_not_its_name_or_folder() {
             box_threshold: 0.05,
             target: cfg.target_classes.clone(),
             reduce: Reduce::Mean,
-            proposals: Proposals::ArgMax,
+            proposals: ProposalSet::ArgMax,
             iou: false,
             box_gradient: false,
         };

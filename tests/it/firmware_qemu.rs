@@ -9,7 +9,7 @@ use crate::common;
 use pav::rig::capture::{capture, CaptureOptions};
 use pav::rig::clockmap::ClockMap;
 use pav::rig::source::LiveCapture;
-use pav::rig::turntable::{Event, Turntable};
+use pav::rig::turntable::{TableEvent, Turntable};
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -106,8 +106,8 @@ fn host_driver_talks_to_the_firmware() {
     let mut samples = Vec::new();
     loop {
         match t.next_event(EMULATED_SILENCE).unwrap() {
-            Some(Event::Angle { t_ms, pos, rx }) => samples.push((t_ms, pos, rx)),
-            Some(Event::Done { seq: Some(s), pos }) if s == seq => {
+            Some(TableEvent::Angle { t_ms, pos, rx }) => samples.push((t_ms, pos, rx)),
+            Some(TableEvent::Done { seq: Some(s), pos }) if s == seq => {
                 assert_eq!(pos, 800 - 3200);
                 break;
             }
@@ -173,10 +173,10 @@ fn device_clock_keeps_host_time_on_a_loaded_host() {
     let mut arrivals = Vec::new();
     loop {
         match t.next_event(EMULATED_SILENCE).unwrap() {
-            Some(Event::Angle { t_ms, rx, .. }) => {
+            Some(TableEvent::Angle { t_ms, rx, .. }) => {
                 arrivals.push((rx.duration_since(epoch).as_secs_f64(), t_ms as f64 / 1000.0))
             }
-            Some(Event::Done { seq: Some(s), .. }) if s == seq => break,
+            Some(TableEvent::Done { seq: Some(s), .. }) if s == seq => break,
             other => panic!("unexpected {other:?}"),
         }
     }

@@ -152,7 +152,7 @@ fn scoring_on_several_workers_gives_the_records_of_one() {
     let (rows1, one) = run(1);
     let (rows3, three) = run(3);
     assert_eq!(one.len(), 2 * 5 * 2);
-    let key = |r: &pav::studies::per_view::ViewRecord| {
+    let key = |r: &pav::studies::per_view::ScoredView| {
         (r.view.clone(), r.texture.clone(), r.detector.clone(), r.score.to_bits())
     };
     assert_eq!(one.iter().map(key).collect::<Vec<_>>(), three.iter().map(key).collect::<Vec<_>>());

@@ -42,6 +42,7 @@ mod layers;
 mod lofo;
 #[cfg(feature = "eval")]
 mod model_inspect;
+mod names;
 #[cfg(feature = "eval")]
 mod ortgrad_darknet;
 #[cfg(feature = "optimize")]

@@ -10,7 +10,7 @@ use pav::detect::onnx::OnnxDetector;
 use pav::detect::preprocess::prepare;
 use pav::detect::DetectorConfig;
 use pav_onnx::autodiff::{differentiate_with, Kernels};
-use pav_onnx::darknet::cfg::Activation;
+use pav_onnx::darknet::cfg::DarknetActivation;
 use pav_onnx::darknet::{to_onnx, Layer, Network, Weights};
 use pav_onnx::session::GradSession;
 
@@ -97,7 +97,7 @@ fn reference_heads(net: &Network, w: &Weights, x: &[f64], n: usize) -> Vec<Vec<f
                                 }
                             }
                             y[(mo * oh + oy) * ow + ox] =
-                                if *activation == Activation::Leaky && acc < 0.0 { 0.1 * acc } else { acc };
+                                if *activation == DarknetActivation::Leaky && acc < 0.0 { 0.1 * acc } else { acc };
                         }
                     }
                 }

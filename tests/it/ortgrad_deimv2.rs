@@ -5,7 +5,7 @@
 
 use crate::common;
 
-use pav::attack::loss::{DetectionLoss, Proposals, Reduce};
+use pav::attack::loss::{DetectionLoss, ProposalSet, Reduce};
 use pav::attack::whitebox::{WhiteBox, WhiteBoxOptions};
 use pav::dataset::fca::CarlaSample;
 use pav::detect::onnx::OnnxDetector;
@@ -43,7 +43,7 @@ fn deimv2_trains_as_a_named_surrogate_and_descent_hides_the_car() {
         box_threshold: 0.05,
         target: cfg.target_classes.clone(),
         reduce: Reduce::Mean,
-        proposals: Proposals::ArgMax,
+        proposals: ProposalSet::ArgMax,
         iou: false,
         box_gradient: false,
     };

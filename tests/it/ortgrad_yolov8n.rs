@@ -6,7 +6,7 @@
 
 use crate::common;
 
-use pav::attack::loss::{DetectionLoss, Proposals, Reduce};
+use pav::attack::loss::{DetectionLoss, ProposalSet, Reduce};
 use pav::attack::outputs::Plan;
 use pav::attack::whitebox::{WhiteBox, WhiteBoxOptions};
 use pav::dataset::fca::CarlaSample;
@@ -97,7 +97,7 @@ fn the_int8_model_trains_only_as_a_named_surrogate() {
         box_threshold: 0.05,
         target: config().target_classes.clone(),
         reduce: Reduce::Mean,
-        proposals: Proposals::ArgMax,
+        proposals: ProposalSet::ArgMax,
         iou: false,
         box_gradient: false,
     };

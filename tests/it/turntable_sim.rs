@@ -2,7 +2,7 @@
 //! real motions, and every injected fault ending in a clear error or a recovery, never a hang.
 
 use pav::rig::sim::{Faults, SimOptions, SimTurntable};
-use pav::rig::turntable::{Event, Turntable, TurntableError};
+use pav::rig::turntable::{TableEvent, Turntable, TurntableError};
 use std::time::{Duration, Instant};
 use turntable_proto::text::Milli;
 use turntable_proto::{Alarm, Command, ErrorCode, State};
@@ -31,11 +31,11 @@ fn moves_and_spins_end_exactly_where_commanded() {
     let mut reports = 0;
     let end = loop {
         match t.next_event(Duration::from_secs(2)).unwrap() {
-            Some(Event::Angle { pos, .. }) => {
+            Some(TableEvent::Angle { pos, .. }) => {
                 assert!((800..=4000).contains(&pos));
                 reports += 1;
             }
-            Some(Event::Done { seq: Some(q), pos }) if q == seq => break pos,
+            Some(TableEvent::Done { seq: Some(q), pos }) if q == seq => break pos,
             other => panic!("unexpected {other:?}"),
         }
     };

@@ -7,7 +7,7 @@
 use crate::common;
 
 use pav::attack::config::OptimizeConfig;
-use pav::attack::loss::{DetectionLoss, Proposals, Reduce};
+use pav::attack::loss::{DetectionLoss, ProposalSet, Reduce};
 use pav::attack::setup::Setup;
 use pav::attack::whitebox::{WhiteBox, WhiteBoxOptions};
 use pav::detect::nms::iou;
@@ -35,7 +35,7 @@ fn white_box(d: &DetectorConfig, surrogate: bool, box_gradient: bool) -> WhiteBo
         box_threshold: 0.05,
         target: d.target_classes.clone(),
         reduce: Reduce::LogMax,
-        proposals: Proposals::ArgMax,
+        proposals: ProposalSet::ArgMax,
         iou: true,
         box_gradient,
     };

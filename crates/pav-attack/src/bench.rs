@@ -1,7 +1,7 @@
 //! What the white-box step costs in time (`pav bench-step`): the detector's forward with the loss,
 //! and forward + backward to its input, at several network input sizes.
 
-use super::loss::{DetectionLoss, Proposals, Reduce};
+use super::loss::{DetectionLoss, ProposalSet, Reduce};
 use super::whitebox::{WhiteBox, WhiteBoxError, WhiteBoxOptions};
 use pav_core::progress::Progress;
 use pav_detect::config::DetectorConfig;
@@ -78,7 +78,7 @@ pub fn time_step(
             box_threshold: 0.05,
             target: detector.target_classes.clone(),
             reduce: if iou { Reduce::LogMax } else { Reduce::Mean },
-            proposals: Proposals::ArgMax,
+            proposals: ProposalSet::ArgMax,
             iou,
             box_gradient,
         };

@@ -1,6 +1,6 @@
 //! `pav optimize` configs (TOML). Relative paths are resolved against the config's folder.
 
-use super::loss::{Proposals, Reduce};
+use super::loss::{ProposalSet, Reduce};
 use super::smooth::SmoothNorm;
 use pav_core::geometry::camera::CameraConvention;
 use pav_core::geometry::parts::Axis;
@@ -86,7 +86,7 @@ impl Default for Init {
 /// The PBR views.
 #[derive(Clone, Debug, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
-pub struct ViewsConfig {
+pub struct TrainingViews {
     /// Training npz files (FCA format); may be empty when `pbr` lists rendered views.
     #[serde(default)]
     pub train: Vec<PathBuf>,
@@ -188,7 +188,7 @@ pub struct LossConfig {
     /// L2's set under `"mean"`: `"arg_max"` (the paper, the default) or `"scored"` (every
     /// prediction whose car score reaches `box_threshold`, as the metrics count).
     #[serde(default)]
-    pub proposals: Proposals,
+    pub proposals: ProposalSet,
     /// L_s normalization: `"mean"` over texels (the authors' code, the default) or `"sum"` (Eq. 12).
     #[serde(default)]
     pub smoothness: SmoothNorm,
@@ -281,7 +281,7 @@ pub struct OptimizeConfig {
     /// Mesh and region.
     pub mesh: MeshConfig,
     /// Views.
-    pub views: ViewsConfig,
+    pub views: TrainingViews,
     /// White-box detectors.
     pub white_box: Vec<WhiteBoxEntry>,
     /// Loss weights.
@@ -473,7 +473,7 @@ impl OptimizeConfig {
             }
             _ => {}
         }
-        if l.proposals != Proposals::ArgMax && l.reduce != Reduce::Mean {
+        if l.proposals != ProposalSet::ArgMax && l.reduce != Reduce::Mean {
             return Err(
                 "loss.proposals chooses the set of reduce = \"mean\"; the other reductions weight every prediction"
                     .into(),
@@ -797,7 +797,7 @@ mod tests {
             assert!(e.contains(key), "{bad}: {e}");
         }
         let scored = "reduce = \"mean\"\nproposals = \"scored\"";
-        assert_eq!(variant("reduce = \"mean\"", scored).unwrap().loss.proposals, Proposals::Scored);
+        assert_eq!(variant("reduce = \"mean\"", scored).unwrap().loss.proposals, ProposalSet::Scored);
         let e = variant("reduce = \"mean\"", "reduce = { top_k = 1 }\nproposals = \"scored\"").unwrap_err().to_string();
         assert!(e.contains("loss.proposals"), "{e}");
         assert!(variant("reduce = \"mean\"", "reduce = \"log_max\"\niou = true").unwrap().loss.iou);

@@ -42,7 +42,7 @@ pub enum SheetError {
 
 /// What was written.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Sheet {
+pub struct WrittenSheet {
     /// Atlas side on the real car (m): the UV square spans this much surface per side.
     pub atlas_side_m: f64,
     /// Atlas side on the sheet (mm).
@@ -99,7 +99,7 @@ pub fn write_sheet(
     side_m: f64,
     spread: f64,
     spec: PrintSpec,
-) -> Result<Sheet, SheetError> {
+) -> Result<WrittenSheet, SheetError> {
     let atlas_mm = side_m * 1000.0 / spec.scale;
     let px_per_mm = spec.dpi / 25.4;
     // The sheet's side as `pav print pieces` cuts it, so that its pages are this sheet's pixels.
@@ -122,7 +122,7 @@ pub fn write_sheet(
     // The 10 mm bar 5 mm below the atlas, 1 mm from the left edge.
     draw_scale_bar(&mut rgb, w, h, [(1.0 * px_per_mm) as usize, side + (5.0 * px_per_mm) as usize], px_per_mm, 10.0);
     save_png_dpi(path, w, h, &rgb, spec.dpi).map_err(|source| SheetError::Png { path: path.into(), source })?;
-    Ok(Sheet { atlas_side_m: side_m, atlas_mm, width_px: w as u32, height_px: h as u32, density_spread: spread })
+    Ok(WrittenSheet { atlas_side_m: side_m, atlas_mm, width_px: w as u32, height_px: h as u32, density_spread: spread })
 }
 
 #[cfg(test)]

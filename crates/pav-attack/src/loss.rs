@@ -33,7 +33,7 @@
 //! box outputs. Under the score reductions (top-k, softmax, log-max) the weight enters L2's
 //! scores; the reported `max_score` stays the unweighted best score.
 //!
-//! [`Proposals::Scored`] changes the Mean's proposals to the set the digital metrics count: every
+//! [`ProposalSet::Scored`] changes the Mean's proposals to the set the digital metrics count: every
 //! prediction whose detection score for a target class reaches `box_threshold`, whatever its most
 //! likely class. The paper's set leaves out a box rated "truck 0.4, car 0.15", which P@0.5 and the
 //! mean best car score still count as a car at 0.15 (`detect::decode::Proposals::target_detections`); in the
@@ -102,7 +102,7 @@ const LOG_MAX_CAP: f32 = 1.0 - 1e-4;
 /// Which predictions L2 averages over under [`Reduce::Mean`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Deserialize, serde::Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
-pub enum Proposals {
+pub enum ProposalSet {
     /// The paper's: boxes (objectness ≥ the threshold) whose most likely class is a target.
     #[default]
     ArgMax,
@@ -120,7 +120,7 @@ pub struct DetectionLoss {
     /// How the predictions are reduced.
     pub reduce: Reduce,
     /// L2's set under [`Reduce::Mean`].
-    pub proposals: Proposals,
+    pub proposals: ProposalSet,
     /// Whether a white box weights scores by IoU with the car's box ([`Predictions::weigh`]).
     pub iou: bool,
     /// Whether that weight is differentiated with respect to the boxes (else held constant).
@@ -450,11 +450,11 @@ impl DetectionLoss {
             if o >= self.box_threshold && o.is_finite() {
                 boxes.push(i);
                 let b = best(i).0;
-                if self.proposals == Proposals::ArgMax && targets.contains(&b) {
+                if self.proposals == ProposalSet::ArgMax && targets.contains(&b) {
                     proposals.push((i, b));
                 }
             }
-            if self.proposals == Proposals::Scored && score >= self.box_threshold && score.is_finite() {
+            if self.proposals == ProposalSet::Scored && score >= self.box_threshold && score.is_finite() {
                 proposals.push((i, k));
             }
         }
@@ -582,7 +582,7 @@ mod tests {
             box_threshold: 0.5,
             target: vec![2],
             reduce,
-            proposals: Proposals::ArgMax,
+            proposals: ProposalSet::ArgMax,
             iou: false,
             box_gradient: false,
         }
@@ -590,7 +590,7 @@ mod tests {
 
     /// Each reduction, and the mean over the metrics' set, for the gradient checks.
     fn every_loss() -> [DetectionLoss; 5] {
-        let scored = DetectionLoss { proposals: Proposals::Scored, ..loss(Reduce::Mean) };
+        let scored = DetectionLoss { proposals: ProposalSet::Scored, ..loss(Reduce::Mean) };
         [loss(Reduce::Mean), loss(Reduce::TopK(2)), loss(Reduce::Softmax(0.2)), scored, loss(Reduce::LogMax)]
     }
 
@@ -664,7 +664,7 @@ mod tests {
                 let fd = (total(&p) - total(&q)) / (2.0 * eps as f64);
                 assert!((fd - g[0][i] as f64).abs() < 1e-4, "{how:?} logit {i}: {} vs {fd}", g[0][i]);
             }
-            if l.proposals == Proposals::ArgMax && how == Reduce::Mean {
+            if l.proposals == ProposalSet::ArgMax && how == Reduce::Mean {
                 assert!(g[0].iter().filter(|v| **v != 0.0).count() == 5, "3 boxes and 2 proposals carry gradient");
             }
         }
@@ -681,7 +681,7 @@ mod tests {
         let (paper, _) = eval(&loss(Reduce::Mean), &(m.clone(), hw), 1.0);
         assert_eq!(paper.proposals, 2);
         assert!((paper.l2 - s(3.0)).abs() < 1e-6, "{paper:?}");
-        let scored = DetectionLoss { proposals: Proposals::Scored, ..loss(Reduce::Mean) };
+        let scored = DetectionLoss { proposals: ProposalSet::Scored, ..loss(Reduce::Mean) };
         let (t, g) = eval(&scored, &(m.clone(), hw), 1.0);
         assert_eq!((t.boxes, t.proposals, t.l1), (paper.boxes, 2, paper.l1));
         assert!((t.l2 - (s(1.0) + s(3.0)) / 2.0).abs() < 1e-6, "{t:?}");

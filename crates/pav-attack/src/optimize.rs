@@ -13,7 +13,7 @@ use super::config::OptimizeConfig;
 use super::pyramid::Pyramid;
 use super::setup::Setup;
 use super::smooth::smoothness;
-use super::view::View;
+use super::view::TrainView;
 use super::whitebox::{Ensemble, EnsembleGrad};
 use pav_core::progress::Progress;
 use pav_core::rng::Rng;
@@ -245,7 +245,7 @@ pub struct Outcome {
     pub finish: Finish,
 }
 
-/// View order of `epoch`: a permutation from the seed, independent of the EoT draws so a resumed
+/// TrainView order of `epoch`: a permutation from the seed, independent of the EoT draws so a resumed
 /// run visits the same views.
 fn epoch_order(n: usize, seed: u64, epoch: u64) -> Vec<usize> {
     let mut r = Rng::new(seed ^ epoch.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0x5eed);
@@ -276,7 +276,7 @@ pub fn step(
     setup: &Setup,
     wb: &Ensemble,
     cfg: &OptimizeConfig,
-    view: &View,
+    view: &TrainView,
     tex: &[f32],
     rng: &mut Rng,
     grad: &mut [f32],

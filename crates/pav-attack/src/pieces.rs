@@ -4,11 +4,11 @@
 
 use crate::config::OptimizeConfig;
 use crate::export::atlas_side_m;
-use crate::placement::{figures, sides, Shot};
+use crate::placement::{figures, sides, SideView};
 use crate::setup::{mesh_and_region, SetupError};
 use pav_core::geometry::parts::Axis;
 use pav_core::image::{save_png_dpi, to_u8, Frame, Rgb};
-use pav_print::pieces::{layout, parts, split_by_chart, Layout, PiecesError, Sheet, Spec};
+use pav_print::pieces::{layout, parts, split_by_chart, PageLayout, PiecesError, Sheet, Spec};
 use std::path::{Path, PathBuf};
 
 /// Why the pieces could not be written.
@@ -40,7 +40,7 @@ pub enum PrintPiecesError {
 #[derive(Clone, Debug)]
 pub struct PiecesReport {
     /// The layout.
-    pub layout: Layout,
+    pub layout: PageLayout,
     /// The share of the pages' printable area the pieces cover.
     pub paper_used: f64,
     /// The length of paper the pages take, m (what a roll needs).
@@ -151,7 +151,7 @@ fn write_guide(
     mesh: &pav_core::geometry::mesh::Mesh,
     labels: &[u32],
     texture: &Frame,
-    l: &Layout,
+    l: &PageLayout,
     front: Axis,
     up: Axis,
     paper: pav_print::paper::Paper,
@@ -159,8 +159,8 @@ fn write_guide(
 ) -> Result<PathBuf, PrintPiecesError> {
     let sides = sides(front, up);
     let parts = l.orient.len().max(labels.iter().copied().max().unwrap_or(0) as usize);
-    let shots: Vec<Shot> =
-        sides.iter().map(|s| Shot::take(mesh, &s.camera, GUIDE_PX, labels, texture, parts)).collect();
+    let shots: Vec<SideView> =
+        sides.iter().map(|s| SideView::take(mesh, &s.camera, GUIDE_PX, labels, texture, parts)).collect();
     let (figs, chosen) = figures(l, &sides, &shots, front, up);
     let dir = out.join("placement");
     std::fs::create_dir_all(&dir).map_err(|source| PrintPiecesError::Write { path: dir.clone(), source })?;

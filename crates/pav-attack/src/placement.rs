@@ -11,7 +11,7 @@ use pav_core::geometry::vec3::cross;
 use pav_core::image::marks::{draw_arrow, draw_text, text_width};
 use pav_core::image::Frame;
 use pav_print::pdf::Figure;
-use pav_print::pieces::Layout;
+use pav_print::pieces::PageLayout;
 use pav_render::raster::{GBuffer, EMPTY};
 
 /// The colour a highlighted piece is drawn in.
@@ -64,7 +64,7 @@ pub fn sides(front: Axis, up: Axis) -> Vec<Side> {
 }
 
 /// The car from one side: which part of the atlas and which colour every pixel shows.
-pub struct Shot {
+pub struct SideView {
     /// Image side, pixels.
     pub size: usize,
     /// The part label under each pixel (0: off the region or off the car).
@@ -75,9 +75,9 @@ pub struct Shot {
     centre: Vec<([f64; 3], usize)>,
 }
 
-impl Shot {
+impl SideView {
     /// `mesh` from `cam` at `size²`, looking each pixel's texel up in the `n × n` atlas.
-    pub fn take(mesh: &Mesh, cam: &Camera, size: usize, labels: &[u32], texture: &Frame, parts: usize) -> Shot {
+    pub fn take(mesh: &Mesh, cam: &Camera, size: usize, labels: &[u32], texture: &Frame, parts: usize) -> SideView {
         let n = texture.width;
         let g = GBuffer::render(mesh, cam, size);
         let mut part = vec![0u32; size * size];
@@ -109,7 +109,7 @@ impl Shot {
                 c.1 += 1;
             }
         }
-        Shot { size, part, rgb, centre }
+        SideView { size, part, rgb, centre }
     }
 
     /// How many pixels show part `label`.
@@ -164,9 +164,9 @@ fn banded(rgb: &[u8], size: usize, text: &str, arrows: &[([f64; 2], char)]) -> V
 /// it), then one per piece from the side that shows most of it. `shots` are `sides`' shots;
 /// `front` and `up` as [`sides`] took them. Also returns, per piece, the side it is shown from.
 pub fn figures(
-    layout: &Layout,
+    layout: &PageLayout,
     sides: &[Side],
-    shots: &[Shot],
+    shots: &[SideView],
     front: Axis,
     up: Axis,
 ) -> (Vec<Figure>, Vec<(usize, &'static str, usize)>) {

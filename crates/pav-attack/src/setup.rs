@@ -2,7 +2,7 @@
 //! optimizable texels, the scene and the prepared views.
 
 use super::config::{Init, InitName, OptimizeConfig};
-use super::view::View;
+use super::view::TrainView;
 #[cfg(feature = "optimize")]
 use super::whitebox::{Ensemble, WhiteBoxError};
 use pav_core::geometry::camera::Camera;
@@ -16,7 +16,7 @@ use pav_core::step::Chain;
 use pav_dataset::fca::CarlaSample;
 use pav_detect::BBox;
 use pav_print::channel::{region_texels, PrintChannel, Printing};
-use pav_render::bake::{bake, BakeError, Plate, Shot, BAKE_SIZE};
+use pav_render::bake::{bake, BakeError, Plate, PosedPhoto, BAKE_SIZE};
 use pav_render::mask::MaskError;
 use pav_render::shade::{vertex_normals, Lights};
 use pav_scene::Scene;
@@ -110,14 +110,14 @@ pub struct Setup {
     /// Lighting and EoT.
     pub scene: Scene,
     /// Training views (photos).
-    pub train: Vec<View>,
+    pub train: Vec<TrainView>,
     /// Synthetic training views (`views.turns`): trained on, never scored.
-    pub synthetic: Vec<View>,
+    pub synthetic: Vec<TrainView>,
     /// Rendered training views (`views.pbr`, Blender Cycles): trained on, never scored; with
     /// `views.stream` only their files are held, and each is rebuilt when stepped on.
     pub pbr: Vec<PbrView>,
     /// Held-out views.
-    pub test: Vec<View>,
+    pub test: Vec<TrainView>,
     /// Ground-truth car boxes by view name, in view pixels.
     pub boxes: HashMap<String, BBox>,
     /// Rendered views laid over a photo's background plate: view name → the photo's stem.
@@ -134,7 +134,7 @@ pub struct Setup {
     maker: ViewMaker,
 }
 
-/// A rendered view as its files: what rebuilds its [`View`] (`views.stream`), and the texels it
+/// A rendered view as its files: what rebuilds its [`TrainView`] (`views.stream`), and the texels it
 /// reads, kept for [`Setup::region_views_shares`].
 #[derive(Clone, Debug)]
 pub struct StoredView {
@@ -144,7 +144,7 @@ pub struct StoredView {
     image: PathBuf,
     /// Its camera, in the mesh's normalized frame.
     camera: Camera,
-    /// [`View::texels_read`] of the built view.
+    /// [`TrainView::texels_read`] of the built view.
     texels: Vec<u32>,
 }
 
@@ -152,7 +152,7 @@ pub struct StoredView {
 #[derive(Clone, Debug)]
 pub enum PbrView {
     /// Built once at set-up, with its rendered image's file.
-    Built(View, PathBuf),
+    Built(TrainView, PathBuf),
     /// Rebuilt from its files at each use.
     Stored(StoredView),
 }
@@ -187,7 +187,7 @@ impl PbrView {
 #[derive(Clone, Copy, Debug)]
 pub enum ViewRef<'a> {
     /// A view held in memory.
-    Built(&'a View),
+    Built(&'a TrainView),
     /// A rendered view held as its files.
     Stored(&'a StoredView),
 }
@@ -208,7 +208,7 @@ impl ViewRef<'_> {
 pub enum KeepError {
     /// Rebuilding a stored view.
     #[error(transparent)]
-    View(Box<SetupError>),
+    TrainView(Box<SetupError>),
     /// A white box.
     #[error(transparent)]
     WhiteBox(#[from] WhiteBoxError),
@@ -266,7 +266,7 @@ impl std::fmt::Display for PbrKept {
     }
 }
 
-/// What turns a CARLA sample into a [`View`].
+/// What turns a CARLA sample into a [`TrainView`].
 #[derive(Clone)]
 struct ViewMaker {
     camera: CameraConvention,
@@ -290,8 +290,8 @@ impl ViewMaker {
         photo: &Frame,
         region: &[f32],
         ts: usize,
-    ) -> Result<View, MaskError> {
-        View::new(name, mesh, &self.normals, cam, photo, self.size, region, (ts, ts), self.lights.as_ref())
+    ) -> Result<TrainView, MaskError> {
+        TrainView::new(name, mesh, &self.normals, cam, photo, self.size, region, (ts, ts), self.lights.as_ref())
     }
 
     /// The view of a rendered image file seen from `cam`.
@@ -303,7 +303,7 @@ impl ViewMaker {
         cam: &Camera,
         region: &[f32],
         ts: usize,
-    ) -> Result<View, SetupError> {
+    ) -> Result<TrainView, SetupError> {
         // A rig's landscape render holds the centre rows of the square the camera sees.
         let img = Rgb::load(image)?.into_square(true);
         let photo = Frame {
@@ -360,7 +360,7 @@ fn pbr_views<T>(
     region: &[f32],
     mut boxes: Option<&mut HashMap<String, BBox>>,
     plates: &mut HashMap<String, String>,
-    keep: impl Fn(View, (PathBuf, Camera)) -> T,
+    keep: impl Fn(TrainView, (PathBuf, Camera)) -> T,
 ) -> Result<Vec<T>, SetupError> {
     let mut out = Vec::new();
     let normalize = match cfg.mesh.camera {
@@ -492,7 +492,7 @@ impl Setup {
         };
         let mut boxes = HashMap::new();
         let mut samples = HashMap::new();
-        let mut views = |files: &[std::path::PathBuf]| -> Result<Vec<View>, SetupError> {
+        let mut views = |files: &[std::path::PathBuf]| -> Result<Vec<TrainView>, SetupError> {
             let mut out = Vec::new();
             for f in files {
                 let s = CarlaSample::load(f)?;
@@ -522,7 +522,7 @@ impl Setup {
         let mut plates = HashMap::new();
         let stream = cfg.views.stream;
         // Only a stored view needs its texel list: a built one reads it off its lookup.
-        let held = |v: View, (image, camera)| {
+        let held = |v: TrainView, (image, camera)| {
             if stream {
                 PbrView::Stored(StoredView { texels: v.texels_read(), name: v.name, image, camera })
             } else {
@@ -568,7 +568,7 @@ impl Setup {
 
     /// The synthetic views of `views.turns` for the photos named `names`, from an appearance
     /// baked from those photos only (so a held-out photo never leaks into training).
-    pub fn turned_views(&self, names: &[&str]) -> Result<Vec<View>, SetupError> {
+    pub fn turned_views(&self, names: &[&str]) -> Result<Vec<TrainView>, SetupError> {
         if self.maker.turns.is_empty() || names.is_empty() {
             return Ok(Vec::new());
         }
@@ -578,8 +578,8 @@ impl Setup {
                 self.samples.get(*n).map(|s| (*n, s)).ok_or_else(|| SetupError::Views(format!("no view named {n}")))
             })
             .collect::<Result<_, _>>()?;
-        let shots: Vec<Shot> =
-            samples.iter().map(|(_, s)| Shot { cam: self.maker.camera(s, 0.0), photo: &s.image }).collect();
+        let shots: Vec<PosedPhoto> =
+            samples.iter().map(|(_, s)| PosedPhoto { cam: self.maker.camera(s, 0.0), photo: &s.image }).collect();
         let n = samples[0].1.image.width;
         let app = bake(&self.mesh, &shots, BAKE_SIZE, (n / 200).max(2))
             .map_err(|source| SetupError::Bake { what: "baking the car's appearance".into(), source })?;
@@ -615,7 +615,7 @@ impl Setup {
     /// What the white boxes see of the texture on `view`, as one chain of steps: the print
     /// channel when the config has a `[print]` table (the gradient passing back to the region's
     /// texels only), then the view's render, composite and the scene's effects.
-    pub fn chain<'a>(&'a self, view: &'a View) -> Chain<'a> {
+    pub fn chain<'a>(&'a self, view: &'a TrainView) -> Chain<'a> {
         let mut c = Chain::new();
         if let Some(p) = &self.print {
             let texels = self.tex_size * self.tex_size;
@@ -626,7 +626,7 @@ impl Setup {
 
     /// The view `v` lists: itself, or rebuilt from its files (the same view, bit for bit, as
     /// the one built at set-up).
-    pub fn view<'a>(&self, v: ViewRef<'a>) -> Result<Cow<'a, View>, SetupError> {
+    pub fn view<'a>(&self, v: ViewRef<'a>) -> Result<Cow<'a, TrainView>, SetupError> {
         match v {
             ViewRef::Built(v) => Ok(Cow::Borrowed(v)),
             ViewRef::Stored(s) => {
@@ -652,7 +652,11 @@ impl Setup {
     /// with `[plates]`), to be scored, never trained on: each kept view's car box (its
     /// silhouette's) goes into [`Setup::boxes`] and its photo into [`Setup::plates`]. A view
     /// without a plate is refused: it belongs to no photo's fold.
-    pub fn rendered_over_plates(&mut self, cfg: &OptimizeConfig, dirs: &[PathBuf]) -> Result<Vec<View>, SetupError> {
+    pub fn rendered_over_plates(
+        &mut self,
+        cfg: &OptimizeConfig,
+        dirs: &[PathBuf],
+    ) -> Result<Vec<TrainView>, SetupError> {
         let (maker, mesh, region) = (&self.maker, &self.mesh, &self.region);
         let views = pbr_views(cfg, dirs, maker, mesh, region, Some(&mut self.boxes), &mut self.plates, |v, _| v)?;
         if let Some(v) = views.iter().find(|v| !self.plates.contains_key(&v.name)) {
@@ -740,7 +744,7 @@ impl Setup {
                     None => {
                         let v = match &built {
                             Some(v) => v,
-                            None => built.insert(self.view(p.as_ref()).map_err(|e| KeepError::View(Box::new(e)))?),
+                            None => built.insert(self.view(p.as_ref()).map_err(|e| KeepError::TrainView(Box::new(e)))?),
                         };
                         let s = m.loss(&v.photo, v.size)?.max_score;
                         cache.put(m.identity(), &file, &sha, s);
@@ -777,7 +781,7 @@ impl Setup {
     }
 
     /// The same problem over other views (cross-validation folds).
-    pub fn with_views(&self, train: Vec<View>, synthetic: Vec<View>, test: Vec<View>) -> Setup {
+    pub fn with_views(&self, train: Vec<TrainView>, synthetic: Vec<TrainView>, test: Vec<TrainView>) -> Setup {
         Setup {
             mesh: self.mesh.clone(),
             tex_size: self.tex_size,

@@ -8,7 +8,7 @@ use pav_core::image::{save_rgb8, tile, ImageError, Rgb};
 use pav_core::table::{write_csv, TableError};
 use pav_render::preview::face_colours;
 use pav_uv::adjust::adjust;
-use pav_uv::charts::{adjust_charts, ChartError};
+use pav_uv::charts::{adjust_charts, UvChartError};
 use std::path::{Path, PathBuf};
 
 /// Why a UV tool failed.
@@ -33,7 +33,7 @@ pub enum UvError {
     NotSquare(usize, usize),
     /// The chart method could not pack the patch.
     #[error(transparent)]
-    Charts(#[from] ChartError),
+    Charts(#[from] UvChartError),
     /// The distortion table.
     #[error(transparent)]
     Table(#[from] TableError),

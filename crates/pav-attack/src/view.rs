@@ -20,7 +20,7 @@ use pav_scene::Scene;
 
 /// A view ready for rendering.
 #[derive(Clone, Debug)]
-pub struct View {
+pub struct TrainView {
     /// Name (the photo's file stem).
     pub name: String,
     /// Image side in pixels.
@@ -41,7 +41,7 @@ pub struct View {
     shade: Option<Shading>,
 }
 
-impl View {
+impl TrainView {
     /// Rasterizes `mesh` from `cam` at `size`, computes P from the texel `region` of a
     /// `tex_w × tex_h` texture, and shades with `lights` (`None`: unlit albedo).
     #[allow(clippy::too_many_arguments)]
@@ -55,7 +55,7 @@ impl View {
         region: &[f32],
         (tex_w, tex_h): (usize, usize),
         lights: Option<&Lights>,
-    ) -> Result<View, MaskError> {
+    ) -> Result<TrainView, MaskError> {
         let g = GBuffer::render(mesh, cam, size);
         let full = Gather::new(g.uv_samples(mesh), tex_w, tex_h);
         let (p, c_mid) = dual_render_mask(&full, region, size * size)?;
@@ -67,7 +67,7 @@ impl View {
         let shade = lights.map(|l| Shading::new(&g, mesh, normals, cam, l).restrict(&active));
         let bgr = resize(photo, size, size, Interpolation::Antialias);
         let photo = bgr.chunks(3).flat_map(|c| [c[2] / 255.0, c[1] / 255.0, c[0] / 255.0]).collect();
-        Ok(View {
+        Ok(TrainView {
             name: name.into(),
             size,
             photo,
@@ -141,7 +141,7 @@ impl View {
 /// scene's effects: linear in the texture, read at the textured pixels only.
 pub struct Composite<'a> {
     /// The view.
-    pub view: &'a View,
+    pub view: &'a TrainView,
 }
 
 impl Step for Composite<'_> {

@@ -368,7 +368,7 @@ impl Drop for VideoWriter {
 }
 
 /// What the prefetching decoder hands over next.
-pub enum Step<T = Frame> {
+pub enum Decoded<T = Frame> {
     /// A decoded frame with its index (or what the decoder thread made of it).
     Frame(usize, T),
     /// A frame skipped by the stride (grabbed, not converted).
@@ -382,7 +382,7 @@ pub enum Step<T = Frame> {
 /// Decodes on a background thread a few frames ahead, so decoding overlaps inference; the
 /// thread can also turn each frame into what its consumer needs (model inputs), off its thread.
 pub struct Prefetch<T: Send + 'static = Frame> {
-    rx: std::sync::mpsc::Receiver<Step<T>>,
+    rx: std::sync::mpsc::Receiver<Decoded<T>>,
     stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
@@ -411,19 +411,19 @@ impl<T: Send + 'static> Prefetch<T> {
             while !flag.load(std::sync::atomic::Ordering::Relaxed) {
                 let step = if keep(n) {
                     match reader.read() {
-                        Ok(Some((i, f))) => Step::Frame(i, make(f)),
-                        Ok(None) => Step::End,
-                        Err(e) => Step::Error(e),
+                        Ok(Some((i, f))) => Decoded::Frame(i, make(f)),
+                        Ok(None) => Decoded::End,
+                        Err(e) => Decoded::Error(e),
                     }
                 } else {
                     match reader.skip() {
-                        Ok(true) => Step::Skipped,
-                        Ok(false) => Step::End,
-                        Err(e) => Step::Error(e),
+                        Ok(true) => Decoded::Skipped,
+                        Ok(false) => Decoded::End,
+                        Err(e) => Decoded::Error(e),
                     }
                 };
                 n += 1;
-                let last = matches!(step, Step::End | Step::Error(_));
+                let last = matches!(step, Decoded::End | Decoded::Error(_));
                 if tx.send(step).is_err() || last {
                     return;
                 }
@@ -433,8 +433,8 @@ impl<T: Send + 'static> Prefetch<T> {
     }
 
     /// The next step; `End` once the decoder thread has finished.
-    pub fn next_step(&mut self) -> Step<T> {
-        self.rx.recv().unwrap_or(Step::End)
+    pub fn next_step(&mut self) -> Decoded<T> {
+        self.rx.recv().unwrap_or(Decoded::End)
     }
 }
 

@@ -3,7 +3,7 @@
 use super::coco::COCO80;
 use super::defence::{chain_label, Defence};
 pub use super::layout::BoxFrame;
-use super::layout::{Activation, Arrange, CellOrder, Centre, Description, Encoding, Level, Part};
+use super::layout::{Activation, Arrange, CellOrder, Centre, Description, Encoding, Level, OutputPart};
 use super::DetectError;
 use pav_core::extends::{load, ExtendsError};
 use pav_core::image::resize::Interpolation;
@@ -528,44 +528,44 @@ impl OutputLayout {
         match self {
             OutputLayout::Custom(d) => (**d).clone(),
             OutputLayout::Darknet { heads } => {
-                let src = Part {
+                let src = OutputPart {
                     output: heads.iter().map(|h| h.output.clone()).collect(),
                     arrange: Arrange::Planes,
                     per_level: true,
-                    ..Part::default()
+                    ..OutputPart::default()
                 };
                 Description {
                     levels: heads.iter().map(|h| Level { stride: None, anchors: h.anchors.clone() }).collect(),
                     order: CellOrder::AnchorCell,
                     centre: Centre::Cell,
-                    boxes: Part { encoding: Some(Encoding::Darknet), ..src.clone() },
-                    objectness: Some(Part { column: 4, activation: Activation::Sigmoid, ..src.clone() }),
-                    scores: Part { column: 5, activation: Activation::Sigmoid, ..src },
+                    boxes: OutputPart { encoding: Some(Encoding::Darknet), ..src.clone() },
+                    objectness: Some(OutputPart { column: 4, activation: Activation::Sigmoid, ..src.clone() }),
+                    scores: OutputPart { column: 5, activation: Activation::Sigmoid, ..src },
                     labels: None,
                     raw: None,
                 }
             }
             OutputLayout::Yolox { output, strides } => {
-                let src = Part { output: named(output), ..Part::default() };
+                let src = OutputPart { output: named(output), ..OutputPart::default() };
                 Description {
                     levels: grid(strides),
                     order: CellOrder::AnchorCell,
                     centre: Centre::Cell,
-                    boxes: Part { encoding: Some(Encoding::Grid), ..src.clone() },
-                    objectness: Some(Part { column: 4, ..src.clone() }),
-                    scores: Part { column: 5, ..src },
+                    boxes: OutputPart { encoding: Some(Encoding::Grid), ..src.clone() },
+                    objectness: Some(OutputPart { column: 4, ..src.clone() }),
+                    scores: OutputPart { column: 5, ..src },
                     labels: None,
                     raw: None,
                 }
             }
             OutputLayout::Ultralytics { output } => {
-                let src = Part { output: named(output), arrange: Arrange::Columns, ..Part::default() };
+                let src = OutputPart { output: named(output), arrange: Arrange::Columns, ..OutputPart::default() };
                 Description {
                     levels: Vec::new(),
                     order: CellOrder::AnchorCell,
                     centre: Centre::Cell,
-                    boxes: Part { encoding: Some(Encoding::Cxcywh), ..src.clone() },
-                    scores: Part { column: 4, ..src },
+                    boxes: OutputPart { encoding: Some(Encoding::Cxcywh), ..src.clone() },
+                    scores: OutputPart { column: 4, ..src },
                     objectness: None,
                     labels: None,
                     raw: None,
@@ -575,49 +575,49 @@ impl OutputLayout {
                 levels: grid(strides),
                 order: CellOrder::AnchorCell,
                 centre: Centre::Pixel,
-                boxes: Part {
+                boxes: OutputPart {
                     per_level: true,
                     width: Some(4 * bins),
                     encoding: Some(Encoding::LtrbBins),
                     bins: Some(*bins),
                     clip: true,
-                    ..Part::default()
+                    ..OutputPart::default()
                 },
-                scores: Part { per_level: true, width: Some(classes), ..Part::default() },
+                scores: OutputPart { per_level: true, width: Some(classes), ..OutputPart::default() },
                 objectness: None,
                 labels: None,
                 raw: None,
             },
             OutputLayout::Rows { output, columns, frame, scores: before, boxes: before_boxes } => {
                 let at = |c: Column| columns.iter().position(|k| *k == c).unwrap_or(0);
-                let src = Part { output: named(output), width: Some(columns.len()), ..Part::default() };
+                let src = OutputPart { output: named(output), width: Some(columns.len()), ..OutputPart::default() };
                 Description {
                     levels: Vec::new(),
                     order: CellOrder::AnchorCell,
                     centre: Centre::Cell,
-                    boxes: Part {
+                    boxes: OutputPart {
                         encoding: Some(Encoding::Xyxy),
                         coords: Some([Column::X1, Column::Y1, Column::X2, Column::Y2].map(at)),
                         frame: *frame,
                         ..src.clone()
                     },
-                    scores: Part { column: at(Column::Score), ..src.clone() },
-                    labels: Some(Part { column: at(Column::Class), ..src }),
+                    scores: OutputPart { column: at(Column::Score), ..src.clone() },
+                    labels: Some(OutputPart { column: at(Column::Class), ..src }),
                     objectness: None,
                     // The class-major scores and the boxes the graph's NMS reads.
                     raw: before.as_ref().map(|s| {
                         Box::new(Description {
-                            boxes: Part {
+                            boxes: OutputPart {
                                 output: named(before_boxes),
                                 width: Some(4),
                                 encoding: Some(Encoding::Xyxy),
-                                ..Part::default()
+                                ..OutputPart::default()
                             },
-                            scores: Part {
+                            scores: OutputPart {
                                 output: vec![s.clone()],
                                 arrange: Arrange::Columns,
                                 width: Some(classes),
-                                ..Part::default()
+                                ..OutputPart::default()
                             },
                             ..Description::empty()
                         })
@@ -628,25 +628,29 @@ impl OutputLayout {
                 levels: Vec::new(),
                 order: CellOrder::AnchorCell,
                 centre: Centre::Cell,
-                boxes: Part { output: vec![boxes.clone()], encoding: Some(Encoding::Xyxy), ..Part::default() },
-                scores: Part { output: vec![scores.clone()], ..Part::default() },
-                labels: Some(Part { output: vec![labels.clone()], ..Part::default() }),
+                boxes: OutputPart {
+                    output: vec![boxes.clone()],
+                    encoding: Some(Encoding::Xyxy),
+                    ..OutputPart::default()
+                },
+                scores: OutputPart { output: vec![scores.clone()], ..OutputPart::default() },
+                labels: Some(OutputPart { output: vec![labels.clone()], ..OutputPart::default() }),
                 objectness: None,
                 // The last decoder layer's class logits and boxes, before the top-k.
                 raw: logits.as_ref().map(|l| {
                     Box::new(Description {
-                        boxes: Part {
+                        boxes: OutputPart {
                             output: named(pred_boxes),
                             width: Some(4),
                             encoding: Some(Encoding::Cxcywh),
                             normalized: true,
-                            ..Part::default()
+                            ..OutputPart::default()
                         },
-                        scores: Part {
+                        scores: OutputPart {
                             output: vec![l.clone()],
                             width: Some(classes),
                             activation: Activation::Sigmoid,
-                            ..Part::default()
+                            ..OutputPart::default()
                         },
                         ..Description::empty()
                     })

@@ -156,7 +156,7 @@ pub struct Level {
 /// Where one part of the proposals (boxes, scores, objectness, labels) lies, and how to read it.
 #[derive(Clone, Debug, Default, Deserialize, PartialEq, serde::Serialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
-pub struct Part {
+pub struct OutputPart {
     /// Output names: one, or one per level with `per_level`; matched by shape when empty.
     #[serde(default, deserialize_with = "one_or_many")]
     pub output: Vec<String>,
@@ -245,15 +245,15 @@ pub struct Description {
     #[serde(default)]
     pub centre: Centre,
     /// The boxes.
-    pub boxes: Part,
+    pub boxes: OutputPart,
     /// The class scores (one column with `labels`).
-    pub scores: Part,
+    pub scores: OutputPart,
     /// An objectness multiplying every class score.
     #[serde(default)]
-    pub objectness: Option<Part>,
+    pub objectness: Option<OutputPart>,
     /// Each row's class, for final detections.
     #[serde(default)]
-    pub labels: Option<Part>,
+    pub labels: Option<OutputPart>,
     /// The values before the graph's own post-processor (its top-k or NMS), described the same
     /// way: what a white box differentiates when the outputs are final detections.
     #[serde(default)]
@@ -292,8 +292,8 @@ impl Description {
             levels: Vec::new(),
             order: CellOrder::AnchorCell,
             centre: Centre::Cell,
-            boxes: Part::default(),
-            scores: Part::default(),
+            boxes: OutputPart::default(),
+            scores: OutputPart::default(),
             objectness: None,
             labels: None,
             raw: None,
@@ -301,7 +301,7 @@ impl Description {
     }
 
     /// The parts present, with their roles.
-    pub fn parts(&self) -> Vec<(Role, &Part)> {
+    pub fn parts(&self) -> Vec<(Role, &OutputPart)> {
         let mut v = vec![(Role::Boxes, &self.boxes), (Role::Scores, &self.scores)];
         v.extend(self.objectness.as_ref().map(|p| (Role::Objectness, p)));
         v.extend(self.labels.as_ref().map(|p| (Role::Labels, p)));
@@ -371,7 +371,7 @@ impl Description {
     }
 
     /// The part of a role (the description must have it).
-    pub fn part(&self, role: Role) -> &Part {
+    pub fn part(&self, role: Role) -> &OutputPart {
         match role {
             Role::Boxes => &self.boxes,
             Role::Scores => &self.scores,

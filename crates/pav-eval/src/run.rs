@@ -14,7 +14,7 @@ use pav_core::image::Frame;
 use pav_core::progress::Progress;
 use pav_core::sidecar::{self, AngleSample};
 use pav_core::table::unique;
-use pav_core::video::{Prefetch, Step, VideoReader};
+use pav_core::video::{Decoded, Prefetch, VideoReader};
 use pav_detect::check::{box_doubt, scores_out_of_range};
 use pav_detect::config::InputConfig;
 use pav_detect::defence::DefenceError;
@@ -531,11 +531,11 @@ fn score_video(
         let mut last = None;
         while batch.len() < lanes.len() {
             match video.frames.next_step() {
-                Step::Skipped => {
+                Decoded::Skipped => {
                     s.decoded += 1;
                     progress.advance(1);
                 }
-                Step::Frame(i, f) => {
+                Decoded::Frame(i, f) => {
                     s.decoded += 1;
                     progress.advance(1);
                     batch.push((i, s.decoded, f));
@@ -594,7 +594,7 @@ fn score_video(
             }
         }
         match last {
-            Some(Step::Error(e)) => {
+            Some(Decoded::Error(e)) => {
                 video.status = format!("stopped: {e}");
                 out.failures.push(e.to_string());
                 break;

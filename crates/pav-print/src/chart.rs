@@ -13,7 +13,7 @@ pub const MARKER_IDS: [i32; 4] = [10, 11, 12, 13];
 
 /// Where everything sits on the page, in millimetres from its top-left corner.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Layout {
+pub struct ChartLayout {
     /// Page width and height.
     pub page_mm: [f64; 2],
     /// Printer resolution the PNG is written at.
@@ -61,7 +61,7 @@ impl Patch {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Chart {
     /// Where things are.
-    pub layout: Layout,
+    pub layout: ChartLayout,
     /// The patches, by ID.
     pub patches: Vec<Patch>,
 }
@@ -79,7 +79,7 @@ pub enum ChartError {
     },
     /// The layout file is not a chart layout.
     #[error("{path}: not a pav chart layout: {source}")]
-    Layout {
+    ChartLayout {
         /// The file.
         path: PathBuf,
         /// The TOML error.
@@ -237,7 +237,7 @@ impl Chart {
             })
             .collect();
         let m = MARGIN_MM;
-        let layout = Layout {
+        let layout = ChartLayout {
             page_mm: spec.page_mm,
             dpi: spec.dpi,
             dictionary: DICTIONARY.into(),
@@ -281,7 +281,7 @@ impl Chart {
         let dir = if path.is_dir() { path } else { path.parent().unwrap_or(Path::new(".")) };
         let lp = dir.join(LAYOUT_FILE);
         let text = std::fs::read_to_string(&lp).map_err(|source| ChartError::Io { path: lp.clone(), source })?;
-        let layout = toml::from_str(&text).map_err(|source| ChartError::Layout { path: lp, source })?;
+        let layout = toml::from_str(&text).map_err(|source| ChartError::ChartLayout { path: lp, source })?;
         let pp = dir.join(PATCHES_FILE);
         let mut rd = csv::Reader::from_path(&pp)
             .map_err(|e| ChartError::Io { path: pp.clone(), source: std::io::Error::other(e) })?;

@@ -3,7 +3,7 @@
 //! checker's dark body located, its patch grid read from the rows and columns of bright pixels,
 //! and its orientation taken as the one whose colours an affine map explains best.
 
-use super::fit::{ColourMap, Model, Pair};
+use super::fit::{ColourMap, MapKind, Pair};
 use super::photo::{median, median_colour, Homography, Photo, PhotoError};
 use pav_core::colour::{delta_e2000_srgb, lab_d50_to_srgb};
 use std::path::{Path, PathBuf};
@@ -206,7 +206,7 @@ pub fn read_checker(
                 captured[index(rot, r, c)] = cells[r * nc + c].0;
             }
         }
-        let Some(m) = ColourMap::fit(Model::Affine, reference_srgb, &captured) else { continue };
+        let Some(m) = ColourMap::fit(MapKind::Affine, reference_srgb, &captured) else { continue };
         let err: f64 = (0..24).map(|i| delta_e2000_srgb(m.apply(reference_srgb[i]), captured[i])).sum();
         if best.is_none_or(|(e, _)| err < e) {
             best = Some((err, rot));

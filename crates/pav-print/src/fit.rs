@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 /// The kinds of map.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
-pub enum Model {
+pub enum MapKind {
     /// 3×3 matrix and offset (12 numbers).
     Affine,
     /// Second-order polynomial in r, g, b (30 numbers).
@@ -20,13 +20,13 @@ pub enum Model {
     Lut,
 }
 
-const MODELS: [Model; 3] = [Model::Affine, Model::Poly2, Model::Lut];
+const MODELS: [MapKind; 3] = [MapKind::Affine, MapKind::Poly2, MapKind::Lut];
 
 /// A fitted map.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ColourMap {
     /// Its kind.
-    pub model: Model,
+    pub model: MapKind,
     /// Affine and polynomial: one row of 3 per feature.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub coefficients: Vec<[f64; 3]>,
@@ -46,7 +46,7 @@ fn is_zero(n: &usize) -> bool {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Residual {
     /// The model.
-    pub model: Model,
+    pub model: MapKind,
     /// Median over held-out patches.
     pub median: f64,
     /// 90th percentile.
@@ -55,12 +55,12 @@ pub struct Residual {
     pub max: f64,
 }
 
-fn features(m: Model, p: [f64; 3]) -> Vec<f64> {
+fn features(m: MapKind, p: [f64; 3]) -> Vec<f64> {
     let [r, g, b] = p;
     match m {
-        Model::Affine => vec![r, g, b, 1.0],
-        Model::Poly2 => vec![1.0, r, g, b, r * r, g * g, b * b, r * g, r * b, g * b],
-        Model::Lut => unreachable!("the LUT has no feature vector"),
+        MapKind::Affine => vec![r, g, b, 1.0],
+        MapKind::Poly2 => vec![1.0, r, g, b, r * r, g * g, b * b, r * g, r * b, g * b],
+        MapKind::Lut => unreachable!("the LUT has no feature vector"),
     }
 }
 
@@ -76,9 +76,9 @@ fn lut_nodes(n: usize) -> usize {
 impl ColourMap {
     /// Fits `model` to pairs (from, to), by least squares (with a small ridge, and for the LUT a
     /// smoothness penalty between neighbouring nodes).
-    pub fn fit(model: Model, from: &[[f64; 3]], to: &[[f64; 3]]) -> Option<ColourMap> {
+    pub fn fit(model: MapKind, from: &[[f64; 3]], to: &[[f64; 3]]) -> Option<ColourMap> {
         match model {
-            Model::Affine | Model::Poly2 => {
+            MapKind::Affine | MapKind::Poly2 => {
                 let p = features(model, [0.0; 3]).len();
                 let mut a = vec![0f64; p * p];
                 let mut b = [vec![0f64; p], vec![0f64; p], vec![0f64; p]];
@@ -101,7 +101,7 @@ impl ColourMap {
                     lut: Vec::new(),
                 })
             }
-            Model::Lut => {
+            MapKind::Lut => {
                 let n = lut_nodes(from.len());
                 let m = n * n * n;
                 let mut a = vec![0f64; m * m];
@@ -152,11 +152,11 @@ impl ColourMap {
     /// The map at one colour, clipped to [0, 1].
     pub fn apply(&self, p: [f64; 3]) -> [f64; 3] {
         let out = match self.model {
-            Model::Affine | Model::Poly2 => {
+            MapKind::Affine | MapKind::Poly2 => {
                 let f = features(self.model, p);
                 std::array::from_fn(|c| f.iter().zip(&self.coefficients).map(|(f, k)| f * k[c]).sum())
             }
-            Model::Lut => Lut3::node_weights(self.lut_size, &p.map(|v| v as f32))
+            MapKind::Lut => Lut3::node_weights(self.lut_size, &p.map(|v| v as f32))
                 .iter()
                 .fold([0.0; 3], |acc, &(w, i)| std::array::from_fn(|c| acc[c] + w as f64 * self.lut[i][c])),
         };
@@ -165,7 +165,7 @@ impl ColourMap {
 }
 
 /// Every patch's ΔE2000 when its fold is held out (`k` interleaved folds).
-fn held_out(model: Model, from: &[[f64; 3]], to: &[[f64; 3]], k: usize) -> Option<Vec<f64>> {
+fn held_out(model: MapKind, from: &[[f64; 3]], to: &[[f64; 3]], k: usize) -> Option<Vec<f64>> {
     let mut de = vec![0f64; from.len()];
     for f in 0..k {
         let (tr, te): (Vec<usize>, Vec<usize>) = (0..from.len()).partition(|i| i % k != f);
@@ -228,7 +228,7 @@ pub enum FitError {
     #[error("the best fit ({model:?}) leaves a held-out median ΔE2000 of {median:.2}, above the bound {bound}: check the photo's light and focus, or keep it with --force (the bound is written into the file)")]
     AboveBound {
         /// The best model.
-        model: Model,
+        model: MapKind,
         /// Its held-out median.
         median: f64,
         /// The bound.
@@ -289,9 +289,9 @@ impl Calibration {
         for m in MODELS {
             // A model with more numbers than a fold's patches cannot be judged.
             let params = match m {
-                Model::Affine => 4,
-                Model::Poly2 => 10,
-                Model::Lut => 0,
+                MapKind::Affine => 4,
+                MapKind::Poly2 => 10,
+                MapKind::Lut => 0,
             };
             if params * 2 > from.len() - from.len() / k {
                 continue;
@@ -371,7 +371,7 @@ mod tests {
         let r = c.residual();
         assert!(r.median < 1.0, "{:?}", c.held_out);
         assert!(c.held_out.iter().all(|h| h.median >= r.median));
-        let affine = c.held_out.iter().find(|h| h.model == Model::Affine).unwrap();
+        let affine = c.held_out.iter().find(|h| h.model == MapKind::Affine).unwrap();
         assert!(affine.median > r.median, "a curved map should beat the affine one: {:?}", c.held_out);
         // Round trip through the file.
         let dir = tempfile::tempdir().unwrap();

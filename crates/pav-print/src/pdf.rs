@@ -6,7 +6,7 @@
 //! Written with `pdf-writer` (typst's step-by-step writer): it only serializes, so the layout
 //! stays the one description of every page, and it pulls in no font or image stack.
 
-use crate::pieces::{Layout, Mark};
+use crate::pieces::{Mark, PageLayout};
 use pav_core::image::Frame;
 use pdf_writer::{Content, Filter, Finish, Name, Pdf, Rect, Ref, Str};
 
@@ -73,7 +73,7 @@ pub fn raster_pdf(rgb: &[u8], size: [usize; 2], page_mm: [f64; 2]) -> Result<Vec
 }
 
 /// The layout's pages as one PDF: what `pieces.pdf` holds.
-pub fn pieces_pdf(layout: &Layout, labels: &[u32], texture: &Frame) -> Result<Vec<u8>, PdfError> {
+pub fn pieces_pdf(layout: &PageLayout, labels: &[u32], texture: &Frame) -> Result<Vec<u8>, PdfError> {
     let mut pdf = Pdf::new();
     let (catalog, tree, icc_id, font, bold) = (Ref::new(1), Ref::new(2), Ref::new(3), Ref::new(4), Ref::new(5));
     // Three objects a page: the page, its content and its raster.

@@ -86,7 +86,7 @@ impl Default for Spec {
 
 /// One connected part of the region in the atlas.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Part {
+pub struct RegionPart {
     /// Its number in the label image (from 1).
     pub label: u32,
     /// Its texels.
@@ -109,7 +109,7 @@ fn neighbours(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
 
 /// The 8-connected parts of the `n × n` region (on where ≥ 0.5), largest first, and the label
 /// of every texel (0: off the region).
-pub fn parts(region: &[f32], n: usize) -> (Vec<u32>, Vec<Part>) {
+pub fn parts(region: &[f32], n: usize) -> (Vec<u32>, Vec<RegionPart>) {
     let mut labels = vec![0u32; n * n];
     let mut out = Vec::new();
     let mut stack = Vec::new();
@@ -132,7 +132,7 @@ pub fn parts(region: &[f32], n: usize) -> (Vec<u32>, Vec<Part>) {
                 }
             }
         }
-        out.push(Part { label, texels, bbox, chart: None });
+        out.push(RegionPart { label, texels, bbox, chart: None });
     }
     out.sort_by(|a, b| b.texels.cmp(&a.texels).then(a.label.cmp(&b.label)));
     (labels, out)
@@ -142,7 +142,13 @@ pub fn parts(region: &[f32], n: usize) -> (Vec<u32>, Vec<Part>) {
 /// (`charts`: each texel's chart, 0 where no face lies; such texels go with the nearest chart of
 /// their part), relabelling `labels`: so that a door and a fender that touch in the atlas
 /// print as two pieces rather than as tiles cut across both. Parts that fit stay whole.
-pub fn split_by_chart(labels: &mut [u32], parts: Vec<Part>, charts: &[u32], sheet: Sheet, spec: Spec) -> Vec<Part> {
+pub fn split_by_chart(
+    labels: &mut [u32],
+    parts: Vec<RegionPart>,
+    charts: &[u32],
+    sheet: Sheet,
+    spec: Spec,
+) -> Vec<RegionPart> {
     let n = sheet.n;
     let mut next = parts.iter().map(|p| p.label).max().unwrap_or(0) + 1;
     let mut out = Vec::new();
@@ -195,7 +201,7 @@ pub fn split_by_chart(labels: &mut [u32], parts: Vec<Part>, charts: &[u32], shee
                 texels += 1;
                 bbox = [bbox[0].min(x), bbox[1].min(y), bbox[2].max(x + 1), bbox[3].max(y + 1)];
             }
-            out.push(Part { label, texels, bbox, chart: Some(c) });
+            out.push(RegionPart { label, texels, bbox, chart: Some(c) });
         }
     }
     out.sort_by(|a, b| b.texels.cmp(&a.texels).then(a.label.cmp(&b.label)));
@@ -315,7 +321,7 @@ pub struct ByHand {
 
 /// The pieces on their pages.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Layout {
+pub struct PageLayout {
     /// The spec it was made with.
     pub spec: Spec,
     /// The sheet it cuts.
@@ -384,12 +390,12 @@ const BAND_MM: f64 = 9.0;
 /// Lays the parts of `labels` out as pieces on pages.
 pub fn layout(
     labels: &[u32],
-    parts: &[Part],
+    parts: &[RegionPart],
     texture: &Frame,
     sheet: Sheet,
     spec: Spec,
     orient: Vec<Orientation>,
-) -> Result<Layout, PiecesError> {
+) -> Result<PageLayout, PiecesError> {
     let px = spec.px_per_mm();
     let bad = |m: String| Err(PiecesError::Invalid(m));
     if !(spec.dpi.is_finite() && spec.dpi > 0.0) {
@@ -472,7 +478,7 @@ pub fn layout(
             [spec.paper.width_mm, ((low / px + LABEL_MM + spec.gap_mm + spec.margin_mm + BAND_MM) * 10.0).ceil() / 10.0]
         })
         .collect();
-    Ok(Layout { spec, sheet, pieces, by_hand, pages, page_mm, orient })
+    Ok(PageLayout { spec, sheet, pieces, by_hand, pages, page_mm, orient })
 }
 
 /// Shelf packing, tallest first: each piece turned so that it is wider than tall when that
@@ -536,7 +542,7 @@ fn pack(boxes: &[Boxed], free_w: usize, free_h: usize, spec: Spec) -> (Vec<Piece
 }
 
 /// The mean sRGB colour of a part's texels.
-fn mean_colour(labels: &[u32], p: &Part, texture: &Frame, n: usize) -> [u8; 3] {
+fn mean_colour(labels: &[u32], p: &RegionPart, texture: &Frame, n: usize) -> [u8; 3] {
     let mut sum = [0u64; 3];
     for y in p.bbox[1]..p.bbox[3] {
         for x in p.bbox[0]..p.bbox[2] {
@@ -550,7 +556,7 @@ fn mean_colour(labels: &[u32], p: &Part, texture: &Frame, n: usize) -> [u8; 3] {
     sum.map(|s| (s as f64 / p.texels.max(1) as f64).round() as u8)
 }
 
-impl Layout {
+impl PageLayout {
     /// Page `page`'s size (from 1) in pixels at the DPI.
     pub fn page_px(&self, page: usize) -> [usize; 2] {
         self.page_mm[page - 1].map(|mm| (mm * self.spec.px_per_mm()).round() as usize)
@@ -1023,7 +1029,7 @@ mod tests {
         let sheet = Sheet::new(16, 160.0, 25.4);
         let spec = Spec { paper: Paper::sheet(60.0, 80.0), dpi: 25.4, min_mm: 0.0, ..Spec::default() };
         let split = split_by_chart(&mut labels, p.clone(), &charts, sheet, spec);
-        let halves: Vec<&Part> = split.iter().filter(|q| q.chart.is_some()).collect();
+        let halves: Vec<&RegionPart> = split.iter().filter(|q| q.chart.is_some()).collect();
         assert_eq!(halves.len(), 2, "{split:?}");
         assert_eq!(halves.iter().map(|q| q.texels).sum::<usize>(), 30, "the texel under no face went with a chart");
         assert_eq!(labels.iter().filter(|&&l| l != 0).count(), 40);

@@ -29,7 +29,7 @@ pub enum BakeError {
 }
 
 /// One photo and the camera that matches it.
-pub struct Shot<'a> {
+pub struct PosedPhoto<'a> {
     /// Camera in mesh coordinates.
     pub cam: Camera,
     /// The photo.
@@ -62,7 +62,7 @@ pub fn car_mask(mesh: &Mesh, cam: &Camera, n: usize) -> Vec<bool> {
 /// Bakes the appearance from `shots` into a `size × size` atlas. Pixels within `margin`
 /// of the silhouette are skipped: the fitted cameras are off by a few pixels there, and those
 /// pixels would paint the background onto the car.
-pub fn bake(mesh: &Mesh, shots: &[Shot], size: usize, margin: usize) -> Result<Appearance, BakeError> {
+pub fn bake(mesh: &Mesh, shots: &[PosedPhoto], size: usize, margin: usize) -> Result<Appearance, BakeError> {
     let face_normals: Vec<[f32; 3]> = (0..mesh.faces.len()).map(|f| normalize(mesh.face_cross(f))).collect();
     let (mut num, mut den) = (vec![0f32; size * size * 3], vec![0f32; size * size]);
     for shot in shots {
@@ -156,7 +156,7 @@ mod tests {
         let (m, n) = (quad(), 64);
         let cam = Camera::look_at([0.3, 0.2, 3.0], [0.0; 3], [0.0, 1.0, 0.0], 60.0);
         let ph = photo(&m, &cam, n);
-        let app = bake(&m, &[Shot { cam, photo: &ph }], 32, 2).unwrap();
+        let app = bake(&m, &[PosedPhoto { cam, photo: &ph }], 32, 2).unwrap();
         assert!(app.seen > 0.5, "a frontal view sees most of the atlas: {}", app.seen);
         let out = Plate::new(&m, &ph, &cam, 3).unwrap().with_car(&m, &app, &cam);
         let inner = shrink(&car_mask(&m, &cam, n), n, n, 3);
@@ -182,9 +182,9 @@ mod tests {
         let m = quad();
         let cam = Camera::look_at([0.0, 0.0, 3.0], [0.0; 3], [0.0, 1.0, 0.0], 60.0);
         let wide = Frame { width: 8, height: 4, bgr: vec![0; 8 * 4 * 3] };
-        assert!(matches!(bake(&m, &[Shot { cam, photo: &wide }], 16, 1), Err(BakeError::NotSquare(8, 4))));
+        assert!(matches!(bake(&m, &[PosedPhoto { cam, photo: &wide }], 16, 1), Err(BakeError::NotSquare(8, 4))));
         let away = Camera::look_at([0.0, 0.0, 3.0], [0.0, 0.0, 6.0], [0.0, 1.0, 0.0], 60.0);
         let ph = photo(&m, &cam, 32);
-        assert!(matches!(bake(&m, &[Shot { cam: away, photo: &ph }], 16, 1), Err(BakeError::Empty)));
+        assert!(matches!(bake(&m, &[PosedPhoto { cam: away, photo: &ph }], 16, 1), Err(BakeError::Empty)));
     }
 }

@@ -8,7 +8,7 @@
 
 use super::clockmap::{ClockMap, ClockRange, DeviceTime};
 use super::source::FrameSource;
-use super::turntable::{Event, Turntable, TurntableError};
+use super::turntable::{TableEvent, Turntable, TurntableError};
 use pav_core::progress::Progress;
 use pav_core::sidecar::{self, AngleSample, SidecarError};
 use pav_core::video::{VideoError, VideoWriter};
@@ -585,15 +585,15 @@ pub fn capture(
         }
         loop {
             match table.next_event(Duration::ZERO) {
-                Ok(Some(Event::Angle { t_ms, pos, rx })) => {
+                Ok(Some(TableEvent::Angle { t_ms, pos, rx })) => {
                     track.push(t_ms, pos, rx);
                     last_event = rx;
                 }
-                Ok(Some(Event::Done { seq: Some(s), pos })) if s == seq => {
+                Ok(Some(TableEvent::Done { seq: Some(s), pos })) if s == seq => {
                     track.end = Some(pos);
                     final_pos = Some(pos);
                 }
-                Ok(Some(Event::Alarm(a))) => break 'rec Some(format!("turntable alarm: {}", a.text())),
+                Ok(Some(TableEvent::Alarm(a))) => break 'rec Some(format!("turntable alarm: {}", a.text())),
                 Ok(Some(_)) => {}
                 Ok(None) => break,
                 Err(e) => break 'rec Some(e.to_string()),

@@ -69,7 +69,7 @@ type Result<T> = std::result::Result<T, TurntableError>;
 
 /// Something the device reported on its own.
 #[derive(Clone, Debug, PartialEq)]
-pub enum Event {
+pub enum TableEvent {
     /// Position sample while moving, with the host time it arrived.
     Angle {
         /// Device clock, ms.
@@ -92,7 +92,7 @@ pub enum Event {
 
 /// A status report.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Status {
+pub struct TableStatus {
     /// State.
     pub state: State,
     /// Active alarm.
@@ -124,7 +124,7 @@ pub struct Turntable {
     seq: u32,
     usteps_per_rev: u32,
     firmware: String,
-    events: VecDeque<Event>,
+    events: VecDeque<TableEvent>,
     timeout: Duration,
     /// Lines dropped because their CRC was missing or wrong, or they were no reply (line noise).
     pub garbage_lines: usize,
@@ -273,9 +273,9 @@ impl Turntable {
             self.last_alive = rx;
         }
         match r {
-            Reply::Angle { t_ms, pos } => self.events.push_back(Event::Angle { t_ms, pos, rx }),
-            Reply::Done { seq, pos } => self.events.push_back(Event::Done { seq, pos }),
-            Reply::Alarm(a) => self.events.push_back(Event::Alarm(a)),
+            Reply::Angle { t_ms, pos } => self.events.push_back(TableEvent::Angle { t_ms, pos, rx }),
+            Reply::Done { seq, pos } => self.events.push_back(TableEvent::Done { seq, pos }),
+            Reply::Alarm(a) => self.events.push_back(TableEvent::Alarm(a)),
             Reply::Banner { fw, usteps_per_rev, proto } => {
                 self.usteps_per_rev = usteps_per_rev;
                 self.firmware = fw.to_string();
@@ -301,7 +301,7 @@ impl Turntable {
     }
 
     /// Sends `cmd` and waits for its `ok`; returns the sequence number and the status line, if any.
-    fn request(&mut self, cmd: Command, timeout: Duration) -> Result<(u32, Option<Status>)> {
+    fn request(&mut self, cmd: Command, timeout: Duration) -> Result<(u32, Option<TableStatus>)> {
         let seq = self.send(cmd)?;
         let deadline = self.now() + timeout;
         let mut status = None;
@@ -320,7 +320,9 @@ impl Turntable {
                     self.resync()?;
                     return Err(TurntableError::Timeout { cmd: cmd.to_string(), after: timeout });
                 }
-                Some(Reply::Status { state, alarm, pos, t_ms }) => status = Some(Status { state, alarm, pos, t_ms }),
+                Some(Reply::Status { state, alarm, pos, t_ms }) => {
+                    status = Some(TableStatus { state, alarm, pos, t_ms })
+                }
                 _ => {}
             }
         }
@@ -364,10 +366,10 @@ impl Turntable {
         // A short motion may be over already (its `done` waits for wait_done), and a table
         // reports angles only while it moves, after the last motion's `done`: listen a while
         // for either, then ask for the status (one line each, so some get through a lossy line).
-        let taken = |events: &VecDeque<Event>| {
+        let taken = |events: &VecDeque<TableEvent>| {
             events.iter().any(|e| match e {
-                Event::Done { seq: Some(s), .. } => *s == seq,
-                Event::Angle { rx, .. } => *rx > sent,
+                TableEvent::Done { seq: Some(s), .. } => *s == seq,
+                TableEvent::Angle { rx, .. } => *rx > sent,
                 _ => false,
             })
         };
@@ -403,7 +405,7 @@ impl Turntable {
     }
 
     /// Current status (retried up to 3 times on line noise).
-    pub fn status(&mut self) -> Result<Status> {
+    pub fn status(&mut self) -> Result<TableStatus> {
         let mut last = None;
         for _ in 0..3 {
             match self.request(Command::Status, self.timeout) {
@@ -466,8 +468,8 @@ impl Turntable {
                 self.command(Command::Stop)?;
             }
             match self.next_event(POLL.min(no_progress))? {
-                Some(Event::Done { seq: Some(s), pos }) if s == seq => return Ok(pos),
-                Some(Event::Alarm(a)) => return Err(TurntableError::Alarm(a)),
+                Some(TableEvent::Done { seq: Some(s), pos }) if s == seq => return Ok(pos),
+                Some(TableEvent::Alarm(a)) => return Err(TurntableError::Alarm(a)),
                 _ => {}
             }
             if self.clock.since(self.last_alive.max(asked)) >= quiet {
@@ -489,8 +491,10 @@ impl Turntable {
     pub fn motion_ended(&mut self, seq: u32) -> Result<Option<i64>> {
         let Some(st) = self.realtime_status()? else { return Ok(None) };
         // Replies are in order: a `done` sent before the status line has been filed by now.
-        if let Some(i) = self.events.iter().position(|e| matches!(e, Event::Done { seq: Some(s), .. } if *s == seq)) {
-            let Some(Event::Done { pos, .. }) = self.events.remove(i) else { unreachable!("found above") };
+        if let Some(i) =
+            self.events.iter().position(|e| matches!(e, TableEvent::Done { seq: Some(s), .. } if *s == seq))
+        {
+            let Some(TableEvent::Done { pos, .. }) = self.events.remove(i) else { unreachable!("found above") };
             return Ok(Some(pos));
         }
         if let Some(a) = st.alarm {
@@ -507,13 +511,13 @@ impl Turntable {
 
     /// A status report by the real-time `?` byte: one reply line instead of `STATUS`'s two, so
     /// it gets through a lossy line more often. Three tries of 150 ms; `None` if none answered.
-    fn realtime_status(&mut self) -> Result<Option<Status>> {
+    fn realtime_status(&mut self) -> Result<Option<TableStatus>> {
         for _ in 0..3 {
             self.write(&[turntable_proto::Realtime::Status.byte()])?;
             let deadline = self.now() + Duration::from_millis(150).min(self.timeout);
             while let Some((l, rx)) = self.read_line(deadline)? {
                 if let Some(Reply::Status { state, alarm, pos, t_ms }) = self.file(&l, rx) {
-                    return Ok(Some(Status { state, alarm, pos, t_ms }));
+                    return Ok(Some(TableStatus { state, alarm, pos, t_ms }));
                 }
             }
         }
@@ -521,7 +525,7 @@ impl Turntable {
     }
 
     /// Next event, waiting up to `timeout` for one; keep-alives reset nothing here but count as traffic.
-    pub fn next_event(&mut self, timeout: Duration) -> Result<Option<Event>> {
+    pub fn next_event(&mut self, timeout: Duration) -> Result<Option<TableEvent>> {
         let mut deadline = self.now() + timeout;
         loop {
             if let Some(e) = self.events.pop_front() {

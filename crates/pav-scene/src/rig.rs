@@ -159,7 +159,7 @@ pub struct Placement {
 /// The model car.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
-pub struct Model {
+pub struct ModelCar {
     /// The model is 1:`scale`.
     pub scale: f64,
     /// The real car's length, metres.
@@ -305,7 +305,7 @@ pub struct RigConfig {
     /// Where it stands.
     pub placement: Placement,
     /// The model's scale.
-    pub model: Model,
+    pub model: ModelCar,
     /// The turntable.
     pub table: Table,
     /// The room.

@@ -11,7 +11,7 @@
 use super::{create_dir, write_file, write_markdown, ExperimentError};
 use pav_attack::config::OptimizeConfig;
 use pav_attack::setup::{random_block_side, random_blocks, Setup};
-use pav_attack::view::View;
+use pav_attack::view::TrainView;
 use pav_core::image::Frame;
 use pav_core::progress::Progress;
 use pav_detect::config::{DetectorConfig, OutputLayout};
@@ -348,7 +348,7 @@ fn fit(
 }
 
 /// The composite of `view` with `tex` (or the photo itself), as scores see it.
-fn composite(view: &View, tex: Option<&[f32]>, setup: &Setup) -> Frame {
+fn composite(view: &TrainView, tex: Option<&[f32]>, setup: &Setup) -> Frame {
     super::table2::frame(view, tex.map(|t| setup.scored(t)).as_deref(), setup)
 }
 
@@ -526,7 +526,7 @@ pub fn adv_train(
     let mut rows = vec!["view,texture,file,before,after".to_string()];
     let mut per: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
     progress.begin("held-out composites", ((test.len() + 1) * setup.test.len()) as u64);
-    let mut score = |c: (&str, &str), v: &View, f: &Frame| -> Result<(f64, f64), ExperimentError> {
+    let mut score = |c: (&str, &str), v: &TrainView, f: &Frame| -> Result<(f64, f64), ExperimentError> {
         let best = |d: &mut OnnxDetector| -> Result<f64, ExperimentError> {
             Ok(d.propose(f)?.best(d.target_classes()).map_or(0.0, |t| t.score as f64))
         };

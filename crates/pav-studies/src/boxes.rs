@@ -3,7 +3,7 @@
 //! a low-scoring box on the car in every view keeps AP high, and one that leaves boxes off the
 //! car (IoU < 0.5) or none lowers it. These tables say which of the two a texture does.
 
-use super::per_view::ViewRecord;
+use super::per_view::ScoredView;
 use super::table2::AP_MIN_SCORE;
 use pav_detect::nms::iou;
 use pav_eval::digital::ImageDetections;
@@ -75,7 +75,7 @@ pub fn own_box_score(im: &ImageDetections) -> f32 {
 
 /// `records` with each view's score replaced by the best score of a box of `boxes` on the car
 /// (IoU ≥ [`HIT_IOU`]; 0 without one): the car's own box, the hit P@0.5 counts.
-pub fn own_box_records(records: &[ViewRecord], boxes: &[BoxRecord]) -> Vec<ViewRecord> {
+pub fn own_box_records(records: &[ScoredView], boxes: &[BoxRecord]) -> Vec<ScoredView> {
     let mut best: HashMap<(usize, &str, &str, u64, &str), f32> = HashMap::new();
     for b in boxes.iter().filter(|b| b.iou >= HIT_IOU) {
         let e = best.entry((b.fold, &b.view, &b.texture, b.seed, &b.detector)).or_insert(0.0);
@@ -85,7 +85,7 @@ pub fn own_box_records(records: &[ViewRecord], boxes: &[BoxRecord]) -> Vec<ViewR
         .iter()
         .map(|r| {
             let key = (r.fold, r.view.as_str(), r.texture.as_str(), r.seed, r.detector.as_str());
-            ViewRecord { score: best.get(&key).copied().unwrap_or(0.0), ..r.clone() }
+            ScoredView { score: best.get(&key).copied().unwrap_or(0.0), ..r.clone() }
         })
         .collect()
 }

@@ -9,13 +9,13 @@ use super::boxes::{
     BoxAnatomy, BoxRecord,
 };
 use super::curve::{pool, score_snapshots, snapshot_mean, snapshot_mean_name, CurveOptions, CurveRecord};
-use super::per_view::{conditional_asr, markdown_paired, paired, ViewRecord};
+use super::per_view::{conditional_asr, markdown_paired, paired, ScoredView};
 use super::table2::{aggregate, detect_view, markdown, markdown_scores, DigitalRow, AP_MIN_SCORE};
 use super::{create_dir, write_markdown, ExperimentError, Scoring};
 use pav_attack::config::OptimizeConfig;
 use pav_attack::optimize::{optimize_texture, Finish, RunOptions, LAST_ITERATE};
 use pav_attack::setup::Setup;
-use pav_attack::view::View;
+use pav_attack::view::TrainView;
 use pav_attack::whitebox::Ensemble;
 use pav_core::image::save_rgb;
 use pav_core::progress::{Progress, Silent};
@@ -48,7 +48,7 @@ pub struct CrossvalOptions {
     pub references: Vec<(String, Vec<f32>)>,
     /// Rendered views over photos' plates ([`Setup::rendered_over_plates`]), each scored in
     /// the fold that holds its photo out: a street and camera that fold never trained on.
-    pub rendered: Vec<View>,
+    pub rendered: Vec<TrainView>,
     /// Snapshot every fold's texture and score the snapshots on its photos
     /// (`experiments::curve`).
     pub curve: CurveOptions,
@@ -67,7 +67,7 @@ pub struct Crossval {
     /// The pooled table rows (splits "held-out" and "train").
     pub rows: Vec<DigitalRow>,
     /// Every view's best car score under every texture and detector.
-    pub records: Vec<ViewRecord>,
+    pub records: Vec<ScoredView>,
     /// Every car box on a held-out view.
     pub boxes: Vec<BoxRecord>,
     /// Where those boxes sit, per detector and texture.
@@ -98,7 +98,7 @@ pub struct RenderedRecord {
     pub fold: usize,
     /// The held-out photo whose plate the view lies over.
     pub photo: String,
-    /// View name.
+    /// TrainView name.
     pub view: String,
     /// Texture name.
     pub texture: String,
@@ -115,7 +115,7 @@ pub struct RenderedRecord {
 /// Per held-out photo, the mean over its rendered views of the best car score (or, with
 /// `own_box`, of the car's own box), as one held-out record per photo: views of one street and
 /// camera are not independent, so a bootstrap over these resamples photos.
-pub fn per_photo(records: &[RenderedRecord], own_box: bool) -> Vec<ViewRecord> {
+pub fn per_photo(records: &[RenderedRecord], own_box: bool) -> Vec<ScoredView> {
     // (fold, photo, texture, seed, detector) → (sum, views)
     type Key<'a> = (usize, &'a str, &'a str, u64, &'a str);
     let mut sums: BTreeMap<Key, (f64, usize)> = BTreeMap::new();
@@ -125,7 +125,7 @@ pub fn per_photo(records: &[RenderedRecord], own_box: bool) -> Vec<ViewRecord> {
         e.1 += 1;
     }
     sums.into_iter()
-        .map(|((fold, photo, texture, seed, detector), (sum, n))| ViewRecord {
+        .map(|((fold, photo, texture, seed, detector), (sum, n))| ScoredView {
             fold,
             role: "held-out",
             view: photo.to_string(),
@@ -161,7 +161,7 @@ pub struct FoldScores {
     /// Seconds the fold took (optimizing and scoring).
     pub seconds: f64,
     /// Every view's best car score under every texture and detector.
-    pub records: Vec<ViewRecord>,
+    pub records: Vec<ScoredView>,
     /// Every car box on a held-out view.
     pub boxes: Vec<BoxRecord>,
     /// Every rendered view over a held-out photo's plate.
@@ -227,7 +227,7 @@ fn score_fold(
     progress: &dyn Progress,
     stop: &AtomicBool,
 ) -> Result<FoldScores, ExperimentError> {
-    let all: Vec<&View> = setup.train.iter().chain(&setup.test).collect();
+    let all: Vec<&TrainView> = setup.train.iter().chain(&setup.test).collect();
     let k = opts.folds;
     let (tr, te) = fold_split(all.len(), k, f);
     // Synthetic views come from this fold's training photos only.
@@ -294,7 +294,7 @@ fn score_fold(
                     if role == "held-out" {
                         out.boxes.extend(box_records(f, &v.name, tname, *seed, detector, &im));
                     }
-                    out.records.push(ViewRecord {
+                    out.records.push(ScoredView {
                         fold: f,
                         role,
                         view: v.name.clone(),
@@ -344,7 +344,7 @@ pub fn crossval(
     progress: &dyn Progress,
     stop: &AtomicBool,
 ) -> Result<Crossval, ExperimentError> {
-    let all: Vec<&View> = setup.train.iter().chain(&setup.test).collect();
+    let all: Vec<&TrainView> = setup.train.iter().chain(&setup.test).collect();
     let k = opts.folds;
     if k < 2 || k > all.len() {
         return Err(ExperimentError::Invalid(format!(

@@ -69,7 +69,7 @@ pub struct CurveRecord {
     pub last: bool,
     /// "train" or "held-out".
     #[serde(deserialize_with = "super::per_view::role")]
-    pub role: super::per_view::Role,
+    pub role: super::per_view::FoldRole,
     /// Photo name.
     pub view: String,
     /// Detector name.

@@ -5,7 +5,7 @@
 //! random colour blocks, paired view by view.
 
 use super::outputs::{optimize_and_report, OptimizeRun, Prepared};
-use super::per_view::ViewRecord;
+use super::per_view::ScoredView;
 use super::table2::eval_digital;
 use super::{create_dir, write_markdown, ExperimentError, Scoring};
 use pav_attack::config::OptimizeConfig;
@@ -209,8 +209,8 @@ type SeedScores<'a> = BTreeMap<&'a str, Vec<(u64, f64)>>;
 
 /// The rows of one arm from its held-out `records` (as `pav eval-digital` writes them):
 /// `mine` (one record per seed and view) against each other texture but the original paint.
-pub fn compare(records: &[ViewRecord], held_out: &str, mine: &str, threshold: f32) -> Vec<LofoRow> {
-    let held: Vec<&ViewRecord> = records.iter().filter(|r| r.role == "held-out" && r.detector == held_out).collect();
+pub fn compare(records: &[ScoredView], held_out: &str, mine: &str, threshold: f32) -> Vec<LofoRow> {
+    let held: Vec<&ScoredView> = records.iter().filter(|r| r.role == "held-out" && r.detector == held_out).collect();
     let mut views: Vec<&str> = held.iter().map(|r| r.view.as_str()).collect();
     views.sort_unstable();
     views.dedup();
@@ -362,13 +362,13 @@ const SCORED: &str = "scored";
 /// The records an earlier run wrote into `dir` when it scored the same inputs with the same
 /// settings as `now` would (its `run.toml`, written after the scores, says so); None otherwise,
 /// and for a run stopped before it finished.
-fn scored_before(dir: &Path, now: &Run) -> Option<Vec<ViewRecord>> {
+fn scored_before(dir: &Path, now: &Run) -> Option<Vec<ScoredView>> {
     let before = Run::read(&dir.join(FILE)).ok()?;
     if before.result.get(SCORED).is_none_or(|v| v != "yes") || scored_on(&before) != scored_on(now) {
         return None;
     }
     let mut r = csv::Reader::from_path(dir.join("digital_views.csv")).ok()?;
-    r.deserialize().collect::<Result<Vec<ViewRecord>, _>>().ok()
+    r.deserialize().collect::<Result<Vec<ScoredView>, _>>().ok()
 }
 
 /// A file a run read, as its path and sha256.
@@ -435,8 +435,8 @@ mod tests {
         assert!(two_level_bootstrap(&[vec![1.0], vec![]], 10, 1).is_none());
     }
 
-    fn record(texture: &str, seed: u64, view: &str, score: f32) -> ViewRecord {
-        ViewRecord {
+    fn record(texture: &str, seed: u64, view: &str, score: f32) -> ScoredView {
+        ScoredView {
             fold: 0,
             role: "held-out",
             view: view.into(),

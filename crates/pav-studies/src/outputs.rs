@@ -4,10 +4,10 @@
 
 use super::{create_dir, ExperimentError};
 use pav_attack::config::OptimizeConfig;
-use pav_attack::export::{atlas_side_m, write_sheet, PrintSpec, Sheet};
+use pav_attack::export::{atlas_side_m, write_sheet, PrintSpec, WrittenSheet};
 use pav_attack::optimize::{optimize_texture, Finish, RunOptions, StepLog, LAST_ITERATE};
 use pav_attack::setup::{PbrKept, Setup};
-use pav_attack::view::View;
+use pav_attack::view::TrainView;
 use pav_attack::whitebox::{Ensemble, WhiteBox, WhiteBoxError};
 use pav_core::image::{halve, save_rgb, tile, ImageError};
 use pav_core::plot::{loss_curve, PlotError};
@@ -27,7 +27,7 @@ pub const PROOF: &str = "texture_proof.png";
 pub struct ViewScore {
     /// "train" or "test".
     pub split: &'static str,
-    /// View name.
+    /// TrainView name.
     pub view: String,
     /// Car score on the unmodified photo.
     pub original: f32,
@@ -62,7 +62,7 @@ pub fn score_views(
 }
 
 /// A grid of (photo | composite) pairs at half size, four views per row.
-pub fn preview(path: &Path, views: &[&View], tex: &[f32], scene: &Scene) -> Result<(), ImageError> {
+pub fn preview(path: &Path, views: &[&TrainView], tex: &[f32], scene: &Scene) -> Result<(), ImageError> {
     let Some(first) = views.first() else { return Ok(()) };
     let s = first.size / 2;
     let tiles: Vec<Vec<f32>> = views
@@ -143,7 +143,7 @@ pub struct OptimizeReport {
     /// White-box scores per view (empty when stopped).
     pub scores: Vec<ViewScore>,
     /// The printable sheet (when finished).
-    pub sheet: Option<Sheet>,
+    pub sheet: Option<WrittenSheet>,
     /// How far printing moves the region's texels (with `[print]`).
     pub shift: Option<Shift>,
     /// The files written, in `out`.
@@ -190,11 +190,11 @@ pub fn optimize_and_report(
         files.push(PROOF);
     }
     let scene = setup.eval_scene();
-    let views: Vec<&View> = setup.train.iter().chain(&setup.test).collect();
+    let views: Vec<&TrainView> = setup.train.iter().chain(&setup.test).collect();
     preview(&out.join("preview.png"), &views, &printed, &scene)?;
     files.push("preview.png");
     if !setup.synthetic.is_empty() {
-        let synthetic: Vec<&View> = setup.synthetic.iter().collect();
+        let synthetic: Vec<&TrainView> = setup.synthetic.iter().collect();
         preview(&out.join("synthetic.png"), &synthetic, &printed, &scene)?;
         files.push("synthetic.png");
     }

@@ -7,12 +7,12 @@ use pav_eval::digital::paired_bootstrap;
 
 /// The best car score of one detector on one view under one texture.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
-pub struct ViewRecord {
+pub struct ScoredView {
     /// Fold index.
     pub fold: usize,
     /// "train" or "held-out" in that fold.
     #[serde(deserialize_with = "role")]
-    pub role: Role,
+    pub role: FoldRole,
     /// View name.
     pub view: String,
     /// "original", "random" or "optimized".
@@ -27,7 +27,7 @@ pub struct ViewRecord {
 
 /// A view's role in a fold, "train" or "held-out". A named type, since serde would otherwise
 /// borrow a `&str` field from its input, which a `'static` one cannot be.
-pub type Role = &'static str;
+pub type FoldRole = &'static str;
 
 /// A fold's role read back ("train" or "held-out"), as the static name records carry.
 pub(crate) fn role<'de, D: serde::Deserializer<'de>>(d: D) -> Result<&'static str, D::Error> {
@@ -64,11 +64,11 @@ pub struct Paired {
 /// The paired comparisons of texture `mine` with every other texture of `records`, per
 /// detector, over held-out views (10,000 bootstrap resamples; a texture with several seeds
 /// counts as each view's mean over them).
-pub fn paired(records: &[ViewRecord], white_box: &[String], mine: &str) -> Vec<Paired> {
-    let held: Vec<&ViewRecord> = records.iter().filter(|r| r.role == "held-out").collect();
+pub fn paired(records: &[ScoredView], white_box: &[String], mine: &str) -> Vec<Paired> {
+    let held: Vec<&ScoredView> = records.iter().filter(|r| r.role == "held-out").collect();
     let mut out = Vec::new();
     for det in unique(held.iter().map(|r| r.detector.clone())) {
-        let rows: Vec<&&ViewRecord> = held.iter().filter(|r| r.detector == det).collect();
+        let rows: Vec<&&ScoredView> = held.iter().filter(|r| r.detector == det).collect();
         let others = unique(rows.iter().map(|r| r.texture.clone()).filter(|t| t != mine));
         for other in others {
             let mut d = Vec::new();
@@ -114,8 +114,8 @@ pub struct ConditionalAsr {
 }
 
 /// [`ConditionalAsr`] for every detector and texture of `records` at `threshold`.
-pub fn conditional_asr(records: &[ViewRecord], threshold: f32) -> Vec<ConditionalAsr> {
-    let held: Vec<&ViewRecord> = records.iter().filter(|r| r.role == "held-out").collect();
+pub fn conditional_asr(records: &[ScoredView], threshold: f32) -> Vec<ConditionalAsr> {
+    let held: Vec<&ScoredView> = records.iter().filter(|r| r.role == "held-out").collect();
     let mut out = Vec::new();
     for det in unique(held.iter().map(|r| r.detector.clone())) {
         let seen: Vec<(usize, &str)> = held

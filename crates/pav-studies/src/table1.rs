@@ -6,7 +6,7 @@ use super::boxes::{
     anatomy_section, markdown_anatomy, mean_anatomy, own_box_records, own_box_section, BoxAnatomy, BoxRecord,
 };
 use super::curve::is_snapshot_mean;
-use super::per_view::{paired, Paired, ViewRecord};
+use super::per_view::{paired, Paired, ScoredView};
 use super::ExperimentError;
 use pav_core::table::unique;
 use std::path::{Path, PathBuf};
@@ -86,7 +86,7 @@ pub struct Table1 {
     pub anatomy: Vec<BoxAnatomy>,
     /// Every held-out view's best car score: the first run's baselines (random ones averaged
     /// over their seeds), then each label's texture averaged over its runs (texture: the label).
-    pub views: Vec<ViewRecord>,
+    pub views: Vec<ScoredView>,
     /// Each label's mean best car score on the photos it trained on and on the same photos held out.
     pub trained_cells: Vec<TrainedCell>,
     /// Each label on the photos it trained on against every baseline: trained-on − baseline,
@@ -154,25 +154,25 @@ fn read<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Vec<T>, Experimen
 /// run written before crossval wrote them).
 struct Run {
     held: Vec<CrossvalRow>,
-    records: Vec<ViewRecord>,
+    records: Vec<ScoredView>,
     anatomy: Vec<BoxAnatomy>,
     /// The records with each view's score replaced by its best box on the car (IoU ≥ 0.5; 0
     /// without one); empty for a run written before crossval wrote its boxes.
-    own: Vec<ViewRecord>,
+    own: Vec<ScoredView>,
     /// The row texture on the photos it trained on, per (photo, detector) the mean over the
     /// folds that trained on it, filed under the fold that holds the photo out (see [`trained_on`]).
-    trained: Vec<ViewRecord>,
+    trained: Vec<ScoredView>,
 }
 
 /// The runs of one label, averaged per held-out view.
 struct Group {
     label: String,
     /// The optimized texture's best car scores.
-    scores: Vec<ViewRecord>,
+    scores: Vec<ScoredView>,
     /// Its car's own box (None when a run lacks its boxes).
-    own: Option<Vec<ViewRecord>>,
+    own: Option<Vec<ScoredView>>,
     /// Its scores on the photos it trained on (None when a run has none).
-    trained: Option<Vec<ViewRecord>>,
+    trained: Option<Vec<ScoredView>>,
     /// The detectors it trained against.
     white: Vec<String>,
 }
@@ -203,11 +203,11 @@ fn read_run(dir: &Path, texture: &str) -> Result<Run, ExperimentError> {
             dir.join("crossval.csv").display()
         )));
     }
-    let held_out_of = |rows: Vec<ViewRow>| -> Vec<ViewRecord> {
+    let held_out_of = |rows: Vec<ViewRow>| -> Vec<ScoredView> {
         rows.into_iter()
             .filter(|v| v.role == "held-out")
             .filter_map(|v| {
-                role(v.texture).map(|texture| ViewRecord {
+                role(v.texture).map(|texture| ScoredView {
                     fold: v.fold,
                     role: "held-out",
                     view: v.view,
@@ -219,7 +219,7 @@ fn read_run(dir: &Path, texture: &str) -> Result<Run, ExperimentError> {
             })
             .collect()
     };
-    let held_out = |path: &Path| -> Result<Vec<ViewRecord>, ExperimentError> { Ok(held_out_of(read(path)?)) };
+    let held_out = |path: &Path| -> Result<Vec<ScoredView>, ExperimentError> { Ok(held_out_of(read(path)?)) };
     let rows: Vec<ViewRow> = read(&dir.join("crossval_views.csv"))?;
     let trained = trained_on(&rows, texture);
     let records = held_out_of(rows);
@@ -247,7 +247,7 @@ fn read_run(dir: &Path, texture: &str) -> Result<Run, ExperimentError> {
 /// `texture`'s records on the photos it trained on: per (photo, detector) the mean best car
 /// score over the folds that trained on the photo, filed as a held-out record of the fold that
 /// holds the photo out (so it pairs with that fold's held-out scores) and named "optimized".
-fn trained_on(rows: &[ViewRow], texture: &str) -> Vec<ViewRecord> {
+fn trained_on(rows: &[ViewRow], texture: &str) -> Vec<ScoredView> {
     let mut out = Vec::new();
     for h in rows.iter().filter(|r| r.role == "held-out" && r.texture == texture) {
         let of: Vec<f64> = rows
@@ -256,7 +256,7 @@ fn trained_on(rows: &[ViewRow], texture: &str) -> Vec<ViewRecord> {
             .map(|r| r.score as f64)
             .collect();
         if !of.is_empty() {
-            out.push(ViewRecord {
+            out.push(ScoredView {
                 fold: h.fold,
                 role: "held-out",
                 view: h.view.clone(),
@@ -276,8 +276,8 @@ fn averaged(
     runs: &[&Run],
     dirs: &[&Path],
     texture: &str,
-    of: fn(&Run) -> &[ViewRecord],
-) -> Result<Vec<ViewRecord>, ExperimentError> {
+    of: fn(&Run) -> &[ScoredView],
+) -> Result<Vec<ScoredView>, ExperimentError> {
     let mine = |r: &Run| -> Vec<(usize, String, String, f32)> {
         let mut v: Vec<_> = of(r)
             .iter()
@@ -305,7 +305,7 @@ fn averaged(
     Ok(first
         .into_iter()
         .zip(sum)
-        .map(|((fold, view, detector, _), s)| ViewRecord {
+        .map(|((fold, view, detector, _), s)| ScoredView {
             fold,
             role: "held-out",
             view,
@@ -413,7 +413,7 @@ pub fn table1_of(runs: &[(String, PathBuf, String)], against: &[String]) -> Resu
         groups.push(Group { label: label.clone(), scores, own, white, trained });
     }
     // Each label against the baselines and the `against` labels, over one kind of per-view score.
-    let pair_all = |mine_of: &dyn Fn(&Group) -> Option<&Vec<ViewRecord>>, baseline: &[ViewRecord]| {
+    let pair_all = |mine_of: &dyn Fn(&Group) -> Option<&Vec<ScoredView>>, baseline: &[ScoredView]| {
         let mut out = Vec::new();
         for g in &groups {
             let (label, white) = (&g.label, &g.white);
@@ -422,7 +422,7 @@ pub fn table1_of(runs: &[(String, PathBuf, String)], against: &[String]) -> Resu
             records.extend(baseline.iter().filter(|r| r.texture != OPTIMIZED && r.texture != "original").cloned());
             for a in against.iter().filter(|a| *a != label) {
                 let theirs = groups.iter().find(|g| &g.label == a).and_then(mine_of);
-                records.extend(theirs.into_iter().flatten().map(|r| ViewRecord { texture: a.clone(), ..r.clone() }));
+                records.extend(theirs.into_iter().flatten().map(|r| ScoredView { texture: a.clone(), ..r.clone() }));
             }
             out.extend(paired(&records, white, OPTIMIZED).into_iter().map(|p| Difference::of(label, p)));
         }
@@ -431,15 +431,15 @@ pub fn table1_of(runs: &[(String, PathBuf, String)], against: &[String]) -> Resu
     let differences = pair_all(&|g| Some(&g.scores), &read[0].records);
     let mut views = seeds_averaged(read[0].records.iter().filter(|r| r.texture != OPTIMIZED));
     views.extend(
-        groups.iter().flat_map(|g| g.scores.iter().map(|r| ViewRecord { texture: g.label.clone(), ..r.clone() })),
+        groups.iter().flat_map(|g| g.scores.iter().map(|r| ScoredView { texture: g.label.clone(), ..r.clone() })),
     );
     let own_box = if read[0].own.is_empty() { Vec::new() } else { pair_all(&|g| g.own.as_ref(), &read[0].own) };
     let (mut trained_cells, mut trained_on, mut generalization) = (Vec::new(), Vec::new(), Vec::new());
     for g in &groups {
         let Some(trained) = &g.trained else { continue };
         let as_difference = |p: Paired| Difference::of(&g.label, p);
-        let mut records: Vec<ViewRecord> =
-            trained.iter().map(|r| ViewRecord { texture: TRAINED_ON.into(), ..r.clone() }).collect();
+        let mut records: Vec<ScoredView> =
+            trained.iter().map(|r| ScoredView { texture: TRAINED_ON.into(), ..r.clone() }).collect();
         records.extend(g.scores.iter().cloned());
         generalization.extend(
             paired(&records, &g.white, OPTIMIZED).into_iter().filter(|p| p.against == TRAINED_ON).map(as_difference),
@@ -449,8 +449,8 @@ pub fn table1_of(runs: &[(String, PathBuf, String)], against: &[String]) -> Resu
         trained_on.extend(paired(&records, &g.white, TRAINED_ON).into_iter().map(as_difference));
         for det in unique(trained.iter().map(|r| r.detector.clone())) {
             // The held-out scores of the same photos as the trained-on ones.
-            let of_det: Vec<&ViewRecord> = trained.iter().filter(|r| r.detector == det).collect();
-            let same = |r: &ViewRecord| of_det.iter().any(|t| (t.fold, &t.view) == (r.fold, &r.view));
+            let of_det: Vec<&ScoredView> = trained.iter().filter(|r| r.detector == det).collect();
+            let same = |r: &ScoredView| of_det.iter().any(|t| (t.fold, &t.view) == (r.fold, &r.view));
             let held: Vec<f64> =
                 g.scores.iter().filter(|r| r.detector == det && same(r)).map(|r| r.score as f64).collect();
             let views = of_det.len();
@@ -483,17 +483,17 @@ pub fn table1_of(runs: &[(String, PathBuf, String)], against: &[String]) -> Resu
 
 /// `records` with each (fold, view, texture, detector)'s seeds averaged into one (seed 0), in
 /// first-seen order.
-fn seeds_averaged<'a>(records: impl Iterator<Item = &'a ViewRecord>) -> Vec<ViewRecord> {
-    let mut out: Vec<(ViewRecord, f64, usize)> = Vec::new();
+fn seeds_averaged<'a>(records: impl Iterator<Item = &'a ScoredView>) -> Vec<ScoredView> {
+    let mut out: Vec<(ScoredView, f64, usize)> = Vec::new();
     for r in records {
         let same =
-            |o: &ViewRecord| (o.fold, &o.view, &o.texture, &o.detector) == (r.fold, &r.view, &r.texture, &r.detector);
+            |o: &ScoredView| (o.fold, &o.view, &o.texture, &o.detector) == (r.fold, &r.view, &r.texture, &r.detector);
         match out.iter_mut().find(|(o, _, _)| same(o)) {
             Some((_, sum, n)) => (*sum, *n) = (*sum + r.score as f64, *n + 1),
-            None => out.push((ViewRecord { seed: 0, ..r.clone() }, r.score as f64, 1)),
+            None => out.push((ScoredView { seed: 0, ..r.clone() }, r.score as f64, 1)),
         }
     }
-    out.into_iter().map(|(r, sum, n)| ViewRecord { score: (sum / n as f64) as f32, ..r }).collect()
+    out.into_iter().map(|(r, sum, n)| ScoredView { score: (sum / n as f64) as f32, ..r }).collect()
 }
 
 /// Per held-out view, one table per detector that some row never trained against: a row per
@@ -514,7 +514,7 @@ fn markdown_views(t: &Table1) -> String {
             textures.join(" | "),
             "---:|".repeat(textures.len())
         ));
-        let of_det: Vec<&ViewRecord> = t.views.iter().filter(|r| r.detector == det).collect();
+        let of_det: Vec<&ScoredView> = t.views.iter().filter(|r| r.detector == det).collect();
         for (fold, view) in unique(of_det.iter().map(|r| (r.fold, r.view.clone()))) {
             s.push_str(&format!("| {fold} | {view} |"));
             for tex in &textures {

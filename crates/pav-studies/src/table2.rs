@@ -2,11 +2,11 @@
 //! texture (lit, no EoT), quantized to 8 bits as a saved image would be, and scored by every
 //! ONNX detector; the white-box model is marked.
 
-use super::per_view::{markdown_paired, paired, Paired, ViewRecord};
+use super::per_view::{markdown_paired, paired, Paired, ScoredView};
 use super::{create_dir, write_markdown, ExperimentError, Scoring};
 use pav_attack::config::OptimizeConfig;
 use pav_attack::setup::Setup;
-use pav_attack::view::View;
+use pav_attack::view::TrainView;
 use pav_core::image::{to_u8, Frame};
 use pav_core::progress::Progress;
 use pav_core::table::{unique, write_csv};
@@ -48,7 +48,7 @@ pub struct DigitalRow {
 
 /// The composite of `view` with `tex` (as scores see it, or the photo itself) as an 8-bit BGR
 /// frame.
-pub(crate) fn frame(view: &View, tex: Option<&[f32]>, setup: &Setup) -> Frame {
+pub(crate) fn frame(view: &TrainView, tex: Option<&[f32]>, setup: &Setup) -> Frame {
     let img = match tex {
         Some(t) => view.composite(t, &setup.eval_scene()),
         None => view.photo.clone(),
@@ -63,7 +63,7 @@ pub(crate) fn frame(view: &View, tex: Option<&[f32]>, setup: &Setup) -> Frame {
 /// The car detections of every detector on `view` composited with `tex` (`None` = the photo),
 /// a texture as scores see it ([`Setup::scored`]).
 pub fn detect_view(
-    view: &View,
+    view: &TrainView,
     tex: Option<&[f32]>,
     setup: &Setup,
     detectors: &mut [Box<dyn Detector>],
@@ -85,7 +85,7 @@ pub fn detect_view(
 /// [`detect_view`] over `views`, dealt out among the `workers` (one set of the same detectors
 /// each) on threads of their own; the detections come back in view order.
 pub fn detect_views(
-    views: &[(&'static str, &View)],
+    views: &[(&'static str, &TrainView)],
     tex: Option<&[f32]>,
     setup: &Setup,
     workers: &mut [Vec<Box<dyn Detector>>],
@@ -175,12 +175,12 @@ pub fn score_textures(
     threshold: f32,
     white_box: &dyn Fn(&str) -> Vec<String>,
     progress: &dyn Progress,
-) -> Result<(Vec<DigitalRow>, Vec<ViewRecord>), pav_detect::DetectError> {
+) -> Result<(Vec<DigitalRow>, Vec<ScoredView>), pav_detect::DetectError> {
     let names: Vec<String> = match workers.first() {
         Some(w) => w.iter().map(|d| d.name().to_string()).collect(),
         None => return Ok((Vec::new(), Vec::new())),
     };
-    let views: Vec<(&'static str, &View)> =
+    let views: Vec<(&'static str, &TrainView)> =
         setup.train.iter().map(|v| ("train", v)).chain(setup.test.iter().map(|v| ("test", v))).collect();
     progress.begin("composites", (conditions.len() * views.len()) as u64);
     let mut records = Vec::new();
@@ -194,7 +194,7 @@ pub fn score_textures(
         let mut per: Vec<Vec<(&'static str, ImageDetections)>> = vec![Vec::new(); names.len()];
         for ((split, v), ims) in views.iter().zip(detected) {
             for (d, im) in ims.into_iter().enumerate() {
-                records.push(ViewRecord {
+                records.push(ScoredView {
                     fold: 0,
                     role: if *split == "test" { "held-out" } else { "train" },
                     view: v.name.clone(),
@@ -302,7 +302,7 @@ pub fn eval_digital(
     squeeze: Option<f64>,
     out: &Path,
     progress: &dyn Progress,
-) -> Result<(String, Vec<ViewRecord>), ExperimentError> {
+) -> Result<(String, Vec<ScoredView>), ExperimentError> {
     let threshold = scoring.threshold;
     let cfg = OptimizeConfig::load(config)?;
     let mut setup = Setup::load_photos(&cfg, None)?;
@@ -399,7 +399,7 @@ pub struct SqueezeView {
     pub texture: String,
     /// Its seed (random textures).
     pub seed: u64,
-    /// View name.
+    /// TrainView name.
     pub view: String,
     /// The undefended detector.
     pub detector: String,
@@ -415,7 +415,7 @@ const LEGITIMATE: [&str; 3] = ["original", "random", "random32"];
 /// Feature squeezing as an attack detector over the scored views: each detector's threshold
 /// flags `false_flags` of the legitimate views (the photo and the random textures); writes
 /// `digital_squeeze.csv` and returns the Markdown section.
-fn squeeze_section(records: &[ViewRecord], false_flags: f64, out: &Path) -> Result<String, ExperimentError> {
+fn squeeze_section(records: &[ScoredView], false_flags: f64, out: &Path) -> Result<String, ExperimentError> {
     use pav_eval::squeeze;
     let scores: Vec<_> = records
         .iter()

@@ -23,7 +23,7 @@ pub struct ChartReport {
 
 /// Errors of the chart adjustment.
 #[derive(Debug, thiserror::Error)]
-pub enum ChartError {
+pub enum UvChartError {
     /// No chart fits the free texels even at a tiny scale.
     #[error("the charts do not fit into the texels the other faces leave free")]
     NoRoom,
@@ -116,10 +116,10 @@ fn signed_area(t: [[f64; 2]; 3]) -> f64 {
     ((t[1][0] - t[0][0]) * (t[2][1] - t[0][1]) - (t[2][0] - t[0][0]) * (t[1][1] - t[0][1])) / 2.0
 }
 
-fn flatten(mesh: &Mesh, chart: &[(usize, f64)], k: usize, flipped: &mut usize) -> Result<Flat, ChartError> {
+fn flatten(mesh: &Mesh, chart: &[(usize, f64)], k: usize, flipped: &mut usize) -> Result<Flat, UvChartError> {
     let faces: Vec<usize> = chart.iter().map(|c| c.0).collect();
     let h: HashMap<usize, f64> = chart.iter().copied().collect();
-    let uv = lscm_with(mesh, &faces, &|f| h[&f], Some(1.0)).ok_or(ChartError::Singular(k))?;
+    let uv = lscm_with(mesh, &faces, &|f| h[&f], Some(1.0)).ok_or(UvChartError::Singular(k))?;
     // Folds: faces whose flattened orientation disagrees with their chart orientation.
     let signs: Vec<f64> = chart.iter().map(|&(f, hf)| signed_area(mesh.face_uvs[f].map(|i| uv[&i])) * hf).collect();
     let pos = signs.iter().filter(|s| **s > 0.0).count();
@@ -199,7 +199,7 @@ pub fn adjust_charts(
     max_angle_deg: f64,
     grid: usize,
     gutter: usize,
-) -> Result<ChartReport, ChartError> {
+) -> Result<ChartReport, UvChartError> {
     let original_density = {
         let (mut a3, mut auv) = (0.0, 0.0);
         for &f in faces {
@@ -281,7 +281,7 @@ pub fn adjust_charts(
             None => hi = mid,
         }
     }
-    let (s, at) = best.ok_or(ChartError::NoRoom)?;
+    let (s, at) = best.ok_or(UvChartError::NoRoom)?;
     for (f, corner) in flats.iter().zip(&at) {
         let (x0, y0) = ((corner[0] + gutter) as f64 / grid as f64, (corner[1] + gutter) as f64 / grid as f64);
         for (i, p) in &f.uv {

@@ -2,7 +2,7 @@
 
 use anyhow::{bail, Result};
 use pav::data::manifest::Manifest;
-use pav::data::store::{Fetched, Origin, State, Store, ENV_MIRROR};
+use pav::data::store::{EntryState, Fetched, Origin, Store, ENV_MIRROR};
 
 #[derive(clap::Subcommand)]
 pub enum Cmd {
@@ -47,14 +47,14 @@ pub fn run(cmd: &Cmd) -> Result<()> {
             for e in &entries {
                 let state = store.state(e, true);
                 let shown = match &state {
-                    State::Present => "present".to_string(),
-                    State::Missing => "missing".to_string(),
-                    State::Corrupt(why) => format!("corrupt ({why})"),
+                    EntryState::Present => "present".to_string(),
+                    EntryState::Missing => "missing".to_string(),
+                    EntryState::Corrupt(why) => format!("corrupt ({why})"),
                 };
                 counts[match state {
-                    State::Present => 0,
-                    State::Missing => 1,
-                    State::Corrupt(_) => 2,
+                    EntryState::Present => 0,
+                    EntryState::Missing => 1,
+                    EntryState::Corrupt(_) => 2,
                 }] += 1;
                 let license: String = e.license.chars().take(28).collect();
                 outln!("{shown:<8} {:>9}  {:<46} {license:<28} {}", e.bytes, e.name, e.source);

@@ -1,7 +1,7 @@
 //! `pav doctor`.
 
 use anyhow::Result;
-use pav::doctor::{checks, main_job_can_run, Status};
+use pav::doctor::{checks, main_job_can_run, Standing};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -16,9 +16,9 @@ pub fn run(a: &Args) -> Result<()> {
     let width = all.iter().map(|c| c.piece.len()).max().unwrap_or(0);
     for c in &all {
         let mark = match c.status {
-            Status::Ok => "ok",
-            Status::Missing => "MISSING",
-            Status::Absent => "none",
+            Standing::Ok => "ok",
+            Standing::Missing => "MISSING",
+            Standing::Absent => "none",
         };
         outln!("{mark:<7} {:width$}  {}", c.piece, c.found);
         if let Some(fix) = &c.fix {

@@ -33,15 +33,15 @@ fn binary(path: &str) -> std::process::Command {
 pub fn shared_data() -> PathBuf {
     static CHECKED: std::sync::OnceLock<Result<PathBuf, String>> = std::sync::OnceLock::new();
     let checked = CHECKED.get_or_init(|| {
-        use pav::data::store::{State, Store};
+        use pav::data::store::{EntryState, Store};
         let store = Store::from_env();
         let bad: Vec<String> = pav::data::manifest::Manifest::builtin()
             .entries
             .iter()
             .filter_map(|e| match store.state(e, false) {
-                State::Present => None,
-                State::Missing => Some(format!("{} (missing)", e.name)),
-                State::Corrupt(why) => Some(format!("{} ({why})", e.name)),
+                EntryState::Present => None,
+                EntryState::Missing => Some(format!("{} (missing)", e.name)),
+                EntryState::Corrupt(why) => Some(format!("{} ({why})", e.name)),
             })
             .collect();
         if bad.is_empty() {
@@ -213,7 +213,7 @@ pub fn two_folds(
     out: &Path,
     random_seeds: u64,
     references: Vec<(String, Vec<f32>)>,
-    rendered: Vec<pav::attack::view::View>,
+    rendered: Vec<pav::attack::view::TrainView>,
 ) -> (pav::studies::crossval::CrossvalOptions, Vec<Box<dyn pav::detect::Detector>>) {
     let opts = pav::studies::crossval::CrossvalOptions {
         folds: 2,

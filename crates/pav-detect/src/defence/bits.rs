@@ -2,7 +2,7 @@
 //! spaced levels. Rounding has no useful gradient, so the backward passes it straight through
 //! (BPDA, the default).
 
-use super::{DefenceError, Gradient, Unit};
+use super::{DefenceError, DefenceUnit, Gradient};
 use pav_core::image::Frame;
 
 /// Feature squeezing by bit depth: `2^b` levels per channel (`b` from 1 to 8).
@@ -13,7 +13,7 @@ pub struct Bits {
     pub b: u32,
 }
 
-impl Unit for Bits {
+impl DefenceUnit for Bits {
     fn check(&self, _: usize, _: usize) -> Result<(), String> {
         if !(1..=8).contains(&self.b) {
             return Err(format!("b = {} must be 1 to 8 bits", self.b));

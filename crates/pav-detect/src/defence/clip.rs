@@ -1,7 +1,7 @@
 //! Feature norm clipping (Yu et al. 2021), a defence inside the model: it leaves the input alone
 //! and is rewritten into the graph when the model loads (`pav_onnx::rewrite::clip_feature_norms`).
 
-use super::{DefenceError, Unit};
+use super::{DefenceError, DefenceUnit};
 use pav_core::image::Frame;
 use pav_onnx::proto::Model;
 
@@ -22,7 +22,7 @@ fn unit_level() -> f32 {
     1.0
 }
 
-impl Unit for Clip {
+impl DefenceUnit for Clip {
     fn check(&self, _: usize, _: usize) -> Result<(), String> {
         if self.layers.is_empty() {
             return Err("layers names no tensor to clip after".into());

@@ -1,7 +1,7 @@
 //! Cutout (DeVries and Taylor) as an input defence: squares of the input filled with grey, their
 //! centres drawn afresh for each image. Its backward is exact: the gradient stops in the squares.
 
-use super::{DefenceError, Gradient, Unit};
+use super::{DefenceError, DefenceUnit, Gradient};
 use pav_core::image::Frame;
 use pav_core::rng::Rng;
 
@@ -42,7 +42,7 @@ fn holes(w: usize, h: usize, n: usize, s: usize, rng: &mut Rng) -> Vec<Rect> {
         .collect()
 }
 
-impl Unit for Cutout {
+impl DefenceUnit for Cutout {
     fn check(&self, width: usize, height: usize) -> Result<(), String> {
         let (n, s) = (self.n, self.s);
         if n == 0 || s == 0 {

@@ -2,7 +2,7 @@
 //! decoded again by OpenCV (libjpeg, 4:2:0 chroma). The white box runs the same codec on the
 //! input rounded to levels and passes the gradient straight through (the default).
 
-use super::{DefenceError, Unit};
+use super::{DefenceError, DefenceUnit};
 use pav_core::image::Frame;
 
 /// JPEG re-compression at quality `q` (1–100).
@@ -24,7 +24,7 @@ pub struct JpegError {
     pub source: opencv::Error,
 }
 
-impl Unit for Jpeg {
+impl DefenceUnit for Jpeg {
     fn check(&self, _: usize, _: usize) -> Result<(), String> {
         if !(1..=100).contains(&self.q) {
             return Err(format!("q = {} must be a quality from 1 to 100", self.q));

@@ -2,7 +2,7 @@
 //! median squeezer). Its backward is exact: each output sample's gradient goes to the input
 //! sample its window picked.
 
-use super::{DefenceError, Gradient, Unit};
+use super::{DefenceError, DefenceUnit, Gradient};
 use pav_core::image::Frame;
 
 /// Spatial smoothing: the median of each `k × k` window (`k` odd, at least 3).
@@ -13,7 +13,7 @@ pub struct Median {
     pub k: usize,
 }
 
-impl Unit for Median {
+impl DefenceUnit for Median {
     fn check(&self, width: usize, height: usize) -> Result<(), String> {
         let k = self.k;
         if k < 3 || k % 2 == 0 {

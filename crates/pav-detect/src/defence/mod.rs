@@ -6,7 +6,7 @@
 //!
 //! Each defence is one unit in one file, as ART's preprocessors are: its parameters (its
 //! `[[defence]]` keys), their check, its label, its 8-bit transform and its float forward with
-//! the backward the white box differentiates through ([`Unit`]). The backward is exact where
+//! the backward the white box differentiates through ([`DefenceUnit`]). The backward is exact where
 //! the defence is differentiable (median smoothing routes each gradient to the sample it picked;
 //! cutout stops it in the squares) and straight through where it is not (BPDA: Athalye et al.
 //! 2018), which is the default. Random defences draw afresh for every image, so training through
@@ -35,7 +35,7 @@ use pav_onnx::proto::Model;
 use serde::Deserialize;
 
 /// What one defence is and does.
-pub trait Unit {
+pub trait DefenceUnit {
     /// Checks the parameters' ranges for a `width × height` input.
     fn check(&self, width: usize, height: usize) -> Result<(), String>;
 
@@ -47,7 +47,7 @@ pub trait Unit {
         false
     }
 
-    /// Whether it transforms the input image (else it changes the model: [`Unit::rewrite`]).
+    /// Whether it transforms the input image (else it changes the model: [`DefenceUnit::rewrite`]).
     fn on_input(&self) -> bool {
         true
     }
@@ -71,7 +71,7 @@ pub trait Unit {
     }
 }
 
-/// The defences, each a [`Unit`] in its own file: one line each makes a `kind` of a detector
+/// The defences, each a [`DefenceUnit`] in its own file: one line each makes a `kind` of a detector
 /// config's `[[defence]]` and of `--defence`.
 macro_rules! defences {
     ($($variant:ident($unit:ty),)*) => {
@@ -88,7 +88,7 @@ macro_rules! defences {
 
         impl Defence {
             /// The defence as its unit.
-            pub fn unit(&self) -> &dyn Unit {
+            pub fn unit(&self) -> &dyn DefenceUnit {
                 match self {
                     $(Defence::$variant(d) => d,)*
                 }

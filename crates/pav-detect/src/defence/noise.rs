@@ -1,7 +1,7 @@
 //! Gaussian noise on the input (randomized smoothing's draw, without its vote). The rounding and
 //! clamping have no useful gradient, so the backward passes it straight through (the default).
 
-use super::{DefenceError, Gradient, Unit};
+use super::{DefenceError, DefenceUnit, Gradient};
 use pav_core::image::Frame;
 use pav_core::rng::Rng;
 
@@ -16,7 +16,7 @@ pub struct Noise {
     pub seed: u64,
 }
 
-impl Unit for Noise {
+impl DefenceUnit for Noise {
     fn check(&self, _: usize, _: usize) -> Result<(), String> {
         let sigma = self.sigma;
         if !(sigma.is_finite() && sigma > 0.0 && sigma <= 255.0) {

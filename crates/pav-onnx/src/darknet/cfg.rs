@@ -4,9 +4,9 @@ use super::DarknetError;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-/// Activation after a convolution.
+/// DarknetActivation after a convolution.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Activation {
+pub enum DarknetActivation {
     /// Identity.
     Linear,
     /// Leaky ReLU with slope 0.1 (darknet's fixed value).
@@ -37,8 +37,8 @@ pub enum Layer {
         pad: usize,
         /// Whether batch normalization follows (and is stored in the weights).
         batch_normalize: bool,
-        /// Activation.
-        activation: Activation,
+        /// DarknetActivation.
+        activation: DarknetActivation,
     },
     /// `[maxpool]`.
     MaxPool {
@@ -179,8 +179,8 @@ impl Network {
                     let pad_flag: usize = s.get("pad", Some(0), origin)?;
                     let padding: usize = s.get("padding", Some(0), origin)?;
                     let activation = match s.get::<String>("activation", Some("logistic".into()), origin)?.as_str() {
-                        "linear" => Activation::Linear,
-                        "leaky" => Activation::Leaky,
+                        "linear" => DarknetActivation::Linear,
+                        "leaky" => DarknetActivation::Leaky,
                         other => {
                             return Err(DarknetError::Unsupported {
                                 index,

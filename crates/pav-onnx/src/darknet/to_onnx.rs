@@ -4,7 +4,7 @@
 //! decoding (sigmoid, anchors) stays with the caller and the graph is comparable layer for
 //! layer with OpenCV DNN's darknet reader.
 
-use super::cfg::{Activation, Layer, Network};
+use super::cfg::{DarknetActivation, Layer, Network};
 use super::weights::Weights;
 use super::DarknetError;
 use crate::proto::{Attr, Dim, InitData, Initializer, Model, Node, ValueInfo, FLOAT};
@@ -87,7 +87,8 @@ pub fn export(net: &Network, weights: &Weights) -> Result<Model, DarknetError> {
                     data: InitData::F32(cw.bias.clone()),
                 });
                 let (k, s, p) = (*size as i64, *stride as i64, *pad as i64);
-                let conv_out = if *activation == Activation::Linear { out.clone() } else { format!("{out}_conv") };
+                let conv_out =
+                    if *activation == DarknetActivation::Linear { out.clone() } else { format!("{out}_conv") };
                 nodes.push(node(
                     "Conv",
                     format!("conv{i}"),
@@ -99,7 +100,7 @@ pub fn export(net: &Network, weights: &Weights) -> Result<Model, DarknetError> {
                         ("pads".into(), Attr::Ints(vec![p, p, p, p])),
                     ],
                 ));
-                if *activation == Activation::Leaky {
+                if *activation == DarknetActivation::Leaky {
                     nodes.push(node(
                         "LeakyRelu",
                         format!("leaky{i}"),

@@ -39,7 +39,7 @@ pub fn file_digest(path: &Path) -> std::io::Result<(u64, String)> {
 
 /// What the store holds of one entry.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub enum State {
+pub enum EntryState {
     /// The file is there with the manifest's size (and hash, when checked).
     Present,
     /// No file.
@@ -117,34 +117,36 @@ impl Store {
     pub fn require(&self, name: &str) -> Result<PathBuf, DataError> {
         let e = Manifest::builtin().get(name)?;
         match self.state(e, false) {
-            State::Present => Ok(self.path(name)),
-            State::Missing => Err(DataError::Missing { name: name.into(), root: self.root.clone() }),
-            State::Corrupt(why) => Err(DataError::Damaged { name: name.into(), root: self.root.clone(), why }),
+            EntryState::Present => Ok(self.path(name)),
+            EntryState::Missing => Err(DataError::Missing { name: name.into(), root: self.root.clone() }),
+            EntryState::Corrupt(why) => Err(DataError::Damaged { name: name.into(), root: self.root.clone(), why }),
         }
     }
 
     /// The state of `e`; `hash` reads the whole file to compare its sha256 as well.
-    pub fn state(&self, e: &Entry, hash: bool) -> State {
+    pub fn state(&self, e: &Entry, hash: bool) -> EntryState {
         let p = self.path(&e.name);
-        let Ok(meta) = std::fs::metadata(&p) else { return State::Missing };
+        let Ok(meta) = std::fs::metadata(&p) else { return EntryState::Missing };
         if meta.len() != e.bytes {
-            return State::Corrupt(format!("{} bytes, not {}", meta.len(), e.bytes));
+            return EntryState::Corrupt(format!("{} bytes, not {}", meta.len(), e.bytes));
         }
         if hash {
             match file_digest(&p) {
                 Ok((_, sha)) if sha == e.sha256 => {}
-                Ok((_, sha)) => return State::Corrupt(format!("sha256 {}…, not {}…", &sha[..12], &e.sha256[..12])),
-                Err(err) => return State::Corrupt(format!("unreadable: {err}")),
+                Ok((_, sha)) => {
+                    return EntryState::Corrupt(format!("sha256 {}…, not {}…", &sha[..12], &e.sha256[..12]))
+                }
+                Err(err) => return EntryState::Corrupt(format!("unreadable: {err}")),
             }
         }
-        State::Present
+        EntryState::Present
     }
 
     /// Makes the store hold `e`: kept when it already does (hash checked), otherwise taken from
     /// `origin` (a shipped entry from pav itself) into a partial file, verified, and only then
     /// moved into place; bytes that are not the manifest's are refused and left nowhere.
     pub fn fetch(&self, e: &Entry, origin: &Origin) -> Result<Fetched, DataError> {
-        if self.state(e, true) == State::Present {
+        if self.state(e, true) == EntryState::Present {
             return Ok(Fetched::Kept);
         }
         let io = |what: String| move |source| DataError::Io { name: e.name.clone(), what, source };
@@ -284,17 +286,17 @@ mod tests {
         let store = Store { root: root.path().to_path_buf() };
         let origin = Origin::Dir(mirror.path().to_path_buf());
         let (good, bad) = (entry("a/good.bin", b"good bytes"), entry("a/bad.bin", b"bad bytes"));
-        assert_eq!(store.state(&good, true), State::Missing);
+        assert_eq!(store.state(&good, true), EntryState::Missing);
         assert_eq!(store.fetch(&good, &origin).unwrap(), Fetched::Written);
         assert_eq!(store.fetch(&good, &origin).unwrap(), Fetched::Kept);
         let e = store.fetch(&bad, &origin).unwrap_err().to_string();
         assert!(e.contains("refused"), "{e}");
-        assert_eq!(store.state(&bad, true), State::Missing);
+        assert_eq!(store.state(&bad, true), EntryState::Missing);
         assert_eq!(std::fs::read_dir(root.path().join("a")).unwrap().count(), 1, "no partial file left");
         // Damage in place: same size, other bytes; only the hash check sees it.
         std::fs::write(store.path("a/good.bin"), b"gooD bytes").unwrap();
-        assert_eq!(store.state(&good, false), State::Present);
-        assert!(matches!(store.state(&good, true), State::Corrupt(_)));
+        assert_eq!(store.state(&good, false), EntryState::Present);
+        assert!(matches!(store.state(&good, true), EntryState::Corrupt(_)));
         assert_eq!(store.fetch(&good, &origin).unwrap(), Fetched::Written);
         assert_eq!(std::fs::read(store.path("a/good.bin")).unwrap(), b"good bytes");
     }
