@@ -5,7 +5,6 @@
 
 use super::common;
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
 
 /// A page's documented keys: table path (`""` for the top level, `output.boxes`, …) → keys.
 type Keys = BTreeMap<String, BTreeSet<String>>;
@@ -69,17 +68,6 @@ fn undocumented(t: &toml::Table, page: &Keys) -> Vec<String> {
         .collect()
 }
 
-fn toml_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for e in std::fs::read_dir(dir).unwrap() {
-        let p = e.unwrap().path();
-        if p.is_dir() {
-            toml_files(&p, out);
-        } else if p.extension().is_some_and(|x| x == "toml") {
-            out.push(p);
-        }
-    }
-}
-
 #[test]
 fn every_key_of_every_shipped_config_is_on_its_kinds_reference_page() {
     let repo = common::repo();
@@ -102,8 +90,7 @@ fn every_key_of_every_shipped_config_is_on_its_kinds_reference_page() {
             _ => vec!["optimize", "views", "rig", "detector", "scene"],
         }
     };
-    let mut files = Vec::new();
-    toml_files(&repo.join("configs"), &mut files);
+    let files = common::files_with_extension(&repo.join("configs"), "toml");
     let (mut checked, mut wrong) = (0, Vec::new());
     for f in &files {
         let rel = f.strip_prefix(&repo).unwrap().to_string_lossy().into_owned();

@@ -4,7 +4,7 @@
 
 use crate::common;
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Names defined twice on purpose: (name, why).
 const ALLOWED: &[(&str, &str)] = &[(
@@ -12,17 +12,6 @@ const ALLOWED: &[(&str, &str)] = &[(
     "firmware/proto's `Frame` is a serial frame on the wire and pav-core's an image; the protocol crate is no_std, \
      shared with the firmware, depends on nothing of pav, and no module uses both",
 )];
-
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for e in std::fs::read_dir(dir).unwrap() {
-        let p = e.unwrap().path();
-        if p.is_dir() {
-            rust_files(&p, out);
-        } else if p.extension().is_some_and(|x| x == "rs") {
-            out.push(p);
-        }
-    }
-}
 
 /// Each public type name defined in `text` (`pub struct`, `pub enum`, `pub trait`, `pub type` at
 /// the start of a line).
@@ -43,9 +32,9 @@ fn defined(text: &str) -> Vec<String> {
 fn names(repo: &Path) -> BTreeMap<String, Vec<String>> {
     let mut files = Vec::new();
     for e in std::fs::read_dir(repo.join("crates")).unwrap() {
-        rust_files(&e.unwrap().path().join("src"), &mut files);
+        files.extend(common::files_with_extension(&e.unwrap().path().join("src"), "rs"));
     }
-    rust_files(&repo.join("firmware/proto/src"), &mut files);
+    files.extend(common::files_with_extension(&repo.join("firmware/proto/src"), "rs"));
     let mut out: BTreeMap<String, Vec<String>> = BTreeMap::new();
     for f in files {
         let rel = f.strip_prefix(repo).unwrap().display().to_string();
